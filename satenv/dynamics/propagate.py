@@ -1,0 +1,191 @@
+"""Relative-motion propagation: linear CW, or exact ECI propagation converted to LVLH.
+
+The truth models (``"nonlinear"``, ``"j2"``, ``"j2_drag"``) integrate the chief's absolute
+ECI state together with the deputies' ECI states *relative to the chief* (so no precision is
+lost to large absolute positions), with RK4, and convert to the chief's LVLH frame at the
+step boundaries. The deputies' control accelerations are given in LVLH and held constant in
+that rotating frame over a step (zero-order hold), matching the discrete CW model.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._checks import as_array, positive
+from .cw import cw_matrices
+from .forces import FORCE_MODELS, ForceModel, acceleration
+from .integrators import INTEGRATORS
+from .orbit import Orbit, _eci_to_lvlh, _lvlh_to_eci_rel, _rotation
+
+MODELS: tuple[str, ...] = ("cw", "nonlinear", "j2", "j2_drag")
+"""Names accepted by :func:`simulate` and :class:`RelativeModel`."""
+
+MAX_SUBSTEP: float = 5.0
+"""Default largest internal RK4 step of the truth models [s]."""
+
+
+def check_model(model: str) -> str:
+    """Return ``model`` if it is a known dynamics model name, else raise ``ValueError``."""
+    if model not in MODELS:
+        raise ValueError(f"unknown dynamics model {model!r}; expected one of {list(MODELS)}")
+    return model
+
+
+def _derivative(force: ForceModel):
+    """Right-hand side on the packed state ``y = [chief_abs; deputies_rel]`` (..., 1+M, 6)."""
+
+    def f(_t: float, y: np.ndarray, u_lvlh: np.ndarray) -> np.ndarray:
+        chief = y[..., 0, :]
+        rel = y[..., 1:, :]
+        r_c, v_c = chief[..., :3], chief[..., 3:]
+        a_c = acceleration(r_c, v_c, force, force.ballistic_chief)
+        r_d = r_c[..., None, :] + rel[..., :3]
+        v_d = v_c[..., None, :] + rel[..., 3:]
+        a_d = acceleration(r_d, v_d, force, force.ballistic_deputy)
+        rot = _rotation(r_c, v_c)
+        thrust = np.einsum("...ji,...mj->...mi", rot, u_lvlh)
+        dy = np.empty_like(y)
+        dy[..., 0, :3] = v_c
+        dy[..., 0, 3:] = a_c
+        dy[..., 1:, :3] = rel[..., 3:]
+        dy[..., 1:, 3:] = a_d - a_c[..., None, :] + thrust
+        return dy
+
+    return f
+
+
+def _plane_rotation(orbit: Orbit, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the orbit normal (the CW chief's circular motion)."""
+    rv = orbit.rv
+    k = np.cross(rv[:3], rv[3:])
+    k /= np.linalg.norm(k)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
+
+
+@dataclass(frozen=True)
+class RelativeModel:
+    """A discrete-time relative-dynamics model: ``(x, chief) -> (x_next, chief_next)``.
+
+    Args:
+        model: ``"cw"``, ``"nonlinear"``, ``"j2"`` or ``"j2_drag"``.
+        orbit: the chief's orbit at epoch (its mean motion is the CW ``n``).
+        dt: step length [s].
+        substeps: internal RK4 steps per ``dt`` for the truth models (default: steps of at
+            most :data:`MAX_SUBSTEP` seconds).
+        force: override the force model of a truth model (e.g. ballistic coefficients).
+
+    States are LVLH ``(..., M, 6)``, inputs LVLH accelerations ``(..., M, 3)``; the chief is its
+    ECI state ``(..., 6)``; under ``"cw"`` it only rotates on the circle of radius ``a`` at the
+    mean motion (the CW assumption), which is what the LVLH frame of the CW model follows.
+    """
+
+    model: str
+    orbit: Orbit
+    dt: float
+    substeps: int | None = None
+    force: ForceModel | None = None
+    integrator: str = "rk4"
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        check_model(self.model)
+        if not isinstance(self.orbit, Orbit):
+            raise ValueError(f"orbit must be a satenv.dynamics.Orbit, got {type(self.orbit).__name__}")
+        object.__setattr__(self, "dt", positive(self.dt, "dt (s)"))
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {self.integrator!r}; expected one of {sorted(INTEGRATORS)}")
+        sub = self.substeps
+        if sub is None:
+            sub = max(1, math.ceil(self.dt / MAX_SUBSTEP - 1e-9))
+        if int(sub) != sub or sub < 1:
+            raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")
+        object.__setattr__(self, "substeps", int(sub))
+        if self.force is None and self.model != "cw":
+            object.__setattr__(self, "force", FORCE_MODELS[self.model])
+        if self.model == "cw":
+            self._cache["ab"] = cw_matrices(self.orbit.n, self.dt)
+            self._cache["chief_rot"] = _plane_rotation(self.orbit, self.orbit.n * self.dt)
+        self._cache["f"] = _derivative(self.force) if self.force else None
+
+    @property
+    def ab(self) -> tuple[np.ndarray, np.ndarray]:
+        """The discrete CW ``(A, B)`` for this ``dt`` (any model: they are the linear model)."""
+        if "ab" not in self._cache:
+            self._cache["ab"] = cw_matrices(self.orbit.n, self.dt)
+        return self._cache["ab"]
+
+    def initial_chief(self) -> np.ndarray:
+        """The chief's ECI state at epoch (6,)."""
+        return self.orbit.rv
+
+    def step(self, x: np.ndarray, u: np.ndarray | None, chief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance LVLH states ``x`` (..., M, 6) by one ``dt`` under LVLH accelerations ``u``.
+
+        No input validation here (this is the hot path): use :func:`simulate` or validate at
+        the boundary.
+        """
+        if u is None:
+            u = np.zeros((*x.shape[:-1], 3))
+        if self.model == "cw":
+            a, b = self._cache["ab"]
+            rot = self._cache["chief_rot"]
+            chief_next = np.concatenate([chief[..., :3] @ rot.T, chief[..., 3:] @ rot.T], axis=-1)
+            return x @ a.T + u @ b.T, chief_next
+        f = self._cache["f"]
+        force = self.force
+        stepper = INTEGRATORS[self.integrator]
+        acc_c = acceleration(chief[..., :3], chief[..., 3:], force, force.ballistic_chief)
+        y = np.concatenate([chief[..., None, :], _lvlh_to_eci_rel(chief, x, acc_c)], axis=-2)
+        h = self.dt / self.substeps
+        rhs = lambda t, yy: f(t, yy, u)  # noqa: E731
+        for k in range(self.substeps):
+            y = stepper(rhs, k * h, y, h)
+        chief_next = y[..., 0, :]
+        acc_c = acceleration(chief_next[..., :3], chief_next[..., 3:], force, force.ballistic_chief)
+        return _eci_to_lvlh(chief_next, y[..., 1:, :], acc_c), chief_next
+
+
+def simulate(model: str, x0, *, orbit: Orbit, dt: float, steps: int, u=None,
+             substeps: int | None = None, force: ForceModel | None = None) -> np.ndarray:
+    """Propagate LVLH relative states and return the trajectory ``(steps + 1, M, 6)``.
+
+    Args:
+        model: ``"cw"``, ``"nonlinear"``, ``"j2"`` or ``"j2_drag"``.
+        x0: initial LVLH relative states (M, 6) [m, m/s] of M deputies.
+        orbit: the chief's :class:`Orbit` at epoch.
+        dt: output (and input hold) step [s].
+        steps: number of steps.
+        u: optional LVLH control accelerations (steps, M, 3) [m/s^2], held per step.
+        substeps: internal RK4 steps per ``dt`` (truth models; default steps <= 5 s).
+        force: optional :class:`ForceModel` override for the truth models.
+
+    Example:
+        >>> from satenv.dynamics import Orbit, simulate
+        >>> xs = simulate("j2", [[0.0, 1000.0, 0.0, 0.0, 0.0, 0.0]],
+        ...               orbit=Orbit(a=6878e3, i=0.9), dt=10.0, steps=3)
+        >>> xs.shape
+        (4, 1, 6)
+    """
+    check_model(model)
+    x0 = as_array(x0, "x0", (6,))
+    if x0.ndim != 2:
+        raise ValueError(f"x0 must have shape (M, 6), got {x0.shape}; for one deputy use x0[None]")
+    if isinstance(steps, bool) or int(steps) != steps or steps < 0:
+        raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+    steps = int(steps)
+    if u is not None:
+        u = as_array(u, "u", (3,))
+        if u.shape != (steps, x0.shape[0], 3):
+            raise ValueError(f"u must have shape (steps, M, 3) = {(steps, x0.shape[0], 3)}, "
+                             f"got {u.shape}")
+    prop = RelativeModel(model, orbit, dt, substeps=substeps, force=force)
+    out = np.empty((steps + 1, *x0.shape))
+    out[0] = x0
+    chief = prop.initial_chief()
+    for k in range(steps):
+        out[k + 1], chief = prop.step(out[k], None if u is None else u[k], chief)
+    return out
