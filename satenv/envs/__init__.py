@@ -1,0 +1,1 @@
+"""satenv's PettingZoo environments (one versioned module per env)."""

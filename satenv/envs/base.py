@@ -1,0 +1,286 @@
+"""Shared machinery of satenv's environments: a batched core and its PettingZoo wrapper.
+
+Every satenv environment has two layers:
+
+* a :class:`BatchedCore` subclass holding the physics and task logic for ``B`` independent
+  copies of the scenario at once (arrays ``(B, M, ...)``, pure numpy, no dicts). The training
+  path (``training.vec_env``) drives this core directly with ``B`` = number of env copies.
+* :class:`FormationEnv`, the PettingZoo ``ParallelEnv`` wrapper (``B = 1``), which only
+  converts dicts to arrays and back, validates input, seeds, truncates and renders.
+
+A core subclass implements :meth:`BatchedCore.sample_initial_state`, :meth:`BatchedCore.reset`,
+:meth:`BatchedCore.step`, :meth:`BatchedCore.observe` (and optionally
+:meth:`BatchedCore.global_state` and :meth:`BatchedCore.render_scene`). An env subclass sets
+``core_class``, ``agent_prefix``, ``metadata["name"]`` and builds its scenario in ``__init__``.
+
+Conventions (``../shared/DESIGN.md``): float32 ``Box`` spaces cached per env; actions in
+``[-1, 1]^3`` scaled to the scenario's ``u_max`` (per axis, or clipped to the ``u_max`` ball when
+``scenario.thrust_mode == "norm"``); one ``np.random.Generator`` per env seeded in
+``reset(seed=...)``; team termination (a collision or leaving the allowed region ends the
+episode for every agent); truncation at ``scenario.max_steps``; per-agent ``infos`` carry raw
+physical quantities (``INFO_KEYS``) at reset and after every step.
+"""
+
+from __future__ import annotations
+
+import warnings
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from satenv.dynamics import unit_box_to_accel
+
+INFO_KEYS: tuple[str, ...] = (
+    "state", "accel", "delta_v", "tracking_error", "min_separation", "collision", "violations", "cost",
+)
+"""Per-agent info entries every environment provides (SI units):
+
+``state`` true state; ``accel`` applied acceleration over the last step [m/s^2] (zeros at reset);
+``delta_v`` spent in the last step [m/s]; ``tracking_error`` the quantity the paper's RMSE
+measures (vector); ``min_separation`` distance to the nearest other body [m]; ``collision``
+(bool); ``violations`` constraint violations this step (int); ``cost`` safety cost (float)."""
+
+
+class SatenvError(ValueError):
+    """Bad input to a satenv environment (a ``ValueError``)."""
+
+
+@dataclass
+class StepResult:
+    """What :meth:`BatchedCore.step` returns for ``B`` copies and ``M`` agents."""
+
+    rewards: np.ndarray          # (B, M) float
+    terminated: np.ndarray       # (B,) bool: collision / left the allowed region
+    info: dict[str, np.ndarray]  # key -> (B, M, ...) raw physical quantities (INFO_KEYS at least)
+
+
+class BatchedCore(ABC):
+    """Task logic and physics for ``batch`` copies of one scenario (arrays ``(B, M, ...)``).
+
+    Subclasses set ``obs_dim`` and ``state_dim`` (per-agent true-state size, 6 for translation)
+    in ``__init__`` and keep ``self.t`` (``(B,)`` step counters) up to date.
+    """
+
+    obs_dim: int
+    state_dim: int = 6
+
+    def __init__(self, scenario: Any, batch: int = 1) -> None:
+        self.scenario = scenario
+        self.batch = int(batch)
+        self.n_agents = int(scenario.n_agents)
+        self.t = np.zeros(self.batch, dtype=np.int64)
+
+    @abstractmethod
+    def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Initial true states ``(n, M, state_dim)`` (the preset's, or random draws)."""
+
+    @abstractmethod
+    def reset(self, x0: np.ndarray, idx: np.ndarray | None = None,
+              rng: np.random.Generator | None = None) -> dict[str, np.ndarray]:
+        """Reset copies ``idx`` (all when ``None``) to ``x0`` ``(len(idx), M, state_dim)``.
+
+        Returns the info arrays ``(len(idx), M, ...)`` of the reset copies (``INFO_KEYS``).
+        """
+
+    @abstractmethod
+    def step(self, accel: np.ndarray, rng: np.random.Generator | None = None) -> StepResult:
+        """Advance every copy one decision period under accelerations ``(B, M, 3)`` [m/s^2]."""
+
+    @abstractmethod
+    def observe(self) -> np.ndarray:
+        """Normalised observations ``(B, M, obs_dim)`` float32."""
+
+    def global_state(self) -> np.ndarray:
+        """The global state ``(B, ...)`` returned by ``env.state()`` (default: all true states)."""
+        raise NotImplementedError
+
+    def render_scene(self, b: int = 0) -> dict[str, Any]:
+        """What to draw for copy ``b``: ``positions`` (M, 3), optional ``spheres`` list of
+        ``(center (3,), radius, label)``, ``targets`` (M, 3), ``title``."""
+        raise NotImplementedError
+
+
+class FormationEnv(ParallelEnv):
+    """PettingZoo ``ParallelEnv`` over a :class:`BatchedCore` with ``B = 1``.
+
+    Subclasses set ``core_class`` and ``agent_prefix`` and call ``super().__init__(scenario,
+    render_mode=...)`` with the resolved frozen scenario (which must provide ``n_agents``,
+    ``dt``, ``max_steps``, ``u_max`` and ``thrust_mode``).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10,
+                                          "name": "formation_v0", "is_parallelizable": True}
+    core_class: ClassVar[type[BatchedCore]]
+    agent_prefix: ClassVar[str] = "sat"
+    reset_option_keys: ClassVar[frozenset[str]] = frozenset({"initial_state"})
+
+    def __init__(self, scenario: Any, *, render_mode: str | None = None) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise SatenvError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                              f"got {render_mode!r}")
+        self.scenario = scenario
+        self.render_mode = render_mode
+        self.core = self.core_class(scenario, batch=1)
+        m = self.core.n_agents
+        self.possible_agents = [f"{self.agent_prefix}_{i + 1}" for i in range(m)]
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self.agents: list[str] = []
+        self._obs_space = spaces.Box(-np.inf, np.inf, (self.core.obs_dim,), np.float32)
+        self._act_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self._rng: np.random.Generator | None = None
+        self._last_info: dict[str, np.ndarray] | None = None
+        self._trails: list[np.ndarray] = []
+        self._fig = None
+
+    # ----------------------------------------------------------------- spaces
+    def observation_space(self, agent: str) -> spaces.Box:
+        self._check_agent(agent)
+        return self._obs_space
+
+    def action_space(self, agent: str) -> spaces.Box:
+        self._check_agent(agent)
+        return self._act_space
+
+    def _check_agent(self, agent: str) -> None:
+        if agent not in self._index:
+            raise SatenvError(f"unknown agent {agent!r}; this env's agents are {self.possible_agents}")
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The env's random generator (created unseeded if ``reset`` has not seeded it)."""
+        if self._rng is None:
+            self._rng = np.random.default_rng()
+        return self._rng
+
+    # ------------------------------------------------------------------- API
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        """Start an episode; ``options={"initial_state": array (M, state_dim)}`` overrides x0."""
+        options = {} if options is None else options
+        if not isinstance(options, dict):
+            raise SatenvError(f"options must be a dict or None, got {type(options).__name__}")
+        unknown = set(options) - self.reset_option_keys
+        if unknown:  # a warning, not an error: PettingZoo's own API test passes a dummy option
+            warnings.warn(f"ignoring unknown reset option(s) {sorted(unknown)}; "
+                          f"known keys: {sorted(self.reset_option_keys)}", stacklevel=2)
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise SatenvError(f"seed must be a non-negative int or None, got {seed!r}")
+            self._rng = np.random.default_rng(int(seed))
+        rng = self.np_random
+        if options.get("initial_state") is not None:
+            x0 = self._check_initial_state(options["initial_state"])
+        else:
+            x0 = self.core.sample_initial_state(rng, 1)[0]
+        info = self.core.reset(x0[None], None, rng)
+        self.agents = list(self.possible_agents)
+        self._last_info = info
+        self._trails = []
+        return self._obs_dict(), self._info_dicts(info)
+
+    def _check_initial_state(self, value: Any) -> np.ndarray:
+        shape = (self.core.n_agents, self.core.state_dim)
+        try:
+            x0 = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SatenvError(f"options['initial_state'] must be a numeric array of shape {shape}, "
+                              f"got {type(value).__name__}") from None
+        if x0.shape != shape:
+            raise SatenvError(f"options['initial_state'] must have shape {shape} (one row per agent, "
+                              f"{self.possible_agents}), got {x0.shape}")
+        if not np.all(np.isfinite(x0)):
+            raise SatenvError("options['initial_state'] must be finite, got NaN/inf entries")
+        return x0
+
+    def step(self, actions: dict[str, Any]):
+        """Apply normalised actions ``{agent: (3,) in [-1, 1]}``; returns the 5 PettingZoo dicts."""
+        if not self.agents:
+            raise SatenvError("step() called with no live agents: call reset() first "
+                              "(the episode has ended or never started)")
+        a = self._action_array(actions)
+        accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
+        res = self.core.step(accel[None], self.np_random)
+        self._last_info = res.info
+        truncated = bool(self.core.t[0] >= self.scenario.max_steps)
+        terminated = bool(res.terminated[0])
+        obs = self._obs_dict()
+        rewards = {ag: float(res.rewards[0, i]) for ag, i in self._index.items()}
+        terms = dict.fromkeys(self.agents, terminated)
+        truncs = dict.fromkeys(self.agents, truncated and not terminated)
+        infos = self._info_dicts(res.info)
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terms, truncs, infos
+
+    def _action_array(self, actions: Any) -> np.ndarray:
+        if not isinstance(actions, dict):
+            raise SatenvError(f"actions must be a dict {{agent: array of shape (3,)}}, got {type(actions).__name__}")
+        missing = [a for a in self.agents if a not in actions]
+        extra = [a for a in actions if a not in self._index]
+        if missing or extra:
+            raise SatenvError(f"actions must have exactly one entry per live agent {self.agents}; "
+                              f"missing {missing}, unknown {extra}")
+        out = np.zeros((self.core.n_agents, 3))
+        for agent, value in actions.items():
+            try:
+                arr = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise SatenvError(f"action for {agent} must be numeric, got {value!r}") from None
+            if arr.shape != (3,):
+                raise SatenvError(f"action for {agent} must have shape (3,), got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise SatenvError(f"action for {agent} must be finite, got {arr.tolist()}; "
+                                  "actions are normalised thrust in [-1, 1]^3")
+            out[self._index[agent]] = arr
+        return out
+
+    def _obs_dict(self) -> dict[str, np.ndarray]:
+        obs = self.core.observe()[0]
+        return {ag: obs[i] for ag, i in self._index.items()}
+
+    def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        for ag, i in self._index.items():
+            d = {}
+            for key, arr in info.items():
+                v = arr[0, i]
+                d[key] = v.item() if np.ndim(v) == 0 else np.array(v)
+            out[ag] = d
+        return out
+
+    def state(self) -> np.ndarray:
+        """The global state (true states of every agent, plus scenario extras)."""
+        return np.asarray(self.core.global_state()[0], dtype=np.float64)
+
+    # ---------------------------------------------------------------- render
+    def render(self):
+        """Draw the current scene (matplotlib, 3-D positions and trails)."""
+        if self.render_mode is None:
+            return None
+        from satenv.render import render_frame
+
+        scene = self.core.render_scene(0)
+        self._trails.append(np.asarray(scene["positions"]))
+        frame, self._fig = render_frame(scene, np.array(self._trails), self._fig,
+                                        show=self.render_mode == "human")
+        return frame if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        if self._fig is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self._fig)
+            self._fig = None
+
+
+def reject_unknown_kwargs(kwargs: dict[str, Any], allowed: set[str], env_name: str) -> None:
+    """Raise :class:`SatenvError` for keyword arguments the env does not know."""
+    unknown = sorted(set(kwargs) - allowed)
+    if unknown:
+        raise SatenvError(f"{env_name}: unknown keyword argument(s) {unknown}; "
+                          f"accepted: {sorted(allowed)}")
