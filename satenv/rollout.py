@@ -23,7 +23,7 @@ class Trajectory:
     dt: float
     t: np.ndarray                    # (T+1,) [s]
     states: np.ndarray               # (T+1, M, d) true states
-    actions: np.ndarray              # (T, M, 3) normalised actions as given
+    actions: np.ndarray              # (T, M, action_dim) normalised actions as given
     rewards: np.ndarray              # (T, M)
     info: dict[str, np.ndarray]      # key -> (T+1, M, ...)
     terminated: bool = False
@@ -96,7 +96,7 @@ def rollout(env, policy, *, seed: int | None = None, options: dict | None = None
     return Trajectory(
         env_id=env.metadata.get("name", type(env).__name__), agents=agents, dt=dt,
         t=np.arange(len(infos)) * dt, states=states,
-        actions=np.array(actions).reshape(-1, len(agents), 3), rewards=np.array(rewards).reshape(-1, len(agents)),
+        actions=np.array(actions).reshape(-1, len(agents), env.action_space(agents[0]).shape[0]), rewards=np.array(rewards).reshape(-1, len(agents)),
         info=stacked, terminated=terminated, truncated=truncated, compute_time=np.array(times),
         policy_info=dict(getattr(policy, "info", {}) or {}), seed=seed,
     )

@@ -61,12 +61,15 @@ class StepResult:
 class BatchedCore(ABC):
     """Task logic and physics for ``batch`` copies of one scenario (arrays ``(B, M, ...)``).
 
-    Subclasses set ``obs_dim`` and ``state_dim`` (per-agent true-state size, 6 for translation)
-    in ``__init__`` and keep ``self.t`` (``(B,)`` step counters) up to date.
+    Subclasses set ``obs_dim``, ``state_dim`` (per-agent true-state size, 6 for translation) and
+    ``action_dim`` (3 accelerations by default; e.g. 6 for force + torque) and keep ``self.t``
+    (``(B,)`` step counters) up to date. ``step`` receives the physical inputs: the normalised
+    actions times ``scenario.u_max`` (a scalar or an ``(action_dim,)`` array).
     """
 
     obs_dim: int
     state_dim: int = 6
+    action_dim: int = 3
 
     def __init__(self, scenario: Any, batch: int = 1) -> None:
         self.scenario = scenario
@@ -88,7 +91,7 @@ class BatchedCore(ABC):
 
     @abstractmethod
     def step(self, accel: np.ndarray, rng: np.random.Generator | None = None) -> StepResult:
-        """Advance every copy one decision period under accelerations ``(B, M, 3)`` [m/s^2]."""
+        """Advance every copy one decision period under inputs ``(B, M, action_dim)`` (SI)."""
 
     @abstractmethod
     def observe(self) -> np.ndarray:
@@ -130,7 +133,7 @@ class FormationEnv(ParallelEnv):
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
         self._obs_space = spaces.Box(-np.inf, np.inf, (self.core.obs_dim,), np.float32)
-        self._act_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self._act_space = spaces.Box(-1.0, 1.0, (self.core.action_dim,), np.float32)
         self._rng: np.random.Generator | None = None
         self._last_info: dict[str, np.ndarray] | None = None
         self._trails: list[np.ndarray] = []
@@ -196,7 +199,7 @@ class FormationEnv(ParallelEnv):
         return x0
 
     def step(self, actions: dict[str, Any]):
-        """Apply normalised actions ``{agent: (3,) in [-1, 1]}``; returns the 5 PettingZoo dicts."""
+        """Apply normalised actions ``{agent: (action_dim,) in [-1, 1]}``; returns the 5 PettingZoo dicts."""
         if not self.agents:
             raise SatenvError("step() called with no live agents: call reset() first "
                               "(the episode has ended or never started)")
@@ -219,23 +222,25 @@ class FormationEnv(ParallelEnv):
 
     def _action_array(self, actions: Any) -> np.ndarray:
         if not isinstance(actions, dict):
-            raise SatenvError(f"actions must be a dict {{agent: array of shape (3,)}}, got {type(actions).__name__}")
+            raise SatenvError(f"actions must be a dict {{agent: array of shape ({self.core.action_dim},)}}, "
+                              f"got {type(actions).__name__}")
         missing = [a for a in self.agents if a not in actions]
         extra = [a for a in actions if a not in self._index]
         if missing or extra:
             raise SatenvError(f"actions must have exactly one entry per live agent {self.agents}; "
                               f"missing {missing}, unknown {extra}")
-        out = np.zeros((self.core.n_agents, 3))
+        dim = self.core.action_dim
+        out = np.zeros((self.core.n_agents, dim))
         for agent, value in actions.items():
             try:
                 arr = np.asarray(value, dtype=np.float64)
             except (TypeError, ValueError):
                 raise SatenvError(f"action for {agent} must be numeric, got {value!r}") from None
-            if arr.shape != (3,):
-                raise SatenvError(f"action for {agent} must have shape (3,), got {arr.shape}")
+            if arr.shape != (dim,):
+                raise SatenvError(f"action for {agent} must have shape ({dim},), got {arr.shape}")
             if not np.all(np.isfinite(arr)):
                 raise SatenvError(f"action for {agent} must be finite, got {arr.tolist()}; "
-                                  "actions are normalised thrust in [-1, 1]^3")
+                                  "actions are normalised inputs in [-1, 1]")
             out[self._index[agent]] = arr
         return out
 
