@@ -1,0 +1,358 @@
+"""Leader–follower platoon scenarios (pereira2023 Table I; pereira2022 §5.1), SI units.
+
+All states are LVLH states of the followers relative to the passive leader at the origin:
+``[x, y, z, vx, vy, vz]`` with x radial, y along-track, z orbit normal.
+
+Formation targets (``formation``):
+
+* ``"neighbourhood"`` (pereira2023 eq. 15): follower f drives its neighbourhood error
+  ``E_f = sum_{i in N_f}(x_f - x_i) + g_f x_f`` to ``(g_f + d_f) E_d``; the resulting
+  formation depends on the topology (``Topology.desired_states``).
+* ``"chain"`` (pereira2022 §3): follower f holds ``x_f - x_{f-1} = E_d`` (leader = follower 0),
+  i.e. ``x_f* = f E_d``.
+
+Random initial states (``randomize=True`` in the env, :func:`sample_initial_state`): each
+follower's position is the preset's nominal position plus ``U(-s, s)`` per axis with
+``s = random_position_spread`` [m]; its velocity is ``U(-v, v)`` per axis with
+``v = random_velocity_spread`` [m/s]. Draws are rejected (up to 1000 times) until every pair of
+bodies (leader included) is at least ``2 r_f + random_min_gap`` apart and, for scenarios with a
+line-of-sight cone / keep-out sphere, every chaser starts strictly inside the cone and outside
+the sphere (so the pereira2022 controller starts feasible).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from satenv.graph import make_topology
+
+__all__ = ["PlatoonScenario", "PRESETS", "resolve_scenario", "sample_initial_state"]
+
+MU_TABLE1 = 3.98600441e14  # pereira2023 Table I value of mu [m^3/s^2]
+
+
+def _vec(value: Any, name: str, length: int | None = None) -> tuple[float, ...]:
+    try:
+        arr = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric sequence, got {value!r}") from None
+    if length is not None and arr.shape != (length,):
+        raise ValueError(f"{name} must have {length} entries, got {arr.size}: {value!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return tuple(float(v) for v in arr)
+
+
+def _pos(value: Any, name: str, *, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        need = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be finite and {need}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class PlatoonScenario:
+    """Parameters of a platoon scenario (frozen, validated; SI units).
+
+    Args:
+        name: preset name (informational).
+        initial_state: (N, 6) follower states relative to the leader, LVLH [m, m/s].
+        desired_error: E_d (6,) — pereira2023 desired neighbourhood error, or (``chain``)
+            the desired state of each follower relative to its predecessor.
+        formation: ``"neighbourhood"`` or ``"chain"`` (module docstring).
+        topology: ``"PLF"``, ``"BDL"``, ``"TPLF"`` or an (N, N) 0/1 adjacency (i hears j).
+        mu: gravitational parameter [m^3/s^2]; orbit_radius: ||r_l|| [m] (circular leader).
+        dt: sampling time T_s [s]; n_steps: episode length n_k.
+        horizon: MPC prediction horizon N.
+        terminal_weight, state_weight: diagonals of P, Q (6,); input_weight: diagonal of W (3,).
+        alpha: per-follower cost weights (N,).
+        sigma: Jacobi stopping tolerance of Algorithm 1.
+        u_max: per-axis acceleration limit [m/s^2]; v_max: velocity limit [m/s].
+        follower_radius: r_f [m]; leader_radius [m] (collision when distance < r_i + r_j).
+        min_error_constraint: add the linearised constraint (41)-(42) in the DMPC.
+        controller: ``"one_hop"`` (pereira2023 Algorithm 1) or ``"convex_step"`` (pereira2022).
+        convex_weights: w_j of pereira2022 eq. 30 (sum to 1); iterations: gamma (pereira2022).
+        keepout_radius: r_delta [m] of the keep-out sphere centred at keepout_center in each
+            target-chaser frame (pereira2022 eq. 31); 0 disables.
+        los_slopes: (c_x, c_z) of the LOS cone (eq. 34), port: (x_rho, y_rho, z_rho) [m];
+            ``los_slopes=None`` disables the cone.
+        dynamics: truth model for the env: ``"cw"``, ``"nonlinear"``, ``"j2"``.
+        max_distance: the allowed region: an episode terminates if a follower is farther than
+            this from the leader [m].
+        random_position_spread, random_velocity_spread, random_min_gap: see module docstring.
+    """
+
+    name: str
+    initial_state: tuple[tuple[float, ...], ...]
+    desired_error: tuple[float, ...] = (0.0, -8.0, 0.0, 0.0, 0.0, 0.0)
+    formation: str = "neighbourhood"
+    topology: Any = "PLF"
+    mu: float = MU_TABLE1
+    orbit_radius: float = 6_621_000.0
+    dt: float = 0.1
+    n_steps: int = 180
+    horizon: int = 30
+    terminal_weight: tuple[float, ...] = (25.0,) * 6
+    state_weight: tuple[float, ...] = (13.0,) * 6
+    input_weight: tuple[float, ...] = (0.1,) * 3
+    alpha: tuple[float, ...] = (2.0, 1.5, 1.0, 1.0)
+    sigma: float = 0.5
+    u_max: float = 6.0
+    v_max: float = 20.0
+    follower_radius: float = 3.0
+    leader_radius: float = 3.0
+    min_error_constraint: bool = False
+    controller: str = "one_hop"
+    convex_weights: tuple[float, ...] | None = None
+    iterations: int | None = None
+    keepout_center: tuple[float, ...] = (0.0, 0.0, 0.0)
+    keepout_radius: float = 0.0
+    los_slopes: tuple[float, ...] | None = None
+    port: tuple[float, ...] = (0.0, 0.0, 0.0)
+    dynamics: str = "cw"
+    max_distance: float = 1000.0
+    random_position_spread: float = 20.0
+    random_velocity_spread: float = 0.5
+    random_min_gap: float = 2.0
+    _topology: Any = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        if not isinstance(self.name, str):
+            raise ValueError(f"name must be a string, got {self.name!r}.")
+        x0 = np.asarray(self.initial_state, dtype=float)
+        if x0.ndim != 2 or x0.shape[1] != 6 or x0.shape[0] < 1 or not np.all(np.isfinite(x0)):
+            raise ValueError(
+                f"initial_state must be a finite (N, 6) array of follower states, got shape "
+                f"{x0.shape}; pass [[x, y, z, vx, vy, vz], ...] relative to the leader."
+            )
+        n = x0.shape[0]
+        s(self, "initial_state", tuple(tuple(float(v) for v in row) for row in x0))
+        s(self, "desired_error", _vec(self.desired_error, "desired_error", 6))
+        if self.formation not in ("neighbourhood", "chain"):
+            raise ValueError(
+                f"formation must be 'neighbourhood' or 'chain', got {self.formation!r}."
+            )
+        topo = make_topology(self.topology, n)
+        s(self, "_topology", topo)
+        if not isinstance(self.topology, str):
+            s(self, "topology", tuple(tuple(int(v) for v in row) for row in topo.adjacency))
+        else:
+            s(self, "topology", topo.name)
+        for name in ("mu", "orbit_radius", "dt", "u_max", "v_max", "follower_radius",
+                     "leader_radius", "max_distance"):
+            s(self, name, _pos(getattr(self, name), name))
+        s(self, "sigma", _pos(self.sigma, "sigma"))
+        for name in ("keepout_radius", "random_position_spread", "random_velocity_spread",
+                     "random_min_gap"):
+            s(self, name, _pos(getattr(self, name), name, allow_zero=True))
+        for name in ("n_steps", "horizon"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                raise ValueError(f"{name} must be a positive int, got {v!r}.")
+            s(self, name, int(v))
+        for name, length in (("terminal_weight", 6), ("state_weight", 6), ("input_weight", 3)):
+            w = _vec(getattr(self, name), name, length)
+            if min(w) < 0:
+                raise ValueError(f"{name} must be >= 0 (diagonal of a PSD weight), got {w}.")
+            s(self, name, w)
+        if min(self.input_weight) <= 0:
+            raise ValueError(f"input_weight must be > 0 (W positive definite), got {self.input_weight}.")
+        alpha = _vec(self.alpha, "alpha")
+        if len(alpha) != n or min(alpha) <= 0:
+            raise ValueError(f"alpha must have {n} positive entries (one per follower), got {alpha}.")
+        s(self, "alpha", alpha)
+        if self.controller not in ("one_hop", "convex_step"):
+            raise ValueError(
+                f"controller must be 'one_hop' or 'convex_step', got {self.controller!r}."
+            )
+        if self.convex_weights is not None:
+            w = _vec(self.convex_weights, "convex_weights")
+            if len(w) != n or min(w) <= 0 or max(w) >= 1 or abs(sum(w) - 1) > 1e-9:
+                raise ValueError(
+                    f"convex_weights must be {n} numbers in (0, 1) summing to 1 (pereira2022 "
+                    f"eq. 30), got {w}."
+                )
+            s(self, "convex_weights", w)
+        if self.iterations is not None:
+            v = self.iterations
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                raise ValueError(f"iterations must be a positive int or None, got {v!r}.")
+            s(self, "iterations", int(v))
+        s(self, "keepout_center", _vec(self.keepout_center, "keepout_center", 3))
+        s(self, "port", _vec(self.port, "port", 3))
+        if self.los_slopes is not None:
+            c = _vec(self.los_slopes, "los_slopes", 2)
+            if min(c) <= 0:
+                raise ValueError(f"los_slopes (c_x, c_z) must be > 0, got {c}.")
+            s(self, "los_slopes", c)
+        if self.dynamics not in ("cw", "nonlinear", "j2", "j2_drag"):
+            raise ValueError(
+                f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}."
+            )
+
+    # ---- derived quantities ---------------------------------------------------------------
+    @property
+    def n_followers(self) -> int:
+        return len(self.initial_state)
+
+    @property
+    def mean_motion(self) -> float:
+        """Leader orbital rate n = sqrt(mu / ||r_l||^3) [rad/s]."""
+        return math.sqrt(self.mu / self.orbit_radius**3)
+
+    @property
+    def graph(self):
+        """The validated :class:`satenv.graph.Topology`."""
+        return self._topology
+
+    def initial_array(self) -> np.ndarray:
+        return np.array(self.initial_state, dtype=float)
+
+    def desired_states(self) -> np.ndarray:
+        """Formation target states x* (N, 6) relative to the leader."""
+        e_d = np.asarray(self.desired_error)
+        if self.formation == "chain":
+            return np.arange(1, self.n_followers + 1)[:, None] * e_d[None, :]
+        return self._topology.desired_states(e_d)
+
+    def desired_neighbourhood_error(self) -> np.ndarray:
+        """Target of the neighbourhood error, ``L_bar x*`` (N, 6); ``(g+d) E_d`` for pereira2023."""
+        return self._topology.augmented_laplacian @ self.desired_states()
+
+    def with_overrides(self, **overrides) -> PlatoonScenario:
+        """A copy with fields replaced; unknown names raise ValueError.
+
+        If ``initial_state`` changes the number of followers and ``alpha`` (resp.
+        ``convex_weights``) is not given, it becomes all ones (resp. uniform).
+        """
+        known = {f.name for f in fields(self) if f.init}
+        bad = sorted(set(overrides) - known)
+        if bad:
+            raise ValueError(
+                f"unknown scenario parameter(s) {bad}; valid names: {sorted(known)}."
+            )
+        n_new = overrides.get("initial_state")
+        if n_new is not None and "alpha" not in overrides:
+            n = np.asarray(n_new).shape[0] if np.ndim(n_new) == 2 else None
+            if n is not None and n != self.n_followers:
+                overrides["alpha"] = (1.0,) * n
+                if self.convex_weights is not None and "convex_weights" not in overrides:
+                    overrides["convex_weights"] = (1.0 / n,) * n
+        return replace(self, **overrides)
+
+
+PRESETS: dict[str, PlatoonScenario] = {
+    # pereira2023 Table I (the CasADi/MATLAB simulation of §IV).
+    "pereira2023": PlatoonScenario(
+        name="pereira2023",
+        initial_state=(
+            (30.0, -35.0, 40.0, 0.0, 0.0, 0.0),
+            (15.0, -46.0, -30.0, 0.0, 0.0, 0.0),
+            (-49.0, -43.0, -20.0, 0.0, 0.0, 0.0),
+            (-29.0, -23.0, 37.0, 0.0, 0.0, 0.0),
+        ),
+    ),
+    # pereira2022 §5.1: leader + 2 followers; p12(0) = [30,-50,40], p23(0) = [15,-46,-30] are
+    # pair states, so follower 2 starts at p12 + p23 relative to the leader. y_d = [0,-10,0]
+    # per pair (chain formation); P, Q weight the position output only. n_k is not given in
+    # the paper: 300 steps (30 s) is our choice. The env's observations use the PLF graph.
+    "pereira2022": PlatoonScenario(
+        name="pereira2022",
+        initial_state=(
+            (30.0, -50.0, 40.0, 0.0, 0.0, 0.0),
+            (45.0, -96.0, 10.0, 0.0, 0.0, 0.0),
+        ),
+        desired_error=(0.0, -10.0, 0.0, 0.0, 0.0, 0.0),
+        formation="chain",
+        topology="PLF",
+        mu=MU_TABLE1,
+        orbit_radius=6_621_000.0,
+        dt=0.1,
+        n_steps=300,
+        horizon=40,
+        terminal_weight=(25.0, 25.0, 25.0, 0.0, 0.0, 0.0),
+        state_weight=(8.0, 8.0, 8.0, 0.0, 0.0, 0.0),
+        input_weight=(0.1, 0.1, 0.1),
+        alpha=(2.0, 1.5),
+        controller="convex_step",
+        convex_weights=(0.6, 0.4),
+        iterations=2,
+        keepout_center=(0.0, 0.0, 0.0),
+        keepout_radius=6.0,
+        los_slopes=(1.0, 1.0),
+        port=(2.0, 2.0, 4.0),
+        u_max=6.0,
+        v_max=20.0,
+    ),
+}
+
+
+def resolve_scenario(preset: str = "pereira2023", **overrides) -> PlatoonScenario:
+    """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown platoon preset {preset!r}; expected one of {sorted(PRESETS)}.")
+    base = PRESETS[preset]
+    return base.with_overrides(**overrides) if overrides else base
+
+
+def pair_states(scenario: PlatoonScenario, x: np.ndarray) -> np.ndarray:
+    """Target–chaser pair states ``x_f - x_{f-1}`` (leader = 0), ``(..., N, 6)``."""
+    x = np.asarray(x, dtype=float)
+    prev = np.concatenate([np.zeros_like(x[..., :1, :]), x[..., :-1, :]], axis=-2)
+    return x - prev
+
+
+def los_keepout_ok(scenario: PlatoonScenario, x: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Per follower (..., N) bool: pair position inside the LOS cone and outside the keep-out.
+
+    ``margin`` [m] tightens both sets. Always True when neither constraint is configured.
+    """
+    p = pair_states(scenario, x)[..., :3]
+    ok = np.ones(p.shape[:-1], dtype=bool)
+    if scenario.keepout_radius > 0:
+        d = np.linalg.norm(p - np.asarray(scenario.keepout_center), axis=-1)
+        ok &= d >= scenario.keepout_radius + margin
+    if scenario.los_slopes is not None:
+        cx, cz = scenario.los_slopes
+        xr, yr, zr = scenario.port
+        px, py, pz = p[..., 0], p[..., 1], p[..., 2]
+        ok &= py <= -yr - margin
+        ok &= cx * np.abs(px) + py <= cx * xr - margin
+        ok &= cz * np.abs(pz) + py <= cz * zr - margin
+    return ok
+
+
+def sample_initial_state(scenario: PlatoonScenario, rng: np.random.Generator) -> np.ndarray:
+    """Draw an initial state (N, 6) from the documented distribution (module docstring)."""
+    nominal = scenario.initial_array()
+    n = scenario.n_followers
+    s, v = scenario.random_position_spread, scenario.random_velocity_spread
+    min_sep = 2.0 * scenario.follower_radius + scenario.random_min_gap
+    min_leader = scenario.follower_radius + scenario.leader_radius + scenario.random_min_gap
+    for _ in range(1000):
+        x = nominal.copy()
+        x[:, :3] += rng.uniform(-s, s, size=(n, 3))
+        x[:, 3:] = rng.uniform(-v, v, size=(n, 3))
+        pos = x[:, :3]
+        if np.any(np.linalg.norm(pos, axis=1) < min_leader):
+            continue
+        if n > 1:
+            dist = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
+            if np.any(dist[np.triu_indices(n, 1)] < min_sep):
+                continue
+        if not np.all(los_keepout_ok(scenario, x, margin=0.5)):
+            continue
+        return x
+    raise RuntimeError(
+        "could not draw a collision-free initial state in 1000 tries; reduce "
+        "random_position_spread or random_min_gap."
+    )
