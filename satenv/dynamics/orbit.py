@@ -142,25 +142,48 @@ def lvlh_rotation(chief_rv) -> np.ndarray:
     return _rotation(chief_rv[..., :3], chief_rv[..., 3:])
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (faster than ``np.cross`` for small batches)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _norm(a: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.sum(a * a, axis=-1, keepdims=True))
+
+
 def _rotation(r: np.ndarray, v: np.ndarray) -> np.ndarray:
-    x = r / np.linalg.norm(r, axis=-1, keepdims=True)
-    h = np.cross(r, v)
-    z = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    y = np.cross(z, x)
+    x = r / _norm(r)
+    h = _cross(r, v)
+    z = h / _norm(h)
+    y = _cross(z, x)
     return np.stack([x, y, z], axis=-2)
+
+
+def rotate(rot: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """``rot @ vec`` for rotations ``(..., 3, 3)`` and vectors ``(..., M, 3)`` (ECI -> LVLH)."""
+    return (vec[..., 0:1] * rot[..., None, :, 0] + vec[..., 1:2] * rot[..., None, :, 1]
+            + vec[..., 2:3] * rot[..., None, :, 2])
+
+
+def rotate_back(rot: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """``rot.T @ vec`` for rotations ``(..., 3, 3)`` and vectors ``(..., M, 3)`` (LVLH -> ECI)."""
+    return (vec[..., 0:1] * rot[..., None, 0, :] + vec[..., 1:2] * rot[..., None, 1, :]
+            + vec[..., 2:3] * rot[..., None, 2, :])
 
 
 def frame_rate(chief_rv: np.ndarray, chief_acc: np.ndarray | None = None) -> np.ndarray:
     """LVLH angular velocity (..., 3) expressed in LVLH components ``[omega_x, 0, omega_z]``."""
     r, v = chief_rv[..., :3], chief_rv[..., 3:]
-    rn = np.linalg.norm(r, axis=-1)
-    h = np.cross(r, v)
-    hn = np.linalg.norm(h, axis=-1)
+    rn = _norm(r)[..., 0]
+    h = _cross(r, v)
+    hn = _norm(h)[..., 0]
     wz = hn / rn**2
     if chief_acc is None:
         wx = np.zeros_like(wz)
     else:
-        wx = rn * np.einsum("...i,...i->...", chief_acc, h / hn[..., None]) / hn
+        wx = rn * np.sum(chief_acc * h, axis=-1) / hn**2
     return np.stack([wx, np.zeros_like(wz), wz], axis=-1)
 
 
@@ -188,9 +211,9 @@ def _eci_to_lvlh(chief_rv: np.ndarray, rel_eci: np.ndarray, chief_acc) -> np.nda
     """Relative ECI states (..., M, 6) -> LVLH (no validation)."""
     rot = _rotation(chief_rv[..., :3], chief_rv[..., 3:])          # (..., 3, 3)
     w = frame_rate(chief_rv, chief_acc)                             # (..., 3) LVLH comps
-    rho = np.einsum("...ij,...mj->...mi", rot, rel_eci[..., :3])
-    dv = np.einsum("...ij,...mj->...mi", rot, rel_eci[..., 3:])
-    rho_dot = dv - np.cross(w[..., None, :], rho)
+    rho = rotate(rot, rel_eci[..., :3])
+    dv = rotate(rot, rel_eci[..., 3:])
+    rho_dot = dv - _cross(w[..., None, :], rho)
     return np.concatenate([rho, rho_dot], axis=-1)
 
 
@@ -199,7 +222,7 @@ def _lvlh_to_eci_rel(chief_rv: np.ndarray, x_lvlh: np.ndarray, chief_acc) -> np.
     rot = _rotation(chief_rv[..., :3], chief_rv[..., 3:])
     w = frame_rate(chief_rv, chief_acc)
     rho, rho_dot = x_lvlh[..., :3], x_lvlh[..., 3:]
-    dv_lvlh = rho_dot + np.cross(w[..., None, :], rho)
-    dr = np.einsum("...ji,...mj->...mi", rot, rho)
-    dv = np.einsum("...ji,...mj->...mi", rot, dv_lvlh)
+    dv_lvlh = rho_dot + _cross(w[..., None, :], rho)
+    dr = rotate_back(rot, rho)
+    dv = rotate_back(rot, dv_lvlh)
     return np.concatenate([dr, dv], axis=-1)

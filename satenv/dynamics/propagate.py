@@ -18,7 +18,7 @@ from ._checks import as_array, positive
 from .cw import cw_matrices
 from .forces import FORCE_MODELS, ForceModel, acceleration
 from .integrators import INTEGRATORS
-from .orbit import Orbit, _eci_to_lvlh, _lvlh_to_eci_rel, _rotation
+from .orbit import Orbit, _eci_to_lvlh, _lvlh_to_eci_rel, _rotation, rotate_back
 
 MODELS: tuple[str, ...] = ("cw", "nonlinear", "j2", "j2_drag")
 """Names accepted by :func:`simulate` and :class:`RelativeModel`."""
@@ -46,7 +46,7 @@ def _derivative(force: ForceModel):
         v_d = v_c[..., None, :] + rel[..., 3:]
         a_d = acceleration(r_d, v_d, force, force.ballistic_deputy)
         rot = _rotation(r_c, v_c)
-        thrust = np.einsum("...ji,...mj->...mi", rot, u_lvlh)
+        thrust = rotate_back(rot, u_lvlh)
         dy = np.empty_like(y)
         dy[..., 0, :3] = v_c
         dy[..., 0, 3:] = a_c
