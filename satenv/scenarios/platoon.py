@@ -84,9 +84,16 @@ class PlatoonScenario:
             target-chaser frame (pereira2022 eq. 31); 0 disables.
         los_slopes: (c_x, c_z) of the LOS cone (eq. 34), port: (x_rho, y_rho, z_rho) [m];
             ``los_slopes=None`` disables the cone.
-        dynamics: truth model for the env: ``"cw"``, ``"nonlinear"``, ``"j2"``.
+        dynamics: truth model for the env: ``"cw"``, ``"nonlinear"``, ``"j2"``, ``"j2_drag"``.
+        inclination: leader orbit inclination [rad] (matters for ``"j2"`` only; the papers do
+            not give one, 0 by default).
+        thrust_mode: ``"box"`` (per-axis limit u_max, eq. 39) or ``"norm"``.
         max_distance: the allowed region: an episode terminates if a follower is farther than
             this from the leader [m].
+        terminate_on_collision: end the episode at a collision (distance < r_i + r_j).
+        reward_scale, collision_penalty, violation_penalty: reward shaping of the env (see
+            ``satenv.envs.platoon_v0``).
+        randomize: draw initial states from the distribution below instead of the preset's.
         random_position_spread, random_velocity_spread, random_min_gap: see module docstring.
     """
 
@@ -118,7 +125,14 @@ class PlatoonScenario:
     los_slopes: tuple[float, ...] | None = None
     port: tuple[float, ...] = (0.0, 0.0, 0.0)
     dynamics: str = "cw"
-    max_distance: float = 1000.0
+    inclination: float = 0.0
+    thrust_mode: str = "box"
+    max_distance: float = 500.0
+    terminate_on_collision: bool = True
+    reward_scale: float = 1.0e4
+    collision_penalty: float = 100.0
+    violation_penalty: float = 1.0
+    randomize: bool = False
     random_position_spread: float = 20.0
     random_velocity_spread: float = 0.5
     random_min_gap: float = 2.0
@@ -151,6 +165,20 @@ class PlatoonScenario:
                      "leader_radius", "max_distance"):
             s(self, name, _pos(getattr(self, name), name))
         s(self, "sigma", _pos(self.sigma, "sigma"))
+        for name in ("reward_scale",):
+            s(self, name, _pos(getattr(self, name), name))
+        for name in ("collision_penalty", "violation_penalty"):
+            s(self, name, _pos(getattr(self, name), name, allow_zero=True))
+        for name in ("terminate_on_collision", "randomize", "min_error_constraint"):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}.")
+            s(self, name, bool(getattr(self, name)))
+        if self.thrust_mode not in ("box", "norm"):
+            raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}.")
+        inc = _vec([self.inclination], "inclination", 1)[0]
+        if not 0.0 <= inc <= math.pi:
+            raise ValueError(f"inclination must be in [0, pi] rad, got {self.inclination!r}.")
+        s(self, "inclination", inc)
         for name in ("keepout_radius", "random_position_spread", "random_velocity_spread",
                      "random_min_gap"):
             s(self, name, _pos(getattr(self, name), name, allow_zero=True))
@@ -203,6 +231,16 @@ class PlatoonScenario:
     @property
     def n_followers(self) -> int:
         return len(self.initial_state)
+
+    @property
+    def n_agents(self) -> int:
+        """Number of controlled agents (the followers)."""
+        return len(self.initial_state)
+
+    @property
+    def max_steps(self) -> int:
+        """Episode length (truncation), ``n_steps``."""
+        return self.n_steps
 
     @property
     def mean_motion(self) -> float:

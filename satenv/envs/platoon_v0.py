@@ -1,0 +1,276 @@
+"""platoon_v0 — leader–follower spacecraft platooning (pereira2023; pereira2022 §3/§5.1).
+
+``satenv.envs.platoon_v0.parallel_env(**kwargs)`` returns a PettingZoo ``ParallelEnv``;
+``env(**kwargs)`` the AEC version (``parallel_to_aec``); ``raw_env`` is the class.
+
+N active followers ``follower_1 … follower_N`` fly relative to a passive leader at the origin of
+its LVLH frame (x radial, y along-track, z orbit normal) on a circular orbit of radius
+``orbit_radius``. They communicate over a graph (``topology``: ``"PLF"``, ``"BDL"``, ``"TPLF"``
+or an adjacency matrix, see :mod:`satenv.graph`) and should reach the formation in which every
+neighbourhood error ``E_f = sum_{i in N_f}(x_f - x_i) + g_f x_f`` (pereira2023 eq. 9) equals its
+target ``E_f* = (L_bar x*)_f`` — ``(g_f + d_f) E_d`` for pereira2023, the chain spacing
+``x_f - x_{f-1} = E_d`` for pereira2022 (:class:`satenv.scenarios.platoon.PlatoonScenario`).
+
+Arguments (keywords; all optional)
+----------------------------------
+``preset``        ``"pereira2023"`` (default: Table I exactly — 4 followers, ||r_l|| = 6621 km,
+                  T_s = 0.1 s, n_k = 180, u_max = 6 m/s^2, v_max = 20 m/s, r_f = 3 m) or
+                  ``"pereira2022"`` (§5.1: 2 followers + leader, y_d = [0, -10, 0] per pair,
+                  keep-out r_delta = 6 m, LOS cone c_x = c_z = 1, port [2, 2, 4] m, N = 40).
+``render_mode``   ``None``, ``"rgb_array"`` or ``"human"`` (matplotlib 3-D positions + trails).
+any field of ``PlatoonScenario`` overrides the preset, e.g. ``topology="BDL"``,
+``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"`` (truth model from ``satenv.dynamics``),
+``randomize=True`` (random initial states, distribution in :mod:`satenv.scenarios.platoon`),
+``initial_state``, ``n_steps``, ``u_max``, ``terminate_on_collision``, ``reward_scale`` …
+Unknown keywords raise ``SatenvError`` (a ``ValueError``).
+``reset(seed=..., options={"initial_state": array (N, 6)})`` starts from a given state.
+
+Spaces (per agent; float32)
+---------------------------
+Action ``Box(-1, 1, (3,))``: LVLH acceleration ``u = a * u_max`` (per-axis box, eq. 39).
+
+Observation ``Box(-inf, inf, (15 + 7 (N - 1),))``, normalised with ``L = 50 m``, ``V = 10 m/s``:
+
+=========  =======================================================================
+entries    meaning
+=========  =======================================================================
+0–5        tracking error ``E_f - E_f*`` (position / L, velocity / V)
+6–11       own state ``x_f`` relative to the leader (position / L, velocity / V)
+12         ``g_f`` (1: hears the leader)
+13         ``(g_f + d_f) / N``
+14         fraction of the episode remaining ``1 - t / n_k``
+15 …       one slot of 7 per other follower j (ascending index, self skipped):
+           ``[mask, (x_j - x_f) / (L, V)]`` with mask = 1 iff f hears j, slot zeroed
+           otherwise (padded and masked to a fixed size)
+=========  =======================================================================
+
+``state()`` returns the global state: the N follower states flattened ``(6 N,)`` float64.
+
+Reward (per follower, mirrors the paper's stage cost eq. 14)
+------------------------------------------------------------
+``r_f = -alpha_f (e^T Q e + u^T W u) / reward_scale - collision_penalty * collision_f
+- violation_penalty * violations_f`` with ``e = E_f - E_f*`` after the step, ``u`` the applied
+acceleration, ``Q = diag(state_weight)``, ``W = diag(input_weight)``.
+
+Termination / truncation
+------------------------
+Terminated (all agents) when two bodies collide (distance < r_i + r_j, the leader included,
+radii ``follower_radius`` / ``leader_radius``; only if ``terminate_on_collision``) or a follower
+leaves the ball of radius ``max_distance`` around the leader. Truncated at ``n_steps``.
+Note: the pereira2023 Table I formation itself puts bodies closer than ``2 r_f`` (PLF: 1 m
+between followers 3 and 4; BDL: followers 1/4 and 2/3 coincide), so the paper's reproduction
+runs with ``terminate_on_collision=False`` and reports the collisions.
+
+Infos (per agent, SI units)
+---------------------------
+``state`` (6,), ``accel`` (3,) applied [m/s^2], ``delta_v`` [m/s] this step,
+``tracking_error`` (6,) ``E_f - E_f*`` (what the paper's RMSE/FOE measure),
+``neighbourhood_error`` (6,) ``E_f``, ``min_separation`` [m] to any other body,
+``collision`` (bool), ``violations`` (int) this step — velocity bound (40) on the velocity part
+of ``E_f`` (``|.| > (g_f + d_f) v_max``), and when configured the minimum tracking error (41),
+the keep-out sphere (eq. 31) and the LOS cone (eq. 34) of the follower's target–chaser pair —,
+``cost`` = ``collision + violations`` (float).
+
+Version History
+---------------
+* v0: initial release.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from satenv.dynamics import Orbit, RelativeModel, delta_v
+from satenv.envs.base import BatchedCore, FormationEnv, StepResult, reject_unknown_kwargs
+from satenv.scenarios.platoon import (
+    PRESETS,
+    PlatoonScenario,
+    resolve_scenario,
+    sample_initial_state,
+)
+
+__all__ = ["PlatoonCore", "PlatoonEnv", "env", "parallel_env", "raw_env", "POS_SCALE", "VEL_SCALE"]
+
+POS_SCALE = 50.0
+"""Observation position scale L [m]."""
+VEL_SCALE = 10.0
+"""Observation velocity scale V [m/s]."""
+
+
+class PlatoonCore(BatchedCore):
+    """Batched platoon physics and task logic (``B`` copies, ``N`` followers)."""
+
+    state_dim = 6
+    action_dim = 3
+
+    def __init__(self, scenario: PlatoonScenario, batch: int = 1) -> None:
+        super().__init__(scenario, batch)
+        n = self.n_agents
+        self.obs_dim = 15 + 7 * (n - 1)
+        self.topology = scenario.graph
+        self.lbar = np.asarray(self.topology.augmented_laplacian)
+        self.adj = np.asarray(self.topology.adjacency, dtype=float)
+        self.gains = self.topology.gains.astype(float)
+        self.target = scenario.desired_neighbourhood_error()  # (N, 6)
+        self.orbit = Orbit.circular(scenario.orbit_radius, i=scenario.inclination, mu=scenario.mu)
+        self.model = RelativeModel(scenario.dynamics, self.orbit, scenario.dt)
+        self.q = np.asarray(scenario.state_weight)
+        self.w = np.asarray(scenario.input_weight)
+        self.alpha = np.asarray(scenario.alpha)
+        radii = np.full(n + 1, scenario.follower_radius)
+        radii[0] = scenario.leader_radius
+        self.contact = radii[:, None] + radii[None, :]  # (N+1, N+1) body 0 = leader
+        others = [[j for j in range(n) if j != i] for i in range(n)]
+        self.others = np.array(others, dtype=np.int64).reshape(n, max(n - 1, 0))
+        self.x = np.zeros((self.batch, n, 6))
+        self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
+        self.accel = np.zeros((self.batch, n, 3))
+
+    # ------------------------------------------------------------------ episode
+    def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        if self.scenario.randomize:
+            return np.stack([sample_initial_state(self.scenario, rng) for _ in range(n)])
+        return np.tile(self.scenario.initial_array(), (n, 1, 1))
+
+    def reset(self, x0, idx=None, rng=None):
+        x0 = np.asarray(x0, dtype=float)
+        sel = slice(None) if idx is None else idx
+        self.x[sel] = x0
+        self.t[sel] = 0
+        self.chief[sel] = self.model.initial_chief()
+        self.accel[sel] = 0.0
+        info = self._info(self.x[sel], self.accel[sel], self.t[sel])
+        return info
+
+    def step(self, accel, rng=None) -> StepResult:
+        accel = np.asarray(accel, dtype=float)
+        self.x, self.chief = self.model.step(self.x, accel, self.chief)
+        self.accel = accel
+        self.t += 1
+        info = self._info(self.x, accel, self.t)
+        e = info["tracking_error"]
+        stage = np.einsum("bnd,d,bnd->bn", e, self.q, e) + np.einsum("bnd,d,bnd->bn", accel, self.w, accel)
+        sc = self.scenario
+        rewards = (-self.alpha * stage / sc.reward_scale
+                   - sc.collision_penalty * info["collision"]
+                   - sc.violation_penalty * info["violations"])
+        far = np.linalg.norm(self.x[..., :3], axis=-1) > sc.max_distance
+        terminated = far.any(axis=-1)
+        if sc.terminate_on_collision:
+            terminated |= info["collision"].any(axis=-1)
+        return StepResult(rewards, terminated, info)
+
+    # ------------------------------------------------------------------ quantities
+    def neighbourhood_error(self, x: np.ndarray) -> np.ndarray:
+        return np.einsum("ij,bjd->bid", self.lbar, x)
+
+    def _info(self, x: np.ndarray, accel: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray]:
+        sc = self.scenario
+        n = self.n_agents
+        err_raw = self.neighbourhood_error(x)
+        err = err_raw - self.target
+        pos = np.concatenate([np.zeros((x.shape[0], 1, 3)), x[..., :3]], axis=1)
+        dist = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)  # (B, N+1, N+1)
+        dist[:, np.arange(n + 1), np.arange(n + 1)] = np.inf
+        min_sep = dist[:, 1:].min(axis=-1)
+        collision = (dist[:, 1:] < self.contact[1:]).any(axis=-1)
+        viol = (np.abs(err_raw[..., 3:]) > (self.gains * sc.v_max)[:, None]).any(axis=-1).astype(np.int64)
+        if sc.min_error_constraint:
+            viol += np.linalg.norm(err_raw[..., :3], axis=-1) < self.gains * sc.follower_radius
+        if sc.keepout_radius > 0 or sc.los_slopes is not None:
+            prev = np.concatenate([np.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
+            p = (x - prev)[..., :3]
+            if sc.keepout_radius > 0:
+                viol += np.linalg.norm(p - np.asarray(sc.keepout_center), axis=-1) < sc.keepout_radius
+            if sc.los_slopes is not None:
+                cx, cz = sc.los_slopes
+                xr, yr, zr = sc.port
+                inside = ((p[..., 1] <= -yr) & (cx * np.abs(p[..., 0]) + p[..., 1] <= cx * xr)
+                          & (cz * np.abs(p[..., 2]) + p[..., 1] <= cz * zr))
+                viol += ~inside
+        viol = viol.astype(np.int64)
+        return {
+            "state": x.copy(),
+            "accel": accel.copy(),
+            "delta_v": delta_v(accel, sc.dt),
+            "tracking_error": err,
+            "neighbourhood_error": err_raw,
+            "min_separation": min_sep,
+            "collision": collision,
+            "violations": viol,
+            "cost": collision.astype(float) + viol,
+        }
+
+    def observe(self) -> np.ndarray:
+        sc = self.scenario
+        n, b = self.n_agents, self.batch
+        scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
+        err = (self.neighbourhood_error(self.x) - self.target) / scale
+        own = self.x / scale
+        obs = np.zeros((b, n, self.obs_dim))
+        obs[..., 0:6] = err
+        obs[..., 6:12] = own
+        obs[..., 12] = self.topology.pinning
+        obs[..., 13] = self.gains / n
+        obs[..., 14] = 1.0 - self.t[:, None] / sc.n_steps
+        if n > 1:
+            rel = (self.x[:, self.others] - self.x[:, :, None]) / scale  # (B, N, N-1, 6)
+            mask = np.take_along_axis(self.adj, self.others, axis=1)  # (N, N-1)
+            slots = np.concatenate([np.broadcast_to(mask[None, ..., None], (b, n, n - 1, 1)),
+                                    rel * mask[None, ..., None]], axis=-1)
+            obs[..., 15:] = slots.reshape(b, n, -1)
+        return obs.astype(np.float32)
+
+    def global_state(self) -> np.ndarray:
+        return self.x.reshape(self.batch, -1).copy()
+
+    def render_scene(self, b: int = 0) -> dict[str, Any]:
+        sc = self.scenario
+        spheres = [(p, sc.follower_radius, f"follower_{i + 1}") for i, p in enumerate(self.x[b, :, :3])]
+        spheres.append((np.zeros(3), sc.leader_radius, "leader"))
+        if sc.keepout_radius > 0:
+            prev = np.vstack([np.zeros(3), self.x[b, :-1, :3]])
+            spheres += [(p + np.asarray(sc.keepout_center), sc.keepout_radius, "keep-out")
+                        for p in prev]
+        return {
+            "positions": self.x[b, :, :3].copy(),
+            "labels": [f"f{i + 1}" for i in range(self.n_agents)],
+            "targets": sc.desired_states()[:, :3],
+            "spheres": spheres,
+            "title": f"platoon_v0 ({sc.name}, {self.topology.name})  t = {self.t[b] * sc.dt:.1f} s",
+        }
+
+
+class PlatoonEnv(FormationEnv):
+    """The platoon ``ParallelEnv`` (see the module docstring)."""
+
+    metadata = {**FormationEnv.metadata, "name": "platoon_v0"}
+    core_class = PlatoonCore
+    agent_prefix = "follower"
+
+    def __init__(self, preset: str = "pereira2023", render_mode: str | None = None, **kwargs) -> None:
+        if preset not in PRESETS:
+            from satenv.envs.base import SatenvError
+
+            raise SatenvError(f"platoon_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
+        allowed = {f for f in PlatoonScenario.__dataclass_fields__ if not f.startswith("_")} - {"name"}
+        reject_unknown_kwargs(kwargs, allowed, "platoon_v0")
+        scenario = resolve_scenario(preset, **kwargs)
+        super().__init__(scenario, render_mode=render_mode)
+        self.topology = scenario.graph
+
+
+raw_env = PlatoonEnv
+
+
+def parallel_env(**kwargs) -> PlatoonEnv:
+    """The PettingZoo ``ParallelEnv`` (keyword arguments: module docstring)."""
+    return PlatoonEnv(**kwargs)
+
+
+def env(**kwargs):
+    """The AEC version of :func:`parallel_env` (``parallel_to_aec``)."""
+    return parallel_to_aec(PlatoonEnv(**kwargs))
