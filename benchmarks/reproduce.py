@@ -1,0 +1,62 @@
+"""Reproduce a paper's table or claims: ``python -m benchmarks.reproduce <paper> --out FILE.json``.
+
+Each paper lives in its own module ``benchmarks/repro_<paper>.py`` (``-`` in the paper name
+becomes ``_``) exposing::
+
+    reproduce(plots: str | Path | None = None, seed: int = 0) -> dict   # {"paper", "rows", "pass", ...}
+    format_table(result: dict) -> str                                  # printed beside the paper
+
+Register it in :data:`PAPERS` (or rely on the naming convention). The command prints the table,
+writes the JSON to ``--out`` and the figures to ``--plots DIR``; it exits with status 1 when the
+reproduction misses its targets (``result["pass"]`` is False).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from pathlib import Path
+from types import ModuleType
+
+PAPERS: dict[str, str] = {
+    "pereira2023": "benchmarks.repro_pereira2023",
+}
+"""Paper name -> module implementing ``reproduce`` and ``format_table``."""
+
+
+def load(paper: str) -> ModuleType:
+    """The reproduction module of ``paper`` (registry first, then ``benchmarks.repro_<paper>``)."""
+    name = PAPERS.get(paper, "benchmarks.repro_" + paper.replace("-", "_"))
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if exc.name != name:
+            raise
+        raise ValueError(f"no reproduction for paper {paper!r}; known: {sorted(PAPERS)} "
+                         f"(or add a module {name})") from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.reproduce", description=__doc__.splitlines()[0])
+    parser.add_argument("paper", help=f"paper to reproduce, e.g. {', '.join(sorted(PAPERS))}")
+    parser.add_argument("--out", type=Path, default=None, help="write the result JSON here")
+    parser.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) in this directory")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the env and the policy (default 0)")
+    args = parser.parse_args(argv)
+    try:
+        module = load(args.paper)
+    except ValueError as exc:
+        parser.error(str(exc))
+    result = module.reproduce(plots=args.plots, seed=args.seed)
+    print(module.format_table(result))
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2))
+        print(f"wrote {args.out}")
+    return 0 if result.get("pass", True) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
