@@ -124,7 +124,7 @@ class QPSolver:
             self.status = int(flag)
             ok = flag == 1 or flag == 2  # 2: soft optimal
         else:
-            res = self._model.solve()
+            res = self._model.solve(raise_error=False)
             self.status = int(res.info.status_val)
             x = res.x
             ok = self.status in (1, 2)  # solved / solved inaccurate
@@ -318,7 +318,7 @@ class OneHopDMPC:
             x, ok = qp.solve()
             self.qp_ms.append(1e3 * (time.perf_counter() - t0))
             if ok:
-                out[f] = x
+                out[f] = np.clip(x, -self.u_max, self.u_max)  # solver tolerance ~1e-9
             else:
                 self.stats.fallbacks += 1
                 out[f] = np.clip(u_prev[f], -self.u_max, self.u_max)
@@ -374,10 +374,19 @@ class ConvexStepDMPC:
         iterations: convex-step iterations per decision (default ``scenario.iterations`` or 2).
         weights: convex weights w_j (default ``scenario.convex_weights`` or uniform).
         constrained: False drops the state constraints (input box kept).
+        coupled_constraints: True makes agent j impose the constraints of every pair its input
+            moves (pairs j and j+1, the joint problem of eq. 29); False (default) only those of
+            its own pair j (it chases follower j-1). With the shifted warm start the coupled
+            problems became infeasible within ~2 s on the §5.1 scenario (agent j cannot keep
+            both pairs feasible against the other agents' stale plans), hence the default.
+
+    When an agent's state-constrained QP is infeasible it falls back to its input-box-only QP
+    (counted in ``stats.fallbacks``); if that fails too it keeps its previous iterate.
     """
 
     def __init__(self, scenario, *, solver: str = "daqp", iterations: int | None = None,
-                 weights=None, constrained: bool = True, seed: int | None = None):
+                 weights=None, constrained: bool = True, coupled_constraints: bool = False,
+                 seed: int | None = None):
         if solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}.")
         self.scenario = scenario
@@ -393,6 +402,7 @@ class ConvexStepDMPC:
             raise ValueError(f"weights must be {m} positive numbers summing to 1, got {w}.")
         self.w = w
         self.constrained = bool(constrained)
+        self.coupled = bool(coupled_constraints)
         self._build()
         self.reset(seed)
 
@@ -433,13 +443,15 @@ class ConvexStepDMPC:
         self.ca_v, self.cb_v = ca[vel_rows], cb[vel_rows]
         self.ca_p, self.cb_p = ca[pos_rows], cb[pos_rows]
         self.u_max = float(sc.u_max)
-        self.qps = []
+        self.qps, self.box_qps = [], []
         lb, ub = np.full(self.nu, -self.u_max), np.full(self.nu, self.u_max)
         for j in range(m):
-            npairs = 2 if j + 1 < m else 1
+            npairs = 2 if (self.coupled and j + 1 < m) else 1
             rows = self._n_rows_pair() * npairs
             amat = np.zeros((rows, self.nu)) if rows else None
             self.qps.append(QPSolver(self.H[j], amat, lb, ub, solver=self.solver))
+            self.box_qps.append(QPSolver(self.H[j], None, lb, ub, solver=self.solver)
+                                if rows else None)
 
     def reset(self, seed: int | None = None) -> None:
         self.U: np.ndarray | None = None
@@ -506,7 +518,7 @@ class ConvexStepDMPC:
                     # pair j+1: Z_{j+1} = free_{j+1} + calB U_{j+1} - calB U_j
                     off_n = free[j + 1] + self.cb @ u[j + 1]
                     f_lin = f_lin - 2 * self.wq[j + 1] * (self.btq @ (off_n - self.yd))
-                    if self.constrained:
+                    if self.constrained and self.coupled:
                         rows.append(self._pair_rows(z[j + 1], off_n, -1.0))
                 qp = self.qps[j]
                 t0 = time.perf_counter()
@@ -517,9 +529,13 @@ class ConvexStepDMPC:
                 else:
                     qp.update(f_lin)
                 sol, ok = qp.solve()
+                if not ok and self.box_qps[j] is not None:
+                    self.stats.fallbacks += 1
+                    self.box_qps[j].update(f_lin)
+                    sol, ok = self.box_qps[j].solve()
                 self.qp_ms.append(1e3 * (time.perf_counter() - t0))
                 if ok:
-                    ustar[j] = sol
+                    ustar[j] = np.clip(sol, -self.u_max, self.u_max)
                 else:
                     self.stats.fallbacks += 1
                     ustar[j] = np.clip(u[j], -self.u_max, self.u_max)
@@ -550,7 +566,8 @@ class DMPC:
 
     _ONE_HOP_OPTS = ("constrained", "min_error_constraint", "velocity_constraint", "solver",
                      "sigma", "max_iterations", "warm_start", "initial", "seed")
-    _CONVEX_OPTS = ("solver", "iterations", "weights", "constrained", "seed")
+    _CONVEX_OPTS = ("solver", "iterations", "weights", "constrained", "coupled_constraints",
+                    "seed")
 
     def __init__(self, env, variant: str | None = None, **options):
         scenario = getattr(env, "scenario", None)

@@ -102,7 +102,7 @@ class Topology:
             idx = np.flatnonzero(np.diag(adj)).tolist()
             raise ValueError(
                 f"adjacency must have a zero diagonal (no self-loops), got a_ii = 1 for followers "
-                f"{[i + 1 for i in idx]}; set those diagonal entries to 0."
+                f"{[int(i) + 1 for i in idx]}; set those diagonal entries to 0."
             )
         n = adj.shape[0]
         g = np.asarray(self.pinning)
@@ -113,7 +113,7 @@ class Topology:
         if not np.all((g == 0) | (g == 1)):
             raise ValueError(f"pinning entries must be 0 or 1, got {g.tolist()}.")
         if np.any(g != 1):
-            missing = [i + 1 for i in np.flatnonzero(g != 1)]
+            missing = [int(i) + 1 for i in np.flatnonzero(g != 1)]
             raise ValueError(
                 f"every follower must hear the leader (g_i = 1), but follower(s) {missing} do "
                 "not; pereira2023 assumes all followers are pinned to the leader (Lemma 1). "
