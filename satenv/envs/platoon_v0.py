@@ -84,7 +84,13 @@ import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v
-from satenv.envs.base import BatchedCore, FormationEnv, StepResult, reject_unknown_kwargs
+from satenv.envs.base import (
+    BatchedCore,
+    FormationEnv,
+    SatenvError,
+    StepResult,
+    reject_unknown_kwargs,
+)
 from satenv.scenarios.platoon import (
     PRESETS,
     PlatoonScenario,
@@ -253,8 +259,6 @@ class PlatoonEnv(FormationEnv):
 
     def __init__(self, preset: str = "pereira2023", render_mode: str | None = None, **kwargs) -> None:
         if preset not in PRESETS:
-            from satenv.envs.base import SatenvError
-
             raise SatenvError(f"platoon_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
         allowed = {f for f in PlatoonScenario.__dataclass_fields__ if not f.startswith("_")} - {"name"}
         reject_unknown_kwargs(kwargs, allowed, "platoon_v0")
