@@ -172,7 +172,8 @@ def test_truncation_at_n_steps():
 def test_collision_terminates_unless_disabled():
     x0 = PRESETS["pereira2023"].initial_array()
     x0[1, :3] = x0[0, :3] + [1.0, 0, 0]  # 1 m apart, radii 3 m
-    e = parallel_env()
+    assert not parallel_env().scenario.terminate_on_collision  # the paper preset never stops
+    e = parallel_env(terminate_on_collision=True)
     _, infos = e.reset(options={"initial_state": x0})
     assert infos["follower_1"]["collision"] and infos["follower_2"]["collision"]
     _, rew, term, _, infos = e.step(_zero_actions(e))

@@ -58,8 +58,9 @@ Terminated (all agents) when two bodies collide (distance < r_i + r_j, the leade
 radii ``follower_radius`` / ``leader_radius``; only if ``terminate_on_collision``) or a follower
 leaves the ball of radius ``max_distance`` around the leader. Truncated at ``n_steps``.
 Note: the pereira2023 Table I formation itself puts bodies closer than ``2 r_f`` (PLF: 1 m
-between followers 3 and 4; BDL: followers 1/4 and 2/3 coincide), so the paper's reproduction
-runs with ``terminate_on_collision=False`` and reports the collisions.
+between followers 3 and 4; BDL: followers 1/4 and 2/3 coincide), so the ``"pereira2023"``
+preset sets ``terminate_on_collision=False`` (as the paper's simulation) and reports the
+collisions; ``formation="chain"`` (followers 8 m apart) is the collision-free variant.
 
 Infos (per agent, SI units)
 ---------------------------

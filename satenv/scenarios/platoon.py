@@ -289,9 +289,14 @@ class PlatoonScenario:
 
 
 PRESETS: dict[str, PlatoonScenario] = {
-    # pereira2023 Table I (the CasADi/MATLAB simulation of §IV).
+    # pereira2023 Table I (the CasADi/MATLAB simulation of §IV). The paper's own target
+    # formation puts followers closer than 2 r_f (PLF: 1 m between followers 3 and 4; BDL:
+    # coincident pairs), and its simulation does not stop at contact: so neither does this
+    # preset — collisions are reported in infos and metrics. Training and collision-aware
+    # benchmarks use ``formation="chain"`` (8 m spacing) with ``terminate_on_collision=True``.
     "pereira2023": PlatoonScenario(
         name="pereira2023",
+        terminate_on_collision=False,
         initial_state=(
             (30.0, -35.0, 40.0, 0.0, 0.0, 0.0),
             (15.0, -46.0, -30.0, 0.0, 0.0, 0.0),
