@@ -1,0 +1,303 @@
+"""Connected in-plane formation scenarios of kannan2022 (§5), SI units.
+
+Three spacecraft ``sat_1 … sat_3`` move in the LVLH (Hill) frame of a virtual centre on a circular
+orbit of mean motion ``n0`` (x radial, y along-track, z orbit normal; CW eqs. 2-4) and must reach
+a predefined connected network formation.
+
+Each agent either has an **absolute goal** position (``goals[i]``), or — leader–follower mode —
+it follows the ``leader`` agent at the offset ``offsets[i]`` (its target is
+``p_leader + offsets[i]``). The leader must have an absolute goal.
+
+Presets (the paper gives no weights, horizon, sampling time, duration or network range; every
+such value below is our choice and marked so):
+
+* ``"kannan2022-position"`` (§5.1, Fig. 2-4): all start at ``[0, 0, 0]``, goals
+  ``[100, 100, 100]``, ``[100, 200, 100]``, ``[100, 300, 100]`` m; cost (33).
+* ``"kannan2022-collision"`` (§5.2, Fig. 5-7): only sat_2's goal ``[100, 100, 100]`` is known;
+  sat_1 and sat_3 follow sat_2 with ``y_1 - y_2 = +10 m`` and ``y_2 - y_3 = +10 m`` and the same
+  x and z (cost (34)); final configuration ``[100, 110, 100]``, ``[100, 100, 100]``,
+  ``[100, 90, 100]`` as in the text of §5.2. The paper's formula reads
+  ``e_y = y_2 - y_1 - 10`` for sat_1, which would put sat_1 at y = 90; we follow the figure
+  captions (sat_1 reaches y = 110) and note the sign discrepancy.
+
+Units of the input bound: the paper writes ``-50 <= u <= 50`` without a unit; in CW eqs. (2)-(4)
+``u`` is an acceleration and positions are in metres, so ``u_max = 50 m/s^2`` per axis (box).
+
+Cost weights (normalised, used by :class:`baselines.cgmres.CGMRES` and the env reward): with the
+length scale ``L = length_scale`` and ``w = u / u_max``, the stage cost is
+``1/2 sum_i (e_i / L)^T diag(q_i) (e_i / L) + 1/2 input_weight |w|^2`` where, per agent, ``e_i``
+is the position error to its goal (weights ``position_weight`` on every axis), or for a follower
+``p_i - p_leader - offset_i`` with weight ``position_weight`` on x and z and ``offset_weight``
+(the paper's ``K_1 = K_2``) on y. In the paper's units this is ``Q = q / L^2`` [1/m^2] and
+``R = input_weight / u_max^2`` [s^4/m^2].
+
+Connectivity (§4.3): agents i, j are linked when ``|p_i - p_j| <= connection_range`` (delta);
+the env reports whether this proximity graph is connected. The paper gives no delta: 150 m
+(ours) keeps both final formations connected (neighbours 100 m / 10 m apart) with margin.
+
+Random initial states (``randomize=True``): the nominal positions plus ``U(-s, s)`` per axis
+(``s = random_position_spread``) and velocities ``U(-v, v)`` (``v = random_velocity_spread``);
+draws are rejected (up to 1000 times) until the proximity graph is connected and every pair is at
+least ``random_min_gap`` apart.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FormationScenario", "PRESETS", "resolve_scenario", "sample_initial_state",
+           "proximity_components"]
+
+
+def _vec(value: Any, name: str, length: int) -> tuple[float, ...]:
+    try:
+        arr = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric sequence of length {length}, got {value!r}") from None
+    if arr.shape != (length,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be {length} finite numbers, got {value!r}")
+    return tuple(float(v) for v in arr)
+
+
+def _num(value: Any, name: str, *, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        need = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be a finite number {need}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class FormationScenario:
+    """Parameters of a kannan2022 formation scenario (frozen, validated; SI units).
+
+    Args:
+        name: preset name (informational).
+        initial_state: (M, 6) LVLH states ``[x, y, z, vx, vy, vz]`` [m, m/s].
+        goals: per agent an absolute goal position (3,) [m], or ``None`` for a follower.
+        leader: index (0-based) of the agent the followers follow, ``None`` if every agent has
+            a goal.
+        offsets: (M, 3) desired ``p_i - p_leader`` of each follower [m] (ignored for agents with
+            a goal).
+        mean_motion: n0 of the reference orbit [rad/s] (kannan2022 §5: 0.0011).
+        dt: decision (sampling) period [s]; max_steps: episode length (truncation).
+        u_max: per-axis acceleration limit [m/s^2]; thrust_mode: ``"box"`` or ``"norm"``.
+        connection_range: delta, range of the proximity graph [m].
+        collision_distance: a pair closer than this collides [m]; 0 disables (the paper starts
+            all three spacecraft at the same point).
+        max_distance: leaving the ball of this radius around the origin terminates [m].
+        terminate_on_disconnect: end the episode when the proximity graph disconnects.
+        dynamics: truth model of the env: ``"cw"``, ``"nonlinear"``, ``"j2"``, ``"j2_drag"``
+            (the chief's circular orbit radius follows from ``mean_motion``).
+        length_scale: L [m] normalising costs and observations; velocities use
+            ``sqrt(L u_max)``.
+        position_weight, offset_weight, input_weight: cost weights (module docstring).
+        connection_penalty: reward penalty per step for an agent cut off from the network.
+        randomize, random_position_spread, random_velocity_spread, random_min_gap: see the
+            module docstring.
+    """
+
+    name: str
+    initial_state: tuple[tuple[float, ...], ...]
+    goals: tuple[tuple[float, ...] | None, ...]
+    leader: int | None = None
+    offsets: tuple[tuple[float, ...], ...] | None = None
+    mean_motion: float = 0.0011
+    dt: float = 0.01
+    max_steps: int = 2000
+    u_max: float = 50.0
+    thrust_mode: str = "box"
+    connection_range: float = 150.0
+    collision_distance: float = 0.0
+    max_distance: float = 5000.0
+    terminate_on_disconnect: bool = False
+    dynamics: str = "cw"
+    length_scale: float = 100.0
+    position_weight: float = 1.0
+    offset_weight: float = 1.0
+    input_weight: float = 0.1
+    connection_penalty: float = 1.0
+    randomize: bool = False
+    random_position_spread: float = 20.0
+    random_velocity_spread: float = 1.0
+    random_min_gap: float = 1.0
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        if not isinstance(self.name, str):
+            raise ValueError(f"name must be a string, got {self.name!r}")
+        try:
+            x0 = np.asarray(self.initial_state, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"initial_state must be a numeric (M, 6) array, got {self.initial_state!r}") from None
+        if x0.ndim != 2 or x0.shape[1] != 6 or x0.shape[0] < 1 or not np.all(np.isfinite(x0)):
+            raise ValueError(f"initial_state must be a finite (M, 6) array (one LVLH state per "
+                             f"spacecraft), got shape {x0.shape}")
+        m = x0.shape[0]
+        s(self, "initial_state", tuple(tuple(float(v) for v in row) for row in x0))
+        if not isinstance(self.goals, (tuple, list)) or len(self.goals) != m:
+            raise ValueError(f"goals must be a sequence of {m} entries (a position (3,) or None per "
+                             f"spacecraft), got {self.goals!r}")
+        goals = tuple(None if g is None else _vec(g, f"goals[{i}]", 3) for i, g in enumerate(self.goals))
+        s(self, "goals", goals)
+        if self.leader is not None:
+            if isinstance(self.leader, bool) or not isinstance(self.leader, (int, np.integer)) \
+                    or not 0 <= self.leader < m:
+                raise ValueError(f"leader must be an agent index in [0, {m - 1}] or None, got {self.leader!r}")
+            s(self, "leader", int(self.leader))
+            if goals[self.leader] is None:
+                raise ValueError(f"the leader (agent index {self.leader}) needs an absolute goal; "
+                                 "give goals[leader] a position")
+        missing = [i for i, g in enumerate(goals) if g is None]
+        if missing and self.leader is None:
+            raise ValueError(f"agents {missing} have no goal and there is no leader to follow; give "
+                             "them goals or set leader=<index> and offsets")
+        if self.offsets is None:
+            offsets = np.zeros((m, 3))
+        else:
+            try:
+                offsets = np.asarray(self.offsets, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"offsets must be a numeric (M, 3) array, got {self.offsets!r}") from None
+            if offsets.shape != (m, 3) or not np.all(np.isfinite(offsets)):
+                raise ValueError(f"offsets must be a finite ({m}, 3) array, got shape {offsets.shape}")
+        s(self, "offsets", tuple(tuple(float(v) for v in row) for row in offsets))
+        for name in ("mean_motion", "dt", "u_max", "connection_range", "max_distance", "length_scale",
+                     "position_weight", "input_weight"):
+            s(self, name, _num(getattr(self, name), name))
+        for name in ("collision_distance", "offset_weight", "connection_penalty",
+                     "random_position_spread", "random_velocity_spread", "random_min_gap"):
+            s(self, name, _num(getattr(self, name), name, allow_zero=True))
+        v = self.max_steps
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"max_steps must be a positive int, got {v!r}")
+        s(self, "max_steps", int(v))
+        if self.thrust_mode not in ("box", "norm"):
+            raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}")
+        if self.dynamics not in ("cw", "nonlinear", "j2", "j2_drag"):
+            raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
+        for name in ("terminate_on_disconnect", "randomize"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+            s(self, name, bool(getattr(self, name)))
+
+    # ---- derived quantities ------------------------------------------------------------------
+    @property
+    def n_agents(self) -> int:
+        return len(self.initial_state)
+
+    @property
+    def velocity_scale(self) -> float:
+        """V = sqrt(L u_max) [m/s], the velocity scale of observations."""
+        return math.sqrt(self.length_scale * self.u_max)
+
+    def initial_array(self) -> np.ndarray:
+        return np.array(self.initial_state, dtype=float)
+
+    def follows(self) -> np.ndarray:
+        """(M,) bool: True for agents that follow the leader (no absolute goal)."""
+        return np.array([g is None for g in self.goals])
+
+    def target_positions(self) -> np.ndarray:
+        """(M, 3) final positions implied by the goals (followers: leader goal + offset)."""
+        out = np.zeros((self.n_agents, 3))
+        for i, g in enumerate(self.goals):
+            out[i] = g if g is not None else np.asarray(self.goals[self.leader]) + np.asarray(self.offsets[i])
+        return out
+
+    def error_weights(self) -> np.ndarray:
+        """(M, 3) per-axis weights q of the normalised position error in the cost."""
+        w = np.full((self.n_agents, 3), self.position_weight)
+        w[self.follows(), 1] = self.offset_weight
+        return w
+
+    def formation_error(self, x: np.ndarray) -> np.ndarray:
+        """The cost's position errors ``e_i`` (..., M, 3) of states ``x`` (..., M, 6).
+
+        Agents with a goal: ``p_i - goal_i``; followers: ``p_i - p_leader - offset_i``.
+        """
+        p = np.asarray(x)[..., :3]
+        e = p - self.target_positions()
+        fol = self.follows()
+        if fol.any():
+            lead = p[..., self.leader:self.leader + 1, :] - np.asarray(self.goals[self.leader])
+            e = np.where(fol[:, None], e - lead, e)
+        return e
+
+    def with_overrides(self, **overrides) -> FormationScenario:
+        """A copy with fields replaced; unknown names raise ``ValueError``."""
+        known = {f.name for f in fields(self)}
+        bad = sorted(set(overrides) - known)
+        if bad:
+            raise ValueError(f"unknown scenario parameter(s) {bad}; valid names: {sorted(known)}")
+        return replace(self, **overrides)
+
+
+_ORIGIN3 = ((0.0,) * 6,) * 3
+
+PRESETS: dict[str, FormationScenario] = {
+    "kannan2022-position": FormationScenario(
+        name="kannan2022-position",
+        initial_state=_ORIGIN3,
+        goals=((100.0, 100.0, 100.0), (100.0, 200.0, 100.0), (100.0, 300.0, 100.0)),
+    ),
+    "kannan2022-collision": FormationScenario(
+        name="kannan2022-collision",
+        initial_state=_ORIGIN3,
+        goals=(None, (100.0, 100.0, 100.0), None),
+        leader=1,
+        offsets=((0.0, 10.0, 0.0), (0.0, 0.0, 0.0), (0.0, -10.0, 0.0)),
+    ),
+}
+
+
+def resolve_scenario(preset: str = "kannan2022-position", **overrides) -> FormationScenario:
+    """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown formation preset {preset!r}; expected one of {sorted(PRESETS)}")
+    base = PRESETS[preset]
+    return base.with_overrides(**overrides) if overrides else base
+
+
+def proximity_components(positions: np.ndarray, delta: float) -> np.ndarray:
+    """Reachability in the proximity graph (link iff distance <= delta), batched.
+
+    ``positions`` (..., M, 3) -> bool (..., M, M), entry ``[i, j]`` True iff j can be reached
+    from i (every node reaches itself). The graph is connected iff all entries are True.
+    """
+    p = np.asarray(positions, dtype=float)
+    m = p.shape[-2]
+    dist = np.linalg.norm(p[..., :, None, :] - p[..., None, :, :], axis=-1)
+    reach = (dist <= delta) | np.eye(m, dtype=bool)
+    for _ in range(max(1, math.ceil(math.log2(max(m, 2))))):
+        r = reach.astype(np.int64)
+        reach = (r @ r) > 0
+    return reach
+
+
+def sample_initial_state(scenario: FormationScenario, rng: np.random.Generator) -> np.ndarray:
+    """Draw an initial state (M, 6) from the documented distribution (module docstring)."""
+    nominal = scenario.initial_array()
+    m = scenario.n_agents
+    s, v = scenario.random_position_spread, scenario.random_velocity_spread
+    iu = np.triu_indices(m, 1)
+    for _ in range(1000):
+        x = nominal.copy()
+        x[:, :3] += rng.uniform(-s, s, size=(m, 3))
+        x[:, 3:] += rng.uniform(-v, v, size=(m, 3))
+        pos = x[:, :3]
+        dist = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
+        if m > 1 and np.min(dist[iu]) < max(scenario.random_min_gap, scenario.collision_distance):
+            continue
+        if not proximity_components(pos, scenario.connection_range).all():
+            continue
+        return x
+    raise RuntimeError("could not draw a connected, well-separated initial state in 1000 tries; "
+                       "reduce random_position_spread or random_min_gap, or increase connection_range")
