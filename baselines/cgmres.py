@@ -308,6 +308,10 @@ _OPTION_DEFAULTS: dict[str, Any] = {
 class CGMRES:
     """Centralised C/GMRES NMPC for ``satenv.formation_v0`` (module docstring).
 
+    Defaults (our choices; kannan2022 gives no solver settings): ``T_f = 3 s``, ``N = 30``,
+    ``alpha = 1 /s``, ``zeta = 1/dt``, ``kmax = 20``, ``h = 1e-6``, ``r_v = 0.1``: 810 unknowns
+    for three spacecraft (27 per stage).
+
     Args:
         env: the formation env (reads ``env.scenario`` and ``env.state()``).
         horizon: T_f [s] (our choice; the paper gives none).

@@ -19,9 +19,10 @@ Arguments (keywords; all optional)
 ``preset``        ``"kannan2022-position"`` (default, §5.1: all from [0,0,0] to [100,100,100],
                   [100,200,100], [100,300,100] m) or ``"kannan2022-collision"`` (§5.2: sat_2 to
                   [100,100,100] m, sat_1 / sat_3 at y_2 +/- 10 m with the same x and z).
-                  Common values: n0 = 0.0011 rad/s, |u| <= 50 m/s^2 per axis (box), dt = 0.05 s,
-                  max_steps = 400 (20 s), delta = 150 m; the paper gives no sampling time,
-                  duration, range or weights: see :mod:`satenv.scenarios.formation`.
+                  Common values: n0 = 0.0011 rad/s, |u| <= 50 m/s^2 per axis (box), dt = 0.01 s,
+                  max_steps = 2000 (20 s), delta = 150 m; the paper gives no sampling time,
+                  duration, range or weights: see :mod:`satenv.scenarios.formation` (dt = 0.01 s
+                  keeps the C/GMRES continuation error small; for RL a larger ``dt`` may suit).
 ``render_mode``   ``None``, ``"rgb_array"`` or ``"human"``.
 any field of :class:`satenv.scenarios.formation.FormationScenario` overrides the preset, e.g.
 ``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"``, ``connection_range``,

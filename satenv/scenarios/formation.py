@@ -9,7 +9,9 @@ it follows the ``leader`` agent at the offset ``offsets[i]`` (its target is
 ``p_leader + offsets[i]``). The leader must have an absolute goal.
 
 Presets (the paper gives no weights, horizon, sampling time, duration or network range; every
-such value below is our choice and marked so):
+such value is our choice: dt = 0.01 s — C/GMRES is a sampled continuation method whose tracking
+error grows with dt —, 2000 steps = 20 s, unit weights ``position_weight = offset_weight = 1``,
+``input_weight = 0.1``, delta = 150 m):
 
 * ``"kannan2022-position"`` (§5.1, Fig. 2-4): all start at ``[0, 0, 0]``, goals
   ``[100, 100, 100]``, ``[100, 200, 100]``, ``[100, 300, 100]`` m; cost (33).
@@ -21,7 +23,9 @@ such value below is our choice and marked so):
   captions (sat_1 reaches y = 110) and note the sign discrepancy.
 
 Units of the input bound: the paper writes ``-50 <= u <= 50`` without a unit; in CW eqs. (2)-(4)
-``u`` is an acceleration and positions are in metres, so ``u_max = 50 m/s^2`` per axis (box).
+``u`` is an acceleration and positions are in metres, so ``u_max = 50 m/s^2`` per axis (box) —
+about 5 g, far beyond real formation-flying thrusters: the paper's scenario is a numerical
+example, and manoeuvres of a few hundred metres take seconds.
 
 Cost weights (normalised, used by :class:`baselines.cgmres.CGMRES` and the env reward): with the
 length scale ``L = length_scale`` and ``w = u / u_max``, the stage cost is
