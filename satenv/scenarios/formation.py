@@ -10,15 +10,17 @@ it follows the ``leader`` agent at the offset ``offsets[i]`` (its target is
 
 Presets (the paper gives no weights, horizon, sampling time, duration or network range; every
 such value is our choice: dt = 0.01 s — C/GMRES is a sampled continuation method whose tracking
-error grows with dt —, 2000 steps = 20 s, unit weights ``position_weight = offset_weight = 1``,
-``input_weight = 0.1``, delta = 150 m):
+error grows with dt —, 2000 steps = 20 s, ``position_weight = 1``, ``input_weight = 0.1``,
+``offset_weight = 10`` (K_1 = K_2 of eq. 34), delta = 150 m):
 
 * ``"kannan2022-position"`` (§5.1, Fig. 2-4): all start at ``[0, 0, 0]``, goals
   ``[100, 100, 100]``, ``[100, 200, 100]``, ``[100, 300, 100]`` m; cost (33).
 * ``"kannan2022-collision"`` (§5.2, Fig. 5-7): only sat_2's goal ``[100, 100, 100]`` is known;
   sat_1 and sat_3 follow sat_2 with ``y_1 - y_2 = +10 m`` and ``y_2 - y_3 = +10 m`` and the same
   x and z (cost (34)); final configuration ``[100, 110, 100]``, ``[100, 100, 100]``,
-  ``[100, 90, 100]`` as in the text of §5.2. The paper's formula reads
+  ``[100, 90, 100]`` as in the text of §5.2. ``K = 10`` (not 1) because with ``K = 1`` sat_1
+  lags sat_2 along y and passes within 3 m of it; with ``K = 10`` the 10 m spacing and the
+  ordering ``y_1 > y_2 > y_3`` hold through the manoeuvre (the paper's "collision avoidance"). The paper's formula reads
   ``e_y = y_2 - y_1 - 10`` for sat_1, which would put sat_1 at y = 90; we follow the figure
   captions (sat_1 reaches y = 110) and note the sign discrepancy.
 
@@ -258,6 +260,7 @@ PRESETS: dict[str, FormationScenario] = {
         goals=(None, (100.0, 100.0, 100.0), None),
         leader=1,
         offsets=((0.0, 10.0, 0.0), (0.0, 0.0, 0.0), (0.0, -10.0, 0.0)),
+        offset_weight=10.0,
     ),
 }
 
