@@ -151,6 +151,7 @@ class FormationOCP:
         self.c = self.ecal @ scenario.target_positions().ravel()
         self.q = scenario.error_weights().ravel()
         self.r = float(scenario.input_weight)
+        self._nlp_key: tuple | None = None
         self._build()
 
     # ------------------------------------------------------------------ symbolic model
@@ -254,7 +255,7 @@ class FormationOCP:
         "status"}``.
         """
         key = ("ipopt", float(tol), int(print_level))
-        if getattr(self, "_nlp_key", None) != key:
+        if self._nlp_key != key:
             self._build_nlp(tol, print_level)
             self._nlp_key = key
         nu, nc, n = self.nu, self.nc, self.N
