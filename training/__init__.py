@@ -1,0 +1,29 @@
+"""Training learned policies for satenv scenarios (stable-baselines3; Ray RLlib optional).
+
+* :func:`load` — a trained policy folder -> a policy with the baseline interface
+  (``reset(seed=None)``, ``act(observations) -> actions``).
+* :class:`training.vec_env.SatVecEnv` — parameter-shared SB3 ``VecEnv`` over a batched core.
+* ``python -m training.train`` — PPO/SAC training (:class:`training.config.TrainConfig`).
+* ``python -m training.rllib_train`` — the same scenarios with Ray RLlib (optional extra).
+* ``training/policies/<name>/`` — shipped trained policies (:data:`SHIPPED`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .config import TrainConfig
+from .policy import LearnedPolicy, PolicyLoadError, load
+
+POLICIES_DIR = Path(__file__).parent / "policies"
+"""Folder of the shipped trained policies (one artefact folder per policy)."""
+
+__all__ = ["LearnedPolicy", "PolicyLoadError", "POLICIES_DIR", "TrainConfig", "load", "SatVecEnv"]
+
+
+def __getattr__(name: str):
+    if name == "SatVecEnv":  # imports stable-baselines3: only on demand
+        from .vec_env import SatVecEnv
+
+        return SatVecEnv
+    raise AttributeError(f"module 'training' has no attribute {name!r}")

@@ -34,6 +34,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from satenv.dynamics import unit_box_to_accel
@@ -83,10 +84,16 @@ class SatVecEnv(VecEnv):
             is not stepped), or a zero-argument callable returning one.
         n_copies: number of scenario copies ``B`` (>= 1); ``num_envs = B * n_agents``.
         seed: optional seed applied at the first ``reset()`` (see the module docstring).
+        reward_fn: optional training-time shaping ``(rewards (B, M), info) -> rewards (B, M)``
+            (e.g. :class:`training.shaping.RewardShaping`).
+        obs_fn: optional feature map applied to the observations ``(..., obs_dim) -> (..., d)``
+            (e.g. :class:`training.shaping.ObsFeatures`); the observation space follows.
     """
 
     def __init__(self, env: FormationEnv | Callable[[], FormationEnv], n_copies: int,
-                 seed: int | None = None) -> None:
+                 seed: int | None = None, *,
+                 reward_fn: Callable[[np.ndarray, dict[str, np.ndarray]], np.ndarray] | None = None,
+                 obs_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         template = env() if callable(env) and not isinstance(env, FormationEnv) else env
         if not isinstance(template, FormationEnv):
             raise SatenvError(f"SatVecEnv needs a satenv FormationEnv (or a callable returning one), "
@@ -102,8 +109,12 @@ class SatVecEnv(VecEnv):
         self.max_steps = int(self.scenario.max_steps)
         self.render_mode = None
         agent = self.agents[0]
-        super().__init__(self.n_copies * self.n_agents, template.observation_space(agent),
-                         template.action_space(agent))
+        obs_space = template.observation_space(agent)
+        self.reward_fn, self.obs_fn = reward_fn, obs_fn
+        if obs_fn is not None:
+            dim = np.asarray(obs_fn(np.zeros((1, *obs_space.shape), dtype=np.float32))).shape[-1]
+            obs_space = spaces.Box(-np.inf, np.inf, (int(dim),), np.float32)
+        super().__init__(self.n_copies * self.n_agents, obs_space, template.action_space(agent))
         self._u_max = self.scenario.u_max
         self._thrust_mode = self.scenario.thrust_mode
         self._copy_rngs: list[np.random.Generator] = []
@@ -152,7 +163,10 @@ class SatVecEnv(VecEnv):
         return self._observe()
 
     def _observe(self) -> np.ndarray:
-        return np.asarray(self.core.observe(), dtype=np.float32).reshape(self._obs_shape)
+        obs = np.asarray(self.core.observe(), dtype=np.float32)
+        if self.obs_fn is not None:
+            obs = np.asarray(self.obs_fn(obs), dtype=np.float32)
+        return obs.reshape(self._obs_shape)
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=np.float64)
@@ -179,7 +193,8 @@ class SatVecEnv(VecEnv):
         truncated = (self.core.t >= self.max_steps) & ~terminated
         done_copy = terminated | truncated
         obs = self._observe()
-        rewards = np.asarray(res.rewards, dtype=np.float32).reshape(self.num_envs)
+        rewards = res.rewards if self.reward_fn is None else self.reward_fn(res.rewards, res.info)
+        rewards = np.asarray(rewards, dtype=np.float32).reshape(self.num_envs)
         dones = np.repeat(done_copy, self.n_agents)
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if done_copy.any():

@@ -1,0 +1,149 @@
+"""training: config, smoke PPO/SAC runs, artefacts, load -> act, resume, gym view, RLlib smoke."""
+
+import json
+
+import numpy as np
+import pytest
+from test_env_base import ToyEnv
+
+import training
+from satenv.rollout import rollout
+from training.config import TrainConfig, config_from_json, parse_args
+from training.policy import PolicyLoadError
+from training.train import latest_checkpoint, main, train
+
+TOY = "test_env_base:ToyEnv"
+
+
+def _cfg(tmp_path, **kw):
+    base = dict(env_id=TOY, env_kwargs={"max_steps": 10}, n_copies=2, total_timesteps=192, n_steps=16,
+                batch_size=48, n_epochs=1, net_arch=(16, 16), eval_every=96, checkpoint_every=96,
+                eval_seeds=(1, 2), test_seeds=(3, 4, 5), eval_baselines=("ZeroPolicy",),
+                out_dir=str(tmp_path / "run"), progress=False)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def test_config_validation_and_json_round_trip():
+    cfg = TrainConfig(net_arch=[32, 32], eval_seeds=range(3))
+    assert cfg.net_arch == (32, 32) and cfg.eval_seeds == (0, 1, 2)
+    assert config_from_json(json.loads(json.dumps(cfg.to_json()))) == cfg
+    for bad, match in [({"algo": "dqn"}, "algo"), ({"n_copies": 0}, "n_copies"),
+                       ({"net_arch": ()}, "net_arch"), ({"gamma": 1.5}, "gamma"),
+                       ({"env_kwargs": {"x": object()}}, "JSON"), ({"total_timesteps": 1.5}, "total_timesteps")]:
+        with pytest.raises(ValueError, match=match):
+            TrainConfig(**bad)
+    with pytest.raises(ValueError, match="unknown TrainConfig"):
+        config_from_json({"nope": 1})
+
+
+def test_cli_flags_parse_into_the_config():
+    cfg, _ = parse_args(["--algo", "sac", "--net-arch", "32,32", "--env-kwargs", '{"randomize": true}',
+                         "--eval-seeds", "5:8", "--progress", "false", "--gamma", "0.98"])
+    assert (cfg.algo, cfg.net_arch, cfg.env_kwargs, cfg.eval_seeds, cfg.progress, cfg.gamma) == \
+        ("sac", (32, 32), {"randomize": True}, (5, 6, 7), False, 0.98)
+    with pytest.raises(ValueError, match="--env-kwargs.*JSON object"):
+        parse_args(["--env-kwargs", "randomize"])
+    with pytest.raises(ValueError, match="--n-copies"):
+        parse_args(["--n-copies", "many"])
+
+
+def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
+    cfg = _cfg(tmp_path)
+    final = train(cfg)
+    assert {p.name for p in final.iterdir()} >= {"model.zip", "obs_norm.npz", "env.json", "config.json",
+                                                  "eval.json", "vecnormalize.pkl"}
+    meta = json.loads((final / "env.json").read_text())
+    assert meta["env_id"] == TOY and meta["env_kwargs"] == {"max_steps": 10} and meta["observation_shape"] == [6]
+    assert json.loads((final / "config.json").read_text()) == cfg.to_json()
+    summary = json.loads((final / "eval.json").read_text())
+    assert summary["test_seeds"] == [3, 4, 5] and set(summary["aggregate"]) == {"learned", "ZeroPolicy"}
+    assert summary["aggregate"]["learned"]["episodes"] == 3
+    run = tmp_path / "run"
+    assert list((run / "tb").rglob("events.out.tfevents.*")), "no TensorBoard log"
+    history = json.loads((run / "eval_history.json").read_text())
+    assert [h["step"] for h in history] == [96, 192]
+    assert (run / "best" / "model.zip").is_file()
+
+    # load -> act reproduces the in-memory model with the saved normalisation
+    policy = training.load(final, env=ToyEnv())
+    env = ToyEnv(max_steps=10)
+    obs, _ = env.reset(seed=0)
+    act = policy.act(obs)
+    assert set(act) == set(env.possible_agents)
+    assert all(a.shape == (3,) and a.dtype == np.float32 and np.all(np.abs(a) <= 1) for a in act.values())
+    stacked = np.stack([obs[a] for a in env.possible_agents])
+    expected, _ = policy.model.predict(policy.normalizer(stacked), deterministic=True)
+    np.testing.assert_allclose(np.stack([act[a] for a in env.possible_agents]), np.clip(expected, -1, 1))
+    assert policy.normalizer.mean is not None and not np.allclose(policy.normalizer.mean, 0)
+    # usable where a baseline is
+    traj = rollout(env, policy, seed=1)
+    assert traj.steps == 10 and traj.policy_info == {"fallbacks": 0}
+    # a second load gives the same actions (deterministic)
+    again = training.load(final)
+    np.testing.assert_array_equal(again.act(obs)["sat_1"], act["sat_1"])
+
+
+def test_load_errors(tmp_path):
+    with pytest.raises(PolicyLoadError, match="not a directory"):
+        training.load(tmp_path / "missing")
+    (tmp_path / "half").mkdir()
+    (tmp_path / "half" / "model.zip").write_bytes(b"junk")
+    with pytest.raises(PolicyLoadError, match="missing"):
+        training.load(tmp_path / "half")
+    for name in ("obs_norm.npz", "env.json", "config.json"):
+        (tmp_path / "half" / name).write_text("{}")
+    with pytest.raises(PolicyLoadError, match="cannot read"):
+        training.load(tmp_path / "half")
+
+
+def test_sac_smoke_and_space_mismatch(tmp_path):
+    cfg = _cfg(tmp_path, algo="sac", learning_starts=48, buffer_size=1000, sac_batch_size=32,
+               eval_every=0, checkpoint_every=0, total_timesteps=240)
+    final = train(cfg)
+    policy = training.load(final)
+    assert type(policy.model).__name__ == "SAC"
+    env = ToyEnv()
+    obs, _ = env.reset(seed=0)
+    assert all(np.all(np.abs(a) <= 1) for a in policy.act(obs).values())
+    from satenv.envs.platoon_v0 import parallel_env
+
+    with pytest.raises(PolicyLoadError, match=r"expects observations \(6,\)"):
+        training.load(final, env=parallel_env())
+    with pytest.raises(PolicyLoadError, match="trained on shape"):
+        policy.act({"sat_1": np.zeros(4)})
+
+
+def test_resume_continues_the_step_count(tmp_path):
+    cfg = _cfg(tmp_path, total_timesteps=96, checkpoint_every=48, eval_every=48)
+    train(cfg)
+    steps, folder = latest_checkpoint(tmp_path / "run")
+    assert steps == 96
+    with pytest.raises(SystemExit, match="already has checkpoints"):
+        main(["--out-dir", cfg.out_dir, "--env-id", TOY])
+    # resume via the CLI: the saved config, a larger budget
+    final = main(["--out-dir", cfg.out_dir, "--resume", "--total-timesteps", "192"])
+    meta = json.loads((final / "env.json").read_text())
+    assert meta["step"] == 192
+    steps_after, _ = latest_checkpoint(tmp_path / "run")
+    assert steps_after == 192
+    history = json.loads((tmp_path / "run" / "eval_history.json").read_text())
+    assert [h["step"] for h in history] == [48, 96, 144, 192]
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["total_timesteps"] == 192
+
+
+def test_centralised_gym_view_passes_check_env():
+    from gymnasium.utils.env_checker import check_env
+
+    from training.gym_view import CentralisedEnv
+
+    env = CentralisedEnv(ToyEnv())
+    check_env(env, skip_render_check=True)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (18,)
+    _, r, term, trunc, info = env.step(np.zeros(9, dtype=np.float32))
+    assert isinstance(r, float) and set(info["agents"]) == {"sat_1", "sat_2", "sat_3"}
+    with pytest.raises(ValueError, match=r"shape \(9,\)"):
+        env.step(np.zeros(3))
+    env2 = CentralisedEnv("platoon_v0", randomize=True)
+    assert env2.observation_space.shape == (4 * 36,)

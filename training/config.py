@@ -1,0 +1,257 @@
+"""The training configuration: one frozen, validated dataclass (CleanRL style).
+
+Every field is a command-line flag of ``python -m training.train`` (``--total-timesteps 200000``,
+``--env-kwargs '{"randomize": true}'``, ``--net-arch 64,64``); see :func:`parse_args`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import types
+import typing
+from dataclasses import MISSING, asdict, dataclass, field, fields
+from typing import Any
+
+__all__ = ["TrainConfig", "parse_args", "config_from_json"]
+
+ALGOS = ("ppo", "sac")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run. Timesteps count agent-steps (SB3 rows: ``n_copies * n_agents`` per env step).
+
+    Environment:
+        env_id: satenv env name (``"platoon_v0"``) or ``"package.module:callable"``.
+        env_kwargs: keyword arguments of the env used for training (JSON object).
+        eval_env_kwargs: overrides applied on top of ``env_kwargs`` for evaluation (e.g. train
+            without termination at a collision, evaluate with it).
+        n_copies: scenario copies stepped together in one batched core (``SatVecEnv``).
+    Algorithm:
+        algo: ``"ppo"`` or ``"sac"``; total_timesteps: agent-steps to train for; seed.
+        net_arch: hidden layer sizes of the policy and value/Q networks.
+        learning_rate, gamma: shared. PPO: n_steps (rollout length per row), batch_size,
+            n_epochs, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, log_std_init.
+            SAC: buffer_size, learning_starts, sac_batch_size, train_freq, gradient_steps, tau.
+        norm_obs / norm_reward / clip_obs: ``VecNormalize`` (statistics saved with the model).
+        reward_shaping: training-only shaping terms (``training.shaping.RewardShaping`` fields,
+            e.g. ``{"precision": 1.0, "proximity": 1.0}``); evaluation uses the env's metrics.
+        obs_symlog_scale / obs_symlog_dims: appended symlog features of the first observation
+            entries (``training.shaping.ObsFeatures``; 0 disables), re-applied at inference.
+    Evaluation and artefacts:
+        eval_every: evaluate every this many agent-steps (0: only at the end) on ``eval_seeds``
+            with the PettingZoo env and ``satenv.rollout`` (the scoreboard's path), logged to
+            TensorBoard next to the scripted ``eval_baselines`` (names in ``baselines``;
+            missing ones are skipped with a warning).
+        test_seeds: held-out seeds of the final evaluation summary (not used for selection).
+        success_tol: position tolerance [m] of ``satenv.metrics.success``.
+        checkpoint_every: save model + normalisation every this many agent-steps (0: never).
+        out_dir: run directory (``tb/``, ``checkpoints/``, ``best/``, ``final/``).
+        torch_threads: ``torch.set_num_threads``; progress: show a tqdm bar.
+    """
+
+    env_id: str = "platoon_v0"
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
+    n_copies: int = 32
+    algo: str = "ppo"
+    total_timesteps: int = 1_000_000
+    seed: int = 0
+    net_arch: tuple[int, ...] = (64, 64)
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    n_steps: int = 64
+    batch_size: int = 1024
+    n_epochs: int = 5
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    log_std_init: float = 0.0
+    buffer_size: int = 200_000
+    learning_starts: int = 2_000
+    sac_batch_size: int = 256
+    train_freq: int = 1
+    gradient_steps: int = 1
+    tau: float = 0.005
+    norm_obs: bool = True
+    norm_reward: bool = True
+    clip_obs: float = 10.0
+    reward_shaping: dict[str, Any] = field(default_factory=dict)
+    obs_symlog_scale: float = 0.0
+    obs_symlog_dims: int = 6
+    eval_every: int = 100_000
+    eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_010))
+    test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
+    eval_baselines: tuple[str, ...] = ("DMPC", "APF", "ZeroPolicy")
+    success_tol: float = 1.0
+    checkpoint_every: int = 100_000
+    out_dir: str = "runs/train"
+    torch_threads: int = 1
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        if not isinstance(self.env_id, str) or not self.env_id:
+            raise ValueError(f"env_id must be a non-empty string such as 'platoon_v0', got {self.env_id!r}")
+        for name in ("env_kwargs", "eval_env_kwargs", "reward_shaping"):
+            value = getattr(self, name)
+            if not isinstance(value, dict):
+                raise ValueError(f"{name} must be a dict (a JSON object on the command line), got {value!r}")
+            try:
+                json.dumps(value)
+            except TypeError:
+                raise ValueError(f"{name} must be JSON-serialisable (it is saved with the model), "
+                                 f"got {value!r}") from None
+        if self.algo not in ALGOS:
+            raise ValueError(f"algo must be one of {ALGOS}, got {self.algo!r}")
+        for name in ("n_copies", "total_timesteps", "n_steps", "batch_size", "n_epochs",
+                     "buffer_size", "sac_batch_size", "train_freq", "gradient_steps", "torch_threads"):
+            _check_int(name, getattr(self, name), minimum=1)
+        for name in ("seed", "learning_starts", "eval_every", "checkpoint_every"):
+            _check_int(name, getattr(self, name), minimum=0)
+        arch = tuple(self.net_arch)
+        if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
+            raise ValueError(f"net_arch must be a non-empty tuple of positive ints (e.g. 64,64), got {self.net_arch!r}")
+        s(self, "net_arch", arch)
+        for name in ("eval_seeds", "test_seeds"):
+            seeds = tuple(getattr(self, name))
+            for v in seeds:
+                _check_int(name, v, minimum=0)
+            s(self, name, seeds)
+        s(self, "eval_baselines", tuple(str(b) for b in self.eval_baselines))
+        for name, lo, hi in (("learning_rate", 0.0, math.inf), ("gamma", 0.0, 1.0),
+                             ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
+                             ("tau", 0.0, 1.0), ("clip_obs", 0.0, math.inf),
+                             ("success_tol", 0.0, math.inf), ("max_grad_norm", 0.0, math.inf)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo < v <= hi):
+                raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {v!r}")
+        for name in ("ent_coef", "vf_coef"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        if not isinstance(self.log_std_init, (int, float)) or not math.isfinite(self.log_std_init):
+            raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init!r}")
+        from training.shaping import ObsFeatures, RewardShaping
+
+        RewardShaping.from_dict(self.reward_shaping)
+        ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims)
+        if not isinstance(self.out_dir, str) or not self.out_dir:
+            raise ValueError(f"out_dir must be a non-empty path string, got {self.out_dir!r}")
+
+    @property
+    def resolved_eval_env_kwargs(self) -> dict[str, Any]:
+        """The evaluation env's kwargs: ``env_kwargs`` updated with ``eval_env_kwargs``."""
+        return {**self.env_kwargs, **self.eval_env_kwargs}
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        for k, v in d.items():
+            if isinstance(v, tuple):
+                d[k] = list(v)
+        return d
+
+    def replace(self, **changes: Any) -> TrainConfig:
+        return config_from_json({**self.to_json(), **changes})
+
+
+def _check_int(name: str, v: Any, minimum: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {v!r}")
+
+
+def config_from_json(data: dict[str, Any]) -> TrainConfig:
+    """Rebuild a :class:`TrainConfig` from :meth:`TrainConfig.to_json` output (unknown keys rejected)."""
+    known = {f.name for f in fields(TrainConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"unknown TrainConfig field(s) {unknown}; known: {sorted(known)}")
+    hints = typing.get_type_hints(TrainConfig)
+    kwargs = {}
+    for k, v in data.items():
+        if _is_tuple(hints[k]) and isinstance(v, list):
+            v = tuple(v)
+        kwargs[k] = v
+    return TrainConfig(**kwargs)
+
+
+def _is_tuple(tp: Any) -> bool:
+    return typing.get_origin(tp) is tuple
+
+
+def _parse_value(tp: Any, text: str, name: str) -> Any:
+    origin = typing.get_origin(tp)
+    try:
+        if tp is bool:
+            low = text.lower()
+            if low not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError
+            return low in ("true", "1", "yes")
+        if tp is int:
+            return int(text)
+        if tp is float:
+            return float(text)
+        if tp is str:
+            return text
+        if origin is tuple:
+            (elem, _) = typing.get_args(tp)
+            parts = [p for p in text.replace(" ", "").split(",") if p]
+            if len(parts) == 1 and ":" in parts[0]:  # "a:b" -> range(a, b)
+                lo, hi = parts[0].split(":")
+                return tuple(range(int(lo), int(hi)))
+            return tuple(elem(p) for p in parts)
+        if origin is dict or tp is dict:
+            value = json.loads(text)
+            if not isinstance(value, dict):
+                raise ValueError
+            return value
+    except (ValueError, json.JSONDecodeError):
+        pass
+    else:
+        raise TypeError(f"unsupported config field type {tp!r} for {name}")  # pragma: no cover
+    raise ValueError(f"--{name.replace('_', '-')}: cannot parse {text!r} as {getattr(tp, '__name__', tp)}"
+                     + (" (a JSON object, e.g. '{\"randomize\": true}')" if origin is dict else "")
+                     + (" (comma-separated, or 'a:b' for a range)" if origin is tuple else ""))
+
+
+def build_parser(description: str = "") -> argparse.ArgumentParser:
+    """An argparse parser with one ``--flag`` per :class:`TrainConfig` field (defaults shown)."""
+    parser = argparse.ArgumentParser(description=description,
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    hints = typing.get_type_hints(TrainConfig)
+    for f in fields(TrainConfig):
+        default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
+        shown = json.dumps(default) if isinstance(default, dict) else (
+            ",".join(map(str, default)) if isinstance(default, tuple) else default)
+        parser.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, default=None, metavar=_metavar(hints[f.name]),
+                            help=f"(default: {shown})")
+    return parser
+
+
+def _metavar(tp: Any) -> str:
+    origin = typing.get_origin(tp)
+    if origin is tuple:
+        return "A,B,..."
+    if origin is dict:
+        return "JSON"
+    return getattr(tp, "__name__", "X").upper() if not isinstance(tp, types.UnionType) else "X"
+
+
+def parse_args(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None,
+               base: TrainConfig | None = None) -> tuple[TrainConfig, argparse.Namespace]:
+    """Parse ``argv`` into a :class:`TrainConfig` (flags given override ``base``); returns also the namespace."""
+    parser = parser or build_parser()
+    ns = parser.parse_args(argv)
+    hints = typing.get_type_hints(TrainConfig)
+    changes = {}
+    for f in fields(TrainConfig):
+        text = getattr(ns, f.name)
+        if text is not None:
+            changes[f.name] = _parse_value(hints[f.name], text, f.name)
+    base = base or TrainConfig()
+    cfg = config_from_json({**base.to_json(), **changes}) if changes else base
+    return cfg, ns

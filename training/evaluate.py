@@ -1,0 +1,125 @@
+"""Evaluate policies (learned or scripted) on fixed seeds with the PettingZoo env and ``satenv.rollout``.
+
+The same path the scoreboard uses: ``rollout(env, policy, seed=s)`` then
+``satenv.metrics.summary``. :func:`compare` adds the learned-vs-reference ratios of the issue's
+targets (tracking RMSE and total delta-v relative to the DMPC on the same seeds).
+"""
+
+from __future__ import annotations
+
+import importlib
+import warnings
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from satenv import metrics
+from satenv.rollout import rollout
+
+__all__ = ["evaluate", "make_baseline", "compare", "format_table"]
+
+_BASELINE_MODULES = ("baselines", "baselines.base", "baselines.dmpc", "baselines.apf")
+
+
+def make_baseline(name: str, env: Any):
+    """``baselines.<name>(env)`` (also looked up in baselines.base/.dmpc/.apf); ``None`` if absent."""
+    for module_name in _BASELINE_MODULES:
+        try:
+            module = importlib.import_module(module_name)
+            cls = getattr(module, name, None)
+        except ImportError:  # the package lists it lazily but its module is not there (yet)
+            continue
+        if cls is not None:
+            return cls(env)
+    return None
+
+
+def evaluate(env: Any, policy: Any, seeds: Iterable[int], tol: float = 1.0) -> dict[str, Any]:
+    """Roll ``policy`` out once per seed; returns per-episode summaries and their aggregate.
+
+    Aggregate keys: ``success_rate``, ``collision_episodes`` (episodes with >= 1 collision
+    flag), ``rmse``/``delta_v``/``final_error_m``/``violations``/``min_separation_m``/
+    ``compute_ms_per_decision`` (means over episodes; ``min_separation_m`` is the minimum),
+    ``terminated_rate``, ``episodes``.
+    """
+    episodes = []
+    for seed in seeds:
+        traj = rollout(env, policy, seed=int(seed))
+        s = metrics.summary(traj, tol=tol)
+        s["seed"] = int(seed)
+        episodes.append(s)
+    return {"aggregate": aggregate(episodes), "episodes": episodes}
+
+
+def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
+    def mean(key):
+        return float(np.mean([e[key] for e in episodes])) if episodes else float("nan")
+
+    return {
+        "episodes": len(episodes),
+        "success_rate": mean("success"),
+        "collision_episodes": int(sum(e["collisions"] > 0 for e in episodes)),
+        "terminated_rate": mean("terminated"),
+        "rmse": mean("rmse"),
+        "delta_v": mean("delta_v"),
+        "final_error_m": mean("final_error_m"),
+        "violations": mean("violations"),
+        "min_separation_m": float(min(e["min_separation_m"] for e in episodes)) if episodes else float("nan"),
+        "steps": mean("steps"),
+        "compute_ms_per_decision": mean("compute_ms_per_decision"),
+    }
+
+
+def compare(results: dict[str, dict[str, Any]], learned: str = "learned",
+            reference: str = "DMPC") -> dict[str, Any]:
+    """Ratios learned/reference of mean RMSE and mean delta-v on the same seeds.
+
+    ``all``: over every seed; ``reference_ok``: over the seeds where the reference episode ran
+    to truncation without a collision (a terminated reference episode has a shorter window).
+    """
+    if learned not in results or reference not in results:
+        return {}
+    le, re = results[learned]["episodes"], results[reference]["episodes"]
+    if [e["seed"] for e in le] != [e["seed"] for e in re]:
+        raise ValueError("compare() needs both policies evaluated on the same seeds in the same order")
+    out: dict[str, Any] = {"reference": reference}
+    ok = [i for i, e in enumerate(re) if e["collisions"] == 0 and not e["terminated"]]
+    for label, idx in (("all", list(range(len(le)))), ("reference_ok", ok)):
+        if not idx:
+            out[label] = {"seeds": 0}
+            continue
+        out[label] = {
+            "seeds": len(idx),
+            "rmse_ratio": float(np.mean([le[i]["rmse"] for i in idx]) / np.mean([re[i]["rmse"] for i in idx])),
+            "delta_v_ratio": float(np.mean([le[i]["delta_v"] for i in idx]) / np.mean([re[i]["delta_v"] for i in idx])),
+            "learned_success_rate": float(np.mean([le[i]["success"] for i in idx])),
+            "reference_success_rate": float(np.mean([re[i]["success"] for i in idx])),
+        }
+    return out
+
+
+def format_table(results: dict[str, dict[str, Any]]) -> str:
+    """A Markdown table of the aggregates, one row per policy."""
+    cols = ["episodes", "success_rate", "collision_episodes", "terminated_rate", "rmse", "delta_v",
+            "final_error_m", "violations", "min_separation_m", "compute_ms_per_decision"]
+    head = "| policy | " + " | ".join(cols) + " |"
+    lines = [head, "|" + "---|" * (len(cols) + 1)]
+    for name, res in results.items():
+        agg = res["aggregate"]
+        cells = [f"{agg[c]:.3g}" if isinstance(agg[c], float) else str(agg[c]) for c in cols]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int], tol: float) -> dict[str, Any]:
+    """Evaluate the named scripted baselines that exist (missing ones: a warning)."""
+    seeds = list(seeds)
+    out = {}
+    for name in names:
+        policy = make_baseline(name, env)
+        if policy is None:
+            warnings.warn(f"baseline {name!r} not found in the baselines package; skipped", stacklevel=2)
+            continue
+        out[name] = evaluate(env, policy, seeds, tol)
+    return out

@@ -1,0 +1,200 @@
+"""Train a satenv scenario with Ray RLlib: multi-agent PPO, one policy shared by every agent.
+
+    python -m training.rllib_train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
+        --iterations 50 --num-env-runners 2 --out-dir runs/rllib_platoon
+    # on an existing Ray cluster (started with `ray start --head` on the head node and
+    # `ray start --address=<head>:6379` on the workers):
+    python -m training.rllib_train --address <head>:6379 --num-env-runners 32 ...
+
+The env goes through RLlib's PettingZoo wrapper (``ParallelPettingZooEnv``); every agent maps to
+the policy ``"shared"``. Without ``--address`` Ray starts locally (``num_cpus`` = ``--num-cpus``).
+RLlib runs are only reproducible with a fixed ``PYTHONHASHSEED`` (set it before starting
+Python, e.g. ``PYTHONHASHSEED=0 python -m training.rllib_train ...``).
+
+Needs the optional extra ``ray[rllib]`` (``pip install "satenv[rllib]"``; it pins
+``gymnasium==1.2.2``). Without it, :func:`main` exits with a clear message.
+
+Output (``--out-dir``): ``checkpoint/`` (``Algorithm.save_to_path``), ``progress.json`` (per
+iteration: env steps, mean episode return, wall time) and ``config.json`` (these arguments).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["RLlibConfig", "run", "main", "require_ray"]
+
+
+class RayNotInstalledError(ImportError):
+    """``ray[rllib]`` is missing."""
+
+
+def require_ray():
+    """Import ray (and RLlib) or raise :class:`RayNotInstalledError` with the install command."""
+    try:
+        import ray
+        import ray.rllib  # noqa: F401
+    except ImportError as err:
+        raise RayNotInstalledError(
+            f"training.rllib_train needs Ray RLlib, which is not installed ({err}). Install the optional "
+            "extra: pip install 'satenv[rllib]' (ray[rllib]; it pins gymnasium==1.2.2 — use the "
+            "project's constraints.txt)") from None
+    return ray
+
+
+@dataclass(frozen=True)
+class RLlibConfig:
+    """Arguments of an RLlib run (every field is a ``--flag``)."""
+
+    env_id: str = "platoon_v0"
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    iterations: int = 20
+    seed: int = 0
+    net_arch: tuple[int, ...] = (64, 64)
+    lr: float = 3e-4
+    gamma: float = 0.99
+    train_batch_size: int = 4000
+    minibatch_size: int = 500
+    num_epochs: int = 5
+    num_env_runners: int = 0
+    num_envs_per_env_runner: int = 1
+    num_cpus: int = 2
+    address: str | None = None
+    out_dir: str = "runs/rllib"
+
+    def __post_init__(self) -> None:
+        for name in ("iterations", "train_batch_size", "minibatch_size", "num_epochs",
+                     "num_envs_per_env_runner", "num_cpus"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive int, got {v!r}")
+        for name in ("seed", "num_env_runners"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"{name} must be an int >= 0, got {v!r}")
+        if not isinstance(self.env_kwargs, dict):
+            raise ValueError(f"env_kwargs must be a dict (JSON object), got {self.env_kwargs!r}")
+        arch = tuple(self.net_arch)
+        if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
+            raise ValueError(f"net_arch must be positive ints, e.g. 64,64; got {self.net_arch!r}")
+        object.__setattr__(self, "net_arch", arch)
+        if self.minibatch_size > self.train_batch_size:
+            raise ValueError(f"minibatch_size ({self.minibatch_size}) must be <= train_batch_size "
+                             f"({self.train_batch_size})")
+
+
+def _env_creator(env_id: str, env_kwargs: dict[str, Any]):
+    def create(_config=None):
+        from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+
+        from training.vec_env import make_env
+
+        return ParallelPettingZooEnv(make_env(env_id, **env_kwargs))
+
+    return create
+
+
+def build_algo_config(cfg: RLlibConfig):
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+    from ray.tune.registry import register_env
+
+    name = f"satenv_{cfg.env_id.replace(':', '_').replace('.', '_')}"
+    register_env(name, _env_creator(cfg.env_id, cfg.env_kwargs))
+    return (
+        PPOConfig()
+        .environment(name)
+        .framework("torch")
+        .multi_agent(policies={"shared"}, policy_mapping_fn=lambda agent_id, *args, **kwargs: "shared")
+        .env_runners(num_env_runners=cfg.num_env_runners, num_envs_per_env_runner=cfg.num_envs_per_env_runner)
+        .training(lr=cfg.lr, gamma=cfg.gamma, train_batch_size_per_learner=cfg.train_batch_size,
+                  minibatch_size=cfg.minibatch_size, num_epochs=cfg.num_epochs)
+        .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=list(cfg.net_arch)))
+        .debugging(seed=cfg.seed)
+    )
+
+
+def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
+    """Train for ``cfg.iterations``; returns the per-iteration progress rows."""
+    ray = require_ray()
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps({**asdict(cfg), "net_arch": list(cfg.net_arch)}, indent=2) + "\n")
+    started = False
+    if not ray.is_initialized():
+        if cfg.address:
+            ray.init(address=cfg.address)
+        else:
+            ray.init(num_cpus=cfg.num_cpus, include_dashboard=False, log_to_driver=False)
+        started = True
+    progress: list[dict[str, Any]] = []
+    try:
+        algo = build_algo_config(cfg).build_algo()
+        t0 = time.perf_counter()
+        for it in range(1, cfg.iterations + 1):
+            result = algo.train()
+            runners = result.get("env_runners", {})
+            row = {"iteration": it,
+                   "env_steps": int(result.get("num_env_steps_sampled_lifetime",
+                                               runners.get("num_env_steps_sampled_lifetime", 0)) or 0),
+                   "episode_return_mean": _float(runners.get("episode_return_mean")),
+                   "wall_s": round(time.perf_counter() - t0, 2)}
+            progress.append(row)
+            (out / "progress.json").write_text(json.dumps(progress, indent=1) + "\n")
+            if verbose:
+                print(f"iter {it}: {row}", flush=True)
+        algo.save_to_path(str((out / "checkpoint").resolve()))
+        algo.stop()
+    finally:
+        if started:
+            ray.shutdown()
+    return progress
+
+
+def _float(v: Any) -> float | None:
+    try:
+        return None if v is None else float(v)
+    except (TypeError, ValueError):
+        return None
+
+
+def parse_args(argv: list[str] | None = None) -> RLlibConfig:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    d = RLlibConfig()
+    p.add_argument("--env-id", default=d.env_id)
+    p.add_argument("--env-kwargs", default="{}", help="JSON object of env keyword arguments")
+    for name in ("iterations", "seed", "train_batch_size", "minibatch_size", "num_epochs",
+                 "num_env_runners", "num_envs_per_env_runner", "num_cpus"):
+        p.add_argument(f"--{name.replace('_', '-')}", type=int, default=getattr(d, name))
+    p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--gamma", type=float, default=d.gamma)
+    p.add_argument("--net-arch", default="64,64", help="hidden sizes, comma-separated")
+    p.add_argument("--address", default=None, help="existing Ray cluster, e.g. 10.0.0.1:6379 (default: local)")
+    p.add_argument("--out-dir", default=d.out_dir)
+    ns = p.parse_args(argv)
+    try:
+        env_kwargs = json.loads(ns.env_kwargs)
+        arch = tuple(int(x) for x in ns.net_arch.split(",") if x)
+    except ValueError as err:
+        p.error(f"--env-kwargs must be a JSON object and --net-arch comma-separated ints ({err})")
+    kw = {k: v for k, v in vars(ns).items() if k not in ("env_kwargs", "net_arch")}
+    return RLlibConfig(env_kwargs=env_kwargs, net_arch=arch, **kw)
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    try:
+        cfg = parse_args(argv)
+        return run(cfg)
+    except (RayNotInstalledError, ValueError) as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,315 @@
+"""Train a shared policy for a satenv scenario with stable-baselines3 (PPO or SAC).
+
+    python -m training.train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
+        --algo ppo --total-timesteps 2000000 --n-copies 32 --out-dir runs/platoon_ppo
+    python -m training.train --out-dir runs/platoon_ppo --resume [--total-timesteps 3000000]
+    tensorboard --logdir runs/platoon_ppo/tb
+
+Every agent of every env copy is one row of the SB3 batch (``training.vec_env.SatVecEnv``,
+parameter sharing); timesteps count agent-steps. Read top to bottom:
+
+1. configuration (``training.config.TrainConfig``; flags given with ``--resume`` override the
+   saved ``config.json``, e.g. a larger ``--total-timesteps``);
+2. seeding: ``torch``/``numpy``/SB3 from ``seed``; the training env copies from ``seed``;
+3. environment: ``SatVecEnv`` -> ``VecMonitor`` -> ``VecNormalize``;
+4. reference: the scripted baselines on the evaluation seeds (``baselines_eval.json``);
+5. model: new, or the last checkpoint (``checkpoints/step_<N>/``) when resuming — the step
+   count continues from ``N``;
+6. learning with a tqdm bar, TensorBoard logs (``tb/``), periodic evaluation on fixed seeds
+   with the PettingZoo env (logged as ``eval/*`` beside ``baseline/<name>/*``; the best model by
+   (success rate, -RMSE) is kept in ``best/``), and checkpoints every ``checkpoint_every`` steps;
+7. artefacts: ``final/`` (model, normalisation, env.json, config.json, eval.json) with the
+   held-out ``test_seeds`` evaluation of the learned policy and the baselines; ``best/`` gets
+   its test evaluation too. ``training.load(folder)`` loads either.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from training.config import TrainConfig, build_parser, config_from_json, parse_args
+from training.evaluate import compare, evaluate, evaluate_baselines, format_table
+from training.policy import LearnedPolicy, ObsNormalizer, features_from_config, save_artifacts
+from training.shaping import RewardShaping
+from training.vec_env import SatVecEnv, env_version, make_env
+
+__all__ = ["main", "train", "latest_checkpoint"]
+
+
+# --------------------------------------------------------------------------- helpers
+def latest_checkpoint(out_dir: Path) -> tuple[int, Path] | None:
+    """``(steps, folder)`` of the newest ``checkpoints/step_<N>`` with a model, or ``None``."""
+    found = []
+    for p in (out_dir / "checkpoints").glob("step_*"):
+        m = re.fullmatch(r"step_(\d+)", p.name)
+        if m and (p / "model.zip").is_file():
+            found.append((int(m.group(1)), p))
+    return max(found) if found else None
+
+
+def env_meta(cfg: TrainConfig, env: Any) -> dict[str, Any]:
+    import satenv
+
+    agent = env.possible_agents[0]
+    return {
+        "env_id": cfg.env_id,
+        "env_version": env_version(cfg.env_id),
+        "env_name": env.metadata.get("name", type(env).__name__),
+        "satenv_version": satenv.__version__,
+        "env_kwargs": cfg.env_kwargs,
+        "eval_env_kwargs": cfg.resolved_eval_env_kwargs,
+        "agents": list(env.possible_agents),
+        "observation_shape": list(env.observation_space(agent).shape),
+        "action_shape": list(env.action_space(agent).shape),
+        "parameter_sharing": True,
+    }
+
+
+def build_model(cfg: TrainConfig, venv):
+    from stable_baselines3 import PPO, SAC
+
+    common = {"seed": cfg.seed, "device": "cpu", "verbose": 0, "learning_rate": cfg.learning_rate,
+              "gamma": cfg.gamma, "tensorboard_log": None}
+    if cfg.algo == "ppo":
+        arch = list(cfg.net_arch)
+        return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+                   gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef,
+                   vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
+                   policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "log_std_init": cfg.log_std_init},
+                   **common)
+    return SAC("MlpPolicy", venv, buffer_size=cfg.buffer_size, learning_starts=cfg.learning_starts,
+               batch_size=cfg.sac_batch_size, train_freq=cfg.train_freq, gradient_steps=cfg.gradient_steps,
+               tau=cfg.tau, policy_kwargs={"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init},
+               **common)
+
+
+def _algo_class(algo: str):
+    from stable_baselines3 import PPO, SAC
+
+    return {"ppo": PPO, "sac": SAC}[algo]
+
+
+def _score(agg: dict[str, Any]) -> tuple[float, float]:
+    return (agg["success_rate"], -agg["rmse"])
+
+
+# --------------------------------------------------------------------------- callback
+def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: dict[str, Any],
+                  meta: dict[str, Any], history: list[dict[str, Any]], features=None):
+    """One SB3 callback doing the progress bar, periodic evaluation and checkpoints."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm.auto import tqdm
+
+    class TrainingCallback(BaseCallback):
+        def _on_training_start(self) -> None:
+            n = self.model.num_timesteps
+            self.next_eval = (n // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
+            self.next_ckpt = (n // cfg.checkpoint_every + 1) * cfg.checkpoint_every if cfg.checkpoint_every else None
+            self.best = max((_score(h["aggregate"]) for h in history), default=None)
+            self.bar = tqdm(total=cfg.total_timesteps, initial=n, unit="step", unit_scale=True,
+                            disable=not cfg.progress, dynamic_ncols=True, file=sys.stderr)
+            self.last_n = n
+            for name, res in baseline_eval.items():
+                for key in ("success_rate", "rmse", "delta_v", "collision_episodes"):
+                    self.logger.record(f"baseline/{name}/{key}", res["aggregate"][key])
+
+        def _on_step(self) -> bool:
+            n = self.model.num_timesteps
+            self.bar.update(n - self.last_n)
+            self.last_n = n
+            if self.next_eval is not None and n >= self.next_eval:
+                self.next_eval += cfg.eval_every
+                self.evaluate_now()
+            if self.next_ckpt is not None and n >= self.next_ckpt:
+                self.next_ckpt += cfg.checkpoint_every
+                save_checkpoint(self.model, venv, out, n)
+            return True
+
+        def evaluate_now(self) -> None:
+            n = self.model.num_timesteps
+            policy = LearnedPolicy(self.model, ObsNormalizer.from_vecnormalize(venv), features=features, meta=meta)
+            res = evaluate(eval_env, policy, cfg.eval_seeds, cfg.success_tol)
+            agg = res["aggregate"]
+            for key in ("success_rate", "rmse", "delta_v", "final_error_m", "collision_episodes",
+                        "violations", "min_separation_m", "terminated_rate"):
+                self.logger.record(f"eval/{key}", agg[key])
+            ratios = compare({"learned": res, **baseline_eval})
+            if ratios:
+                self.logger.record("eval/rmse_ratio_vs_DMPC", ratios["all"]["rmse_ratio"])
+                self.logger.record("eval/delta_v_ratio_vs_DMPC", ratios["all"]["delta_v_ratio"])
+            self.logger.dump(n)
+            history.append({"step": n, "aggregate": agg, "vs_DMPC": ratios})
+            (out / "eval_history.json").write_text(json.dumps(history, indent=1) + "\n")
+            self.bar.set_postfix(success=f"{agg['success_rate']:.2f}", rmse=f"{agg['rmse']:.3g}",
+                                 dv=f"{agg['delta_v']:.3g}", refresh=False)
+            if self.best is None or _score(agg) > self.best:
+                self.best = _score(agg)
+                save_artifacts(out / "best", self.model, ObsNormalizer.from_vecnormalize(venv),
+                               env_meta={**meta, "step": n}, config=cfg.to_json(),
+                               evaluation={"eval_seeds": list(cfg.eval_seeds), "learned": agg})
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return TrainingCallback()
+
+
+def save_checkpoint(model, venv, out: Path, steps: int) -> Path:
+    folder = out / "checkpoints" / f"step_{steps}"
+    tmp = folder.with_name(folder.name + ".tmp")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    model.save(tmp / "model.zip")
+    venv.save(str(tmp / "vecnormalize.pkl"))
+    if hasattr(model, "replay_buffer") and model.replay_buffer is not None:
+        model.save_replay_buffer(tmp / "replay_buffer.pkl")
+    if folder.exists():
+        shutil.rmtree(folder)
+    tmp.rename(folder)  # a checkpoint folder is complete or absent
+    return folder
+
+
+# --------------------------------------------------------------------------- training
+def train(cfg: TrainConfig, resume: bool = False) -> Path:
+    """Run (or resume) training; returns the ``final/`` artefact folder."""
+    import torch
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    out = Path(cfg.out_dir)
+    ckpt = latest_checkpoint(out) if resume else None
+    if resume and ckpt is None:
+        raise ValueError(f"--resume: no checkpoint under {out / 'checkpoints'}; train first without --resume")
+    if not resume and latest_checkpoint(out) is not None:
+        raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
+
+    # 2. seeding
+    torch.set_num_threads(cfg.torch_threads)
+    start_steps = ckpt[0] if ckpt else 0
+    set_random_seed(cfg.seed + start_steps)
+
+    # 3. environment (training) and evaluation env
+    env = make_env(cfg.env_id, **cfg.env_kwargs)
+    eval_env = make_env(cfg.env_id, **cfg.resolved_eval_env_kwargs)
+    meta = env_meta(cfg, env)
+    shaping = RewardShaping.from_dict(cfg.reward_shaping)
+    features = features_from_config(cfg.to_json())
+    vec = VecMonitor(SatVecEnv(env, cfg.n_copies, seed=cfg.seed + start_steps,
+                               reward_fn=shaping if shaping.active else None, obs_fn=features))
+    if ckpt:
+        venv = VecNormalize.load(str(ckpt[1] / "vecnormalize.pkl"), vec)
+        venv.training = True
+    else:
+        venv = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, clip_obs=cfg.clip_obs,
+                            gamma=cfg.gamma)
+
+    # 4. scripted baselines on the evaluation seeds (cached)
+    baseline_eval = _cached_baselines(out / "baselines_eval.json", eval_env, cfg, cfg.eval_seeds)
+
+    # 5. model
+    if ckpt:
+        model = _algo_class(cfg.algo).load(ckpt[1] / "model.zip", env=venv, device="cpu")
+        if (ckpt[1] / "replay_buffer.pkl").is_file():
+            model.load_replay_buffer(ckpt[1] / "replay_buffer.pkl")
+    else:
+        model = build_model(cfg, venv)
+    model.tensorboard_log = str(out / "tb")
+    history_path = out / "eval_history.json"
+    history = [h for h in json.loads(history_path.read_text()) if h["step"] <= start_steps] \
+        if (resume and history_path.is_file()) else []
+
+    # 6. learn
+    remaining = cfg.total_timesteps - model.num_timesteps
+    t0 = time.perf_counter()
+    if remaining > 0:
+        callback = make_callback(cfg, out, venv, eval_env, baseline_eval, meta, history, features)
+        model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=not ckpt,
+                    tb_log_name="run", log_interval=1)
+        if cfg.checkpoint_every:
+            save_checkpoint(model, venv, out, model.num_timesteps)
+    wall = time.perf_counter() - t0
+
+    # 7. artefacts with the held-out evaluation
+    test_baselines = _cached_baselines(out / "baselines_test.json", eval_env, cfg, cfg.test_seeds)
+    final_policy = LearnedPolicy(model, ObsNormalizer.from_vecnormalize(venv), features=features, meta=meta)
+    summary = _summary(cfg, eval_env, final_policy, test_baselines, model.num_timesteps, wall)
+    final = save_artifacts(out / "final", model, final_policy.normalizer,
+                           env_meta={**meta, "step": model.num_timesteps}, config=cfg.to_json(),
+                           evaluation=summary, vecnormalize=venv)
+    print(f"final policy ({model.num_timesteps} steps, {wall / 60:.1f} min this session) on "
+          f"{len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
+    if (out / "best" / "model.zip").is_file():
+        from training.policy import load
+
+        best = load(out / "best")
+        best_summary = _summary(cfg, eval_env, best, test_baselines, best.meta.get("step"), wall)
+        (out / "best" / "eval.json").write_text(json.dumps(best_summary, indent=2) + "\n")
+        print(f"best-on-eval-seeds policy (step {best.meta.get('step')}):\n{best_summary['table']}")
+    venv.close()
+    return final
+
+
+def _summary(cfg: TrainConfig, eval_env, policy, baselines: dict[str, Any], steps, wall: float) -> dict[str, Any]:
+    learned = evaluate(eval_env, policy, cfg.test_seeds, cfg.success_tol)
+    results = {"learned": learned, **baselines}
+    return {
+        "test_seeds": list(cfg.test_seeds),
+        "success_tol_m": cfg.success_tol,
+        "steps": steps,
+        "train_wall_s_this_session": round(wall, 1),
+        "aggregate": {k: v["aggregate"] for k, v in results.items()},
+        "vs_DMPC": compare(results),
+        "table": format_table(results),
+        "learned_episodes": learned["episodes"],
+    }
+
+
+def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str, Any]:
+    key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs, "seeds": list(seeds),
+           "baselines": list(cfg.eval_baselines), "tol": cfg.success_tol}
+    if path.is_file():
+        cached = json.loads(path.read_text())
+        if cached.get("key") == key:
+            return cached["results"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        results = evaluate_baselines(eval_env, cfg.eval_baselines, seeds, cfg.success_tol)
+    path.write_text(json.dumps({"key": key, "results": results}, indent=1, default=float) + "\n")
+    return results
+
+
+# --------------------------------------------------------------------------- CLI
+def main(argv: list[str] | None = None) -> Path:
+    parser = build_parser(__doc__.split("\n\n")[0])
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from the last checkpoint in --out-dir (its config.json; flags given override it)")
+    argv = sys.argv[1:] if argv is None else list(argv)
+    cfg, ns = parse_args(argv, parser)
+    if ns.resume:
+        saved = Path(cfg.out_dir) / "config.json"
+        if not saved.is_file():
+            raise SystemExit(f"--resume: {saved} not found; train first without --resume")
+        base = config_from_json(json.loads(saved.read_text()))
+        cfg, _ = parse_args(argv, parser, base=base)
+    try:
+        return train(cfg, resume=ns.resume)
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+if __name__ == "__main__":
+    warnings.filterwarnings("ignore", category=DeprecationWarning)
+    np.set_printoptions(precision=4, suppress=True)
+    main()
