@@ -293,9 +293,11 @@ POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
 :func:`discover_trained_policies`."""
 
 QUICK: dict[str, Any] = {
-    "scenarios": ["platoon-PLF-cw", "platoon-BDL-j2", "platoon-random-cw", "cluster-case1"],
-    "policies": ["zero", "random", "dmpc", "apf", "trained:*"],
+    "scenarios": ["platoon-PLF-cw", "platoon-BDL-j2", "platoon-random-cw", "platoon-pereira2022",
+                  "formation-kannan2022-position", "cluster-case1"],
+    "policies": ["zero", "random", "dmpc", "apf", "cgmres", "trained:*"],
     "seeds": [0, 1, 2],
+    "scenario_seeds": {"cluster-case1": [0]},   # ~10 s per episode: one seed in the quick board
 }
 """The ``--quick`` board (the README's first command): a few minutes on 2 cores at most.
 Names that are not available yet are skipped with a note."""

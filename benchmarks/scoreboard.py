@@ -38,18 +38,16 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # one BLAS thread per episode: fair, stable solve timings
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 import difflib  # noqa: E402
 import fnmatch  # noqa: E402
 import json  # noqa: E402
-import math  # noqa: E402
 import platform  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
 from collections.abc import Callable, Iterable, Iterator  # noqa: E402
-from dataclasses import dataclass, field  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from datetime import datetime, timezone  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
@@ -66,29 +64,22 @@ from benchmarks.registry import (  # noqa: E402
     Unavailable,
     discover_trained_policies,
 )
+from benchmarks.scoreboard_report import (  # noqa: E402
+    KEY,
+    METRICS,
+    TIMING_FIELDS,
+    Board,
+    aggregate,
+    jsonable,
+    rank,
+    render_markdown,
+    write_outputs,
+)
 
-__all__ = ["METRICS", "TIMING_FIELDS", "Task", "aggregate", "main", "read_episodes", "run_episode",
-           "run_scoreboard"]
+__all__ = ["EPISODES_FILE", "METRICS", "TIMING_FIELDS", "Task", "aggregate", "main", "rank",
+           "read_episodes", "run_episode", "run_scoreboard"]
 
 EPISODES_FILE = "episodes.jsonl"
-KEY = ("scenario", "policy", "seed")
-METRICS: tuple[str, ...] = (
-    "success", "rmse", "rmsee", "foe", "final_error_m", "delta_v", "time_to_converge_s",
-    "min_separation_m", "collisions", "violations", "safety_cost", "fallbacks",
-    "compute_ms_per_decision", "episode_return", "steps",
-)
-"""Aggregated per (scenario, policy): ``satenv.metrics.summary`` plus ``episode_return``."""
-TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "wall_s")
-"""Measured wall times: the only record fields that differ between two runs of the same key."""
-
-_TABLE = [  # (metric, column header) of the markdown table
-    ("success", "success"), ("rmse", "RMSE"), ("rmsee", "RMSEE"), ("foe", "FOE"),
-    ("delta_v", "Δv [m/s]"), ("time_to_converge_s", "t_conv [s]*"),
-    ("min_separation_m", "min sep [m]"), ("collisions", "collisions"), ("violations", "violations"),
-    ("safety_cost", "cost"), ("fallbacks", "fallbacks"), ("compute_ms_per_decision", "ms/decision"),
-]
-_PLOTS = ("success", "rmse", "rmsee", "foe", "delta_v", "time_to_converge_s", "min_separation_m",
-          "collisions", "violations", "compute_ms_per_decision")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -106,23 +97,6 @@ class Task:
     @property
     def key(self) -> tuple[str, str, int]:
         return (self.scenario.name, self.policy.name, self.seed)
-
-
-def _jsonable(value: Any) -> Any:
-    """Plain JSON values; NaN / inf become ``None``."""
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    return value
 
 
 def run_episode(task: Task) -> dict[str, Any]:
@@ -156,7 +130,7 @@ def run_episode(task: Task) -> dict[str, Any]:
         if env is not None:
             env.close()
     record["wall_s"] = time.perf_counter() - start
-    return _jsonable(record)
+    return jsonable(record)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -205,67 +179,6 @@ class EpisodeLog:
 
     def close(self) -> None:
         os.close(self._fd)
-
-
-# ----------------------------------------------------------------------------------------------
-# Aggregation.
-# ----------------------------------------------------------------------------------------------
-def _t_interval(values: np.ndarray) -> tuple[float, float, float]:
-    from scipy import stats
-
-    n = values.size
-    mean = float(values.mean())
-    if n < 2:
-        return mean, math.nan, math.nan
-    half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
-    return mean, mean - half, mean + half
-
-
-def _wilson(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float, float]:
-    if n == 0:
-        return math.nan, math.nan, math.nan
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return p, centre - half, centre + half
-
-
-def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
-    """``{scenario: {policy: {"n", "errors", metric: {"mean", "ci95": [lo, hi], "n"}}}}``.
-
-    Errored episodes count as failures in the success rate and are left out of the other
-    metrics; ``None`` (e.g. no convergence) values are left out of that metric's mean.
-    """
-    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
-    for rec in records:
-        groups.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
-    out: dict[str, dict[str, dict[str, Any]]] = {}
-    for (scen, pol), recs in sorted(groups.items()):
-        ok = [r for r in recs if r.get("error") is None]
-        entry: dict[str, Any] = {"n": len(recs), "errors": len(recs) - len(ok)}
-        for m in METRICS:
-            if m == "success":
-                mean, lo, hi = _wilson(sum(bool(r.get("success")) for r in recs), len(recs))
-                n = len(recs)
-            else:
-                vals = np.array([float(r[m]) for r in ok if r.get(m) is not None], dtype=float)
-                n = int(vals.size)
-                mean, lo, hi = _t_interval(vals) if n else (math.nan, math.nan, math.nan)
-            entry[m] = {"mean": mean, "ci95": [lo, hi], "n": n}
-        out.setdefault(scen, {})[pol] = entry
-    return _jsonable(out)
-
-
-def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
-    """Policies of one scenario, best first: success rate desc, RMSE asc, delta-v asc."""
-    def key(item):
-        pol, e = item
-        def val(m, sign=1.0):
-            v = e[m]["mean"]
-            return math.inf if v is None else sign * v
-        return (val("success", -1.0), val("rmse"), val("delta_v"), pol)
-    return [pol for pol, _ in sorted(agg.items(), key=key)]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -432,19 +345,6 @@ def _user_policy(path: str) -> PolicySpec:
 # ----------------------------------------------------------------------------------------------
 # Running.
 # ----------------------------------------------------------------------------------------------
-@dataclass
-class Board:
-    """The result of :func:`run_scoreboard`."""
-
-    out: Path
-    header: dict[str, Any]
-    records: list[dict[str, Any]]
-    aggregates: dict[str, Any]
-    ranking: dict[str, list[str]]
-    notes: list[str] = field(default_factory=list)
-    markdown: str = ""
-
-
 def _machine() -> dict[str, Any]:
     cpu = platform.processor() or platform.machine()
     try:
@@ -522,7 +422,8 @@ def _trajectory_path(out: Path, scen: str, pol: str, seed: int) -> Path:
 
 def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | list[str] | None = None,
                    policies: str | list[str] | None = None, seeds: list[int] | str = "0-9",
-                   checkpoints: list[str] = (), quick: bool = False, workers: int = 1,
+                   checkpoints: list[str] = (), quick: bool = False,
+                   scenario_seeds: dict[str, list[int]] | None = None, workers: int = 1,
                    backend: str = "process", ray_address: str | None = None, resume: bool = False,
                    overwrite: bool = False, plots: bool = True, progress: bool = True,
                    scenario_registry: dict[str, ScenarioSpec] | None = None,
@@ -531,6 +432,8 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
                    argv: list[str] | None = None) -> Board:
     """Run the board and write its files; see the module docstring. Returns the :class:`Board`.
 
+    ``scenario_seeds`` caps the seeds of expensive scenarios (``{name: seeds}``, used as given
+    if they are a subset of ``seeds``; the quick board's ``QUICK["scenario_seeds"]`` by default);
     ``scenario_registry`` / ``policy_registry`` replace the registry's dicts (tests, plugins);
     ``on_record`` is called after each record is written (progress hooks, tests).
     """
@@ -544,6 +447,9 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
     if not seeds or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0 for s in seeds):
         raise ScoreboardError(f"seeds must be non-negative integers, got {seeds!r}")
     seeds = [int(s) for s in seeds]
+    if scenario_seeds is None:
+        scenario_seeds = dict(QUICK.get("scenario_seeds", {})) if quick else {}
+    scen_seeds = {name: [s for s in seeds if s in set(lst)] or seeds[:1] for name, lst in scenario_seeds.items()}
 
     scen_reg = dict(SCENARIOS if scenario_registry is None else scenario_registry)
     pol_reg = dict(POLICIES if policy_registry is None else policy_registry)
@@ -596,7 +502,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
                                       f"{'scenarios' if idx else 'policies'}: "
                                       + "; ".join(n for n in notes if name in n)
                                       + " (see --list for which policy applies where)")
-    plan = [(s, p, seed) for s, p in pairs for seed in seeds]
+    plan = [(s, p, seed) for s, p in pairs for seed in scen_seeds.get(s, seeds)]
 
     if overwrite:
         log_path.unlink(missing_ok=True)
@@ -619,7 +525,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
                                       "pass --overwrite or choose another --out")
         done[key] = rec
     todo = [k for k in plan if k not in done]
-    examples = {(s, p): seeds[0] for s, p in pairs}
+    examples = {(s, p): scen_seeds.get(s, seeds)[0] for s, p in pairs}
     tasks = [Task(scen_reg[s], pol_reg[p], seed,
                   str(_trajectory_path(out, s, p, seed)) if plots and examples[(s, p)] == seed else None)
              for s, p, seed in todo]
@@ -630,6 +536,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
         "generated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "command": "python -m benchmarks.scoreboard " + " ".join(argv if argv is not None else []),
         "machine": _machine(), "backend": backend, "workers": workers, "seeds": seeds,
+        "scenario_seeds": {n: v for n, v in scen_seeds.items() if n in scen_names},
         "env_versions": sorted(set(env_ids.values())),
         "scenarios": {n: {"env": env_ids[n], "kwargs": dict(scen_reg[n].kwargs),
                           "description": scen_reg[n].description,
@@ -689,154 +596,6 @@ def _version() -> str:
         return satenv.__version__
     except (ImportError, AttributeError):
         return "unknown"
-
-
-# ----------------------------------------------------------------------------------------------
-# Outputs.
-# ----------------------------------------------------------------------------------------------
-def _fmt(x: float | None) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "–"
-    if x == 0:
-        return "0"
-    if abs(x) >= 1e4 or abs(x) < 1e-3:
-        return f"{x:.2e}"
-    return f"{x:.3g}"
-
-
-def _cell(stat: dict[str, Any], metric: str) -> str:
-    mean, (lo, hi) = stat["mean"], stat["ci95"]
-    if mean is None:
-        return "–"
-    if metric == "success":
-        return f"{100 * mean:.0f} %"
-    if lo is None or hi is None:
-        return _fmt(mean)
-    half = (hi - lo) / 2
-    if half <= 1e-9 * max(1.0, abs(mean)):   # the same value on every seed (up to round-off)
-        return _fmt(mean)
-    return f"{_fmt(mean)} ± {_fmt(half)}"
-
-
-def render_markdown(board: Board) -> str:
-    h = board.header
-    m = h["machine"]
-    seeds = h["seeds"]
-    seed_text = f"{seeds[0]}–{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else str(seeds)
-    lines = [f"# {h['title']}", "",
-             f"satenv {h['satenv_version']}" + (f" (git {h['git']})" if h.get("git") else "")
-             + f" · envs {', '.join(h['env_versions'])} · seeds {seed_text} ({len(seeds)} per pair) · "
-             f"{h['generated']}",
-             f"machine: {m['cpu']}, {m['cpus']} CPUs, {m['platform']}, Python {m['python']}, "
-             f"numpy {m['numpy']}", "",
-             f"Ranked by {h['ranking']}. Cells: mean ± 95 % CI half-width over seeds (Student t; "
-             "success: Wilson interval). * t_conv: mean over the episodes that converged "
-             "(n in scoreboard.json). RMSE, RMSEE, FOE: the env's tracking error as defined by "
-             "its paper (satenv.metrics); Δv summed over agents; ms/decision: wall time of act().", ""]
-    for scen, entries in board.aggregates.items():
-        info = h["scenarios"].get(scen, {})
-        rule = (f"success: every agent within {info.get('success_tol_m', '?')} m of its target at the end"
-                + (" and no collision" if info.get("collision_free_success", True) else ""))
-        desc = info.get("description", "")
-        lines += [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
-        cols = ["#", "policy", "n"] + [c for _, c in _TABLE] + ["errors"]
-        lines.append("| " + " | ".join(cols) + " |")
-        lines.append("|" + "|".join("---" if i < 2 else "--:" for i in range(len(cols))) + "|")
-        for i, pol in enumerate(board.ranking[scen], 1):
-            e = entries[pol]
-            row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in _TABLE]
-            row.append(str(e["errors"]))
-            lines.append("| " + " | ".join(row) + " |")
-        lines.append("")
-    if board.notes:
-        lines += ["## Notes", ""] + [f"- {n}" for n in board.notes] + [""]
-    return "\n".join(lines)
-
-
-def write_outputs(board: Board, plots: bool = True) -> None:
-    out = board.out
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scoreboard.md").write_text(board.markdown)
-    payload = {"header": board.header, "ranking": board.ranking, "aggregates": board.aggregates,
-               "episodes": [{k: v for k, v in r.items() if k != "traceback"} for r in board.records]}
-    tmp = out / "scoreboard.json.tmp"
-    tmp.write_text(json.dumps(_jsonable(payload), indent=1, allow_nan=False))
-    tmp.replace(out / "scoreboard.json")
-    with open(out / "scoreboard.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["scenario", "rank", "policy", "n", "errors"]
-                   + [f"{m}_{s}" for m in METRICS for s in ("mean", "ci95_lo", "ci95_hi", "n")])
-        for scen, order in board.ranking.items():
-            for i, pol in enumerate(order, 1):
-                e = board.aggregates[scen][pol]
-                w.writerow([scen, i, pol, e["n"], e["errors"]]
-                           + [v for m in METRICS for v in (e[m]["mean"], *e[m]["ci95"], e[m]["n"])])
-    fields = list(KEY) + ["env"] + list(METRICS) + [k for k in ("final_error_m", "terminated",
-                                                                 "wall_s", "error") if k not in METRICS]
-    with open(out / "episodes.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        for r in board.records:
-            w.writerow(r)
-    if plots:
-        write_plots(board)
-
-
-def write_plots(board: Board) -> list[Path]:
-    """Bar charts (mean with 95 % CI) per metric, and the example trajectories."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from satenv.render import plot_trajectory
-    from satenv.rollout import Trajectory
-
-    pdir = board.out / "plots"
-    pdir.mkdir(parents=True, exist_ok=True)
-    written = []
-    scens = list(board.aggregates)
-    pols = sorted({p for s in scens for p in board.aggregates[s]})
-    width = 0.8 / max(1, len(pols))
-    for metric in _PLOTS:
-        fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(scens) + 2), 4), dpi=100)
-        drawn = False
-        for j, pol in enumerate(pols):
-            xs, ys, errs = [], [], [[], []]
-            for i, s in enumerate(scens):
-                e = board.aggregates[s].get(pol)
-                if e is None or e[metric]["mean"] is None:
-                    continue
-                mean, (lo, hi) = e[metric]["mean"], e[metric]["ci95"]
-                xs.append(i + (j - (len(pols) - 1) / 2) * width)
-                ys.append(mean)
-                errs[0].append(0 if lo is None else mean - lo)
-                errs[1].append(0 if hi is None else hi - mean)
-            if xs:
-                ax.bar(xs, ys, width, yerr=errs, capsize=2, label=pol, color=f"C{j % 10}")
-                drawn = True
-        ax.set_xticks(range(len(scens)))
-        ax.set_xticklabels(scens, rotation=20, ha="right", fontsize=8)
-        ax.set_ylabel(metric)
-        ax.set_title(f"{metric} (mean, 95 % CI)")
-        if drawn:
-            ax.legend(fontsize=7, ncol=min(4, len(pols)))
-        else:
-            ax.text(0.5, 0.5, "no finite values", ha="center", va="center", transform=ax.transAxes)
-        fig.tight_layout()
-        path = pdir / f"{metric}.png"
-        fig.savefig(path)
-        plt.close(fig)
-        written.append(path)
-    for npz in sorted((board.out / "trajectories").glob("*.npz")):
-        scen, pol, seed = npz.stem.split("__")
-        try:
-            traj = Trajectory.load(npz)
-        except (OSError, ValueError, KeyError):
-            continue
-        written.append(plot_trajectory(traj, pdir / "trajectories" / f"{npz.stem}.png",
-                                       title=f"{scen} · {pol} · {seed}"))
-    return written
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,0 +1,287 @@
+"""Scoreboard results: aggregation (mean and 95 % CI), ranking, and the written outputs
+(``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``, ``episodes.csv``, ``plots/``).
+
+Pure functions of the episode records written by :mod:`benchmarks.scoreboard`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import sys
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["KEY", "METRICS", "TIMING_FIELDS", "Board", "aggregate", "jsonable", "rank", "render_markdown",
+           "write_outputs", "write_plots"]
+
+KEY = ("scenario", "policy", "seed")
+METRICS: tuple[str, ...] = (
+    "success", "rmse", "rmsee", "foe", "final_error_m", "delta_v", "time_to_converge_s",
+    "min_separation_m", "collisions", "violations", "safety_cost", "fallbacks",
+    "compute_ms_per_decision", "episode_return", "steps",
+)
+"""Aggregated per (scenario, policy): ``satenv.metrics.summary`` plus ``episode_return``."""
+TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "wall_s")
+"""Measured wall times: the only record fields that differ between two runs of the same key."""
+
+_TABLE = [  # (metric, column header) of the markdown table
+    ("success", "success"), ("rmse", "RMSE"), ("rmsee", "RMSEE"), ("foe", "FOE"),
+    ("delta_v", "Δv [m/s]"), ("time_to_converge_s", "t_conv [s]*"),
+    ("min_separation_m", "min sep [m]"), ("collisions", "collisions"), ("violations", "violations"),
+    ("safety_cost", "cost"), ("fallbacks", "fallbacks"), ("compute_ms_per_decision", "ms/decision"),
+]
+_PLOTS = ("success", "rmse", "rmsee", "foe", "delta_v", "time_to_converge_s", "min_separation_m",
+          "collisions", "violations", "compute_ms_per_decision")
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON values; NaN / inf become ``None``."""
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    return value
+
+
+@dataclass
+class Board:
+    """A finished board (:func:`benchmarks.scoreboard.run_scoreboard`): header, records in plan
+    order, aggregates and ranking per scenario, notes and the markdown table."""
+
+    out: Path
+    header: dict[str, Any]
+    records: list[dict[str, Any]]
+    aggregates: dict[str, Any]
+    ranking: dict[str, list[str]]
+    notes: list[str] = field(default_factory=list)
+    markdown: str = ""
+
+
+# ----------------------------------------------------------------------------------------------
+# Aggregation.
+# ----------------------------------------------------------------------------------------------
+def _t_interval(values: np.ndarray) -> tuple[float, float, float]:
+    from scipy import stats
+
+    n = values.size
+    mean = float(values.mean())
+    if n < 2:
+        return mean, math.nan, math.nan
+    half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
+    return mean, mean - half, mean + half
+
+
+def _wilson(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float, float]:
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return p, centre - half, centre + half
+
+
+def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+    """``{scenario: {policy: {"n", "errors", metric: {"mean", "ci95": [lo, hi], "n"}}}}``.
+
+    Errored episodes count as failures in the success rate and are left out of the other
+    metrics; ``None`` (e.g. no convergence) values are left out of that metric's mean.
+    """
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for rec in records:
+        groups.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for (scen, pol), recs in sorted(groups.items()):
+        ok = [r for r in recs if r.get("error") is None]
+        entry: dict[str, Any] = {"n": len(recs), "errors": len(recs) - len(ok)}
+        for m in METRICS:
+            if m == "success":
+                mean, lo, hi = _wilson(sum(bool(r.get("success")) for r in recs), len(recs))
+                n = len(recs)
+            else:
+                vals = np.array([float(r[m]) for r in ok if r.get(m) is not None], dtype=float)
+                n = int(vals.size)
+                mean, lo, hi = _t_interval(vals) if n else (math.nan, math.nan, math.nan)
+            entry[m] = {"mean": mean, "ci95": [lo, hi], "n": n}
+        out.setdefault(scen, {})[pol] = entry
+    return jsonable(out)
+
+
+def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
+    """Policies of one scenario, best first: success rate desc, RMSE asc, delta-v asc."""
+    def key(item):
+        pol, e = item
+        def val(m, sign=1.0):
+            v = e[m]["mean"]
+            return math.inf if v is None else sign * v
+        return (val("success", -1.0), val("rmse"), val("delta_v"), pol)
+    return [pol for pol, _ in sorted(agg.items(), key=key)]
+
+
+# ----------------------------------------------------------------------------------------------
+# Outputs.
+# ----------------------------------------------------------------------------------------------
+def _fmt(x: float | None) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    if x == 0:
+        return "0"
+    if abs(x) >= 1e4 or abs(x) < 1e-3:
+        return f"{x:.2e}"
+    return f"{x:.3g}"
+
+
+def _cell(stat: dict[str, Any], metric: str) -> str:
+    mean, (lo, hi) = stat["mean"], stat["ci95"]
+    if mean is None:
+        return "–"
+    if metric == "success":
+        return f"{100 * mean:.0f} %"
+    if lo is None or hi is None:
+        return _fmt(mean)
+    half = (hi - lo) / 2
+    if half <= 1e-9 * max(1.0, abs(mean)):   # the same value on every seed (up to round-off)
+        return _fmt(mean)
+    return f"{_fmt(mean)} ± {_fmt(half)}"
+
+
+def render_markdown(board: Board) -> str:
+    h = board.header
+    m = h["machine"]
+    seeds = h["seeds"]
+    seed_text = f"{seeds[0]}–{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else str(seeds)
+    lines = [f"# {h['title']}", "",
+             f"satenv {h['satenv_version']}" + (f" (git {h['git']})" if h.get("git") else "")
+             + f" · envs {', '.join(h['env_versions'])} · seeds {seed_text} ({len(seeds)} per pair) · "
+             f"{h['generated']}",
+             f"machine: {m['cpu']}, {m['cpus']} CPUs, {m['platform']}, Python {m['python']}, "
+             f"numpy {m['numpy']}", ""]
+    if h.get("scenario_seeds"):
+        lines += ["Fewer seeds for the expensive scenarios: "
+                  + ", ".join(f"{n}: {v}" for n, v in h["scenario_seeds"].items()), ""]
+    lines += [
+             f"Ranked by {h['ranking']}. Cells: mean ± 95 % CI half-width over seeds (Student t; "
+             "success: Wilson interval). * t_conv: mean over the episodes that converged "
+             "(n in scoreboard.json). RMSE, RMSEE, FOE: the env's tracking error as defined by "
+             "its paper (satenv.metrics); Δv summed over agents; ms/decision: wall time of act().", ""]
+    for scen, entries in board.aggregates.items():
+        info = h["scenarios"].get(scen, {})
+        rule = (f"success: every agent within {info.get('success_tol_m', '?')} m of its target at the end"
+                + (" and no collision" if info.get("collision_free_success", True) else ""))
+        desc = info.get("description", "")
+        lines += [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
+        cols = ["#", "policy", "n"] + [c for _, c in _TABLE] + ["errors"]
+        lines.append("| " + " | ".join(cols) + " |")
+        lines.append("|" + "|".join("---" if i < 2 else "--:" for i in range(len(cols))) + "|")
+        for i, pol in enumerate(board.ranking[scen], 1):
+            e = entries[pol]
+            row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in _TABLE]
+            row.append(str(e["errors"]))
+            lines.append("| " + " | ".join(row) + " |")
+        lines.append("")
+    if board.notes:
+        lines += ["## Notes", ""] + [f"- {n}" for n in board.notes] + [""]
+    return "\n".join(lines)
+
+
+def write_outputs(board: Board, plots: bool = True) -> None:
+    out = board.out
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scoreboard.md").write_text(board.markdown)
+    payload = {"header": board.header, "ranking": board.ranking, "aggregates": board.aggregates,
+               "episodes": [{k: v for k, v in r.items() if k != "traceback"} for r in board.records]}
+    tmp = out / "scoreboard.json.tmp"
+    tmp.write_text(json.dumps(jsonable(payload), indent=1, allow_nan=False))
+    tmp.replace(out / "scoreboard.json")
+    with open(out / "scoreboard.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["scenario", "rank", "policy", "n", "errors"]
+                   + [f"{m}_{s}" for m in METRICS for s in ("mean", "ci95_lo", "ci95_hi", "n")])
+        for scen, order in board.ranking.items():
+            for i, pol in enumerate(order, 1):
+                e = board.aggregates[scen][pol]
+                w.writerow([scen, i, pol, e["n"], e["errors"]]
+                           + [v for m in METRICS for v in (e[m]["mean"], *e[m]["ci95"], e[m]["n"])])
+    fields = list(KEY) + ["env"] + list(METRICS) + [k for k in ("final_error_m", "terminated",
+                                                                 "wall_s", "error") if k not in METRICS]
+    with open(out / "episodes.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
+        w.writeheader()
+        for r in board.records:
+            w.writerow(r)
+    if plots:
+        try:
+            write_plots(board)
+        except Exception as exc:  # the tables are written; a plotting problem must not lose them
+            print(f"warning: plots not written ({type(exc).__name__}: {exc})", file=sys.stderr)
+
+
+def write_plots(board: Board) -> list[Path]:
+    """Bar charts (mean with 95 % CI) per metric, and the example trajectories."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from satenv.render import plot_trajectory
+    from satenv.rollout import Trajectory
+
+    pdir = board.out / "plots"
+    pdir.mkdir(parents=True, exist_ok=True)
+    written = []
+    scens = list(board.aggregates)
+    pols = sorted({p for s in scens for p in board.aggregates[s]})
+    colors = {p: f"C{j % 10}" for j, p in enumerate(pols)}
+    ncols = min(3, len(scens))
+    nrows = math.ceil(len(scens) / ncols)
+    for metric in _PLOTS:   # one panel per scenario (own y scale), one bar per policy, ranked order
+        fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), dpi=90, squeeze=False)
+        for ax, scen in zip(axes.ravel(), scens, strict=False):
+            names, ys, errs = [], [], [[], []]
+            for pol in board.ranking[scen]:
+                stat = board.aggregates[scen][pol][metric]
+                mean, (lo, hi) = stat["mean"], stat["ci95"]
+                if mean is None:
+                    continue
+                names.append(pol)
+                ys.append(mean)
+                errs[0].append(0.0 if lo is None else max(0.0, mean - lo))
+                errs[1].append(0.0 if hi is None else max(0.0, hi - mean))
+            if names:
+                ax.bar(range(len(names)), ys, yerr=errs, capsize=3, color=[colors[n] for n in names])
+                ax.set_xticks(range(len(names)))
+                ax.set_xticklabels(names, rotation=20, ha="right", fontsize=8)
+            else:
+                ax.text(0.5, 0.5, "no finite values", ha="center", va="center", transform=ax.transAxes)
+            ax.set_title(scen, fontsize=9)
+        for ax in axes.ravel()[len(scens):]:
+            ax.set_visible(False)
+        fig.suptitle(f"{metric} (mean, 95 % CI over seeds)")
+        fig.tight_layout()
+        path = pdir / f"{metric}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        written.append(path)
+    for npz in sorted((board.out / "trajectories").glob("*.npz")):
+        scen, pol, seed = npz.stem.split("__")
+        try:
+            traj = Trajectory.load(npz)
+        except (OSError, ValueError, KeyError):
+            continue
+        written.append(plot_trajectory(traj, pdir / "trajectories" / f"{npz.stem}.png",
+                                       title=f"{scen} · {pol} · {seed}"))
+    return written
