@@ -317,7 +317,16 @@ def _machine() -> dict:
         pass
     return {"platform": platform.platform(), "cpu": cpu, "cpus": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__,
-            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS")}
+            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+            "load_average_at_start": _loadavg()}
+
+
+def _loadavg() -> list[float] | None:
+    """1/5/15-minute load averages (a shared machine slows every figure down alike)."""
+    try:
+        return [round(v, 2) for v in os.getloadavg()]
+    except OSError:
+        return None
 
 
 def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: float = 0.2,
@@ -368,6 +377,7 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
                                    f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
     result["ratios"], result["targets"] = _ratios(result)
+    result["machine"]["load_average_at_end"] = _loadavg()
     return result
 
 
