@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
-    "POLICIES", "QUICK", "SCENARIOS", "PolicySpec", "ScenarioSpec", "ScoreboardError",
+    "FULL", "POLICIES", "QUICK", "SCENARIOS", "PolicySpec", "ScenarioSpec", "ScoreboardError",
     "checkpoint_policy", "discover_trained_policies", "resolve",
 ]
 
@@ -302,6 +302,15 @@ QUICK: dict[str, Any] = {
 """The ``--quick`` board (the README's first command): a few minutes on 2 cores at most.
 Names that are not available yet are skipped with a note."""
 
+FULL: dict[str, Any] = {
+    "seeds": "0-9",
+    # the costliest pairs: tube-RDMPC ~0.6 s x 400 decisions per cluster episode, NMPC ~0.8 s x
+    # 1200 decisions per servicing episode (measured on 2 shared cores)
+    "scenario_seeds": {"cluster-case1": [0, 1, 2, 3, 4], "cluster-case2": [0, 1, 2, 3, 4],
+                       "servicing-pereira2022": [0, 1, 2]},
+}
+"""The full (published) board: every available scenario x applicable policy x these seeds."""
+
 
 def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, PolicySpec]:
     """One ``trained:<name>`` entry per shipped artefact folder under ``training/policies/``.
@@ -331,5 +340,6 @@ def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, Poli
                                       f"unreadable file ({exc})") from None
         name = f"trained:{path.name}"
         out[name] = PolicySpec(name, ("training:load",), scenarios=patterns, checkpoint=str(path),
-                               learned=True, description=f"shipped trained policy {path.name}")
+                               learned=True, requires=("stable_baselines3",),
+                               description=f"shipped trained policy {path.name}")
     return out

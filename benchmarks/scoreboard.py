@@ -55,6 +55,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from benchmarks.registry import (  # noqa: E402
+    FULL,
     POLICIES,
     QUICK,
     SCENARIOS,
@@ -339,7 +340,7 @@ def _user_policy(path: str) -> PolicySpec:
         raise ScoreboardError(f"--policy {path}: cannot load this checkpoint: {type(exc).__name__}: "
                               f"{exc}") from None
     return PolicySpec(f"user:{p.resolve().name}", ("training:load",), checkpoint=str(p),
-                      learned=True, description=f"user checkpoint {path}")
+                      requires=("stable_baselines3",), learned=True, description=f"user checkpoint {path}")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -421,7 +422,7 @@ def _trajectory_path(out: Path, scen: str, pol: str, seed: int) -> Path:
 
 
 def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | list[str] | None = None,
-                   policies: str | list[str] | None = None, seeds: list[int] | str = "0-9",
+                   policies: str | list[str] | None = None, seeds: list[int] | str | None = None,
                    checkpoints: list[str] = (), quick: bool = False,
                    scenario_seeds: dict[str, list[int]] | None = None, workers: int = 1,
                    backend: str = "process", ray_address: str | None = None, resume: bool = False,
@@ -432,8 +433,9 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
                    argv: list[str] | None = None) -> Board:
     """Run the board and write its files; see the module docstring. Returns the :class:`Board`.
 
-    ``scenario_seeds`` caps the seeds of expensive scenarios (``{name: seeds}``, used as given
-    if they are a subset of ``seeds``; the quick board's ``QUICK["scenario_seeds"]`` by default);
+    ``seeds`` default to the board's (``FULL`` or ``QUICK`` in the registry); ``scenario_seeds``
+    caps the seeds of expensive scenarios (``{name: seeds}``, intersected with ``seeds``), by
+    default the board's caps unless ``seeds`` were given;
     ``scenario_registry`` / ``policy_registry`` replace the registry's dicts (tests, plugins);
     ``on_record`` is called after each record is written (progress hooks, tests).
     """
@@ -443,12 +445,16 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
         raise ScoreboardError(f"--backend must be 'process' or 'ray', got {backend!r}")
     if resume and overwrite:
         raise ScoreboardError("--resume and --overwrite contradict each other: pick one")
+    board_preset = QUICK if quick else FULL
+    user_seeds = seeds is not None
+    if seeds is None:
+        seeds = board_preset["seeds"]
     seeds = parse_seeds(seeds) if isinstance(seeds, str) else sorted(set(seeds))
     if not seeds or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0 for s in seeds):
         raise ScoreboardError(f"seeds must be non-negative integers, got {seeds!r}")
     seeds = [int(s) for s in seeds]
     if scenario_seeds is None:
-        scenario_seeds = dict(QUICK.get("scenario_seeds", {})) if quick else {}
+        scenario_seeds = {} if user_seeds else dict(board_preset.get("scenario_seeds", {}))
     scen_seeds = {name: [s for s in seeds if s in set(lst)] or seeds[:1] for name, lst in scenario_seeds.items()}
 
     scen_reg = dict(SCENARIOS if scenario_registry is None else scenario_registry)
@@ -625,13 +631,14 @@ def _list_registry() -> str:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m benchmarks.scoreboard",
                                 description="Rank every policy on every scenario (satenv scoreboard).",
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true",
                    help=f"the small embedded board: {QUICK['scenarios']} x {QUICK['policies']} x seeds "
                         f"{QUICK['seeds']} (a few minutes on 2 cores)")
     p.add_argument("--scenarios", help="comma-separated scenario names or globs (default: all available)")
     p.add_argument("--policies", help="comma-separated policy names or globs (default: all available)")
-    p.add_argument("--seeds", help="seeds: '0-9', '0,3,7' (default: 0-9, or the quick seeds)")
+    p.add_argument("--seeds", help=f"seeds: '0-9', '0,3,7' (default: {FULL['seeds']} with fewer for "
+                                   f"{sorted(FULL['scenario_seeds'])}; quick: {QUICK['seeds']})")
     p.add_argument("--policy", action="append", default=[], metavar="PATH",
                    help="also run a trained checkpoint (training.load(PATH)); repeatable")
     p.add_argument("--out", help="output directory (default: results/scoreboard, "
@@ -656,10 +663,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.list:
         print(_list_registry())
         return 0
-    seeds = args.seeds or (",".join(map(str, QUICK["seeds"])) if args.quick else "0-9")
     out = args.out or ("results/scoreboard/quick" if args.quick else "results/scoreboard")
     try:
-        board = run_scoreboard(out, scenarios=args.scenarios, policies=args.policies, seeds=seeds,
+        board = run_scoreboard(out, scenarios=args.scenarios, policies=args.policies, seeds=args.seeds,
                                checkpoints=args.policy, quick=args.quick, workers=args.workers,
                                backend=args.backend, ray_address=args.ray_address, resume=args.resume,
                                overwrite=args.overwrite, plots=not args.no_plots,
