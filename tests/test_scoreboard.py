@@ -245,3 +245,19 @@ def test_parse_seeds():
     for bad in ("", "a", "-1", "5-2"):
         with pytest.raises(ScoreboardError):
             parse_seeds(bad)
+
+
+def test_scenario_seed_caps(tmp_path):
+    board = _board(tmp_path, seeds="0-2", scenario_seeds={"toy": [1, 7]})
+    assert sorted({r["seed"] for r in board.records}) == [1]
+    assert board.header["scenario_seeds"] == {"toy": [1]}
+
+
+def test_board_presets_name_registered_entries():
+    for preset in (registry.QUICK, registry.FULL):
+        for name in preset.get("scenarios", []):
+            assert name in registry.SCENARIOS, name
+        for name in preset.get("policies", []):
+            assert name in registry.POLICIES or name.startswith("trained:"), name
+        for name in preset["scenario_seeds"]:
+            assert name in registry.SCENARIOS, name
