@@ -1,0 +1,131 @@
+"""baselines.nmpc: the cooperative NMPC of pereira2022 §4 on satenv.servicing_v0."""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("casadi")
+
+from baselines.nmpc import NMPC, build_model  # noqa: E402
+from satenv.dynamics import cw_continuous  # noqa: E402
+from satenv.dynamics.attitude import attitude_derivative, thruster_matrices  # noqa: E402
+from satenv.envs.servicing_v0 import parallel_env  # noqa: E402
+from satenv.rollout import rollout  # noqa: E402
+from satenv.scenarios.servicing import PRESETS  # noqa: E402
+
+
+def random_states(rng, n):
+    x = np.zeros((n, 13))
+    x[:, :3] = rng.normal(size=(n, 3)) * 20
+    x[:, 3:6] = rng.normal(size=(n, 3))
+    q = rng.normal(size=(n, 4))
+    x[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    x[:, 10:] = rng.normal(size=(n, 3)) * 0.5
+    return x
+
+
+@pytest.mark.parametrize(("frame", "radius", "att_tol"),
+                         [("lvlh", 6621e3, 1e-5), ("body", 6621e3, 1e-5), ("lvlh", 1e9, 1e-11)])
+def test_casadi_model_matches_numpy_physics(frame, radius, att_tol):
+    """The NMPC's eq. 35 (CasADi) equals satenv.dynamics (CW translation, attitude module).
+
+    The discrete model holds the orbital-rate coupling of eq. 14-15 (~ J n |omega|) over each
+    step: a ~1e-6 rad/s difference per step at |omega| ~ 1 rad/s in LEO, which vanishes with n.
+    """
+    sc = PRESETS["pereira2022"].with_overrides(thrust_frame=frame, orbit_radius=radius)
+    f, F = build_model(sc)
+    env = parallel_env(thrust_frame=frame, dynamics="cw", terminate_on_collision=False,
+                       max_distance=1e6, orbit_radius=radius)
+    rng = np.random.default_rng(0)
+    a_c, _ = cw_continuous(sc.mean_motion)
+    f_t, f_r = thruster_matrices(sc.dimensions)
+    j_f, j_l = np.array(sc.inertia), np.array(sc.object_inertia)
+    w_l = np.array([0, 0, sc.mean_motion])
+    from satenv.dynamics.attitude import quat_to_matrix
+
+    for x in random_states(rng, 5):
+        u = rng.uniform(-3, 3, 6)
+        xdot = np.asarray(f(x, u)).ravel()
+        force = f_t @ u if frame == "lvlh" else quat_to_matrix(x[6:10]) @ (f_t @ u)
+        np.testing.assert_allclose(xdot[:6], a_c @ x[:6] + np.r_[0, 0, 0, force], atol=1e-12)
+        np.testing.assert_allclose(xdot[6:], attitude_derivative(x[6:], f_r @ u, j_f, j_l, w_l), atol=1e-12)
+        # one discrete step against the env's truth step (CW translation, RK4 attitude)
+        env.reset(options={"initial_state": np.stack([x, x])})
+        _, _, _, _, info = env.step({a: u / 3.0 for a in env.agents})
+        nxt = np.asarray(F(x, u)).ravel()
+        np.testing.assert_allclose(nxt[:6], info["sat_1"]["state"][:6], atol=1e-10)
+        np.testing.assert_allclose(nxt[6:], info["sat_1"]["state"][6:], atol=att_tol)
+
+
+def test_nmpc_keeps_every_constraint_on_the_paper_start():
+    """First 5 s of §5.2: keep-out, velocity, angular-velocity and input bounds all become active."""
+    env = parallel_env(n_steps=50)
+    policy = NMPC(env)
+    traj = rollout(env, policy, seed=0)
+    sc = env.scenario
+    info = traj.info
+    assert traj.steps == 50 and not traj.terminated
+    assert info["violations"].sum() == 0 and not info["collision"].any()
+    assert policy.info["fallbacks"] == 0
+    assert info["dist_object"].min() >= sc.keepout_radius - sc.contact_tolerance
+    assert np.abs(traj.states[..., 3:6]).max() <= sc.v_max
+    assert np.abs(traj.states[..., 10:]).max() <= sc.omega_max
+    assert np.abs(info["thrust"]).max() <= 3.0 + 1e-9
+    # the constraints are exercised, not idle: the run presses against the limits
+    assert np.abs(traj.states[..., 3:6]).max() > 0.95 * sc.v_max
+    assert np.abs(info["thrust"]).max() > 0.99 * 3.0
+    assert info["dist_object"][1:].min() < sc.keepout_radius + 0.01
+    # and it makes progress around the object towards the first waypoints (30 m away)
+    err = np.linalg.norm(info["tracking_error"][-1], axis=-1)
+    assert np.all(err < 20.0)
+    assert len(policy.info["agent_solve_ms"]) == 100 and len(policy.info["solve_ms"]) == 50
+
+
+def test_coupled_collision_constraint_when_paths_cross():
+    """Two spacecraft swap places: the sequential NMPC keeps r_i + r_j = 6 m between them."""
+    p0 = [[-10.0, 25.0, 0.0], [10.0, 25.0, 0.5]]
+    goal = [[10.0, 25.0, 0.0], [-10.0, 25.0, 0.5]]
+    env = parallel_env(initial_position=p0, initial_velocity=[[0, 0, 0]] * 2, waypoints=[goal],
+                       waypoint_times=[], n_steps=80)
+    policy = NMPC(env)
+    traj = rollout(env, policy, seed=0)
+    info = traj.info
+    assert not traj.terminated and info["violations"].sum() == 0
+    assert info["dist_other"].min() >= env.scenario.separation_radius
+    assert info["dist_other"].min() < env.scenario.separation_radius + 0.1   # constraint active
+    assert np.all(np.linalg.norm(info["tracking_error"][-1], axis=-1) < 0.5)
+
+
+def test_failed_solves_fall_back_to_a_flagged_safe_action():
+    env = parallel_env(n_steps=3)
+    policy = NMPC(env, max_iter=1)        # ipopt stops at its iteration limit: not a success
+    obs, _ = env.reset(seed=0)
+    policy.reset()
+    act = policy.act(obs)
+    assert policy.info["fallbacks"] == 2
+    assert all(status.startswith("Maximum_Iterations") for status in policy.info["statuses"])
+    for a in act.values():
+        assert a.shape == (6,) and np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1.0)
+    # the brake-and-hold action pushes a spacecraft that is inside the keep-out margin outwards
+    x = env.state()[:13].copy()
+    u = policy.safe_action(x)
+    f_t, _ = thruster_matrices(env.scenario.dimensions)
+    assert np.all(np.abs(u) <= 3.0 + 1e-12)
+    assert (f_t @ u) @ x[:3] > 0
+
+
+def test_bad_options_rejected():
+    env = parallel_env()
+    with pytest.raises(ValueError, match="solver"):
+        NMPC(env, solver="snopt")
+    with pytest.raises(ValueError, match="order"):
+        NMPC(env, order="random")
+    with pytest.raises(ValueError, match="horizon"):
+        NMPC(env, horizon=0)
+    with pytest.raises(TypeError):
+        NMPC(env, horizn=10)
+
+    class Other:
+        scenario = object()
+        possible_agents = ["a"]
+    with pytest.raises(ValueError, match="servicing"):
+        NMPC(Other())
