@@ -1,0 +1,181 @@
+"""Artificial-potential-field baseline for satellite-cluster reconfiguration (li2022 §4.3).
+
+li2022 compares its RDMPC with the APF controller of Hwang et al. (2022) but does not print that
+controller's equations or gains, so this is a standard APF, documented here. Per satellite i
+(LVLH accelerations, ``e_i = q_i - q_id``, ``p_i`` its velocity)::
+
+    u_att = sat_{att_fraction u_max}( -k_att e_i min(1, d_att / ||e_i||) - k_damp p_i )
+    u_i   = sat_{u_max}( u_att - f_CW(x_i) + sum_b rep_b )
+
+The attraction is a quadratic potential (conic beyond ``d_att``) with damping; it is limited to
+``att_fraction`` (70 %) of the thrust so that the repulsion can always override it — li2022 §4.3
+notes that with bounded thrust "the parameters of the attractive potential field cannot be set too
+large", otherwise the repulsion cannot guarantee collision avoidance. ``-f_CW`` cancels the
+Clohessy–Wiltshire drift (``cw_compensation``).
+
+The bodies b are the satellite's graph neighbours (li2022 §2.3), the obstacle and the target
+spacecraft. With ``c = ||q_i - q_b|| - d_b`` the clearance to the safety distance ``d_b``
+(``2 r_s``, ``r_s + r_o``, ``r_s + r_t``), ``n`` the unit vector from b to i and
+``v_c = -(p_i - p_b) . n`` the closing speed::
+
+    rep_b = m_b (n + k_swirl t),
+    m_b   = k_rep (1/c - 1/rho_b) / c^2 [c < rho_b]  +  k_close max(0, v_c - sqrt(2 a_brake c)) [c < rho_brake]
+
+(FIRAS repulsion, plus a braking term that keeps the closing speed under the stopping curve
+with deceleration ``a_brake = brake_fraction u_max`` (over a longer range, as it does not bias the
+rest positions), plus a tangential "swirl" ``t`` — the
+component of ``-e_i`` orthogonal to ``n``, normalised — that lets a satellite slide around a body
+standing between it and its target instead of stalling in the APF's local minimum). The clearance
+is clipped below at ``c_min``. The steady-state error under a disturbance ``w`` is about
+``||w|| / k_att`` (no integral action), so the APF is less accurate than the tube RDMPC, as li2022
+reports.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from satenv.cluster_graph import nearest_neighbour_graph
+from satenv.dynamics import cw_continuous, saturate_norm
+
+__all__ = ["APF", "APFConfig"]
+
+
+@dataclass(frozen=True)
+class APFConfig:
+    """Gains of :class:`APF` (SI units; module docstring for the law).
+
+    Args:
+        k_att [1/s^2], d_att [m]: attraction stiffness and the distance beyond which it is conic.
+        k_damp [1/s]: velocity damping; att_fraction: cap of the attraction (fraction of u_max).
+        k_rep [m^4/s^2]: FIRAS repulsion gain; k_close [1/s]: closing-speed braking gain;
+        brake_fraction: a_brake / u_max of the stopping curve;
+        k_swirl: tangential fraction of the repulsion.
+        rho_pair, rho_obstacle, rho_target [m]: FIRAS influence ranges beyond the safety distances.
+        rho_brake [m]: range (clearance) within which the closing-speed braking term acts.
+        c_min [m]: smallest clearance used in the repulsion.
+        cw_compensation: cancel the CW natural dynamics (feed-forward).
+    """
+
+    k_att: float = 4e-3
+    d_att: float = 63.0
+    k_damp: float = 0.126
+    att_fraction: float = 0.7
+    k_rep: float = 700.0
+    k_close: float = 0.5
+    brake_fraction: float = 0.5
+    k_swirl: float = 1.0
+    rho_pair: float = 150.0
+    rho_obstacle: float = 300.0
+    rho_target: float = 90.0
+    rho_brake: float = 400.0
+    c_min: float = 1.0
+    cw_compensation: bool = True
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "cw_compensation":
+                if not isinstance(v, bool | np.bool_):
+                    raise ValueError(f"APF option cw_compensation must be a bool, got {v!r}")
+                continue
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"APF option {f.name} must be a number, got {v!r}") from None
+            zero_ok = f.name in ("k_close", "k_swirl", "k_damp", "k_rep")
+            if not math.isfinite(fv) or fv < 0 or (fv == 0 and not zero_ok):
+                raise ValueError(f"APF option {f.name} must be finite and "
+                                 f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
+        for name in ("att_fraction", "brake_fraction"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"APF option {name} must be in (0, 1], got {getattr(self, name)!r}")
+
+
+class APF:
+    """Artificial potential field controller for ``satenv.cluster_v0`` (module docstring).
+
+    Args:
+        env: a ``cluster_v0`` env (read: true states, allocated targets, obstacle, graph).
+        **options: fields of :class:`APFConfig`.
+    """
+
+    name = "apf"
+
+    def __init__(self, env: Any, **options: Any) -> None:
+        known = {f.name for f in fields(APFConfig)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"APF: unknown option(s) {unknown}; accepted: {sorted(known)}")
+        self.cfg = APFConfig(**options)
+        sc = getattr(env, "scenario", None)
+        if sc is None or not hasattr(sc, "obstacle_velocity"):
+            raise ValueError(f"APF controls satenv.cluster_v0 envs, got {type(env).__name__}")
+        self.env = env
+        self.sc = sc
+        self.agents = list(env.possible_agents)
+        self.m = len(self.agents)
+        self.f_rows = cw_continuous(sc.orbit.n)[0][3:, :]
+        self.info: dict[str, Any] = {"fallbacks": 0}
+
+    def reset(self, seed: int | None = None) -> None:
+        self.info = {"fallbacks": 0}
+
+    def _repulsion(self, q, p, qb, pb, d_safe, rho, e) -> np.ndarray:
+        """Repulsive accelerations (M, 3) from bodies at ``qb`` (M, K, 3) (``inf`` = absent)."""
+        cfg = self.cfg
+        diff = q[:, None, :] - qb                                    # (M, K, 3) body -> sat
+        dist = np.linalg.norm(diff, axis=-1)
+        reach = max(rho, cfg.rho_brake)
+        active = np.isfinite(dist) & (dist - d_safe < reach)
+        if not np.any(active):
+            return np.zeros_like(q)
+        safe_dist = np.where(active, dist, 1.0)
+        n = np.where(active[..., None], diff / safe_dist[..., None], 0.0)
+        c = np.maximum(np.where(active, dist - d_safe, reach), cfg.c_min)
+        firas = np.where(c < rho, cfg.k_rep * (1.0 / c - 1.0 / rho) / c**2, 0.0)
+        closing = -np.einsum("mkd,mkd->mk", p[:, None, :] - np.where(active[..., None], pb, 0.0), n)
+        allowed = np.sqrt(2.0 * cfg.brake_fraction * self.sc.u_max * c)
+        brake = np.where(c < cfg.rho_brake, cfg.k_close * np.maximum(0.0, closing - allowed), 0.0)
+        mag = np.where(active, firas + brake, 0.0)
+        # tangential direction: the part of -e orthogonal to n (slide around the body)
+        goal = -e[:, None, :]
+        tang = goal - np.einsum("mkd,mkd->mk", goal, n)[..., None] * n
+        tn = np.linalg.norm(tang, axis=-1, keepdims=True)
+        tang = np.where(tn > 1e-9, tang / np.maximum(tn, 1e-9), 0.0)
+        return np.sum(mag[..., None] * (n + cfg.k_swirl * tang), axis=1)
+
+    def accelerations(self) -> np.ndarray:
+        """The APF accelerations (M, 3) [m/s^2] for the env's current state (saturated)."""
+        cfg, sc, env = self.cfg, self.sc, self.env
+        x = env.state()[: 6 * self.m].reshape(self.m, 6)
+        q, p = x[:, :3], x[:, 3:]
+        e = q - env.targets()
+        dist = np.linalg.norm(e, axis=-1, keepdims=True)
+        u = -cfg.k_att * e * np.minimum(1.0, cfg.d_att / np.maximum(dist, 1e-12)) - cfg.k_damp * p
+        u = saturate_norm(u, cfg.att_fraction * sc.u_max)
+        if cfg.cw_compensation:
+            u -= x @ self.f_rows.T
+        adj = nearest_neighbour_graph(q, sc.n_neighbours, sc.comm_range)
+        qb = np.where(adj[..., None], q[None, :, :], np.inf)            # (M, M, 3)
+        pb = np.broadcast_to(p[None, :, :], qb.shape)
+        u += self._repulsion(q, p, qb, pb, sc.pair_distance, cfg.rho_pair, e)
+        q_o, p_o = env.obstacle_state()
+        u += self._repulsion(q, p, np.broadcast_to(q_o, (self.m, 1, 3)),
+                             np.broadcast_to(p_o, (self.m, 1, 3)), sc.obstacle_distance,
+                             cfg.rho_obstacle, e)
+        q_r = np.asarray(sc.target_spacecraft, dtype=float)
+        u += self._repulsion(q, p, np.broadcast_to(q_r, (self.m, 1, 3)), np.zeros((self.m, 1, 3)),
+                             sc.target_distance, cfg.rho_target, e)
+        if not np.all(np.isfinite(u)):
+            self.info["fallbacks"] += 1
+            u = np.where(np.isfinite(u), u, 0.0)
+        return saturate_norm(u, sc.u_max)
+
+    def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        u = self.accelerations() / self.sc.u_max
+        return {a: u[i] for i, a in enumerate(self.agents)}

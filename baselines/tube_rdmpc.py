@@ -1,0 +1,479 @@
+"""Tube-based robust distributed MPC for satellite-cluster reconfiguration (li2022 §3.1–3.2).
+
+``TubeRDMPC(env, **options)`` controls ``satenv.cluster_v0``. It has two layers:
+
+* **Nominal DMPC** (one NLP per satellite every decision period Δt = 5 s, horizon
+  ``T_p = 50 s``, N = 10 steps): cost (27)–(28)
+  ``sum_{m=0}^{N-1} alpha ||q~_m - q_d||^2 + beta ||F_m||^2 + gamma lambda_m^2`` with the nominal
+  thrust ``F = m u~`` in newtons (li2022 calls u a control *force*), the Lyapunov-decrease
+  constraint ``V_{m+1} - V_m <= -(sigma - lambda_m) V_m`` with ``V = alpha ||q~ - q_d||^2`` and
+  ``0 <= lambda_m <= sigma``, thrust ``||u~_m|| <= u_max - kappa_bar`` (U ⊖ sup κ), collision
+  constraints against the neighbours' predicted trajectories tightened by the tube (34),
+  obstacle (36) and target-spacecraft keep-outs tightened by ε̄, and the terminal set (38) with
+  the terminal controller ρ = 0 (39). Neighbours exchange the predictions (29)–(30): at t_k
+  satellite i uses ``ζ*_j(t_k + mΔt | t_{k-1})`` (m < N) and the ρ = 0 coast for m = N; all
+  satellites solve in parallel (Jacobi) from the previous exchange.
+* **Tube controller** κ (13) with ``k1 = 2``, ``k2 = 4``, running at the env's physics rate on
+  the true state through the env's inner-loop hook
+  (``env.set_inner_loop``): ``u = u~ + κ``, ``κ = -(f(x) - f(x~)) - (1 + k1) ε - (k1 + k2) ε̇``,
+  ``ε = q - q~``; the nominal state ``x~`` is propagated by the controller with ``u~``.
+
+Prediction / nominal model: the exact zero-order-hold Clohessy–Wiltshire model of
+``satenv.dynamics`` for the chief's mean motion (li2022 integrates its J2 + drag nominal model
+(5)). Over the cluster's few kilometres the J2 / drag / nonlinear terms differ from CW by about
+1e-5 m/s^2 (measured: 9.8e-6 m/s^2 at 1.7 km), 0.5 % of the disturbance the tube rejects and
+0.06 % of the thrust: they change the predicted 50 s trajectory by ~1 cm, so the plans are the
+same for practical purposes; the difference enters ε like a disturbance and is covered by
+``model_error_bound`` in the tube radius. ``f`` in κ is the same CW model (so
+``f(x) - f(x~) = A_c (x - x~)`` exactly).
+
+Deviations (documented, each can be switched off):
+
+* ``terminal_braking=True`` adds the terminal constraint ``||p_N||^2 <= 2 a_b ||q_N - q_d||``
+  (``a_b = braking_fraction * (u_max - kappa_bar)``): the satellite must be able to stop before
+  its target. With the paper's terminal set only (38), a 50 s horizon and 0.02 m/s^2 of thrust,
+  the DMPC accelerates toward the target until stopping is impossible within the horizon, the
+  Lyapunov constraint then becomes infeasible and the satellite overshoots (see the
+  reproduction note in ``benchmarks/repro_li2022.py``).
+* When the NLP is infeasible (ipopt fails), a relaxed NLP is solved (``lambda`` unbounded above,
+  collision rows softened with an L1 slack of weight 1e9); if that fails too, the previous plan
+  shifted with ρ = 0 appended is applied (li2022's feasibility candidate (29)). Both are counted
+  (``info["relaxed"]``, ``info["fallbacks"]``), never raised.
+* ``lyapunov_tolerance`` (1e-4 m^2) is added to the right-hand side of the Lyapunov rows so the
+  nominal can hold a target it has reached to within ipopt's tolerance.
+
+Tube radius (15): ``ε̄ = sqrt(eta / k1) w̄`` with ``w̄ = sup ||w|| + model_error_bound``;
+``eta = 1`` by default (Theorem 1 allows any ``eta >= 1 / (4 k2)``; note that for the κ of (13)
+the exact worst case is ``sup ||ε|| = w̄ / (1 + k1)`` — the closed loop
+``ε'' + (k1 + k2) ε' + (1 + k1) ε = w`` has a non-negative impulse response — which exceeds
+(15) for ``eta < (k1 / (1 + k1)^2) = 0.22``; ``benchmarks/repro_li2022.py`` measures it).
+
+Solver: CasADi + ipopt (MUMPS), one NLP built once per controller (the structure is the same for
+every satellite) and warm-started per satellite from its shifted previous solution.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from satenv.cluster_graph import nearest_neighbour_graph
+from satenv.dynamics import cw_continuous, cw_matrices, prediction_matrices
+
+__all__ = ["TubeController", "TubeRDMPC", "TubeRDMPCConfig"]
+
+_FAR = 1.0e5  # [m] position of an unused neighbour slot (its constraints are inactive)
+_SLACK_WEIGHT = 1.0e9
+
+
+@dataclass(frozen=True)
+class TubeRDMPCConfig:
+    """Options of :class:`TubeRDMPC` (li2022 §4 values by default).
+
+    Args:
+        horizon: T_p [s] (N = T_p / Δt steps).
+        alpha, beta, gamma: cost weights (28); sigma: the Lyapunov rate bound σ.
+        k1, k2: tube-controller gains (13); eta: η of (15) (see the module docstring).
+        model_error_bound: bound on ``||f_truth - f_CW||`` added to w̄ [m/s^2].
+        kappa_margin: κ̄ = kappa_margin * w̄ is reserved from the thrust for the tube controller.
+        terminal_braking, braking_fraction: the stopping-distance terminal constraint.
+        lyapunov_tolerance: [m^2] added to the Lyapunov rows.
+        relax_on_failure: solve the relaxed NLP when the exact one fails.
+        tube: run the tube controller κ (False: nominal DMPC applied open loop to the truth).
+        max_iter, tol: ipopt iteration limit and tolerance.
+    """
+
+    horizon: float = 50.0
+    alpha: float = 1.0
+    beta: float = 200.0
+    gamma: float = 500.0
+    sigma: float = 0.2
+    k1: float = 2.0
+    k2: float = 4.0
+    eta: float = 1.0
+    model_error_bound: float = 5e-5
+    kappa_margin: float = 1.1
+    terminal_braking: bool = True
+    braking_fraction: float = 0.5
+    lyapunov_tolerance: float = 1e-4
+    relax_on_failure: bool = True
+    tube: bool = True
+    max_iter: int = 150
+    tol: float = 1e-6
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.type in ("bool",):
+                if not isinstance(v, bool | np.bool_):
+                    raise ValueError(f"TubeRDMPC option {f.name} must be a bool, got {v!r}")
+                continue
+            if f.name == "max_iter":
+                if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+                    raise ValueError(f"TubeRDMPC option max_iter must be a positive int, got {v!r}")
+                continue
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"TubeRDMPC option {f.name} must be a number, got {v!r}") from None
+            zero_ok = f.name in ("beta", "gamma", "model_error_bound", "lyapunov_tolerance")
+            if not math.isfinite(fv) or fv < 0 or (fv == 0 and not zero_ok):
+                raise ValueError(f"TubeRDMPC option {f.name} must be finite and "
+                                 f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
+        if self.sigma >= 1:
+            raise ValueError(f"sigma must be in (0, 1) (V_(m+1) <= (1 - sigma + lambda) V_m), got {self.sigma!r}")
+        if self.k2 < 1.0 / (4.0 * self.eta):
+            raise ValueError(f"Theorem 1 needs k2 >= 1 / (4 eta): k2 = {self.k2}, eta = {self.eta}")
+        if not 0 < self.braking_fraction <= 1:
+            raise ValueError(f"braking_fraction must be in (0, 1], got {self.braking_fraction!r}")
+
+
+class TubeController:
+    """The auxiliary controller κ of li2022 eq. (13) around a CW nominal state (env inner loop).
+
+    The env calls :meth:`correction` at every physics step; the controller returns κ and
+    advances its nominal state ``x~`` with the commanded nominal input over the physics step.
+    It records ``||ε||`` and ``u~ + κ`` at every physics step.
+    """
+
+    def __init__(self, n: float, physics_dt: float, k1: float, k2: float) -> None:
+        self.a_h, self.b_h = cw_matrices(n, physics_dt)
+        self.f_rows = cw_continuous(n)[0][3:, :]      # CW acceleration rows: f(x) = f_rows @ x
+        self.h = float(physics_dt)
+        self.k1, self.k2 = float(k1), float(k2)
+        self.enabled = True
+        self.nominal: np.ndarray | None = None
+        self.t: float | None = None
+        self.eps: list[np.ndarray] = []     # per physics step (M,) ||q - q~|| [m]
+        self.u_total: list[np.ndarray] = []  # per physics step (M, 3) u~ + κ (before saturation)
+        self.kappa: list[np.ndarray] = []   # per physics step (M, 3) κ
+        self.stats: dict[str, Any] = {}     # receives "tube_error_max_m" (the policy's info)
+
+    def sync(self, x: np.ndarray, t: float) -> None:
+        """Start the nominal at the true state ``x`` (M, 6) at time ``t`` (ε = 0)."""
+        self.nominal = np.array(x, dtype=float)
+        self.t = float(t)
+
+    def kappa_of(self, x: np.ndarray, nominal: np.ndarray) -> np.ndarray:
+        """κ (M, 3) for true states ``x`` and nominal states ``nominal`` (M, 6)."""
+        e = x - nominal
+        return -(e @ self.f_rows.T) - (1.0 + self.k1) * e[:, :3] - (self.k1 + self.k2) * e[:, 3:]
+
+    def correction(self, t, x, chief, u_cmd) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.shape[0] != 1:
+            raise ValueError(f"TubeController drives one env copy, got a batch of {x.shape[0]}")
+        if self.nominal is None:
+            self.sync(x[0], float(np.asarray(t).ravel()[0]))
+        u_cmd = np.asarray(u_cmd, dtype=float)[0]
+        kappa = self.kappa_of(x[0], self.nominal) if self.enabled else np.zeros_like(u_cmd)
+        eps = np.linalg.norm(x[0, :, :3] - self.nominal[:, :3], axis=-1)
+        self.eps.append(eps)
+        self.stats["tube_error_max_m"] = max(float(self.stats.get("tube_error_max_m", 0.0)),
+                                             float(eps.max()))
+        self.kappa.append(kappa)
+        self.u_total.append(u_cmd + kappa)
+        self.nominal = self.nominal @ self.a_h.T + u_cmd @ self.b_h.T
+        self.t = float(np.asarray(t).ravel()[0]) + self.h
+        return kappa[None]
+
+
+class _NominalNLP:
+    """The nominal DMPC problem (36)+(38) of one satellite as one CasADi/ipopt solver."""
+
+    def __init__(self, cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int,
+                 u_nom: float, mass: float, r_pair: float, r_obs: float, r_tgt: float) -> None:
+        import casadi as ca
+
+        self.ca = ca
+        self.N, self.K = horizon, k_slots
+        self.u_nom = u_nom
+        a, b = cw_matrices(n, dt)
+        self.a, self.b = a, b
+        cal_a, cal_b = prediction_matrices(a, b, horizon)
+        self.cal_a, self.cal_b = cal_a, cal_b
+        N, K = horizon, k_slots
+        v = ca.SX.sym("v", 3 * N)
+        lam = ca.SX.sym("lam", N)
+        s = ca.SX.sym("s", N)
+        x0 = ca.SX.sym("x0", 6)
+        qd = ca.SX.sym("qd", 3)
+        qn = ca.SX.sym("qn", 3 * (N + 1) * K)
+        dn = ca.SX.sym("dn", 3 * K)
+        qo = ca.SX.sym("qo", 3 * (N + 2))
+        qr = ca.SX.sym("qr", 3)
+        u = u_nom * v
+        xs = ca.mtimes(ca.DM(cal_a), x0) + ca.mtimes(ca.DM(cal_b), u)
+        states = [x0] + [xs[6 * m:6 * m + 6] for m in range(N)]
+        q = [st[:3] for st in states]
+        x_n = states[N]
+        x_next = ca.mtimes(ca.DM(a), x_n)
+        d_n = x_next[:3] - x_n[:3]
+
+        def sq(e):
+            return ca.sumsqr(e)
+
+        v_of = [cfg.alpha * sq(q[m] - qd) for m in range(N + 1)]
+        v_scale = v_of[0] + 1.0
+        cost = 0
+        for m in range(N):
+            um = u[3 * m:3 * m + 3]
+            cost += v_of[m] + cfg.beta * mass**2 * sq(um) + cfg.gamma * lam[m] ** 2
+        cost += _SLACK_WEIGHT * ca.sum1(s)
+
+        g, lbg, ubg = [], [], []
+
+        def add(expr, lo, hi):
+            g.append(expr)
+            lbg.append(lo)
+            ubg.append(hi)
+
+        inf = ca.inf
+        for m in range(N):                                         # thrust (U ⊖ κ̄)
+            add(sq(v[3 * m:3 * m + 3]) - 1.0, -inf, 0.0)
+        for m in range(N):                                         # Lyapunov decrease
+            add((v_of[m + 1] - (1.0 - cfg.sigma + lam[m]) * v_of[m] - cfg.lyapunov_tolerance) / v_scale,
+                -inf, 0.0)
+        for m in range(1, N + 1):                                  # (34), (36)
+            for j in range(K):
+                qj = qn[3 * ((N + 1) * j + m):3 * ((N + 1) * j + m) + 3]
+                add((sq(q[m] - qj) - r_pair**2) / r_pair**2 + s[m - 1], 0.0, inf)
+            add((sq(q[m] - qo[3 * m:3 * m + 3]) - r_obs**2) / r_obs**2 + s[m - 1], 0.0, inf)
+            add((sq(q[m] - qr) - r_tgt**2) / r_tgt**2 + s[m - 1], 0.0, inf)
+        step_len = ca.sqrt(sq(d_n) + 1e-6)                          # ||∫ f dt|| over one Δt
+        q_n, q_next = x_n[:3], x_next[:3]
+        for j in range(K):                                         # terminal set (38)
+            qj = qn[3 * ((N + 1) * j + N):3 * ((N + 1) * j + N) + 3]
+            add((ca.sqrt(sq(q_n - qj)) - step_len - r_pair) / r_pair + s[N - 1], 0.0, inf)
+            add((sq(q_next - qj - dn[3 * j:3 * j + 3]) - r_pair**2) / r_pair**2 + s[N - 1], 0.0, inf)
+        qo_n, qo_next = qo[3 * N:3 * N + 3], qo[3 * (N + 1):3 * (N + 1) + 3]
+        add((ca.sqrt(sq(q_n - qo_n)) - step_len - r_obs) / r_obs + s[N - 1], 0.0, inf)
+        add((sq(q_next - qo_next) - r_obs**2) / r_obs**2 + s[N - 1], 0.0, inf)
+        add((ca.sqrt(sq(q_n - qr)) - step_len - r_tgt) / r_tgt + s[N - 1], 0.0, inf)
+        add((sq(q_next - qr) - r_tgt**2) / r_tgt**2 + s[N - 1], 0.0, inf)
+        add((sq(q_next - qd) - sq(q_n - qd) - cfg.lyapunov_tolerance) / v_scale, -inf, 0.0)
+        if cfg.terminal_braking:
+            a_b = cfg.braking_fraction * u_nom
+            add(sq(x_n[3:]) - 2.0 * a_b * ca.sqrt(sq(q_n - qd) + cfg.lyapunov_tolerance), -inf, 0.0)
+
+        w = ca.vertcat(v, lam, s)
+        p = ca.vertcat(x0, qd, qn, dn, qo, qr)
+        nlp = {"x": w, "p": p, "f": cost, "g": ca.vertcat(*g)}
+        opts = {
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": int(cfg.max_iter),
+            "ipopt.tol": float(cfg.tol),
+            "ipopt.acceptable_tol": 1e-4,
+            "ipopt.acceptable_iter": 5,
+            "ipopt.mu_strategy": "adaptive",
+        }
+        self.solver = ca.nlpsol("tube_rdmpc", "ipopt", nlp, opts)
+        self.lbg = np.array(lbg, dtype=float)
+        self.ubg = np.array(ubg, dtype=float)
+        self.n_w = 5 * N
+        self.sigma = cfg.sigma
+
+    def bounds(self, relaxed: bool) -> tuple[np.ndarray, np.ndarray]:
+        N = self.N
+        lb = np.concatenate([-np.ones(3 * N), np.zeros(N), np.zeros(N)])
+        ub = np.concatenate([np.ones(3 * N), np.full(N, 1e3 if relaxed else self.sigma),
+                             np.full(N, np.inf if relaxed else 0.0)])
+        return lb, ub
+
+    def solve(self, params: np.ndarray, w0: np.ndarray, relaxed: bool) -> tuple[np.ndarray, bool, str]:
+        lbx, ubx = self.bounds(relaxed)
+        w0 = np.clip(w0, lbx, np.where(np.isfinite(ubx), ubx, w0))
+        try:
+            sol = self.solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=self.lbg, ubg=self.ubg)
+        except RuntimeError as exc:  # CasADi raises on evaluation errors (NaN etc.)
+            return w0, False, f"error: {exc}"
+        stats = self.solver.stats()
+        status = str(stats.get("return_status", ""))
+        ok = bool(stats.get("success", False)) or status == "Solved_To_Acceptable_Level"
+        w = np.asarray(sol["x"], dtype=float).ravel()
+        if not np.all(np.isfinite(w)):
+            return w0, False, status
+        return w, ok, status
+
+    def states(self, x0: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Predicted nominal states (N + 1, 6) for scaled inputs ``v`` (3N,)."""
+        xs = self.cal_a @ x0 + self.cal_b @ (self.u_nom * v)
+        return np.vstack([x0, xs.reshape(self.N, 6)])
+
+
+class TubeRDMPC:
+    """Tube-based robust DMPC (li2022) for ``satenv.cluster_v0`` (see the module docstring).
+
+    Args:
+        env: a ``cluster_v0`` env (the controller reads its scenario, targets, obstacle and graph,
+            and registers its tube controller with ``env.set_inner_loop``).
+        **options: fields of :class:`TubeRDMPCConfig`.
+
+    ``info``: ``fallbacks`` (decisions that used the shifted previous plan), ``relaxed`` (relaxed
+    NLP solves), ``solve_ms`` (every NLP solve), ``tube_error_max_m`` (largest ``||q - q~||``),
+    ``tube_bound_m`` (ε̄ of (15)), ``resyncs`` (nominal restarted at the true state).
+    """
+
+    name = "tube_rdmpc"
+
+    def __init__(self, env: Any, **options: Any) -> None:
+        known = {f.name for f in fields(TubeRDMPCConfig)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"TubeRDMPC: unknown option(s) {unknown}; accepted: {sorted(known)}")
+        self.cfg = TubeRDMPCConfig(**options)
+        sc = getattr(env, "scenario", None)
+        if sc is None or not hasattr(sc, "obstacle_velocity") or not hasattr(env, "set_inner_loop"):
+            raise ValueError(f"TubeRDMPC controls satenv.cluster_v0 envs, got {type(env).__name__}")
+        self.env = env
+        self.sc = sc
+        self.agents = list(env.possible_agents)
+        self.m = len(self.agents)
+        cfg = self.cfg
+        steps = cfg.horizon / sc.dt
+        if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+            raise ValueError(f"horizon must be a positive multiple of the decision period dt = {sc.dt} s, "
+                             f"got {cfg.horizon} s")
+        self.N = int(round(steps))
+        self.n = sc.orbit.n
+        self.w_bar = sc.disturbance_bound + cfg.model_error_bound
+        self.eps_bar = math.sqrt(cfg.eta / cfg.k1) * self.w_bar             # (15)
+        self.kappa_bar = cfg.kappa_margin * self.w_bar if cfg.tube else 0.0
+        self.u_nom = sc.u_max - self.kappa_bar
+        if self.u_nom <= 0:
+            raise ValueError(f"the disturbance bound {self.w_bar:.3g} m/s^2 leaves no thrust for the "
+                             f"nominal DMPC (u_max = {sc.u_max:.3g} m/s^2)")
+        self.k_slots = max(self.m - 1, 1)
+        self.a, self.b = cw_matrices(self.n, sc.dt)
+        self.nlp = _NominalNLP(cfg, self.n, sc.dt, self.N, self.k_slots, self.u_nom, sc.mass,
+                               r_pair=sc.pair_distance + 2 * self.eps_bar,
+                               r_obs=sc.obstacle_distance + self.eps_bar,
+                               r_tgt=sc.target_distance + self.eps_bar)
+        self.tube = TubeController(self.n, sc.physics_dt, cfg.k1, cfg.k2)
+        self.tube.enabled = cfg.tube
+        self.info: dict[str, Any] = {}
+        self._reset_state()
+
+    # ------------------------------------------------------------------ episode
+    def _reset_state(self) -> None:
+        self.plans: np.ndarray | None = None     # (M, N + 1, 6) nominal plans from the last decision
+        self.warm: np.ndarray = np.zeros((self.m, self.nlp.n_w))
+        self.expected_time: float | None = None
+        self.history: dict[str, list] = {"t": [], "nominal": [], "lambda": [], "u_nominal": [],
+                                         "status": []}
+        self.tube.nominal = None
+        self.tube.eps, self.tube.kappa, self.tube.u_total = [], [], []
+        self.info = {"fallbacks": 0, "relaxed": 0, "solve_ms": [], "tube_error_max_m": 0.0,
+                     "tube_bound_m": self.eps_bar, "resyncs": 0, "solves": 0}
+        self.tube.stats = self.info
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget plans and statistics; the nominal restarts at the env's true state."""
+        self._reset_state()
+        if self.env.agents:
+            self._attach()
+
+    def _attach(self) -> None:
+        x = self.env.state()[: 6 * self.m].reshape(self.m, 6)
+        self.tube.sync(x, self.env.time)
+        self.plans = None
+        self.env.set_inner_loop(self.tube)
+        self.expected_time = self.env.time
+
+    # ------------------------------------------------------------------ control
+    def _shifted(self) -> np.ndarray:
+        """Every satellite's prediction for t_k .. t_k + NΔt (29)–(30): (M, N + 1, 6)."""
+        if self.plans is None:
+            x = self.tube.nominal
+            out = np.empty((self.m, self.N + 1, 6))
+            out[:, 0] = x
+            for k in range(self.N):
+                out[:, k + 1] = out[:, k] @ self.a.T
+            return out
+        nxt = self.plans[:, -1] @ self.a.T
+        return np.concatenate([self.plans[:, 1:], nxt[:, None]], axis=1)
+
+    def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        env = self.env
+        if env.inner_loop is not self.tube or self.tube.nominal is None or (
+                self.expected_time is not None and abs(env.time - self.expected_time) > 1e-6):
+            if self.tube.nominal is not None:
+                self.info["resyncs"] += 1
+            self._attach()
+        sc, N, K = self.sc, self.N, self.k_slots
+        t_k = env.time
+        nominal = self.tube.nominal.copy()
+        pred = self._shifted()
+        pred[:, 0] = nominal
+        pred_q = pred[..., :3]
+        coast = (pred[:, -1] @ self.a.T)[:, :3] - pred[:, -1, :3]     # (M, 3)
+        q_o, p_o = env.obstacle_state()
+        qo = q_o + np.arange(N + 2)[:, None] * sc.dt * p_o
+        targets = env.targets()
+        true_pos = env.state()[: 6 * self.m].reshape(self.m, 6)[:, :3]
+        adj = nearest_neighbour_graph(true_pos, sc.n_neighbours, sc.comm_range)
+        q_r = np.asarray(sc.target_spacecraft, dtype=float)
+        new_plans = np.empty((self.m, N + 1, 6))
+        actions: dict[str, np.ndarray] = {}
+        lam0 = np.zeros(self.m)
+        status_row = []
+        for i, agent in enumerate(self.agents):
+            qn = np.full((K, N + 1, 3), _FAR)
+            dn = np.zeros((K, 3))
+            nbrs = np.nonzero(adj[i])[0][:K]
+            for slot, j in enumerate(nbrs):
+                qn[slot] = pred_q[j]
+                dn[slot] = coast[j]
+            params = np.concatenate([nominal[i], targets[i], qn.ravel(), dn.ravel(), qo.ravel(), q_r])
+            w0 = self.warm[i]
+            start = time.perf_counter()
+            w, ok, status = self.nlp.solve(params, w0, relaxed=False)
+            self.info["solve_ms"].append((time.perf_counter() - start) * 1e3)
+            self.info["solves"] += 1
+            kind = "ok"
+            if not ok and self.cfg.relax_on_failure:
+                start = time.perf_counter()
+                w, ok, status = self.nlp.solve(params, w0, relaxed=True)
+                self.info["solve_ms"].append((time.perf_counter() - start) * 1e3)
+                self.info["relaxed"] += 1
+                kind = "relaxed"
+            v = w[: 3 * N]
+            if not ok:
+                self.info["fallbacks"] += 1
+                kind = "fallback"
+                prev = self.warm[i][: 3 * N]
+                v = np.concatenate([prev[3:], np.zeros(3)])          # shifted plan, ρ = 0 appended
+                w = np.concatenate([v, np.zeros(2 * N)])
+            v = v.reshape(N, 3)
+            norms = np.linalg.norm(v, axis=1, keepdims=True)
+            v = (v / np.maximum(norms, 1.0)).ravel()                 # exact unit-ball feasibility
+            new_plans[i] = self.nlp.states(nominal[i], v)
+            lam0[i] = w[3 * N]
+            # warm start of the next decision: shift by one step, ρ = 0 at the end
+            self.warm[i] = np.concatenate([v[3:], np.zeros(3), w[3 * N + 1:4 * N], [0.0], np.zeros(N)])
+            u0 = self.u_nom * v[:3]
+            actions[agent] = u0 / sc.u_max
+            status_row.append(kind)
+        self.plans = new_plans
+        self.expected_time = t_k + sc.dt
+        h = self.history
+        h["t"].append(t_k)
+        h["nominal"].append(nominal)
+        h["lambda"].append(lam0)
+        h["u_nominal"].append(np.array([actions[a] * sc.u_max for a in self.agents]))
+        h["status"].append(status_row)
+        return actions
+
+    # ------------------------------------------------------------------ diagnostics
+    def tube_errors(self) -> np.ndarray:
+        """``||q - q~||`` at every physics step so far (T_phys, M) [m]."""
+        return np.array(self.tube.eps) if self.tube.eps else np.zeros((0, self.m))
+
+    def config(self) -> dict[str, Any]:
+        return asdict(self.cfg)

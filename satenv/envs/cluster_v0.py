@@ -1,0 +1,410 @@
+"""cluster_v0 — satellite-cluster reconfiguration around a target spacecraft (li2022).
+
+``satenv.envs.cluster_v0.parallel_env(**kwargs)`` (or ``satenv.cluster_v0(**kwargs)``) returns a
+PettingZoo ``ParallelEnv``; ``env(**kwargs)`` the AEC version (``parallel_to_aec``); ``raw_env``
+is the class.
+
+M satellites ``sat_1 … sat_M`` (10 in the presets; 50 kg, 1 N thrusters) fly relative to a virtual
+reference satellite at the origin of its LVLH frame (x radial, y along-track, z orbit normal) and
+must reach target points around a target spacecraft while a space obstacle crosses the cluster.
+Targets are allocated with the Hungarian algorithm (:mod:`satenv.allocation`, cost
+``alpha ||q_i - q_jd||^2``) at reset and, optionally, every ``reallocate_every`` decisions. The
+satellites talk over a time-varying graph: each one to its ``n_neighbours`` nearest within
+``comm_range`` (:mod:`satenv.cluster_graph`). Scenario details and the documented choices the
+paper leaves open (orbit, disturbance units, keep-out radii): :mod:`satenv.scenarios.cluster`.
+
+Arguments (keywords; all optional)
+----------------------------------
+``preset``        ``"li2022-case1"`` (default; Table 2 start) or ``"li2022-case2"`` (Table 3).
+``render_mode``   ``None``, ``"rgb_array"`` or ``"human"``.
+any field of :class:`~satenv.scenarios.cluster.ClusterScenario` overrides the preset, e.g.
+``disturbance="none" | "sinusoid" | "random"``, ``disturbance_force`` [N], ``dynamics``,
+``physics_dt``, ``max_steps``, ``allocation="fixed"``, ``reallocate_every``,
+``terminate_on_collision``, ``random_position_spread``, ``initial_positions`` (any M).
+Unknown keywords raise ``SatenvError`` (a ``ValueError``).
+``reset(seed=..., options={"initial_state": array (M, 6)})`` starts from a given state.
+
+Time: one ``step`` is one decision period ``dt`` (Δt = 5 s); inside it the truth dynamics
+(default J2 + drag, ``satenv.dynamics.RelativeModel``) and the disturbance run with step
+``physics_dt`` (0.25 s). The decoded action is held over the period (zero-order hold).
+
+Inner-loop hook (for controllers that act at the physics rate, e.g. the tube controller κ of
+li2022 eq. 13): ``env.set_inner_loop(obj)`` registers an object with a method
+``correction(t, x, chief, u_cmd) -> (B, M, 3)`` called at every physics step with the time
+``t`` (B,) [s], the true states ``x`` (B, M, 6), the reference satellite's ECI state
+``chief`` (B, 6) and the commanded accelerations ``u_cmd`` (B, M, 3) of the current decision; the
+env applies ``saturate_norm(u_cmd + correction, u_max)``. ``reset()`` removes the hook (a
+controller registers it again for its episode: ``baselines.TubeRDMPC`` does so itself).
+
+Spaces (per agent; float32)
+---------------------------
+Action ``Box(-1, 1, (3,))``: LVLH acceleration ``u = a * u_max`` clipped to the ball
+``||u|| <= u_max = T_max / m`` (0.02 m/s^2).
+
+Observation ``Box(-inf, inf, (19 + 7 K,))`` with ``K = min(n_neighbours, M - 1)``, normalised
+with ``L = 1000 m`` and ``V = 1 m/s``:
+
+=========  =======================================================================
+entries    meaning
+=========  =======================================================================
+0–2        position error to the allocated target ``(q_i - q_id) / L``
+3–5        velocity ``p_i / V`` (the targets are at rest)
+6–8        own position ``q_i / L``
+9–14       obstacle relative to the satellite ``(q_o - q_i) / L``, ``(p_o - p_i) / V``
+15–17      target spacecraft relative to the satellite ``(q_r - q_i) / L``
+18         fraction of the episode remaining ``1 - t / max_steps``
+19 …       K slots of 7, the graph neighbours nearest first:
+           ``[1, (q_j - q_i) / L, (p_j - p_i) / V]``; unused slots are zeros
+=========  =======================================================================
+
+``state()`` returns the global state ``(6 M + 6,)``: the satellites' states, then the obstacle's
+position and velocity.
+
+Reward (per satellite)
+----------------------
+``r_i = -||q_i - q_id|| / reward_distance_scale - reward_control_weight (||a_i|| / u_max)^2
+- collision_penalty * collision_i`` after the step, ``a_i`` the mean applied acceleration.
+
+Termination / truncation
+------------------------
+Terminated (all agents) when a safety distance is violated at any physics step (only if
+``terminate_on_collision``; satellites ``< 2 r_s = 200 m`` apart, ``< r_s + r_o = 400 m`` from the
+obstacle or ``< r_s + r_t = 200 m`` from the target spacecraft) or when a satellite leaves the
+ball of radius ``max_distance``. Truncated after ``max_steps`` decisions (400, i.e. 2000 s).
+
+Infos (per agent, SI units; distances are minima over the physics steps of the period)
+------------------------------------------------------------------------------------
+``state`` (6,), ``accel`` (3,) mean applied acceleration [m/s^2], ``delta_v`` [m/s] (sum of
+``||u|| physics_dt``), ``thrust_peak`` largest ``||u||`` [m/s^2], ``tracking_error`` (6,)
+``x_i - [q_id, 0]``, ``pair_distance`` to the nearest satellite, ``obstacle_distance``,
+``target_distance`` (to the target spacecraft), ``min_separation`` (smallest of the three centre
+distances), ``collision`` (bool, any safety distance violated), ``violations`` (int, how many of the
+three), ``cost`` (float, = violations), ``target_index`` (int, allocated target),
+``n_neighbours`` (int, graph degree).
+
+Version History
+---------------
+* v0: initial release.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from satenv.allocation import hungarian_assignment
+from satenv.cluster_graph import nearest_neighbour_graph, pairwise_distances
+from satenv.dynamics import (
+    BoundedRandomDisturbance,
+    RelativeModel,
+    saturate_norm,
+    sinusoid_disturbance,
+)
+from satenv.envs.base import (
+    BatchedCore,
+    FormationEnv,
+    SatenvError,
+    StepResult,
+    reject_unknown_kwargs,
+)
+from satenv.scenarios.cluster import (
+    DEFAULT_PRESET,
+    PRESETS,
+    ClusterScenario,
+    resolve_scenario,
+    sample_initial_state,
+)
+
+__all__ = ["ClusterCore", "ClusterEnv", "InnerLoop", "POS_SCALE", "VEL_SCALE", "env",
+           "parallel_env", "raw_env"]
+
+POS_SCALE = 1000.0
+"""Observation position scale L [m]."""
+VEL_SCALE = 1.0
+"""Observation velocity scale V [m/s]."""
+N_FIXED_OBS = 19
+
+
+class InnerLoop(Protocol):
+    """A controller the env calls at every physics step (see the module docstring)."""
+
+    def correction(self, t: np.ndarray, x: np.ndarray, chief: np.ndarray,
+                   u_cmd: np.ndarray) -> np.ndarray: ...
+
+
+class ClusterCore(BatchedCore):
+    """Batched cluster physics and task logic (``B`` copies, ``M`` satellites)."""
+
+    state_dim = 6
+    action_dim = 3
+
+    def __init__(self, scenario: ClusterScenario, batch: int = 1) -> None:
+        super().__init__(scenario, batch)
+        sc = scenario
+        m = self.n_agents
+        self.n_slots = min(sc.n_neighbours, m - 1)
+        self.obs_dim = N_FIXED_OBS + 7 * self.n_slots
+        self.orbit = sc.orbit
+        self.model = RelativeModel(sc.dynamics, self.orbit, sc.physics_dt)
+        self.all_targets = sc.targets_array()
+        self.q_r = np.asarray(sc.target_spacecraft, dtype=float)
+        self.p_obs = np.asarray(sc.obstacle_velocity, dtype=float)
+        self.x = np.zeros((self.batch, m, 6))
+        self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
+        self.assignment = np.tile(np.arange(m), (self.batch, 1))
+        self.accel = np.zeros((self.batch, m, 3))
+        self.inner_loop: InnerLoop | None = None
+        self._random = (BoundedRandomDisturbance(sc.disturbance_amplitude)
+                        if sc.disturbance == "random" else None)
+        self._own_rng = np.random.default_rng()
+
+    # ------------------------------------------------------------------ helpers
+    def time(self) -> np.ndarray:
+        """Elapsed time of every copy [s] ``(B,)``."""
+        return self.t * self.scenario.dt
+
+    def targets(self) -> np.ndarray:
+        """Allocated target positions ``(B, M, 3)``."""
+        return self.all_targets[self.assignment]
+
+    def obstacle(self, t: np.ndarray | None = None) -> np.ndarray:
+        """Obstacle positions ``(B, 3)`` at times ``t`` (default: now)."""
+        return self.scenario.obstacle_at(self.time() if t is None else t)
+
+    def graph(self) -> np.ndarray:
+        """Communication adjacency ``(B, M, M)`` bool from the current true positions."""
+        sc = self.scenario
+        return nearest_neighbour_graph(self.x[..., :3], sc.n_neighbours, sc.comm_range)
+
+    def allocate(self, idx=None) -> None:
+        sc = self.scenario
+        sel = slice(None) if idx is None else idx
+        if sc.allocation == "hungarian":
+            self.assignment[sel] = hungarian_assignment(self.x[sel, :, :3], self.all_targets)
+        else:
+            self.assignment[sel] = np.arange(self.n_agents)
+
+    def _distances(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per satellite: nearest other satellite, obstacle and target-spacecraft distances."""
+        m = self.n_agents
+        pos = x[..., :3]
+        if m > 1:
+            d = pairwise_distances(pos)
+            d[..., np.arange(m), np.arange(m)] = np.inf
+            pair = d.min(axis=-1)
+        else:
+            pair = np.full(pos.shape[:-1], np.inf)
+        obs = np.linalg.norm(pos - self.scenario.obstacle_at(t)[:, None, :], axis=-1)
+        tgt = np.linalg.norm(pos - self.q_r, axis=-1)
+        return pair, obs, tgt
+
+    def _disturbance(self, t: np.ndarray, rng: np.random.Generator | None) -> np.ndarray | float:
+        sc = self.scenario
+        if sc.disturbance == "sinusoid":
+            return sinusoid_disturbance(t, sc.disturbance_amplitude)[:, None, :]
+        if sc.disturbance == "random":
+            return self._random.sample(rng if rng is not None else self._own_rng, self.x.shape[:-1])
+        return 0.0
+
+    def _info(self, sel, accel, dv, peak, pair, obs, tgt) -> dict[str, np.ndarray]:
+        sc = self.scenario
+        x = self.x[sel]
+        err = x.copy()
+        err[..., :3] -= self.all_targets[self.assignment[sel]]
+        flags = np.stack([pair < sc.pair_distance, obs < sc.obstacle_distance,
+                          tgt < sc.target_distance], axis=-1)
+        viol = flags.sum(axis=-1).astype(np.int64)
+        adj = nearest_neighbour_graph(x[..., :3], sc.n_neighbours, sc.comm_range)
+        return {
+            "state": x.copy(),
+            "accel": accel.copy(),
+            "delta_v": dv,
+            "thrust_peak": peak,
+            "tracking_error": err,
+            "pair_distance": pair,
+            "obstacle_distance": obs,
+            "target_distance": tgt,
+            "min_separation": np.minimum(np.minimum(pair, obs), tgt),
+            "collision": viol > 0,
+            "violations": viol,
+            "cost": viol.astype(float),
+            "target_index": self.assignment[sel].copy(),
+            "n_neighbours": adj.sum(axis=-1).astype(np.int64),
+        }
+
+    # ------------------------------------------------------------------ episode
+    def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        return np.stack([sample_initial_state(self.scenario, rng) for _ in range(n)])
+
+    def reset(self, x0, idx=None, rng=None):
+        x0 = np.asarray(x0, dtype=float)
+        sel = slice(None) if idx is None else np.asarray(idx)
+        self.x[sel] = x0
+        self.t[sel] = 0
+        self.chief[sel] = self.model.initial_chief()
+        self.accel[sel] = 0.0
+        self.allocate(sel)
+        k = self.x[sel].shape[0]
+        zeros = np.zeros((k, self.n_agents))
+        pair, obs, tgt = self._distances(self.x[sel], np.zeros(k))
+        return self._info(sel, np.zeros((k, self.n_agents, 3)), zeros, zeros.copy(), pair, obs, tgt)
+
+    def step(self, accel, rng=None) -> StepResult:
+        sc = self.scenario
+        accel = np.asarray(accel, dtype=float)
+        h, n_sub = sc.physics_dt, sc.substeps
+        t0 = self.time()
+        shape = self.x.shape[:-1]
+        u_sum = np.zeros(accel.shape)
+        dv = np.zeros(shape)
+        peak = np.zeros(shape)
+        pair = np.full(shape, np.inf)
+        obs = np.full(shape, np.inf)
+        tgt = np.full(shape, np.inf)
+        for s in range(n_sub):
+            ts = t0 + s * h
+            u = accel
+            if self.inner_loop is not None:
+                u = u + np.asarray(self.inner_loop.correction(ts, self.x, self.chief, accel), dtype=float)
+            u = saturate_norm(u, sc.u_max)
+            self.x, self.chief = self.model.step(self.x, u + self._disturbance(ts, rng), self.chief)
+            un = np.linalg.norm(u, axis=-1)
+            u_sum += u
+            dv += un * h
+            np.maximum(peak, un, out=peak)
+            p, o, g = self._distances(self.x, ts + h)
+            np.minimum(pair, p, out=pair)
+            np.minimum(obs, o, out=obs)
+            np.minimum(tgt, g, out=tgt)
+        self.t += 1
+        self.accel = u_sum / n_sub
+        if sc.reallocate_every > 0:
+            due = self.t % sc.reallocate_every == 0
+            if np.any(due):
+                self.allocate(np.nonzero(due)[0])
+        info = self._info(slice(None), self.accel, dv, peak, pair, obs, tgt)
+        dist = np.linalg.norm(info["tracking_error"][..., :3], axis=-1)
+        rewards = (-dist / sc.reward_distance_scale
+                   - sc.reward_control_weight * (np.linalg.norm(self.accel, axis=-1) / sc.u_max) ** 2
+                   - sc.collision_penalty * info["collision"])
+        terminated = (np.linalg.norm(self.x[..., :3], axis=-1) > sc.max_distance).any(axis=-1)
+        if sc.terminate_on_collision:
+            terminated |= info["collision"].any(axis=-1)
+        return StepResult(rewards, terminated, info)
+
+    # ------------------------------------------------------------------ observations
+    def observe(self) -> np.ndarray:
+        sc = self.scenario
+        b, m = self.batch, self.n_agents
+        x = self.x
+        q, p = x[..., :3], x[..., 3:]
+        obs = np.zeros((b, m, self.obs_dim))
+        obs[..., 0:3] = (q - self.targets()) / POS_SCALE
+        obs[..., 3:6] = p / VEL_SCALE
+        obs[..., 6:9] = q / POS_SCALE
+        obs[..., 9:12] = (self.obstacle()[:, None, :] - q) / POS_SCALE
+        obs[..., 12:15] = (self.p_obs - p) / VEL_SCALE
+        obs[..., 15:18] = (self.q_r - q) / POS_SCALE
+        obs[..., 18] = 1.0 - self.t[:, None] / sc.max_steps
+        k = self.n_slots
+        if k > 0:
+            adj = self.graph()
+            d = pairwise_distances(q)
+            d = np.where(adj, d, np.inf)
+            order = np.argsort(d, axis=-1, kind="stable")[..., :k]          # (B, M, K)
+            valid = np.take_along_axis(d, order, axis=-1) < np.inf            # (B, M, K)
+            nb = np.take_along_axis(x[:, None, :, :], order[..., None], axis=2)  # (B, M, K, 6)
+            rel = (nb - x[:, :, None, :]) / np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
+            slots = np.concatenate([np.ones(valid.shape + (1,)), rel], axis=-1) * valid[..., None]
+            obs[..., N_FIXED_OBS:] = slots.reshape(b, m, 7 * k)
+        return obs.astype(np.float32)
+
+    def global_state(self) -> np.ndarray:
+        obs_pos = self.obstacle()
+        vel = np.broadcast_to(self.p_obs, obs_pos.shape)
+        return np.concatenate([self.x.reshape(self.batch, -1), obs_pos, vel], axis=-1)
+
+    def render_scene(self, b: int = 0) -> dict[str, Any]:
+        sc = self.scenario
+        return {
+            "positions": self.x[b, :, :3].copy(),
+            "labels": [f"s{i + 1}" for i in range(self.n_agents)],
+            "targets": self.targets()[b],
+            "spheres": [(self.obstacle()[b], sc.obstacle_distance, "obstacle keep-out"),
+                        (self.q_r, sc.target_distance, "target spacecraft keep-out")],
+            "title": f"cluster_v0 ({sc.name})  t = {self.time()[b]:.0f} s",
+        }
+
+
+class ClusterEnv(FormationEnv):
+    """The cluster ``ParallelEnv`` (see the module docstring)."""
+
+    metadata = {**FormationEnv.metadata, "name": "cluster_v0"}
+    core_class = ClusterCore
+    agent_prefix = "sat"
+
+    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, **kwargs) -> None:
+        if preset not in PRESETS:
+            raise SatenvError(f"cluster_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
+        allowed = set(ClusterScenario.__dataclass_fields__) - {"name"}
+        reject_unknown_kwargs(kwargs, allowed, "cluster_v0")
+        try:
+            scenario = resolve_scenario(preset, **kwargs)
+        except SatenvError:
+            raise
+        except ValueError as exc:
+            raise SatenvError(f"cluster_v0: {exc}") from None
+        super().__init__(scenario, render_mode=render_mode)
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        self.core.inner_loop = None
+        return super().reset(seed=seed, options=options)
+
+    # ---- what controllers read -----------------------------------------------------------------
+    def set_inner_loop(self, controller: InnerLoop | None) -> None:
+        """Register (or remove, with ``None``) the physics-rate controller hook for this episode."""
+        if controller is not None and not callable(getattr(controller, "correction", None)):
+            raise SatenvError(f"inner loop must have a correction(t, x, chief, u_cmd) method, got "
+                              f"{type(controller).__name__}")
+        self.core.inner_loop = controller
+
+    @property
+    def inner_loop(self) -> InnerLoop | None:
+        return self.core.inner_loop
+
+    @property
+    def time(self) -> float:
+        """Elapsed time of the episode [s]."""
+        return float(self.core.time()[0])
+
+    @property
+    def assignment(self) -> np.ndarray:
+        """Index of the target allocated to each satellite ``(M,)``."""
+        return self.core.assignment[0].copy()
+
+    def targets(self) -> np.ndarray:
+        """Allocated target positions ``(M, 3)`` [m]."""
+        return self.core.targets()[0].copy()
+
+    def obstacle_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The obstacle's current position and velocity (3,), (3,) in LVLH (li2022 Assumption 1)."""
+        return self.core.obstacle()[0].copy(), self.core.p_obs.copy()
+
+    def graph(self) -> np.ndarray:
+        """Current communication adjacency ``(M, M)`` bool."""
+        return self.core.graph()[0]
+
+
+raw_env = ClusterEnv
+
+
+def parallel_env(**kwargs) -> ClusterEnv:
+    """The PettingZoo ``ParallelEnv`` (keyword arguments: module docstring)."""
+    return ClusterEnv(**kwargs)
+
+
+def env(**kwargs):
+    """The AEC version of :func:`parallel_env` (``parallel_to_aec``)."""
+    return parallel_to_aec(ClusterEnv(**kwargs))

@@ -1,0 +1,357 @@
+"""Satellite-cluster reconfiguration scenarios (li2022 §4), SI units.
+
+Ten satellites of 50 kg with 1 N thrusters fly relative to a *virtual* reference satellite at the
+origin of its LVLH frame (x radial, y along-track, z orbit normal) and must reach target points
+spread on a 300 m sphere around a target spacecraft at ``q_r = [-200, -200, -200] m`` while a
+space obstacle crosses the cluster on a straight LVLH line from ``[600, 0, 0] m`` at
+``[-0.4, 0.4, 0.4] m/s``. Presets: ``"li2022-case1"`` (Table 2, concentrated start) and
+``"li2022-case2"`` (Table 3, dispersed start); both start at rest, targets from Table 4.
+
+Choices the paper leaves open (documented here, overridable):
+
+* **Chief orbit.** li2022 gives none; the virtual reference satellite is on a 500 km circular
+  orbit inclined 45 deg (``altitude``, ``inclination``), the truth model is J2 + drag
+  (``dynamics="j2_drag"``, exponential atmosphere, equal ballistic coefficients).
+* **Disturbance units.** §4 writes ``w = w_bar [sin(0.02t + pi/3), sin(0.02t - 2pi/3),
+  sin(0.02t + pi/2)]`` with ``w_bar = 0.1``. li2022 adds ``w`` to the "control force" ``u``
+  (eq. 4) and requires ``w_bar < sup ||u - f||`` (eq. 7), i.e. ``w`` is measured like ``u``, in
+  newtons: we read ``w_bar = 0.1 N`` on a 50 kg satellite, an acceleration of 0.002 m/s^2 (10 %
+  of the 0.02 m/s^2 thrust authority). 0.1 m/s^2 is impossible: it is five times what a 1 N
+  thruster can give a 50 kg satellite. Each component is bounded by ``w_bar``, so
+  ``sup ||w|| = 1.68 w_bar`` (:attr:`ClusterScenario.disturbance_bound`).
+* **Safety distances.** Satellites must stay ``2 r_s = 200 m`` apart; eq. (31) keeps a
+  satellite ``r_s + r_o = 400 m`` from the obstacle (``r_o = 300 m`` is the obstacle's safety
+  radius, added to the satellite's ``r_s``); the paper gives no value for the target spacecraft,
+  which we treat as one more spacecraft of safety radius ``target_radius = 100 m``: keep-out
+  ``r_s + r_t = 200 m`` (the targets are 300 m from it, so they satisfy it with 100 m to spare).
+* **Obstacle and target spacecraft** move kinematically in the LVLH frame (straight line at
+  constant velocity; fixed), as the paper describes them; they are not propagated with orbital
+  dynamics.
+* **Decision period and physics step.** ``dt = 5 s`` is the DMPC sampling period Δt; the physics
+  (and an inner-loop controller such as the tube controller κ) runs every ``physics_dt``.
+
+Random initial states (``random_position_spread > 0``): every satellite's preset position plus
+``U(-s, s)`` per axis, at rest, redrawn (up to 1000 times) until all safety distances hold with
+a 10 m margin.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from satenv.dynamics import MODELS, R_EARTH, Orbit
+
+__all__ = ["ClusterScenario", "PRESETS", "LI2022_TARGETS", "resolve_scenario", "sample_initial_state"]
+
+LI2022_TARGETS: tuple[tuple[float, float, float], ...] = (
+    (-189.9, -11.8, -433.5), (-118.7, 85.5, -156.7), (-103.4, -470.2, -112.5),
+    (-310.7, -112.9, 64.8), (-16.1, -174.3, 35.5), (-393.8, -403.2, -94.4),
+    (-476.1, -83.1, -189.2), (-100.3, -343.3, -443.9), (-394.8, -292.6, -408.4),
+    (94.2, -235.2, -247.2),
+)
+"""li2022 Table 4: target positions in the LVLH frame [m]."""
+
+CASE1_POSITIONS: tuple[tuple[float, float, float], ...] = (
+    (946.1, 1025.3, 666.3), (628.1, 973.3, 625.6), (801.3, 501.1, 825.7),
+    (525.5, 734.1, 901.6), (981.6, 960.1, 977.1), (803.4, 707.3, 1085.3),
+    (669.3, 1028.2, 944.6), (937.3, 727.1, 543.4), (632.3, 656.5, 596.7),
+    (1075.9, 687.1, 833.6),
+)
+"""li2022 Table 2: initial positions of case 1 (concentrated) [m]."""
+
+CASE2_POSITIONS: tuple[tuple[float, float, float], ...] = (
+    (490.6, 560.7, 805.9), (856.3, 1070.5, 318.5), (512.7, 969.1, 1501.6),
+    (1262.7, 442.7, 667.7), (1033.4, 439.1, 1417.3), (1619.1, 900.2, 1311.2),
+    (424.5, 1382.5, 888.1), (1566.1, 1163.7, 622.3), (1112.2, 1682.3, 891.4),
+    (1119.9, 1385.1, 1572.2),
+)
+"""li2022 Table 3: initial positions of case 2 (dispersed) [m]."""
+
+DISTURBANCES = ("sinusoid", "random", "none")
+ALLOCATIONS = ("hungarian", "fixed")
+
+
+def _rows(value: Any, name: str, min_rows: int = 1) -> tuple[tuple[float, float, float], ...]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric (K, 3) array, got {value!r}") from None
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < min_rows or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be a finite (K, 3) array with K >= {min_rows} (one [x, y, z] "
+                         f"row per point, metres), got shape {arr.shape}")
+    return tuple(tuple(float(v) for v in row) for row in arr)
+
+
+def _vec3(value: Any, name: str) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric 3-vector [x, y, z], got {value!r}") from None
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be a finite 3-vector [x, y, z], got {value!r}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _number(value: Any, name: str, *, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise ValueError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+    return v
+
+
+def _integer(value: Any, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _sinusoid_norm_max() -> float:
+    """``sup_t ||[sin(a + pi/3), sin(a - 2pi/3), sin(a + pi/2)]||`` (= 1.6801...)."""
+    a = np.linspace(0.0, 2.0 * np.pi, 200_001)
+    return float(np.sqrt(np.max(2.0 * np.sin(a + np.pi / 3) ** 2 + np.cos(a) ** 2)))
+
+
+SINUSOID_NORM_MAX = _sinusoid_norm_max()
+
+
+@dataclass(frozen=True)
+class ClusterScenario:
+    """Parameters of a cluster-reconfiguration scenario (frozen, validated; SI units).
+
+    Args:
+        name: preset name (informational).
+        initial_positions: (M, 3) satellite positions [m] (LVLH, relative to the reference).
+        initial_velocities: (M, 3) [m/s]; ``None`` means at rest.
+        targets: (T, 3) target points [m], T >= M (li2022 Table 4).
+        target_spacecraft: q_r [m], the spacecraft the cluster gathers around.
+        obstacle_position, obstacle_velocity: the obstacle's LVLH position at t = 0 [m] and its
+            constant LVLH velocity [m/s].
+        sat_radius: r_s [m]; satellites must stay 2 r_s apart.
+        obstacle_radius: r_o [m]; satellites must stay r_s + r_o from the obstacle (eq. 31).
+        target_radius: r_t [m]; satellites must stay r_s + r_t from the target spacecraft.
+        comm_range: r_c [m]; n_neighbours: N_a (see :mod:`satenv.cluster_graph`).
+        mass: satellite mass [kg]; thrust_max: T_max [N] (a bound on the thrust norm).
+        disturbance: ``"sinusoid"`` (li2022 §4), ``"random"`` (uniform in the ball of radius
+            ``disturbance_force / mass``, drawn from the env's generator every physics step) or
+            ``"none"``; disturbance_force: w_bar [N] (module docstring).
+        altitude [m], inclination [rad]: the circular orbit of the virtual reference satellite.
+        dynamics: truth model (``satenv.dynamics.MODELS``).
+        dt: decision period Δt [s]; physics_dt: physics / inner-loop step [s] (divides dt).
+        max_steps: episode length in decisions (truncation).
+        allocation: ``"hungarian"`` (li2022 §3.3) or ``"fixed"`` (satellite i -> target i).
+        reallocate_every: re-run the allocation every K decisions (0: only at reset).
+        terminate_on_collision: a safety-distance violation ends the episode.
+        max_distance: the allowed region, a ball around the reference satellite [m].
+        random_position_spread: see the module docstring (0: the preset's positions).
+        reward_distance_scale [m], reward_control_weight, collision_penalty: reward terms
+            (``satenv.envs.cluster_v0``).
+    """
+
+    name: str
+    initial_positions: tuple[tuple[float, float, float], ...]
+    initial_velocities: tuple[tuple[float, float, float], ...] | None = None
+    targets: tuple[tuple[float, float, float], ...] = LI2022_TARGETS
+    target_spacecraft: tuple[float, float, float] = (-200.0, -200.0, -200.0)
+    obstacle_position: tuple[float, float, float] = (600.0, 0.0, 0.0)
+    obstacle_velocity: tuple[float, float, float] = (-0.4, 0.4, 0.4)
+    sat_radius: float = 100.0
+    obstacle_radius: float = 300.0
+    target_radius: float = 100.0
+    comm_range: float = 1000.0
+    n_neighbours: int = 4
+    mass: float = 50.0
+    thrust_max: float = 1.0
+    disturbance: str = "sinusoid"
+    disturbance_force: float = 0.1
+    altitude: float = 500e3
+    inclination: float = math.radians(45.0)
+    dynamics: str = "j2_drag"
+    dt: float = 5.0
+    physics_dt: float = 0.25
+    max_steps: int = 400
+    allocation: str = "hungarian"
+    reallocate_every: int = 0
+    terminate_on_collision: bool = True
+    max_distance: float = 10_000.0
+    random_position_spread: float = 0.0
+    reward_distance_scale: float = 1000.0
+    reward_control_weight: float = 0.01
+    collision_penalty: float = 10.0
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        if not isinstance(self.name, str):
+            raise ValueError(f"name must be a string, got {self.name!r}")
+        s(self, "initial_positions", _rows(self.initial_positions, "initial_positions"))
+        m = len(self.initial_positions)
+        if self.initial_velocities is not None:
+            vel = _rows(self.initial_velocities, "initial_velocities")
+            if len(vel) != m:
+                raise ValueError(f"initial_velocities must have {m} rows (one per satellite), got {len(vel)}")
+            s(self, "initial_velocities", vel)
+        s(self, "targets", _rows(self.targets, "targets"))
+        if len(self.targets) < m:
+            raise ValueError(f"need at least one target per satellite: {m} satellites, "
+                             f"{len(self.targets)} targets")
+        for name in ("target_spacecraft", "obstacle_position", "obstacle_velocity"):
+            s(self, name, _vec3(getattr(self, name), name))
+        for name in ("sat_radius", "comm_range", "mass", "thrust_max", "dt", "physics_dt",
+                     "max_distance", "reward_distance_scale"):
+            s(self, name, _number(getattr(self, name), name))
+        for name in ("obstacle_radius", "target_radius", "disturbance_force", "random_position_spread",
+                     "reward_control_weight", "collision_penalty", "inclination"):
+            s(self, name, _number(getattr(self, name), name, allow_zero=True))
+        if self.inclination > math.pi:
+            raise ValueError(f"inclination must be in [0, pi] rad, got {self.inclination!r} "
+                             "(use math.radians for degrees)")
+        s(self, "altitude", _number(self.altitude, "altitude (m above R_EARTH)"))
+        s(self, "n_neighbours", _integer(self.n_neighbours, "n_neighbours", 0))
+        s(self, "max_steps", _integer(self.max_steps, "max_steps", 1))
+        s(self, "reallocate_every", _integer(self.reallocate_every, "reallocate_every", 0))
+        ratio = self.dt / self.physics_dt
+        if abs(ratio - round(ratio)) > 1e-9 * ratio:
+            raise ValueError(f"physics_dt must divide dt: dt = {self.dt} s, physics_dt = "
+                             f"{self.physics_dt} s gives {ratio:.6g} physics steps per decision")
+        if self.dynamics not in MODELS:
+            raise ValueError(f"dynamics must be one of {list(MODELS)}, got {self.dynamics!r}")
+        if self.disturbance not in DISTURBANCES:
+            raise ValueError(f"disturbance must be one of {list(DISTURBANCES)}, got {self.disturbance!r}")
+        if self.allocation not in ALLOCATIONS:
+            raise ValueError(f"allocation must be one of {list(ALLOCATIONS)}, got {self.allocation!r}")
+        if not isinstance(self.terminate_on_collision, bool | np.bool_):
+            raise ValueError(f"terminate_on_collision must be a bool, got {self.terminate_on_collision!r}")
+        s(self, "terminate_on_collision", bool(self.terminate_on_collision))
+
+    # ---- what FormationEnv needs -------------------------------------------------------------
+    @property
+    def n_agents(self) -> int:
+        return len(self.initial_positions)
+
+    @property
+    def u_max(self) -> float:
+        """Acceleration authority ``T_max / m`` [m/s^2] (a bound on the norm)."""
+        return self.thrust_max / self.mass
+
+    @property
+    def thrust_mode(self) -> str:
+        return "norm"
+
+    # ---- derived quantities ------------------------------------------------------------------
+    @property
+    def substeps(self) -> int:
+        """Physics steps per decision ``dt / physics_dt``."""
+        return int(round(self.dt / self.physics_dt))
+
+    @property
+    def orbit(self) -> Orbit:
+        """The circular orbit of the virtual reference satellite (the LVLH origin)."""
+        return Orbit.circular(R_EARTH + self.altitude, i=self.inclination)
+
+    @property
+    def disturbance_amplitude(self) -> float:
+        """w_bar as an acceleration ``disturbance_force / mass`` [m/s^2] (0 without disturbance)."""
+        return 0.0 if self.disturbance == "none" else self.disturbance_force / self.mass
+
+    @property
+    def disturbance_bound(self) -> float:
+        """``sup ||w||`` [m/s^2]: 1.68 w_bar for the sinusoid (componentwise amplitude), w_bar
+        for the random ball, 0 without disturbance."""
+        amp = self.disturbance_amplitude
+        return amp * SINUSOID_NORM_MAX if self.disturbance == "sinusoid" else amp
+
+    @property
+    def pair_distance(self) -> float:
+        """Minimum satellite-satellite distance ``2 r_s`` [m]."""
+        return 2.0 * self.sat_radius
+
+    @property
+    def obstacle_distance(self) -> float:
+        """Minimum satellite-obstacle distance ``r_s + r_o`` [m] (eq. 31)."""
+        return self.sat_radius + self.obstacle_radius
+
+    @property
+    def target_distance(self) -> float:
+        """Minimum satellite-target-spacecraft distance ``r_s + r_t`` [m]."""
+        return self.sat_radius + self.target_radius
+
+    def initial_array(self) -> np.ndarray:
+        """Initial states (M, 6) [m, m/s]."""
+        x = np.zeros((self.n_agents, 6))
+        x[:, :3] = self.initial_positions
+        if self.initial_velocities is not None:
+            x[:, 3:] = self.initial_velocities
+        return x
+
+    def targets_array(self) -> np.ndarray:
+        return np.array(self.targets, dtype=float)
+
+    def obstacle_at(self, t) -> np.ndarray:
+        """Obstacle position(s) at time(s) ``t`` [s]: ``(*t.shape, 3)``."""
+        t = np.asarray(t, dtype=float)
+        return np.asarray(self.obstacle_position) + t[..., None] * np.asarray(self.obstacle_velocity)
+
+    def with_overrides(self, **overrides) -> ClusterScenario:
+        """A validated copy with fields replaced; unknown names raise ``ValueError``."""
+        known = {f.name for f in fields(self)}
+        bad = sorted(set(overrides) - known)
+        if bad:
+            raise ValueError(f"unknown cluster scenario parameter(s) {bad}; valid names: {sorted(known)}")
+        if "initial_positions" in overrides and "initial_velocities" not in overrides:
+            n_new = np.shape(overrides["initial_positions"])[0] if np.ndim(overrides["initial_positions"]) == 2 else None
+            if self.initial_velocities is not None and n_new != self.n_agents:
+                overrides["initial_velocities"] = None
+        return replace(self, **overrides)
+
+
+PRESETS: dict[str, ClusterScenario] = {
+    "li2022-case1": ClusterScenario(name="li2022-case1", initial_positions=CASE1_POSITIONS),
+    "li2022-case2": ClusterScenario(name="li2022-case2", initial_positions=CASE2_POSITIONS),
+}
+"""li2022 §4.1: case 1 (Table 2) and case 2 (Table 3)."""
+
+DEFAULT_PRESET = "li2022-case1"
+
+
+def resolve_scenario(preset: str = DEFAULT_PRESET, **overrides) -> ClusterScenario:
+    """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown cluster preset {preset!r}; expected one of {sorted(PRESETS)}")
+    base = PRESETS[preset]
+    return base.with_overrides(**overrides) if overrides else base
+
+
+def safety_ok(scenario: ClusterScenario, positions: np.ndarray, t: float = 0.0, margin: float = 0.0) -> bool:
+    """True when ``positions`` (M, 3) satisfy every safety distance at time ``t`` (+ ``margin``)."""
+    p = np.asarray(positions, dtype=float)
+    m = p.shape[0]
+    if m > 1:
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1)[np.triu_indices(m, 1)]
+        if np.any(d < scenario.pair_distance + margin):
+            return False
+    if np.any(np.linalg.norm(p - scenario.obstacle_at(t), axis=-1) < scenario.obstacle_distance + margin):
+        return False
+    return not np.any(np.linalg.norm(p - np.asarray(scenario.target_spacecraft), axis=-1)
+                      < scenario.target_distance + margin)
+
+
+def sample_initial_state(scenario: ClusterScenario, rng: np.random.Generator) -> np.ndarray:
+    """Initial states (M, 6): the preset's, or a random draw (module docstring)."""
+    x = scenario.initial_array()
+    s = scenario.random_position_spread
+    if s == 0.0:
+        return x
+    for _ in range(1000):
+        pos = x[:, :3] + rng.uniform(-s, s, size=(scenario.n_agents, 3))
+        if safety_ok(scenario, pos, 0.0, margin=10.0):
+            out = x.copy()
+            out[:, :3] = pos
+            return out
+    raise RuntimeError("could not draw initial positions satisfying the safety distances in 1000 "
+                       f"tries with random_position_spread = {s} m; reduce the spread")
