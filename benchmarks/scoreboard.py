@@ -459,6 +459,11 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
 
     scen_reg = dict(SCENARIOS if scenario_registry is None else scenario_registry)
     pol_reg = dict(POLICIES if policy_registry is None else policy_registry)
+    for reg in (scen_reg, pol_reg):
+        for key, spec in reg.items():
+            if key != spec.name:
+                raise ScoreboardError(f"registry entry {key!r} holds a spec named {spec.name!r}: "
+                                      "the key must be the spec's name")
     if policy_registry is None:
         for name, spec in discover_trained_policies().items():
             pol_reg.setdefault(name, spec)

@@ -261,3 +261,32 @@ def test_board_presets_name_registered_entries():
             assert name in registry.POLICIES or name.startswith("trained:"), name
         for name in preset["scenario_seeds"]:
             assert name in registry.SCENARIOS, name
+
+
+def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    training = pytest.importorskip("training")
+    if not callable(getattr(training, "load", None)):
+        pytest.skip("training.load not available")
+    try:
+        registry.SCENARIOS["platoon-random-cw"].factory()
+    except Unavailable as why:
+        pytest.skip(str(why))
+    run = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "training.train", "--total-timesteps", "256", "--n-copies", "2",
+                           "--n-steps", "32", "--batch-size", "64", "--eval-every", "0", "--test-seeds", "0",
+                           "--eval-baselines", "zero", "--checkpoint-every", "0", "--progress", "false",
+                           "--env-kwargs", '{"randomize": true}', "--out-dir", str(run)],
+                          capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    scen = registry.SCENARIOS["platoon-random-cw"]
+    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "n_steps": 20}),
+           "platoon-2022": ScenarioSpec("platoon-2022", scen.targets, {"preset": "pereira2022"})}  # 2 followers
+    board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero",
+                   scenarios="platoon-short", checkpoints=[str(run / "final")])
+    assert {r["policy"] for r in board.records} == {"zero", "user:final"}
+    assert all(r["error"] is None for r in board.records)
+    with pytest.raises(ScoreboardError, match=r"user:final cannot run on scenario platoon-2022.*\(36,\)"):
+        _board(tmp_path / "bad", seeds="0", scenario_registry=reg, policies="zero",
+               scenarios="platoon-2022", checkpoints=[str(run / "final")])
+    assert not (tmp_path / "bad" / EPISODES_FILE).exists()
