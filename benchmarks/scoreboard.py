@@ -16,7 +16,12 @@ go as one JSON line to ``OUT/episodes.jsonl``, appended and flushed (``fsync``) 
 episode finishes. ``--resume`` reads that file back (dropping a torn last line), skips the keys
 already done and runs the rest, so an interrupted run loses and duplicates nothing.
 Before any episode runs, every (scenario, policy) pair is built (and cheap or learned policies
-act once) so bad input fails fast with a :class:`~benchmarks.registry.ScoreboardError`.
+act once) so bad input fails fast with a :class:`~benchmarks.registry.ScoreboardError`: a name
+the user typed must exist and be runnable, and a pair the user named on both sides must work;
+entries selected by default or by a glob that are not available (code not landed, optional
+dependency missing) or cannot run together are skipped with a note in the outputs.
+The boards: ``registry.FULL`` (seeds 0-9, fewer for the costliest scenarios) and
+``registry.QUICK``; ``--seeds`` replaces both the seeds and the caps.
 
 Outputs in ``OUT`` (default ``results/scoreboard``, ``results/scoreboard/quick`` with
 ``--quick``): ``scoreboard.md`` (header + a ranked table per scenario: success rate desc, then
