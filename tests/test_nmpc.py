@@ -130,3 +130,20 @@ def test_bad_options_rejected():
         possible_agents = ["a"]
     with pytest.raises(ValueError, match="servicing"):
         NMPC(Other())
+
+
+@pytest.mark.slow
+def test_full_pereira2022_run_keeps_constraints_and_follows_waypoints():
+    """The whole §5.2 episode (120 s, ~2-4 min): the reproduction's claims on constraints/waypoints."""
+    from benchmarks.repro_servicing import analyse
+
+    env = parallel_env()
+    policy = NMPC(env)
+    traj = rollout(env, policy, seed=0)
+    result = analyse(traj, env, policy)
+    assert result["claims"]["constraints_satisfied_at_all_times"]
+    assert result["claims"]["waypoints_followed"]
+    assert policy.info["fallbacks"] == 0
+    for row in result["rows"]:
+        assert row["final_position_error_m"] < 0.01
+        assert row["final_pointing_error_deg"] < 5.0
