@@ -147,3 +147,69 @@ def test_centralised_gym_view_passes_check_env():
         env.step(np.zeros(3))
     env2 = CentralisedEnv("platoon_v0", randomize=True)
     assert env2.observation_space.shape == (4 * 36,)
+
+
+def test_reward_shaping_terms_and_obs_features():
+    from training.shaping import ObsFeatures, RewardShaping
+
+    info = {"tracking_error": np.zeros((1, 2, 6)), "min_separation": np.array([[10.0, 6.75]]),
+            "collision": np.array([[False, True]]), "delta_v": np.array([[0.0, 0.5]])}
+    info["tracking_error"][0, 0, :3] = [3.0, 4.0, 0.0]  # |e_pos| = 5
+    r = np.array([[-2.0, -4.0]])
+    np.testing.assert_array_equal(RewardShaping()(r, info), r)
+    assert not RewardShaping().active
+    s = RewardShaping(env_weight=0.5, tracking=1.0, tracking_scale=5.0, precision=2.0, proximity=4.0,
+                      proximity_distance=7.5, proximity_width=1.5, collision=10.0, effort=2.0)
+    out = s(r, info)
+    prec0 = 2.0 * (1 - np.log1p(5.0) / np.log1p(100.0))
+    np.testing.assert_allclose(out[0, 0], -1.0 - 1.0 + prec0)
+    np.testing.assert_allclose(out[0, 1], -2.0 - 0.0 + 2.0 - 4.0 * 0.25 - 10.0 - 1.0)
+    with pytest.raises(ValueError, match="unknown reward_shaping"):
+        RewardShaping.from_dict({"bonus": 1})
+    with pytest.raises(ValueError, match="must be a finite number >= 0"):
+        RewardShaping(tracking=-1)
+    f = ObsFeatures(symlog_scale=50.0, symlog_dims=2)
+    obs = np.array([[0.02, -1.0, 0.5]], dtype=np.float32)
+    out = f(obs)
+    assert out.shape == (1, 5) and f.out_dim(3) == 5 and out.dtype == np.float32
+    np.testing.assert_allclose(out[0, 3:], [np.log1p(1.0), -np.log1p(50.0)], rtol=1e-6)
+
+
+def test_features_are_reapplied_at_inference(tmp_path):
+    cfg = _cfg(tmp_path, obs_symlog_scale=10.0, obs_symlog_dims=3, eval_every=0, checkpoint_every=0,
+               reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
+    final = train(cfg)
+    policy = training.load(final, env=ToyEnv())
+    assert policy.model.observation_space.shape == (9,) and policy.obs_shape == (6,)
+    obs, _ = ToyEnv().reset(seed=0)
+    assert set(policy.act(obs)) == {"sat_1", "sat_2", "sat_3"}
+
+
+@pytest.mark.rllib
+@pytest.mark.slow
+def test_rllib_one_iteration(tmp_path):
+    pytest.importorskip("ray.rllib", reason="ray[rllib] not installed")
+    from training.rllib_train import RLlibConfig, run
+
+    cfg = RLlibConfig(env_id=TOY, env_kwargs={"max_steps": 10}, iterations=1, train_batch_size=200,
+                      minibatch_size=100, num_epochs=1, net_arch=(16,), out_dir=str(tmp_path / "rl"))
+    progress = run(cfg, verbose=False)
+    assert len(progress) == 1 and progress[0]["env_steps"] >= 200
+    assert (tmp_path / "rl" / "checkpoint").is_dir()
+
+
+def test_rllib_missing_ray_message(monkeypatch):
+    import builtins
+
+    from training import rllib_train
+
+    real_import = builtins.__import__
+
+    def fake_import(name, *args, **kwargs):
+        if name == "ray" or name.startswith("ray."):
+            raise ImportError("No module named 'ray'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", fake_import)
+    with pytest.raises(SystemExit, match=r"satenv\[rllib\]"):
+        rllib_train.main(["--iterations", "1"])

@@ -40,6 +40,8 @@ class TrainConfig:
             e.g. ``{"precision": 1.0, "proximity": 1.0}``); evaluation uses the env's metrics.
         obs_symlog_scale / obs_symlog_dims: appended symlog features of the first observation
             entries (``training.shaping.ObsFeatures``; 0 disables), re-applied at inference.
+        action_power: env action = ``sign(y)|y|^action_power`` of the network's ``y``
+            (``training.shaping.ActionMap``; 1 = identity), re-applied at inference.
     Evaluation and artefacts:
         eval_every: evaluate every this many agent-steps (0: only at the end) on ``eval_seeds``
             with the PettingZoo env and ``satenv.rollout`` (the scoreboard's path), logged to
@@ -83,6 +85,7 @@ class TrainConfig:
     reward_shaping: dict[str, Any] = field(default_factory=dict)
     obs_symlog_scale: float = 0.0
     obs_symlog_dims: int = 6
+    action_power: float = 1.0
     eval_every: int = 100_000
     eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_010))
     test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
@@ -136,8 +139,9 @@ class TrainConfig:
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         if not isinstance(self.log_std_init, (int, float)) or not math.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init!r}")
-        from training.shaping import ObsFeatures, RewardShaping
+        from training.shaping import ActionMap, ObsFeatures, RewardShaping
 
+        ActionMap(self.action_power)
         RewardShaping.from_dict(self.reward_shaping)
         ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims)
         if not isinstance(self.out_dir, str) or not self.out_dir:

@@ -117,7 +117,11 @@ def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int], tol
     seeds = list(seeds)
     out = {}
     for name in names:
-        policy = make_baseline(name, env)
+        try:
+            policy = make_baseline(name, env)
+        except (ValueError, TypeError, NotImplementedError) as err:  # the baseline does not fit this env
+            warnings.warn(f"baseline {name!r} cannot control this env ({err}); skipped", stacklevel=2)
+            continue
         if policy is None:
             warnings.warn(f"baseline {name!r} not found in the baselines package; skipped", stacklevel=2)
             continue

@@ -80,11 +80,12 @@ class LearnedPolicy:
     name = "learned"
 
     def __init__(self, model: Any, normalizer: ObsNormalizer | None = None, *,
-                 features: Any = None, meta: dict[str, Any] | None = None,
+                 features: Any = None, action_map: Any = None, meta: dict[str, Any] | None = None,
                  deterministic: bool = True) -> None:
         self.model = model
         self.normalizer = normalizer or ObsNormalizer()
         self.features = features
+        self.action_map = action_map
         self.meta = dict(meta or {})
         self.deterministic = deterministic
         # the env's per-agent observation shape (before the optional feature map)
@@ -111,7 +112,10 @@ class LearnedPolicy:
         if self.features is not None:
             obs = self.features(obs)
         actions, _ = self.model.predict(self.normalizer(obs), deterministic=self.deterministic)
-        actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        if self.action_map is not None:
+            actions = self.action_map(actions)
+        actions = actions.astype(np.float32)
         return {a: actions[i] for i, a in enumerate(agents)}
 
     def check_env(self, env: Any) -> None:
@@ -132,6 +136,14 @@ def features_from_config(config: dict[str, Any]):
 
     feats = ObsFeatures(config.get("obs_symlog_scale", 0.0), config.get("obs_symlog_dims", 6))
     return feats if feats.active else None
+
+
+def action_map_from_config(config: dict[str, Any]):
+    """The action map of a run config (``None`` when it is the identity)."""
+    from training.shaping import ActionMap
+
+    amap = ActionMap(config.get("action_power", 1.0))
+    return amap if amap.active else None
 
 
 def _algo_class(algo: str):
@@ -163,10 +175,11 @@ def load(path: str | Path, env: Any = None, *, device: str = "cpu") -> LearnedPo
             raise KeyError(algo)
         normalizer = ObsNormalizer.load(root / "obs_norm.npz")
         features = features_from_config(config)
+        action_map = action_map_from_config(config)
         model = _algo_class(algo).load(root / "model.zip", device=device)
     except (OSError, ValueError, KeyError, EOFError) as err:
         raise PolicyLoadError(f"cannot read the learned policy in {str(root)!r}: {type(err).__name__}: {err}") from None
-    policy = LearnedPolicy(model, normalizer, features=features, meta=meta)
+    policy = LearnedPolicy(model, normalizer, features=features, action_map=action_map, meta=meta)
     if normalizer.mean is not None and normalizer.mean.shape != tuple(model.observation_space.shape):
         raise PolicyLoadError(f"{str(root)!r}: obs_norm.npz has shape {normalizer.mean.shape} but the model "
                               f"expects {policy.obs_shape}; the folder mixes files of different runs")

@@ -1,21 +1,38 @@
-"""Training-only reward shaping and observation features (recorded in the run's config).
+"""Training-only reward shaping, and the policy's input/output maps (recorded in the run's config).
 
-Both act on the batched arrays of :class:`training.vec_env.SatVecEnv`; the observation features
-are re-applied by :class:`training.policy.LearnedPolicy` at inference, so a policy sees the same
-inputs in training and in the PettingZoo env. Evaluation metrics never see the shaping.
+All act on the batched arrays of :class:`training.vec_env.SatVecEnv`; the observation features
+and the action map are part of the policy and are re-applied by
+:class:`training.policy.LearnedPolicy` at inference, so a policy sees the same inputs and
+produces the same env actions in training and in the PettingZoo env. Evaluation metrics never
+see the reward shaping.
 
-Reward shaping (per agent, added to the env's reward; info arrays ``(B, M, ...)``)::
+Reward shaping (per agent; info arrays ``(B, M, ...)``)::
 
-    r += precision * (1 - log1p(||e_pos|| / precision_scale) / log1p(100))  [clipped at 0 below]
+    r  = env_weight * r_env
+    r -= tracking * ||e|| / tracking_scale                     (e: the 6-d tracking error)
+    r += precision * max(0, 1 - log1p(||e_pos|| / precision_scale) / log1p(100))
     r -= proximity * clip((proximity_distance - min_separation) / proximity_width, 0, 1)^2
+    r -= collision * collision_flag + effort * delta_v
+    r -= anticipation * sum_j clip((anticipation_distance - d_cpa_ij) / anticipation_width, 0, 1)^2
 
-``e_pos`` = ``info["tracking_error"][..., :3]`` [m]. The precision term gives a signal whose slope
-grows near the target (the quadratic stage cost of the env vanishes there); the proximity term
-is a smooth penalty before contact (the env's collision penalty is a step).
+``e`` = ``info["tracking_error"]``, ``e_pos`` its first 3 entries [m]. Why: the env's quadratic
+stage cost spans orders of magnitude over an episode (hundreds of metres at the start, metres at
+the end), so after PPO's advantage normalisation the end of the episode carries almost no signal;
+the linear ``tracking`` term and the logarithmic ``precision`` bonus keep the slope near the
+target. ``proximity`` is a smooth penalty before contact (the env's collision penalty is a step;
+``collision`` re-adds one when ``env_weight = 0``). ``anticipation`` looks ahead: ``d_cpa_ij`` is
+the closest-approach distance of agents i and j over the next ``anticipation_horizon`` seconds
+if both keep their velocity (positions and velocities from ``info["state"][..., :6]``), so fast
+crossings are penalised before the contact.
 
 Observation features: ``symlog_scale > 0`` appends ``sign(x) log1p(|x| symlog_scale)`` of the
 first ``symlog_dims`` observation entries (for platoon_v0, entries 0-5 are the tracking error in
 units of 50 m / 10 m/s, so ``symlog_scale=50`` resolves metres near the target).
+
+Action map: ``power > 1`` sends the network's action ``y`` in ``[-1, 1]`` to the env action
+``sign(y) |y|^power`` (still in ``[-1, 1]``; the env then scales it to ``u_max`` as always). With
+a large ``u_max`` (platoon: 6 m/s^2 per axis) this gives fine resolution and small exploration
+noise near zero thrust while keeping full authority.
 """
 
 from __future__ import annotations
@@ -26,26 +43,36 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RewardShaping", "ObsFeatures"]
+__all__ = ["RewardShaping", "ObsFeatures", "ActionMap"]
 
 
 @dataclass(frozen=True)
 class RewardShaping:
     """Shaping weights (0 disables a term); see the module docstring."""
 
+    env_weight: float = 1.0
+    tracking: float = 0.0
+    tracking_scale: float = 50.0
     precision: float = 0.0
     precision_scale: float = 1.0
     proximity: float = 0.0
     proximity_distance: float = 8.0
     proximity_width: float = 2.0
+    collision: float = 0.0
+    effort: float = 0.0
+    anticipation: float = 0.0
+    anticipation_distance: float = 8.0
+    anticipation_width: float = 2.0
+    anticipation_horizon: float = 2.0
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"reward_shaping[{name!r}] must be a finite number >= 0, got {value!r}")
-        if self.precision_scale <= 0 or self.proximity_width <= 0:
-            raise ValueError("reward_shaping precision_scale and proximity_width must be > 0, got "
-                             f"{self.precision_scale}, {self.proximity_width}")
+        if self.precision_scale <= 0 or self.proximity_width <= 0 or self.tracking_scale <= 0 \
+                or self.anticipation_width <= 0:
+            raise ValueError("reward_shaping precision_scale, proximity_width and tracking_scale must be "
+                             f"> 0, got {self.precision_scale}, {self.proximity_width}, {self.tracking_scale}")
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RewardShaping:
@@ -57,17 +84,39 @@ class RewardShaping:
 
     @property
     def active(self) -> bool:
-        return self.precision > 0 or self.proximity > 0
+        return (self.env_weight != 1.0 or self.tracking > 0 or self.precision > 0 or self.proximity > 0
+                or self.collision > 0 or self.effort > 0 or self.anticipation > 0)
 
     def __call__(self, rewards: np.ndarray, info: dict[str, np.ndarray]) -> np.ndarray:
-        out = np.asarray(rewards, dtype=np.float64).copy()
+        out = self.env_weight * np.asarray(rewards, dtype=np.float64)
+        if self.tracking > 0:
+            e = info["tracking_error"]
+            out -= self.tracking * np.linalg.norm(e.reshape(*e.shape[:2], -1), axis=-1) / self.tracking_scale
         if self.precision > 0:
             e = np.linalg.norm(info["tracking_error"][..., :3], axis=-1)
             out += self.precision * np.maximum(0.0, 1.0 - np.log1p(e / self.precision_scale) / math.log1p(100.0))
         if self.proximity > 0:
             gap = (self.proximity_distance - info["min_separation"]) / self.proximity_width
             out -= self.proximity * np.clip(gap, 0.0, 1.0) ** 2
+        if self.collision > 0:
+            out -= self.collision * info["collision"]
+        if self.effort > 0:
+            out -= self.effort * info["delta_v"]
+        if self.anticipation > 0:
+            out -= self.anticipation * self.closest_approach_penalty(info["state"])
         return out
+
+    def closest_approach_penalty(self, state: np.ndarray) -> np.ndarray:
+        """Per agent ``(B, M)``: sum over the other agents of the look-ahead penalty."""
+        p = state[..., None, :, :3] - state[..., :, None, :3]      # (B, M, M, 3): x_j - x_i
+        v = state[..., None, :, 3:6] - state[..., :, None, 3:6]
+        vv = np.sum(v * v, axis=-1)
+        t = np.clip(-np.sum(p * v, axis=-1) / np.maximum(vv, 1e-12), 0.0, self.anticipation_horizon)
+        d = np.linalg.norm(p + v * t[..., None], axis=-1)
+        pen = np.clip((self.anticipation_distance - d) / self.anticipation_width, 0.0, 1.0) ** 2
+        m = state.shape[-2]
+        pen[..., np.arange(m), np.arange(m)] = 0.0
+        return pen.sum(axis=-1)
 
 
 @dataclass(frozen=True)
@@ -97,3 +146,25 @@ class ObsFeatures:
         x = obs[..., : self.symlog_dims]
         extra = np.sign(x) * np.log1p(np.abs(x) * self.symlog_scale)
         return np.concatenate([obs, extra.astype(obs.dtype)], axis=-1)
+
+
+@dataclass(frozen=True)
+class ActionMap:
+    """``y -> sign(y) |y|^power`` on actions clipped to ``[-1, 1]`` (``power = 1``: identity)."""
+
+    power: float = 1.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.power, bool) or not isinstance(self.power, (int, float)) \
+                or not math.isfinite(self.power) or self.power <= 0:
+            raise ValueError(f"action_power must be a finite number > 0, got {self.power!r}")
+
+    @property
+    def active(self) -> bool:
+        return self.power != 1.0
+
+    def __call__(self, action: np.ndarray) -> np.ndarray:
+        y = np.clip(action, -1.0, 1.0)
+        if not self.active:
+            return y
+        return np.sign(y) * np.abs(y) ** self.power

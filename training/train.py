@@ -38,7 +38,13 @@ import numpy as np
 
 from training.config import TrainConfig, build_parser, config_from_json, parse_args
 from training.evaluate import compare, evaluate, evaluate_baselines, format_table
-from training.policy import LearnedPolicy, ObsNormalizer, features_from_config, save_artifacts
+from training.policy import (
+    LearnedPolicy,
+    ObsNormalizer,
+    action_map_from_config,
+    features_from_config,
+    save_artifacts,
+)
 from training.shaping import RewardShaping
 from training.vec_env import SatVecEnv, env_version, make_env
 
@@ -104,7 +110,7 @@ def _score(agg: dict[str, Any]) -> tuple[float, float]:
 
 # --------------------------------------------------------------------------- callback
 def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: dict[str, Any],
-                  meta: dict[str, Any], history: list[dict[str, Any]], features=None):
+                  meta: dict[str, Any], history: list[dict[str, Any]], maps: dict[str, Any] | None = None):
     """One SB3 callback doing the progress bar, periodic evaluation and checkpoints."""
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm.auto import tqdm
@@ -136,7 +142,7 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
 
         def evaluate_now(self) -> None:
             n = self.model.num_timesteps
-            policy = LearnedPolicy(self.model, ObsNormalizer.from_vecnormalize(venv), features=features, meta=meta)
+            policy = LearnedPolicy(self.model, ObsNormalizer.from_vecnormalize(venv), meta=meta, **(maps or {}))
             res = evaluate(eval_env, policy, cfg.eval_seeds, cfg.success_tol)
             agg = res["aggregate"]
             for key in ("success_rate", "rmse", "delta_v", "final_error_m", "collision_episodes",
@@ -206,8 +212,10 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     meta = env_meta(cfg, env)
     shaping = RewardShaping.from_dict(cfg.reward_shaping)
     features = features_from_config(cfg.to_json())
+    action_map = action_map_from_config(cfg.to_json())
     vec = VecMonitor(SatVecEnv(env, cfg.n_copies, seed=cfg.seed + start_steps,
-                               reward_fn=shaping if shaping.active else None, obs_fn=features))
+                               reward_fn=shaping if shaping.active else None, obs_fn=features,
+                               action_fn=action_map))
     if ckpt:
         venv = VecNormalize.load(str(ckpt[1] / "vecnormalize.pkl"), vec)
         venv.training = True
@@ -234,7 +242,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     remaining = cfg.total_timesteps - model.num_timesteps
     t0 = time.perf_counter()
     if remaining > 0:
-        callback = make_callback(cfg, out, venv, eval_env, baseline_eval, meta, history, features)
+        callback = make_callback(cfg, out, venv, eval_env, baseline_eval, meta, history,
+                                 {"features": features, "action_map": action_map})
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=not ckpt,
                     tb_log_name="run", log_interval=1)
         if cfg.checkpoint_every:
@@ -243,7 +252,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
     # 7. artefacts with the held-out evaluation
     test_baselines = _cached_baselines(out / "baselines_test.json", eval_env, cfg, cfg.test_seeds)
-    final_policy = LearnedPolicy(model, ObsNormalizer.from_vecnormalize(venv), features=features, meta=meta)
+    final_policy = LearnedPolicy(model, ObsNormalizer.from_vecnormalize(venv), features=features,
+                                 action_map=action_map, meta=meta)
     summary = _summary(cfg, eval_env, final_policy, test_baselines, model.num_timesteps, wall)
     final = save_artifacts(out / "final", model, final_policy.normalizer,
                            env_meta={**meta, "step": model.num_timesteps}, config=cfg.to_json(),

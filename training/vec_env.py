@@ -88,12 +88,15 @@ class SatVecEnv(VecEnv):
             (e.g. :class:`training.shaping.RewardShaping`).
         obs_fn: optional feature map applied to the observations ``(..., obs_dim) -> (..., d)``
             (e.g. :class:`training.shaping.ObsFeatures`); the observation space follows.
+        action_fn: optional map of the policy's actions in ``[-1, 1]`` to env actions in
+            ``[-1, 1]`` (e.g. :class:`training.shaping.ActionMap`), applied before the scaling.
     """
 
     def __init__(self, env: FormationEnv | Callable[[], FormationEnv], n_copies: int,
                  seed: int | None = None, *,
                  reward_fn: Callable[[np.ndarray, dict[str, np.ndarray]], np.ndarray] | None = None,
-                 obs_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 obs_fn: Callable[[np.ndarray], np.ndarray] | None = None,
+                 action_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         template = env() if callable(env) and not isinstance(env, FormationEnv) else env
         if not isinstance(template, FormationEnv):
             raise SatenvError(f"SatVecEnv needs a satenv FormationEnv (or a callable returning one), "
@@ -110,7 +113,7 @@ class SatVecEnv(VecEnv):
         self.render_mode = None
         agent = self.agents[0]
         obs_space = template.observation_space(agent)
-        self.reward_fn, self.obs_fn = reward_fn, obs_fn
+        self.reward_fn, self.obs_fn, self.action_fn = reward_fn, obs_fn, action_fn
         if obs_fn is not None:
             dim = np.asarray(obs_fn(np.zeros((1, *obs_space.shape), dtype=np.float32))).shape[-1]
             obs_space = spaces.Box(-np.inf, np.inf, (int(dim),), np.float32)
@@ -186,6 +189,8 @@ class SatVecEnv(VecEnv):
             raise SatenvError("step() called before reset(): call reset() first")
         a = self._actions.reshape(self.n_copies, self.n_agents, -1)
         self._actions = None
+        if self.action_fn is not None:
+            a = self.action_fn(a)
         accel = unit_box_to_accel(a, self._u_max, self._thrust_mode)
         res = self.core.step(accel, self._batch_rng)
         self.last_info = res.info
