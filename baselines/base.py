@@ -30,14 +30,14 @@ class ZeroPolicy:
     name = "zero"
 
     def __init__(self, env: Any) -> None:
-        self.agents = list(env.possible_agents)
+        self.shapes = {a: env.action_space(a).shape for a in env.possible_agents}
         self.info: dict[str, Any] = {}
 
     def reset(self, seed: int | None = None) -> None:
         self.info = {"fallbacks": 0}
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {a: np.zeros(3, dtype=np.float32) for a in observations}
+        return {a: np.zeros(self.shapes[a], dtype=np.float32) for a in observations}
 
 
 class RandomPolicy:
@@ -46,6 +46,7 @@ class RandomPolicy:
     name = "random"
 
     def __init__(self, env: Any) -> None:
+        self.shapes = {a: env.action_space(a).shape for a in env.possible_agents}
         self.info: dict[str, Any] = {}
         self._rng = np.random.default_rng()
 
@@ -54,4 +55,4 @@ class RandomPolicy:
         self.info = {"fallbacks": 0}
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {a: self._rng.uniform(-1.0, 1.0, 3).astype(np.float32) for a in observations}
+        return {a: self._rng.uniform(-1.0, 1.0, self.shapes[a]).astype(np.float32) for a in observations}

@@ -6,6 +6,9 @@ becomes ``_``) exposing::
     reproduce(plots: str | Path | None = None, seed: int = 0) -> dict   # {"paper", "rows", "pass", ...}
     format_table(result: dict) -> str                                  # printed beside the paper
 
+A module may also define ``add_arguments(parser)`` to add its own options (e.g. li2022's
+``--case``); their values are passed to ``reproduce`` as keyword arguments.
+
 Register it in :data:`PAPERS` (or rely on the naming convention). The command prints the table,
 writes the JSON to ``--out`` and the figures to ``--plots DIR``; it exits with status 1 when the
 reproduction misses its targets (``result["pass"]`` is False).
@@ -22,6 +25,8 @@ from types import ModuleType
 
 PAPERS: dict[str, str] = {
     "pereira2023": "benchmarks.repro_pereira2023",
+    "pereira2022-servicing": "benchmarks.repro_servicing",
+    "kannan2022": "benchmarks.repro_kannan2022",
 }
 """Paper name -> module implementing ``reproduce`` and ``format_table``."""
 
@@ -44,12 +49,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="write the result JSON here")
     parser.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) in this directory")
     parser.add_argument("--seed", type=int, default=0, help="seed of the env and the policy (default 0)")
-    args = parser.parse_args(argv)
+    known, _ = parser.parse_known_args(argv)
     try:
-        module = load(args.paper)
+        module = load(known.paper)
     except ValueError as exc:
         parser.error(str(exc))
-    result = module.reproduce(plots=args.plots, seed=args.seed)
+    base = set(vars(known))
+    if hasattr(module, "add_arguments"):
+        module.add_arguments(parser)
+    args = parser.parse_args(argv)
+    extra = {k: v for k, v in vars(args).items() if k not in base}
+    result = module.reproduce(plots=args.plots, seed=args.seed, **extra)
     print(module.format_table(result))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
