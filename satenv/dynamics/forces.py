@@ -84,18 +84,8 @@ def drag(r: np.ndarray, v: np.ndarray, ballistic: float | np.ndarray, model: For
 
 
 def acceleration(r: np.ndarray, v: np.ndarray, model: ForceModel, ballistic: float) -> np.ndarray:
-    """Total natural (uncontrolled) acceleration of a spacecraft under ``model``."""
-    if model.j2:  # two-body + J2 sharing the powers of r (the hot path of the "j2" models)
-        x, y, z = r[..., 0], r[..., 1], r[..., 2]
-        rn2 = x * x + y * y + z * z
-        inv_r3 = 1.0 / (rn2 * np.sqrt(rn2))
-        k = -1.5 * model.j2_coef * model.r_earth**2 / rn2
-        z2 = 5.0 * z * z / rn2
-        kxy = -model.mu * inv_r3 * (1.0 + k * (z2 - 1.0))
-        kz = -model.mu * inv_r3 * (1.0 + k * (z2 - 3.0))
-        acc = np.stack([kxy * x, kxy * y, kz * z], axis=-1)
-    else:
-        acc = two_body(r, model.mu)
-    if model.drag:
-        acc = acc + drag(r, v, ballistic, model)
-    return acc
+    """Total natural (uncontrolled) acceleration of a spacecraft under ``model`` (``(..., 3)``)."""
+    from ._soa import acceleration_soa
+
+    v_c = None if v is None else np.moveaxis(v, -1, 0)
+    return np.moveaxis(acceleration_soa(np.moveaxis(r, -1, 0), v_c, model, ballistic), 0, -1)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._checks import as_array
+from ._soa import eci_rel_to_lvlh_soa, frame_rate_soa, lvlh_axes, lvlh_to_eci_rel_soa
 from .constants import MU_EARTH, R_EARTH
 
 
@@ -142,48 +143,17 @@ def lvlh_rotation(chief_rv) -> np.ndarray:
     return _rotation(chief_rv[..., :3], chief_rv[..., 3:])
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (faster than ``np.cross`` for small batches)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def _norm(a: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.sum(a * a, axis=-1, keepdims=True))
-
-
 def _rotation(r: np.ndarray, v: np.ndarray) -> np.ndarray:
-    x = r / _norm(r)
-    h = _cross(r, v)
-    z = h / _norm(h)
-    y = _cross(z, x)
-    return np.stack([x, y, z], axis=-2)
-
-
-def rotate(rot: np.ndarray, vec: np.ndarray) -> np.ndarray:
-    """``rot @ vec`` for rotations ``(..., 3, 3)`` and vectors ``(..., M, 3)`` (ECI -> LVLH)."""
-    return (vec[..., 0:1] * rot[..., None, :, 0] + vec[..., 1:2] * rot[..., None, :, 1]
-            + vec[..., 2:3] * rot[..., None, :, 2])
-
-
-def rotate_back(rot: np.ndarray, vec: np.ndarray) -> np.ndarray:
-    """``rot.T @ vec`` for rotations ``(..., 3, 3)`` and vectors ``(..., M, 3)`` (LVLH -> ECI)."""
-    return (vec[..., 0:1] * rot[..., None, 0, :] + vec[..., 1:2] * rot[..., None, 1, :]
-            + vec[..., 2:3] * rot[..., None, 2, :])
+    """ECI -> LVLH rotation (..., 3, 3) of chief position/velocity (..., 3)."""
+    ex, ey, ez, _ = lvlh_axes(np.moveaxis(r, -1, 0), np.moveaxis(v, -1, 0))
+    return np.stack([np.moveaxis(ex, 0, -1), np.moveaxis(ey, 0, -1), np.moveaxis(ez, 0, -1)], axis=-2)
 
 
 def frame_rate(chief_rv: np.ndarray, chief_acc: np.ndarray | None = None) -> np.ndarray:
     """LVLH angular velocity (..., 3) expressed in LVLH components ``[omega_x, 0, omega_z]``."""
-    r, v = chief_rv[..., :3], chief_rv[..., 3:]
-    rn = _norm(r)[..., 0]
-    h = _cross(r, v)
-    hn = _norm(h)[..., 0]
-    wz = hn / rn**2
-    if chief_acc is None:
-        wx = np.zeros_like(wz)
-    else:
-        wx = rn * np.sum(chief_acc * h, axis=-1) / hn**2
+    r, v = np.moveaxis(chief_rv[..., :3], -1, 0), np.moveaxis(chief_rv[..., 3:], -1, 0)
+    acc = None if chief_acc is None else np.moveaxis(chief_acc, -1, 0)
+    wx, wz = frame_rate_soa(r, lvlh_axes(r, v)[3], acc)
     return np.stack([wx, np.zeros_like(wz), wz], axis=-1)
 
 
@@ -207,22 +177,23 @@ def lvlh_to_eci(chief_rv, x_lvlh, chief_acc=None) -> np.ndarray:
     return chief_rv[..., None, :] + _lvlh_to_eci_rel(chief_rv, x_lvlh, acc)
 
 
+def _to_soa(x: np.ndarray) -> np.ndarray:
+    """(..., M, 6) -> component-major (6, M, ...)."""
+    return np.moveaxis(x, (-1, -2), (0, 1))
+
+
+def _from_soa(x: np.ndarray) -> np.ndarray:
+    """Component-major (6, M, ...) -> (..., M, 6)."""
+    return np.moveaxis(x, (0, 1), (-1, -2))
+
+
 def _eci_to_lvlh(chief_rv: np.ndarray, rel_eci: np.ndarray, chief_acc) -> np.ndarray:
     """Relative ECI states (..., M, 6) -> LVLH (no validation)."""
-    rot = _rotation(chief_rv[..., :3], chief_rv[..., 3:])          # (..., 3, 3)
-    w = frame_rate(chief_rv, chief_acc)                             # (..., 3) LVLH comps
-    rho = rotate(rot, rel_eci[..., :3])
-    dv = rotate(rot, rel_eci[..., 3:])
-    rho_dot = dv - _cross(w[..., None, :], rho)
-    return np.concatenate([rho, rho_dot], axis=-1)
+    acc = None if chief_acc is None else np.moveaxis(chief_acc, -1, 0)
+    return _from_soa(eci_rel_to_lvlh_soa(np.moveaxis(chief_rv, -1, 0), _to_soa(rel_eci), acc))
 
 
 def _lvlh_to_eci_rel(chief_rv: np.ndarray, x_lvlh: np.ndarray, chief_acc) -> np.ndarray:
     """LVLH relative states (..., M, 6) -> relative ECI states (no validation)."""
-    rot = _rotation(chief_rv[..., :3], chief_rv[..., 3:])
-    w = frame_rate(chief_rv, chief_acc)
-    rho, rho_dot = x_lvlh[..., :3], x_lvlh[..., 3:]
-    dv_lvlh = rho_dot + _cross(w[..., None, :], rho)
-    dr = rotate_back(rot, rho)
-    dv = rotate_back(rot, dv_lvlh)
-    return np.concatenate([dr, dv], axis=-1)
+    acc = None if chief_acc is None else np.moveaxis(chief_acc, -1, 0)
+    return _from_soa(lvlh_to_eci_rel_soa(np.moveaxis(chief_rv, -1, 0), _to_soa(x_lvlh), acc))

@@ -3,8 +3,9 @@
 The truth models (``"nonlinear"``, ``"j2"``, ``"j2_drag"``) integrate the chief's absolute
 ECI state together with the deputies' ECI states *relative to the chief* (so no precision is
 lost to large absolute positions), with RK4, and convert to the chief's LVLH frame at the
-step boundaries. The deputies' control accelerations are given in LVLH and held constant in
-that rotating frame over a step (zero-order hold), matching the discrete CW model.
+step boundaries (the hot path runs on component-major arrays, :mod:`._soa`). The deputies'
+control accelerations are given in LVLH and held constant in that rotating frame over a step
+(zero-order hold), matching the discrete CW model.
 """
 
 from __future__ import annotations
@@ -15,10 +16,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._checks import as_array, positive
+from ._soa import acceleration_soa, derivative_soa, eci_rel_to_lvlh_soa, lvlh_to_eci_rel_soa
 from .cw import cw_matrices
-from .forces import FORCE_MODELS, ForceModel, acceleration
+from .forces import FORCE_MODELS, ForceModel
 from .integrators import INTEGRATORS
-from .orbit import Orbit, _eci_to_lvlh, _lvlh_to_eci_rel, _rotation, rotate_back
+from .orbit import Orbit
 
 MODELS: tuple[str, ...] = ("cw", "nonlinear", "j2", "j2_drag")
 """Names accepted by :func:`simulate` and :class:`RelativeModel`."""
@@ -32,29 +34,6 @@ def check_model(model: str) -> str:
     if model not in MODELS:
         raise ValueError(f"unknown dynamics model {model!r}; expected one of {list(MODELS)}")
     return model
-
-
-def _derivative(force: ForceModel):
-    """Right-hand side on the packed state ``y = [chief_abs; deputies_rel]`` (..., 1+M, 6)."""
-
-    def f(_t: float, y: np.ndarray, u_lvlh: np.ndarray) -> np.ndarray:
-        chief = y[..., 0, :]
-        rel = y[..., 1:, :]
-        r_c, v_c = chief[..., :3], chief[..., 3:]
-        a_c = acceleration(r_c, v_c, force, force.ballistic_chief)
-        r_d = r_c[..., None, :] + rel[..., :3]
-        v_d = v_c[..., None, :] + rel[..., 3:]
-        a_d = acceleration(r_d, v_d, force, force.ballistic_deputy)
-        rot = _rotation(r_c, v_c)
-        thrust = rotate_back(rot, u_lvlh)
-        dy = np.empty_like(y)
-        dy[..., 0, :3] = v_c
-        dy[..., 0, 3:] = a_c
-        dy[..., 1:, :3] = rel[..., 3:]
-        dy[..., 1:, 3:] = a_d - a_c[..., None, :] + thrust
-        return dy
-
-    return f
 
 
 def _plane_rotation(orbit: Orbit, angle: float) -> np.ndarray:
@@ -107,9 +86,12 @@ class RelativeModel:
         if self.force is None and self.model != "cw":
             object.__setattr__(self, "force", FORCE_MODELS[self.model])
         if self.model == "cw":
-            self._cache["ab"] = cw_matrices(self.orbit.n, self.dt)
-            self._cache["chief_rot"] = _plane_rotation(self.orbit, self.orbit.n * self.dt)
-        self._cache["f"] = _derivative(self.force) if self.force else None
+            a, b = self._cache["ab"] = cw_matrices(self.orbit.n, self.dt)
+            self._cache["abT"] = (np.ascontiguousarray(a.T), np.ascontiguousarray(b.T))
+            rot = _plane_rotation(self.orbit, self.orbit.n * self.dt)
+            self._cache["chief_rot"] = rot
+            self._cache["chief_rotT"] = np.ascontiguousarray(rot.T)
+        self._cache["f"] = derivative_soa(self.force) if self.force else None
 
     @property
     def ab(self) -> tuple[np.ndarray, np.ndarray]:
@@ -131,22 +113,37 @@ class RelativeModel:
         if u is None:
             u = np.zeros((*x.shape[:-1], 3))
         if self.model == "cw":
-            a, b = self._cache["ab"]
-            rot = self._cache["chief_rot"]
-            chief_next = np.concatenate([chief[..., :3] @ rot.T, chief[..., 3:] @ rot.T], axis=-1)
-            return x @ a.T + u @ b.T, chief_next
+            a_t, b_t = self._cache["abT"]
+            chief = np.asarray(chief, dtype=float)
+            # (3,)-row matmuls on the flattened copies: one BLAS call each instead of a Python-level
+            # loop over the stacked (M, 6) @ (6, 6) products that a batched ``@`` performs.
+            chief_next = (np.ascontiguousarray(chief).reshape(-1, 3) @ self._cache["chief_rotT"]
+                          ).reshape(chief.shape)
+            if u.shape[:-1] != x.shape[:-1]:          # broadcasting inputs: the general form
+                return x @ a_t + u @ b_t, chief_next
+            out = x.reshape(-1, 6) @ a_t
+            out += u.reshape(-1, 3) @ b_t
+            return out.reshape(x.shape), chief_next
         f = self._cache["f"]
         force = self.force
         stepper = INTEGRATORS[self.integrator]
-        acc_c = acceleration(chief[..., :3], chief[..., 3:], force, force.ballistic_chief)
-        y = np.concatenate([chief[..., None, :], _lvlh_to_eci_rel(chief, x, acc_c)], axis=-2)
+        lead, m = x.shape[:-2], x.shape[-2]
+        n = int(np.prod(lead)) if lead else 1
+        xs = np.ascontiguousarray(x.reshape(n, m, 6).transpose(2, 1, 0))        # (6, M, B)
+        cs = np.ascontiguousarray(np.broadcast_to(chief, (*lead, 6)).reshape(n, 6).T)  # (6, B)
+        us = np.ascontiguousarray(np.broadcast_to(u, (*lead, m, 3)).reshape(n, m, 3).transpose(2, 1, 0))
+        y = np.empty((6, 1 + m, n))
+        y[:, 0] = cs
+        y[:, 1:] = lvlh_to_eci_rel_soa(cs, xs, acceleration_soa(cs[:3], cs[3:], force, force.ballistic_chief))
         h = self.dt / self.substeps
-        rhs = lambda t, yy: f(t, yy, u)  # noqa: E731
+        rhs = lambda t, yy: f(t, yy, us)  # noqa: E731
         for k in range(self.substeps):
             y = stepper(rhs, k * h, y, h)
-        chief_next = y[..., 0, :]
-        acc_c = acceleration(chief_next[..., :3], chief_next[..., 3:], force, force.ballistic_chief)
-        return _eci_to_lvlh(chief_next, y[..., 1:, :], acc_c), chief_next
+        c_next = y[:, 0]
+        acc_c = acceleration_soa(c_next[:3], c_next[3:], force, force.ballistic_chief)
+        x_next = eci_rel_to_lvlh_soa(c_next, y[:, 1:], acc_c)
+        return (np.ascontiguousarray(x_next.transpose(2, 1, 0)).reshape(x.shape),
+                np.ascontiguousarray(c_next.T).reshape((*lead, 6)))
 
 
 def simulate(model: str, x0, *, orbit: Orbit, dt: float, steps: int, u=None,

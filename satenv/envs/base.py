@@ -224,12 +224,20 @@ class FormationEnv(ParallelEnv):
         if not isinstance(actions, dict):
             raise SatenvError(f"actions must be a dict {{agent: array of shape ({self.core.action_dim},)}}, "
                               f"got {type(actions).__name__}")
+        dim = self.core.action_dim
+        if len(actions) == len(self.agents) == self.core.n_agents:
+            # fast path: one conversion and one finiteness check for the whole team
+            try:
+                out = np.array([actions[a] for a in self.possible_agents], dtype=np.float64)
+            except (KeyError, TypeError, ValueError):
+                out = None
+            if out is not None and out.shape == (self.core.n_agents, dim) and np.isfinite(out).all():
+                return out
         missing = [a for a in self.agents if a not in actions]
         extra = [a for a in actions if a not in self._index]
         if missing or extra:
             raise SatenvError(f"actions must have exactly one entry per live agent {self.agents}; "
                               f"missing {missing}, unknown {extra}")
-        dim = self.core.action_dim
         out = np.zeros((self.core.n_agents, dim))
         for agent, value in actions.items():
             try:
@@ -249,14 +257,11 @@ class FormationEnv(ParallelEnv):
         return {ag: obs[i] for ag, i in self._index.items()}
 
     def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
-        out: dict[str, dict[str, Any]] = {}
-        for ag, i in self._index.items():
-            d = {}
-            for key, arr in info.items():
-                v = arr[0, i]
-                d[key] = v.item() if np.ndim(v) == 0 else np.array(v)
-            out[ag] = d
-        return out
+        # one conversion per key: python scalars for per-agent scalars, rows of a private copy
+        # for per-agent vectors (the env never writes into them)
+        columns = {key: (arr[0].tolist() if arr.ndim == 2 else list(np.array(arr[0])))
+                   for key, arr in info.items()}
+        return {ag: {key: col[i] for key, col in columns.items()} for ag, i in self._index.items()}
 
     def state(self) -> np.ndarray:
         """The global state (true states of every agent, plus scenario extras)."""
