@@ -135,6 +135,19 @@ class PlatoonCore(BatchedCore):
         self.x = np.zeros((self.batch, n, 6))
         self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
         self.accel = np.zeros((self.batch, n, 3))
+        self.err_raw = np.zeros((self.batch, n, 6))  # E_f of the current state (cached for observe)
+        # constant pieces of the hot path
+        self._scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
+        self._self_diag = np.where(np.eye(n + 1, dtype=bool), np.inf, 0.0)
+        self._vbound = (self.gains * scenario.v_max)[:, None]
+        mask = np.take_along_axis(self.adj, self.others, axis=1) if n > 1 else np.zeros((n, 0))
+        self._slot_mask = mask[..., None]                      # (N, N-1, 1)
+        obs0 = np.zeros((n, self.obs_dim))
+        obs0[:, 12] = self.topology.pinning
+        obs0[:, 13] = self.gains / n
+        if n > 1:
+            obs0[:, 15:] = np.concatenate([self._slot_mask, np.zeros((n, n - 1, 6))], -1).reshape(n, -1)
+        self._obs0 = obs0
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -149,7 +162,8 @@ class PlatoonCore(BatchedCore):
         self.t[sel] = 0
         self.chief[sel] = self.model.initial_chief()
         self.accel[sel] = 0.0
-        info = self._info(self.x[sel], self.accel[sel], self.t[sel])
+        info = self._info(self.x[sel], self.accel[sel])
+        self.err_raw[sel] = info["neighbourhood_error"]
         return info
 
     def step(self, accel, rng=None) -> StepResult:
@@ -157,14 +171,15 @@ class PlatoonCore(BatchedCore):
         self.x, self.chief = self.model.step(self.x, accel, self.chief)
         self.accel = accel
         self.t += 1
-        info = self._info(self.x, accel, self.t)
+        info = self._info(self.x, accel)
+        self.err_raw = info["neighbourhood_error"]
         e = info["tracking_error"]
-        stage = np.einsum("bnd,d,bnd->bn", e, self.q, e) + np.einsum("bnd,d,bnd->bn", accel, self.w, accel)
+        stage = (e * e) @ self.q + (accel * accel) @ self.w
         sc = self.scenario
         rewards = (-self.alpha * stage / sc.reward_scale
                    - sc.collision_penalty * info["collision"]
                    - sc.violation_penalty * info["violations"])
-        far = np.linalg.norm(self.x[..., :3], axis=-1) > sc.max_distance
+        far = np.sum(self.x[..., :3] ** 2, axis=-1) > sc.max_distance**2
         terminated = far.any(axis=-1)
         if sc.terminate_on_collision:
             terminated |= info["collision"].any(axis=-1)
@@ -172,19 +187,19 @@ class PlatoonCore(BatchedCore):
 
     # ------------------------------------------------------------------ quantities
     def neighbourhood_error(self, x: np.ndarray) -> np.ndarray:
-        return np.einsum("ij,bjd->bid", self.lbar, x)
+        """``E_f`` (eq. 9) for states ``(B, N, 6)``: the augmented Laplacian times the states."""
+        return self.lbar @ x
 
-    def _info(self, x: np.ndarray, accel: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray]:
+    def _info(self, x: np.ndarray, accel: np.ndarray) -> dict[str, np.ndarray]:
         sc = self.scenario
-        n = self.n_agents
         err_raw = self.neighbourhood_error(x)
         err = err_raw - self.target
         pos = np.concatenate([np.zeros((x.shape[0], 1, 3)), x[..., :3]], axis=1)
-        dist = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)  # (B, N+1, N+1)
-        dist[:, np.arange(n + 1), np.arange(n + 1)] = np.inf
+        diff = pos[:, :, None] - pos[:, None]
+        dist = np.sqrt(np.sum(diff * diff, axis=-1)) + self._self_diag  # (B, N+1, N+1)
         min_sep = dist[:, 1:].min(axis=-1)
         collision = (dist[:, 1:] < self.contact[1:]).any(axis=-1)
-        viol = (np.abs(err_raw[..., 3:]) > (self.gains * sc.v_max)[:, None]).any(axis=-1).astype(np.int64)
+        viol = (np.abs(err_raw[..., 3:]) > self._vbound).any(axis=-1).astype(np.int64)
         if sc.min_error_constraint:
             viol += np.linalg.norm(err_raw[..., :3], axis=-1) < self.gains * sc.follower_radius
         if sc.keepout_radius > 0 or sc.los_slopes is not None:
@@ -212,23 +227,14 @@ class PlatoonCore(BatchedCore):
         }
 
     def observe(self) -> np.ndarray:
-        sc = self.scenario
-        n, b = self.n_agents, self.batch
-        scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
-        err = (self.neighbourhood_error(self.x) - self.target) / scale
-        own = self.x / scale
-        obs = np.zeros((b, n, self.obs_dim))
-        obs[..., 0:6] = err
-        obs[..., 6:12] = own
-        obs[..., 12] = self.topology.pinning
-        obs[..., 13] = self.gains / n
-        obs[..., 14] = 1.0 - self.t[:, None] / sc.n_steps
+        n = self.n_agents
+        obs = np.broadcast_to(self._obs0, (self.batch, n, self.obs_dim)).copy()
+        obs[..., 0:6] = (self.err_raw - self.target) / self._scale
+        obs[..., 6:12] = self.x / self._scale
+        obs[..., 14] = 1.0 - self.t[:, None] / self.scenario.n_steps
         if n > 1:
-            rel = (self.x[:, self.others] - self.x[:, :, None]) / scale  # (B, N, N-1, 6)
-            mask = np.take_along_axis(self.adj, self.others, axis=1)  # (N, N-1)
-            slots = np.concatenate([np.broadcast_to(mask[None, ..., None], (b, n, n - 1, 1)),
-                                    rel * mask[None, ..., None]], axis=-1)
-            obs[..., 15:] = slots.reshape(b, n, -1)
+            rel = (self.x[:, self.others] - self.x[:, :, None]) / self._scale  # (B, N, N-1, 6)
+            obs[..., 15:].reshape(self.batch, n, n - 1, 7)[..., 1:] = rel * self._slot_mask
         return obs.astype(np.float32)
 
     def global_state(self) -> np.ndarray:
