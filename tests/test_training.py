@@ -115,7 +115,7 @@ def test_sac_smoke_and_space_mismatch(tmp_path):
 
 
 def test_resume_continues_the_step_count(tmp_path):
-    cfg = _cfg(tmp_path, total_timesteps=96, checkpoint_every=48, eval_every=48)
+    cfg = _cfg(tmp_path, total_timesteps=96, checkpoint_every=48, eval_every=48, lr_schedule="linear")
     train(cfg)
     steps, folder = latest_checkpoint(tmp_path / "run")
     assert steps == 96
@@ -175,14 +175,37 @@ def test_reward_shaping_terms_and_obs_features():
     np.testing.assert_allclose(out[0, 3:], [np.log1p(1.0), -np.log1p(50.0)], rtol=1e-6)
 
 
-def test_features_are_reapplied_at_inference(tmp_path):
+def test_look_ahead_penalty():
+    from training.shaping import RewardShaping
+
+    s = RewardShaping(anticipation=1.0, anticipation_distance=8.0, anticipation_width=2.0, anticipation_horizon=2.0)
+    st = np.zeros((1, 3, 6))
+    st[0, 1, :3], st[0, 1, 3:], st[0, 2, :3] = [20, 0, 0], [-10, 0, 0], [0, 100, 0]
+    np.testing.assert_allclose(s.closest_approach_penalty(st), [[1.0, 1.0, 0.0]])  # head-on in 2 s
+    st[0, 1, 3:] = [10, 0, 0]  # moving apart
+    np.testing.assert_allclose(s.closest_approach_penalty(st), [[0.0, 0.0, 0.0]])
+    st[0, 1, :3], st[0, 1, 3:] = [7, 0, 0], 0.0  # at rest, 7 m apart: ((8 - 7) / 2)^2
+    np.testing.assert_allclose(s.closest_approach_penalty(st), [[0.25, 0.25, 0.0]])
+
+
+def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
+    from training.shaping import ActionMap
+
     cfg = _cfg(tmp_path, obs_symlog_scale=10.0, obs_symlog_dims=3, eval_every=0, checkpoint_every=0,
-               reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
+               action_power=3.0, reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
     final = train(cfg)
     policy = training.load(final, env=ToyEnv())
     assert policy.model.observation_space.shape == (9,) and policy.obs_shape == (6,)
-    obs, _ = ToyEnv().reset(seed=0)
-    assert set(policy.act(obs)) == {"sat_1", "sat_2", "sat_3"}
+    env = ToyEnv()
+    obs, _ = env.reset(seed=0)
+    act = policy.act(obs)
+    stacked = np.stack([obs[a] for a in env.possible_agents])
+    y, _ = policy.model.predict(policy.normalizer(policy.features(stacked)), deterministic=True)
+    np.testing.assert_allclose(np.stack([act[a] for a in env.possible_agents]),
+                               np.sign(y) * np.abs(np.clip(y, -1, 1)) ** 3, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(ActionMap(2.0)(np.array([-2.0, -0.5, 0.5])), [-1.0, -0.25, 0.25])
+    with pytest.raises(ValueError, match="action_power"):
+        TrainConfig(action_power=0)
 
 
 @pytest.mark.rllib

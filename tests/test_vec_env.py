@@ -149,3 +149,26 @@ def test_sb3_wrappers_and_ppo_step():
     model = PPO("MlpPolicy", vec, n_steps=16, batch_size=32, n_epochs=1, seed=0, device="cpu")
     model.learn(total_timesteps=2 * 16 * 2 * M)
     assert model.num_timesteps == 2 * 16 * 2 * M
+
+
+def test_action_obs_and_reward_maps():
+    from training.shaping import ActionMap, ObsFeatures
+
+    calls = []
+
+    def reward_fn(rewards, info):
+        calls.append((rewards.shape, info["state"].shape))
+        return rewards * 0 + 7.0
+
+    vec = SatVecEnv(ToyEnv(), n_copies=2, seed=4, reward_fn=reward_fn, obs_fn=ObsFeatures(10.0, 6),
+                    action_fn=ActionMap(3.0))
+    env = ToyEnv()
+    assert vec.observation_space.shape == (12,)
+    obs = vec.reset()
+    o, _ = env.reset(seed=4)
+    np.testing.assert_allclose(obs[:M, :6], np.stack([o[a] for a in env.possible_agents]))
+    act = np.full((2 * M, 3), 0.5)
+    obs, rew, _, _ = vec.step(act)
+    o, *_ = env.step({a: np.full(3, 0.125) for a in env.possible_agents})  # 0.5 ** 3
+    np.testing.assert_allclose(obs[:M, :6], np.stack([o[a] for a in env.possible_agents]), rtol=1e-6)
+    assert calls == [((2, M), (2, M, 6))] and np.all(rew == 7.0)

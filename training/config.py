@@ -32,7 +32,8 @@ class TrainConfig:
     Algorithm:
         algo: ``"ppo"`` or ``"sac"``; total_timesteps: agent-steps to train for; seed.
         net_arch: hidden layer sizes of the policy and value/Q networks.
-        learning_rate, gamma: shared. PPO: n_steps (rollout length per row), batch_size,
+        learning_rate, gamma: shared; lr_schedule: ``"constant"`` or ``"linear"`` (decays to 5 %
+            of ``learning_rate`` at ``total_timesteps``). PPO: n_steps (rollout length per row), batch_size,
             n_epochs, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, log_std_init.
             SAC: buffer_size, learning_starts, sac_batch_size, train_freq, gradient_steps, tau.
         norm_obs / norm_reward / clip_obs: ``VecNormalize`` (statistics saved with the model).
@@ -63,6 +64,7 @@ class TrainConfig:
     seed: int = 0
     net_arch: tuple[int, ...] = (64, 64)
     learning_rate: float = 3e-4
+    lr_schedule: str = "constant"
     gamma: float = 0.99
     n_steps: int = 64
     batch_size: int = 1024
@@ -109,6 +111,8 @@ class TrainConfig:
             except TypeError:
                 raise ValueError(f"{name} must be JSON-serialisable (it is saved with the model), "
                                  f"got {value!r}") from None
+        if self.lr_schedule not in ("constant", "linear"):
+            raise ValueError(f"lr_schedule must be 'constant' or 'linear', got {self.lr_schedule!r}")
         if self.algo not in ALGOS:
             raise ValueError(f"algo must be one of {ALGOS}, got {self.algo!r}")
         for name in ("n_copies", "total_timesteps", "n_steps", "batch_size", "n_epochs",

@@ -80,10 +80,18 @@ def env_meta(cfg: TrainConfig, env: Any) -> dict[str, Any]:
     }
 
 
+def learning_rate(cfg: TrainConfig):
+    """The learning rate or schedule (SB3 passes the remaining progress, 1 -> 0)."""
+    if cfg.lr_schedule == "linear":
+        lr = cfg.learning_rate
+        return lambda progress_remaining: lr * max(progress_remaining, 0.05)
+    return cfg.learning_rate
+
+
 def build_model(cfg: TrainConfig, venv):
     from stable_baselines3 import PPO, SAC
 
-    common = {"seed": cfg.seed, "device": "cpu", "verbose": 0, "learning_rate": cfg.learning_rate,
+    common = {"seed": cfg.seed, "device": "cpu", "verbose": 0, "learning_rate": learning_rate(cfg),
               "gamma": cfg.gamma, "tensorboard_log": None}
     if cfg.algo == "ppo":
         arch = list(cfg.net_arch)
