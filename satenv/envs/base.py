@@ -23,6 +23,7 @@ physical quantities (``INFO_KEYS``) at reset and after every step.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -286,6 +287,25 @@ class FormationEnv(ParallelEnv):
 
             plt.close(self._fig)
             self._fig = None
+
+
+def resolve_preset(env_name: str, preset: str, presets: dict[str, Any], resolve: Any,
+                   kwargs: dict[str, Any]) -> Any:
+    """The frozen scenario of ``preset`` with ``kwargs`` overriding its fields.
+
+    Unknown presets, unknown keywords and invalid values raise :class:`SatenvError` naming the
+    env; ``resolve(preset, **overrides)`` is the scenario module's resolver.
+    """
+    if preset not in presets:
+        raise SatenvError(f"{env_name}: unknown preset {preset!r}; expected one of {sorted(presets)}")
+    allowed = {f.name for f in dataclasses.fields(presets[preset]) if f.init and not f.name.startswith("_")} - {"name"}
+    reject_unknown_kwargs(kwargs, allowed, env_name)
+    try:
+        return resolve(preset, **kwargs)
+    except SatenvError:
+        raise
+    except ValueError as exc:
+        raise SatenvError(f"{env_name}: {exc}") from None
 
 
 def reject_unknown_kwargs(kwargs: dict[str, Any], allowed: set[str], env_name: str) -> None:

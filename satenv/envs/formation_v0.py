@@ -86,13 +86,7 @@ import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from satenv.dynamics import MU_EARTH, Orbit, RelativeModel, delta_v
-from satenv.envs.base import (
-    BatchedCore,
-    FormationEnv,
-    SatenvError,
-    StepResult,
-    reject_unknown_kwargs,
-)
+from satenv.envs.base import BatchedCore, FormationEnv, StepResult, resolve_preset
 from satenv.scenarios.formation import (
     PRESETS,
     FormationScenario,
@@ -231,14 +225,7 @@ class FormationFlyingEnv(FormationEnv):
 
     def __init__(self, preset: str = "kannan2022-position", render_mode: str | None = None,
                  **kwargs) -> None:
-        if preset not in PRESETS:
-            raise SatenvError(f"formation_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
-        allowed = set(FormationScenario.__dataclass_fields__) - {"name"}
-        reject_unknown_kwargs(kwargs, allowed, "formation_v0")
-        try:
-            scenario = resolve_scenario(preset, **kwargs)
-        except ValueError as exc:
-            raise SatenvError(f"formation_v0: {exc}") from None
+        scenario = resolve_preset("formation_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode)
 
 

@@ -85,13 +85,7 @@ import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v
-from satenv.envs.base import (
-    BatchedCore,
-    FormationEnv,
-    SatenvError,
-    StepResult,
-    reject_unknown_kwargs,
-)
+from satenv.envs.base import BatchedCore, FormationEnv, StepResult, resolve_preset
 from satenv.scenarios.platoon import (
     PRESETS,
     PlatoonScenario,
@@ -265,11 +259,7 @@ class PlatoonEnv(FormationEnv):
     agent_prefix = "follower"
 
     def __init__(self, preset: str = "pereira2023", render_mode: str | None = None, **kwargs) -> None:
-        if preset not in PRESETS:
-            raise SatenvError(f"platoon_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
-        allowed = {f for f in PlatoonScenario.__dataclass_fields__ if not f.startswith("_")} - {"name"}
-        reject_unknown_kwargs(kwargs, allowed, "platoon_v0")
-        scenario = resolve_scenario(preset, **kwargs)
+        scenario = resolve_preset("platoon_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode)
         self.topology = scenario.graph
 

@@ -114,13 +114,7 @@ from satenv.dynamics.attitude import (
     quat_to_matrix,
     thruster_matrices,
 )
-from satenv.envs.base import (
-    BatchedCore,
-    FormationEnv,
-    SatenvError,
-    StepResult,
-    reject_unknown_kwargs,
-)
+from satenv.envs.base import BatchedCore, FormationEnv, SatenvError, StepResult, resolve_preset
 from satenv.scenarios.servicing import (
     PRESETS,
     ServicingScenario,
@@ -336,16 +330,7 @@ class ServicingEnv(FormationEnv):
     agent_prefix = "sat"
 
     def __init__(self, preset: str = "pereira2022", render_mode: str | None = None, **kwargs) -> None:
-        if preset not in PRESETS:
-            raise SatenvError(f"servicing_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
-        allowed = {f for f in ServicingScenario.__dataclass_fields__ if not f.startswith("_")} - {"name"}
-        reject_unknown_kwargs(kwargs, allowed, "servicing_v0")
-        try:
-            scenario = resolve_scenario(preset, **kwargs)
-        except SatenvError:
-            raise
-        except ValueError as exc:
-            raise SatenvError(f"servicing_v0: {exc}") from None
+        scenario = resolve_preset("servicing_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode)
 
     def _check_initial_state(self, value: Any) -> np.ndarray:

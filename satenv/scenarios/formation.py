@@ -51,33 +51,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import Any
 
 import numpy as np
 
+from satenv.scenarios._fields import number, vector
+
 __all__ = ["FormationScenario", "PRESETS", "resolve_scenario", "sample_initial_state",
            "proximity_components"]
-
-
-def _vec(value: Any, name: str, length: int) -> tuple[float, ...]:
-    try:
-        arr = np.asarray(value, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric sequence of length {length}, got {value!r}") from None
-    if arr.shape != (length,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be {length} finite numbers, got {value!r}")
-    return tuple(float(v) for v in arr)
-
-
-def _num(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        need = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be a finite number {need}, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -151,7 +131,7 @@ class FormationScenario:
         if not isinstance(self.goals, (tuple, list)) or len(self.goals) != m:
             raise ValueError(f"goals must be a sequence of {m} entries (a position (3,) or None per "
                              f"spacecraft), got {self.goals!r}")
-        goals = tuple(None if g is None else _vec(g, f"goals[{i}]", 3) for i, g in enumerate(self.goals))
+        goals = tuple(None if g is None else vector(g, f"goals[{i}]", 3) for i, g in enumerate(self.goals))
         s(self, "goals", goals)
         if self.leader is not None:
             if isinstance(self.leader, bool) or not isinstance(self.leader, (int, np.integer)) \
@@ -177,10 +157,10 @@ class FormationScenario:
         s(self, "offsets", tuple(tuple(float(v) for v in row) for row in offsets))
         for name in ("mean_motion", "dt", "u_max", "connection_range", "max_distance", "length_scale",
                      "position_weight", "input_weight"):
-            s(self, name, _num(getattr(self, name), name))
+            s(self, name, number(getattr(self, name), name))
         for name in ("collision_distance", "offset_weight", "connection_penalty",
                      "random_position_spread", "random_velocity_spread", "random_min_gap"):
-            s(self, name, _num(getattr(self, name), name, allow_zero=True))
+            s(self, name, number(getattr(self, name), name, allow_zero=True))
         v = self.max_steps
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"max_steps must be a positive int, got {v!r}")

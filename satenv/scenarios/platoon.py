@@ -29,33 +29,11 @@ from typing import Any
 import numpy as np
 
 from satenv.graph import make_topology
+from satenv.scenarios._fields import number, vector
 
 __all__ = ["PlatoonScenario", "PRESETS", "resolve_scenario", "sample_initial_state"]
 
 MU_TABLE1 = 3.98600441e14  # pereira2023 Table I value of mu [m^3/s^2]
-
-
-def _vec(value: Any, name: str, length: int | None = None) -> tuple[float, ...]:
-    try:
-        arr = np.asarray(value, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric sequence, got {value!r}") from None
-    if length is not None and arr.shape != (length,):
-        raise ValueError(f"{name} must have {length} entries, got {arr.size}: {value!r}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return tuple(float(v) for v in arr)
-
-
-def _pos(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        need = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be finite and {need}, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -150,7 +128,7 @@ class PlatoonScenario:
             )
         n = x0.shape[0]
         s(self, "initial_state", tuple(tuple(float(v) for v in row) for row in x0))
-        s(self, "desired_error", _vec(self.desired_error, "desired_error", 6))
+        s(self, "desired_error", vector(self.desired_error, "desired_error", 6))
         if self.formation not in ("neighbourhood", "chain"):
             raise ValueError(
                 f"formation must be 'neighbourhood' or 'chain', got {self.formation!r}."
@@ -163,38 +141,38 @@ class PlatoonScenario:
             s(self, "topology", topo.name)
         for name in ("mu", "orbit_radius", "dt", "u_max", "v_max", "follower_radius",
                      "leader_radius", "max_distance"):
-            s(self, name, _pos(getattr(self, name), name))
-        s(self, "sigma", _pos(self.sigma, "sigma"))
+            s(self, name, number(getattr(self, name), name))
+        s(self, "sigma", number(self.sigma, "sigma"))
         for name in ("reward_scale",):
-            s(self, name, _pos(getattr(self, name), name))
+            s(self, name, number(getattr(self, name), name))
         for name in ("collision_penalty", "violation_penalty"):
-            s(self, name, _pos(getattr(self, name), name, allow_zero=True))
+            s(self, name, number(getattr(self, name), name, allow_zero=True))
         for name in ("terminate_on_collision", "randomize", "min_error_constraint"):
             if not isinstance(getattr(self, name), bool | np.bool_):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}.")
             s(self, name, bool(getattr(self, name)))
         if self.thrust_mode not in ("box", "norm"):
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}.")
-        inc = _vec([self.inclination], "inclination", 1)[0]
+        inc = vector([self.inclination], "inclination", 1)[0]
         if not 0.0 <= inc <= math.pi:
             raise ValueError(f"inclination must be in [0, pi] rad, got {self.inclination!r}.")
         s(self, "inclination", inc)
         for name in ("keepout_radius", "random_position_spread", "random_velocity_spread",
                      "random_min_gap"):
-            s(self, name, _pos(getattr(self, name), name, allow_zero=True))
+            s(self, name, number(getattr(self, name), name, allow_zero=True))
         for name in ("n_steps", "horizon"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}.")
             s(self, name, int(v))
         for name, length in (("terminal_weight", 6), ("state_weight", 6), ("input_weight", 3)):
-            w = _vec(getattr(self, name), name, length)
+            w = vector(getattr(self, name), name, length)
             if min(w) < 0:
                 raise ValueError(f"{name} must be >= 0 (diagonal of a PSD weight), got {w}.")
             s(self, name, w)
         if min(self.input_weight) <= 0:
             raise ValueError(f"input_weight must be > 0 (W positive definite), got {self.input_weight}.")
-        alpha = _vec(self.alpha, "alpha")
+        alpha = vector(self.alpha, "alpha")
         if len(alpha) != n or min(alpha) <= 0:
             raise ValueError(f"alpha must have {n} positive entries (one per follower), got {alpha}.")
         s(self, "alpha", alpha)
@@ -203,7 +181,7 @@ class PlatoonScenario:
                 f"controller must be 'one_hop' or 'convex_step', got {self.controller!r}."
             )
         if self.convex_weights is not None:
-            w = _vec(self.convex_weights, "convex_weights")
+            w = vector(self.convex_weights, "convex_weights")
             if len(w) != n or min(w) <= 0 or max(w) >= 1 or abs(sum(w) - 1) > 1e-9:
                 raise ValueError(
                     f"convex_weights must be {n} numbers in (0, 1) summing to 1 (pereira2022 "
@@ -215,10 +193,10 @@ class PlatoonScenario:
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ValueError(f"iterations must be a positive int or None, got {v!r}.")
             s(self, "iterations", int(v))
-        s(self, "keepout_center", _vec(self.keepout_center, "keepout_center", 3))
-        s(self, "port", _vec(self.port, "port", 3))
+        s(self, "keepout_center", vector(self.keepout_center, "keepout_center", 3))
+        s(self, "port", vector(self.port, "port", 3))
         if self.los_slopes is not None:
-            c = _vec(self.los_slopes, "los_slopes", 2)
+            c = vector(self.los_slopes, "los_slopes", 2)
             if min(c) <= 0:
                 raise ValueError(f"los_slopes (c_x, c_z) must be > 0, got {c}.")
             s(self, "los_slopes", c)

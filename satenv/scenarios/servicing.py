@@ -25,36 +25,9 @@ from typing import Any
 import numpy as np
 
 from satenv.dynamics import MU_EARTH
+from satenv.scenarios._fields import array, nested, number
 
 __all__ = ["PRESETS", "ServicingScenario", "resolve_scenario", "sample_initial_state"]
-
-
-def _arr(value: Any, name: str, shape: tuple[int, ...] | None = None, ndim: int | None = None) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numeric, got {value!r}") from None
-    if shape is not None and arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}: {value!r}")
-    if ndim is not None and arr.ndim != ndim:
-        raise ValueError(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return arr
-
-
-def _tup(arr: np.ndarray):
-    return tuple(_tup(a) for a in arr) if arr.ndim > 1 else tuple(float(v) for v in arr)
-
-
-def _pos(value: Any, name: str, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -146,50 +119,50 @@ class ServicingScenario:
         s = object.__setattr__
         if not isinstance(self.name, str):
             raise ValueError(f"name must be a string, got {self.name!r}")
-        p0 = _arr(self.initial_position, "initial_position", ndim=2)
+        p0 = array(self.initial_position, "initial_position", ndim=2)
         m = p0.shape[0]
         if p0.shape != (m, 3) or m < 1:
             raise ValueError(f"initial_position must have shape (M, 3), got {p0.shape}")
-        s(self, "initial_position", _tup(p0))
-        s(self, "initial_velocity", _tup(_arr(self.initial_velocity, "initial_velocity", (m, 3))))
-        q0 = _arr(self.initial_quaternion, "initial_quaternion", (m, 4))
+        s(self, "initial_position", nested(p0))
+        s(self, "initial_velocity", nested(array(self.initial_velocity, "initial_velocity", (m, 3))))
+        q0 = array(self.initial_quaternion, "initial_quaternion", (m, 4))
         qn = np.linalg.norm(q0, axis=1, keepdims=True)
         if np.any(qn < 1e-6):
             raise ValueError("initial_quaternion rows must be non-zero [eta, ex, ey, ez], got "
                              f"{q0.tolist()}")
-        s(self, "initial_quaternion", _tup(q0 / qn))
+        s(self, "initial_quaternion", nested(q0 / qn))
         s(self, "initial_angular_velocity",
-          _tup(_arr(self.initial_angular_velocity, "initial_angular_velocity", (m, 3))))
-        wp = _arr(self.waypoints, "waypoints", ndim=3)
+          nested(array(self.initial_angular_velocity, "initial_angular_velocity", (m, 3))))
+        wp = array(self.waypoints, "waypoints", ndim=3)
         if wp.shape[1:] != (m, 3) or wp.shape[0] < 1:
             raise ValueError(f"waypoints must have shape (P, M, 3) = (P, {m}, 3), got {wp.shape}")
-        s(self, "waypoints", _tup(wp))
-        wt = _arr(self.waypoint_times, "waypoint_times").ravel()
+        s(self, "waypoints", nested(wp))
+        wt = array(self.waypoint_times, "waypoint_times").ravel()
         if wt.shape != (wp.shape[0] - 1,) or np.any(np.diff(wt) <= 0) or np.any(wt <= 0):
             raise ValueError(f"waypoint_times must be {wp.shape[0] - 1} increasing positive times "
                              f"(one per phase change), got {wt.tolist()}")
         s(self, "waypoint_times", tuple(float(v) for v in wt))
-        s(self, "desired_velocity", _tup(_arr(self.desired_velocity, "desired_velocity", (3,))))
+        s(self, "desired_velocity", nested(array(self.desired_velocity, "desired_velocity", (3,))))
         for name in ("inertia", "object_inertia"):
-            j = _arr(getattr(self, name), name, (3, 3))
+            j = array(getattr(self, name), name, (3, 3))
             if not np.allclose(j, j.T) or np.min(np.linalg.eigvalsh(0.5 * (j + j.T))) <= 0:
                 raise ValueError(f"{name} must be symmetric positive definite, got {j.tolist()}")
-            s(self, name, _tup(j))
-        dims = _arr(self.dimensions, "dimensions", (3,))
+            s(self, name, nested(j))
+        dims = array(self.dimensions, "dimensions", (3,))
         if np.any(dims <= 0):
             raise ValueError(f"dimensions [L_x, L_y, L_z] must be > 0, got {dims.tolist()}")
-        s(self, "dimensions", _tup(dims))
+        s(self, "dimensions", nested(dims))
         for name in ("thrust_limit", "v_max", "omega_max", "object_radius", "spacecraft_radius",
                      "orbit_radius", "mu", "dt", "max_distance", "reward_scale", "random_shell"):
-            s(self, name, _pos(getattr(self, name), name))
+            s(self, name, number(getattr(self, name), name))
         for name in ("collision_penalty", "violation_penalty", "random_min_gap", "contact_tolerance",
                      "random_velocity_spread", "random_angular_spread"):
-            s(self, name, _pos(getattr(self, name), name, allow_zero=True))
-        s(self, "pointing_target", _tup(_arr(self.pointing_target, "pointing_target", (3,))))
-        ref = _arr(self.pointing_reference, "pointing_reference", (3,))
+            s(self, name, number(getattr(self, name), name, allow_zero=True))
+        s(self, "pointing_target", nested(array(self.pointing_target, "pointing_target", (3,))))
+        ref = array(self.pointing_reference, "pointing_reference", (3,))
         if np.linalg.norm(ref) < 1e-9:
             raise ValueError("pointing_reference must be a non-zero direction, got [0, 0, 0]")
-        s(self, "pointing_reference", _tup(ref / np.linalg.norm(ref)))
+        s(self, "pointing_reference", nested(ref / np.linalg.norm(ref)))
         if self.thrust_frame not in ("lvlh", "body"):
             raise ValueError(f"thrust_frame must be 'lvlh' (eq. 35) or 'body', got {self.thrust_frame!r}")
         if self.dynamics not in ("cw", "nonlinear", "j2", "j2_drag"):
@@ -203,13 +176,13 @@ class ServicingScenario:
             s(self, name, int(v))
         for name, n in (("position_weight", 3), ("velocity_weight", 3), ("quaternion_weight", 4),
                         ("omega_weight", 3), ("input_weight", 6)):
-            w = _arr(getattr(self, name), name).ravel()
+            w = array(getattr(self, name), name).ravel()
             if w.size == 1:
                 w = np.full(n, float(w[0]))
             if w.shape != (n,) or np.any(w < 0):
                 raise ValueError(f"{name} must be {n} non-negative diagonal entries (or one scalar), "
                                  f"got {getattr(self, name)!r}")
-            s(self, name, _tup(w))
+            s(self, name, nested(w))
         if min(self.input_weight) <= 0:
             raise ValueError(f"input_weight must be > 0 (H positive definite), got {self.input_weight}")
         for name in ("terminate_on_collision", "randomize"):
