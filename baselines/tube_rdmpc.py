@@ -27,17 +27,27 @@ same for practical purposes; the difference enters ε like a disturbance and is 
 ``model_error_bound`` in the tube radius. ``f`` in κ is the same CW model (so
 ``f(x) - f(x~) = A_c (x - x~)`` exactly).
 
-Deviations (documented, each can be switched off):
+Choices and deviations (documented; each is an option):
 
-* ``terminal_braking=True`` adds the terminal constraint ``||p_N||^2 <= 2 a_b ||q_N - q_d||``
-  (``a_b = braking_fraction * (u_max - kappa_bar)``): the satellite must be able to stop before
-  its target. With the paper's terminal set only (38), a 50 s horizon and 0.02 m/s^2 of thrust,
-  the DMPC accelerates toward the target until stopping is impossible within the horizon, the
-  Lyapunov constraint then becomes infeasible and the satellite overshoots (see the
-  reproduction note in ``benchmarks/repro_li2022.py``).
-* When the NLP is infeasible (ipopt fails), a relaxed NLP is solved (``lambda`` unbounded above,
-  collision rows softened with an L1 slack of weight 1e9); if that fails too, the previous plan
-  shifted with ρ = 0 appended is applied (li2022's feasibility candidate (29)). Both are counted
+* ``v_max = 2.5 m/s``: the state constraint set Ξ_i of (36), which li2022 leaves unspecified, is
+  a speed bound ``||p~_m|| <= v_max``. Without it the DMPC (whose 50 s horizon sees only ~20 m
+  of lateral manoeuvre at 0.016 m/s^2) reaches 4-5 m/s, the moving obstacle then deflects the
+  fastest satellites, which circle their targets at ~500 m for many minutes (measured on case 1:
+  2 of 10 satellites not converged after 2000 s with ``v_max=None``; all within 1 m after about
+  1100 s with 2.5 m/s).
+* ``terminal_braking=True`` adds stopping-distance terminal rows: ``||p_N||^2 <= 2 a_b
+  ||q_N - q_d||`` (able to stop before the target) and, for the obstacle, the target spacecraft
+  and every neighbour, closing speed ``v_c`` with ``v_c |v_c| <= 2 a_b (d_N - d_safe)``
+  (``a_b = braking_fraction (u_max - kappa_bar)``). li2022's terminal set (38) with ρ = 0 only
+  guarantees one more safe Δt of coasting; with 0.02 m/s^2 of thrust a satellite closing at a few
+  m/s needs minutes to stop, so (38) alone lets it run into states from which the Lyapunov and
+  keep-out constraints are infeasible.
+* ``safety_margin = 5 m`` is added to every keep-out distance: the Jacobi exchange plans against
+  the neighbours' *previous* predictions while they re-plan at the same time.
+* Infeasibility: when ipopt fails on the exact NLP, a relaxed NLP is solved (λ unbounded above,
+  collision rows softened by an L1 slack of weight 1e9, terminal / speed rows by one of weight
+  1e8); if that fails too, the previous plan shifted with ρ = 0 appended (li2022's candidate (29))
+  is applied, or a braking input once that plan is exhausted. Both are counted
   (``info["relaxed"]``, ``info["fallbacks"]``), never raised.
 * ``lyapunov_tolerance`` (1e-4 m^2) is added to the right-hand side of the Lyapunov rows so the
   nominal can hold a target it has reached to within ipopt's tolerance.
@@ -67,7 +77,8 @@ from satenv.dynamics import cw_continuous, cw_matrices, prediction_matrices
 __all__ = ["TubeController", "TubeRDMPC", "TubeRDMPCConfig"]
 
 _FAR = 1.0e5  # [m] position of an unused neighbour slot (its constraints are inactive)
-_SLACK_WEIGHT = 1.0e9
+_SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed problem only)
+_TERMINAL_SLACK_WEIGHT = 1.0e8  # L1 weight of the terminal / speed slack (relaxed problem only)
 
 
 @dataclass(frozen=True)
@@ -80,7 +91,9 @@ class TubeRDMPCConfig:
         k1, k2: tube-controller gains (13); eta: η of (15) (see the module docstring).
         model_error_bound: bound on ``||f_truth - f_CW||`` added to w̄ [m/s^2].
         kappa_margin: κ̄ = kappa_margin * w̄ is reserved from the thrust for the tube controller.
-        terminal_braking, braking_fraction: the stopping-distance terminal constraint.
+        terminal_braking, braking_fraction: the stopping-distance terminal constraints.
+        v_max: speed bound [m/s] of the state set Ξ_i (None: no bound).
+        safety_margin: [m] added to every keep-out distance (Jacobi-update margin).
         lyapunov_tolerance: [m^2] added to the Lyapunov rows.
         relax_on_failure: solve the relaxed NLP when the exact one fails.
         tube: run the tube controller κ (False: nominal DMPC applied open loop to the truth).
@@ -99,6 +112,8 @@ class TubeRDMPCConfig:
     kappa_margin: float = 1.1
     terminal_braking: bool = True
     braking_fraction: float = 0.5
+    v_max: float | None = 2.5
+    safety_margin: float = 5.0
     lyapunov_tolerance: float = 1e-4
     relax_on_failure: bool = True
     tube: bool = True
@@ -108,6 +123,8 @@ class TubeRDMPCConfig:
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "v_max" and v is None:
+                continue
             if f.type in ("bool",):
                 if not isinstance(v, bool | np.bool_):
                     raise ValueError(f"TubeRDMPC option {f.name} must be a bool, got {v!r}")
@@ -120,7 +137,8 @@ class TubeRDMPCConfig:
                 fv = float(v)
             except (TypeError, ValueError):
                 raise ValueError(f"TubeRDMPC option {f.name} must be a number, got {v!r}") from None
-            zero_ok = f.name in ("beta", "gamma", "model_error_bound", "lyapunov_tolerance")
+            zero_ok = f.name in ("beta", "gamma", "model_error_bound", "lyapunov_tolerance",
+                                 "safety_margin")
             if not math.isfinite(fv) or fv < 0 or (fv == 0 and not zero_ok):
                 raise ValueError(f"TubeRDMPC option {f.name} must be finite and "
                                  f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
@@ -183,28 +201,38 @@ class TubeController:
 
 
 class _NominalNLP:
-    """The nominal DMPC problem (36)+(38) of one satellite as one CasADi/ipopt solver."""
+    """The nominal DMPC problem (36)+(38) of one satellite as one CasADi/ipopt solver.
+
+    Decision variables ``w = [v (3N), lambda (N), s (N), s_t (1)]``: the inputs scaled to the
+    unit ball (``u~ = u_nom v``), the slack of the Lyapunov rows, and two slacks that are fixed
+    at zero in the exact problem and free (L1-penalised) in the relaxed one: ``s_m`` softens the
+    collision rows of step m, ``s_t`` the terminal Lyapunov (38e), braking and velocity rows.
+    Parameters ``p = [x0, q_d, neighbour positions (K, N + 1, 3), neighbour terminal coast
+    displacements (K, 3), neighbour terminal velocities (K, 3), obstacle positions (N + 2, 3),
+    obstacle velocity (3), q_r]``.
+    """
 
     def __init__(self, cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int,
                  u_nom: float, mass: float, r_pair: float, r_obs: float, r_tgt: float) -> None:
         import casadi as ca
 
-        self.ca = ca
         self.N, self.K = horizon, k_slots
         self.u_nom = u_nom
         a, b = cw_matrices(n, dt)
-        self.a, self.b = a, b
         cal_a, cal_b = prediction_matrices(a, b, horizon)
         self.cal_a, self.cal_b = cal_a, cal_b
         N, K = horizon, k_slots
         v = ca.SX.sym("v", 3 * N)
         lam = ca.SX.sym("lam", N)
         s = ca.SX.sym("s", N)
+        s_t = ca.SX.sym("s_t", 1)
         x0 = ca.SX.sym("x0", 6)
         qd = ca.SX.sym("qd", 3)
         qn = ca.SX.sym("qn", 3 * (N + 1) * K)
         dn = ca.SX.sym("dn", 3 * K)
+        pn = ca.SX.sym("pn", 3 * K)
         qo = ca.SX.sym("qo", 3 * (N + 2))
+        po = ca.SX.sym("po", 3)
         qr = ca.SX.sym("qr", 3)
         u = u_nom * v
         xs = ca.mtimes(ca.DM(cal_a), x0) + ca.mtimes(ca.DM(cal_b), u)
@@ -213,17 +241,21 @@ class _NominalNLP:
         x_n = states[N]
         x_next = ca.mtimes(ca.DM(a), x_n)
         d_n = x_next[:3] - x_n[:3]
+        q_n, p_n, q_next = x_n[:3], x_n[3:], x_next[:3]
 
         def sq(e):
             return ca.sumsqr(e)
 
+        def nb_pos(j, m):
+            k = 3 * ((N + 1) * j + m)
+            return qn[k:k + 3]
+
         v_of = [cfg.alpha * sq(q[m] - qd) for m in range(N + 1)]
         v_scale = v_of[0] + 1.0
         cost = 0
-        for m in range(N):
-            um = u[3 * m:3 * m + 3]
-            cost += v_of[m] + cfg.beta * mass**2 * sq(um) + cfg.gamma * lam[m] ** 2
-        cost += _SLACK_WEIGHT * ca.sum1(s)
+        for m in range(N):                                           # (27)-(28)
+            cost += v_of[m] + cfg.beta * mass**2 * sq(u[3 * m:3 * m + 3]) + cfg.gamma * lam[m] ** 2
+        cost += _SLACK_WEIGHT * ca.sum1(s) + _TERMINAL_SLACK_WEIGHT * s_t
 
         g, lbg, ubg = [], [], []
 
@@ -233,35 +265,47 @@ class _NominalNLP:
             ubg.append(hi)
 
         inf = ca.inf
-        for m in range(N):                                         # thrust (U ⊖ κ̄)
+        for m in range(N):                                           # thrust: U ⊖ sup κ
             add(sq(v[3 * m:3 * m + 3]) - 1.0, -inf, 0.0)
-        for m in range(N):                                         # Lyapunov decrease
+        for m in range(N):                                           # Lyapunov decrease (36)
             add((v_of[m + 1] - (1.0 - cfg.sigma + lam[m]) * v_of[m] - cfg.lyapunov_tolerance) / v_scale,
                 -inf, 0.0)
-        for m in range(1, N + 1):                                  # (34), (36)
+        for m in range(1, N + 1):                                    # (34) and the keep-outs
             for j in range(K):
-                qj = qn[3 * ((N + 1) * j + m):3 * ((N + 1) * j + m) + 3]
-                add((sq(q[m] - qj) - r_pair**2) / r_pair**2 + s[m - 1], 0.0, inf)
+                add((sq(q[m] - nb_pos(j, m)) - r_pair**2) / r_pair**2 + s[m - 1], 0.0, inf)
             add((sq(q[m] - qo[3 * m:3 * m + 3]) - r_obs**2) / r_obs**2 + s[m - 1], 0.0, inf)
             add((sq(q[m] - qr) - r_tgt**2) / r_tgt**2 + s[m - 1], 0.0, inf)
-        step_len = ca.sqrt(sq(d_n) + 1e-6)                          # ||∫ f dt|| over one Δt
-        q_n, q_next = x_n[:3], x_next[:3]
-        for j in range(K):                                         # terminal set (38)
-            qj = qn[3 * ((N + 1) * j + N):3 * ((N + 1) * j + N) + 3]
-            add((ca.sqrt(sq(q_n - qj)) - step_len - r_pair) / r_pair + s[N - 1], 0.0, inf)
-            add((sq(q_next - qj - dn[3 * j:3 * j + 3]) - r_pair**2) / r_pair**2 + s[N - 1], 0.0, inf)
+        if cfg.v_max is not None:                                    # state set Ξ_i: speed bound
+            for m in range(1, N + 1):
+                add((sq(states[m][3:]) - cfg.v_max**2) / cfg.v_max**2 - s_t, -inf, 0.0)
+        step_len = ca.sqrt(sq(d_n) + 1e-6)                            # ||∫ f dt|| over one Δt
         qo_n, qo_next = qo[3 * N:3 * N + 3], qo[3 * (N + 1):3 * (N + 1) + 3]
+        for j in range(K):                                           # terminal set (38)
+            add((ca.sqrt(sq(q_n - nb_pos(j, N))) - step_len - r_pair) / r_pair + s[N - 1], 0.0, inf)
+            add((sq(q_next - nb_pos(j, N) - dn[3 * j:3 * j + 3]) - r_pair**2) / r_pair**2 + s[N - 1],
+                0.0, inf)
         add((ca.sqrt(sq(q_n - qo_n)) - step_len - r_obs) / r_obs + s[N - 1], 0.0, inf)
         add((sq(q_next - qo_next) - r_obs**2) / r_obs**2 + s[N - 1], 0.0, inf)
         add((ca.sqrt(sq(q_n - qr)) - step_len - r_tgt) / r_tgt + s[N - 1], 0.0, inf)
         add((sq(q_next - qr) - r_tgt**2) / r_tgt**2 + s[N - 1], 0.0, inf)
-        add((sq(q_next - qd) - sq(q_n - qd) - cfg.lyapunov_tolerance) / v_scale, -inf, 0.0)
-        if cfg.terminal_braking:
+        add((sq(q_next - qd) - sq(q_n - qd) - cfg.lyapunov_tolerance) / v_scale - s_t, -inf, 0.0)
+        if cfg.terminal_braking:                                     # stopping-distance rows
             a_b = cfg.braking_fraction * u_nom
-            add(sq(x_n[3:]) - 2.0 * a_b * ca.sqrt(sq(q_n - qd) + cfg.lyapunov_tolerance), -inf, 0.0)
+            add(sq(p_n) - 2.0 * a_b * ca.sqrt(sq(q_n - qd) + cfg.lyapunov_tolerance) - s_t, -inf, 0.0)
 
-        w = ca.vertcat(v, lam, s)
-        p = ca.vertcat(x0, qd, qn, dn, qo, qr)
+            def closing_ok(q_b, p_b, radius):
+                rel = q_n - q_b
+                dist = ca.sqrt(sq(rel) + 1e-6)
+                v_c = -ca.dot(p_n - p_b, rel) / dist                   # closing speed
+                return v_c * ca.sqrt(v_c**2 + 1e-6) - 2.0 * a_b * (dist - radius) - s_t
+
+            for j in range(K):
+                add(closing_ok(nb_pos(j, N), pn[3 * j:3 * j + 3], r_pair), -inf, 0.0)
+            add(closing_ok(qo_n, po, r_obs), -inf, 0.0)
+            add(closing_ok(qr, ca.DM.zeros(3), r_tgt), -inf, 0.0)
+
+        w = ca.vertcat(v, lam, s, s_t)
+        p = ca.vertcat(x0, qd, qn, dn, pn, qo, po, qr)
         nlp = {"x": w, "p": p, "f": cost, "g": ca.vertcat(*g)}
         opts = {
             "print_time": False,
@@ -276,14 +320,14 @@ class _NominalNLP:
         self.solver = ca.nlpsol("tube_rdmpc", "ipopt", nlp, opts)
         self.lbg = np.array(lbg, dtype=float)
         self.ubg = np.array(ubg, dtype=float)
-        self.n_w = 5 * N
+        self.n_w = 5 * N + 1
         self.sigma = cfg.sigma
 
     def bounds(self, relaxed: bool) -> tuple[np.ndarray, np.ndarray]:
         N = self.N
-        lb = np.concatenate([-np.ones(3 * N), np.zeros(N), np.zeros(N)])
+        lb = np.concatenate([-np.ones(3 * N), np.zeros(N), np.zeros(N + 1)])
         ub = np.concatenate([np.ones(3 * N), np.full(N, 1e3 if relaxed else self.sigma),
-                             np.full(N, np.inf if relaxed else 0.0)])
+                             np.full(N + 1, np.inf if relaxed else 0.0)])
         return lb, ub
 
     def solve(self, params: np.ndarray, w0: np.ndarray, relaxed: bool) -> tuple[np.ndarray, bool, str]:
@@ -352,9 +396,9 @@ class TubeRDMPC:
         self.k_slots = max(self.m - 1, 1)
         self.a, self.b = cw_matrices(self.n, sc.dt)
         self.nlp = _NominalNLP(cfg, self.n, sc.dt, self.N, self.k_slots, self.u_nom, sc.mass,
-                               r_pair=sc.pair_distance + 2 * self.eps_bar,
-                               r_obs=sc.obstacle_distance + self.eps_bar,
-                               r_tgt=sc.target_distance + self.eps_bar)
+                               r_pair=sc.pair_distance + 2 * self.eps_bar + cfg.safety_margin,
+                               r_obs=sc.obstacle_distance + self.eps_bar + cfg.safety_margin,
+                               r_tgt=sc.target_distance + self.eps_bar + cfg.safety_margin)
         self.tube = TubeController(self.n, sc.physics_dt, cfg.k1, cfg.k2)
         self.tube.enabled = cfg.tube
         self.info: dict[str, Any] = {}
@@ -412,6 +456,7 @@ class TubeRDMPC:
         pred = self._shifted()
         pred[:, 0] = nominal
         pred_q = pred[..., :3]
+        pred_p_end = pred[:, -1, 3:]                                   # (M, 3) terminal velocities
         coast = (pred[:, -1] @ self.a.T)[:, :3] - pred[:, -1, :3]     # (M, 3)
         q_o, p_o = env.obstacle_state()
         qo = q_o + np.arange(N + 2)[:, None] * sc.dt * p_o
@@ -426,11 +471,14 @@ class TubeRDMPC:
         for i, agent in enumerate(self.agents):
             qn = np.full((K, N + 1, 3), _FAR)
             dn = np.zeros((K, 3))
+            pn = np.zeros((K, 3))
             nbrs = np.nonzero(adj[i])[0][:K]
             for slot, j in enumerate(nbrs):
                 qn[slot] = pred_q[j]
                 dn[slot] = coast[j]
-            params = np.concatenate([nominal[i], targets[i], qn.ravel(), dn.ravel(), qo.ravel(), q_r])
+                pn[slot] = pred_p_end[j]
+            params = np.concatenate([nominal[i], targets[i], qn.ravel(), dn.ravel(), pn.ravel(),
+                                     qo.ravel(), p_o, q_r])
             w0 = self.warm[i]
             start = time.perf_counter()
             w, ok, status = self.nlp.solve(params, w0, relaxed=False)
@@ -447,16 +495,19 @@ class TubeRDMPC:
             if not ok:
                 self.info["fallbacks"] += 1
                 kind = "fallback"
-                prev = self.warm[i][: 3 * N]
-                v = np.concatenate([prev[3:], np.zeros(3)])          # shifted plan, ρ = 0 appended
-                w = np.concatenate([v, np.zeros(2 * N)])
+                v = self.warm[i][: 3 * N].copy()     # the shifted previous plan, ρ = 0 appended (29)
+                speed = np.linalg.norm(nominal[i, 3:])
+                if not np.any(v[:3]) and speed > 1e-3:  # plan exhausted: brake instead of coasting
+                    v[:3] = -self.cfg.braking_fraction * nominal[i, 3:] / speed
+                w = np.concatenate([v, np.zeros(2 * N + 1)])
             v = v.reshape(N, 3)
             norms = np.linalg.norm(v, axis=1, keepdims=True)
             v = (v / np.maximum(norms, 1.0)).ravel()                 # exact unit-ball feasibility
             new_plans[i] = self.nlp.states(nominal[i], v)
             lam0[i] = w[3 * N]
             # warm start of the next decision: shift by one step, ρ = 0 at the end
-            self.warm[i] = np.concatenate([v[3:], np.zeros(3), w[3 * N + 1:4 * N], [0.0], np.zeros(N)])
+            self.warm[i] = np.concatenate([v[3:], np.zeros(3), w[3 * N + 1:4 * N], [0.0],
+                                           np.zeros(N + 1)])
             u0 = self.u_nom * v[:3]
             actions[agent] = u0 / sc.u_max
             status_row.append(kind)

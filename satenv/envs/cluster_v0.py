@@ -69,7 +69,7 @@ Termination / truncation
 ------------------------
 Terminated (all agents) when a safety distance is violated at any physics step (only if
 ``terminate_on_collision``; satellites ``< 2 r_s = 200 m`` apart, ``< r_s + r_o = 400 m`` from the
-obstacle or ``< r_s + r_t = 200 m`` from the target spacecraft) or when a satellite leaves the
+obstacle or ``< r_s + r_t = 100 m`` from the target spacecraft) or when a satellite leaves the
 ball of radius ``max_distance``. Truncated after ``max_steps`` decisions (400, i.e. 2000 s).
 
 Infos (per agent, SI units; distances are minima over the physics steps of the period)

@@ -21,9 +21,13 @@ Choices the paper leaves open (documented here, overridable):
   ``sup ||w|| = 1.68 w_bar`` (:attr:`ClusterScenario.disturbance_bound`).
 * **Safety distances.** Satellites must stay ``2 r_s = 200 m`` apart; eq. (31) keeps a
   satellite ``r_s + r_o = 400 m`` from the obstacle (``r_o = 300 m`` is the obstacle's safety
-  radius, added to the satellite's ``r_s``); the paper gives no value for the target spacecraft,
-  which we treat as one more spacecraft of safety radius ``target_radius = 100 m``: keep-out
-  ``r_s + r_t = 200 m`` (the targets are 300 m from it, so they satisfy it with 100 m to spare).
+  radius, added to the satellite's ``r_s``). li2022 gives no size for the target spacecraft (its
+  constraint set (36) does not even list it); we keep satellites ``r_s + r_t`` from it with
+  ``target_radius = r_t = 0``: the satellite's own 100 m safety radius, the target treated as a
+  point. The targets lie 300 m from it. With ``r_t = 100 m`` (a 200 m keep-out) the satellites
+  that reach their targets first, 200 m apart on the 300 m sphere, and the keep-out leave no
+  passage for the others (only 95 m between the keep-out and the parked ring): in our case-1 run
+  the tube RDMPC then left 4 of 10 satellites trapped or looping for the whole 2000 s.
 * **Obstacle and target spacecraft** move kinematically in the LVLH frame (straight line at
   constant velocity; fixed), as the paper describes them; they are not propagated with orbital
   dynamics.
@@ -163,7 +167,7 @@ class ClusterScenario:
     obstacle_velocity: tuple[float, float, float] = (-0.4, 0.4, 0.4)
     sat_radius: float = 100.0
     obstacle_radius: float = 300.0
-    target_radius: float = 100.0
+    target_radius: float = 0.0
     comm_range: float = 1000.0
     n_neighbours: int = 4
     mass: float = 50.0

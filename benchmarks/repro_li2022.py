@@ -1,0 +1,418 @@
+"""Reproduce li2022's claims: tube-based robust DMPC vs APF on the 10-satellite cluster.
+
+``python -m benchmarks.reproduce li2022 --out FILE.json [--plots DIR]`` (both cases) or
+``python -m benchmarks.repro_li2022 --case 1 --out FILE.json [--plots DIR]``.
+
+Runs ``satenv.cluster_v0(preset="li2022-case<k>", terminate_on_collision=False)`` (so a safety
+violation is counted, not hidden by an early end) with ``baselines.TubeRDMPC`` and
+``baselines.APF`` through ``satenv.rollout`` for ``max_steps`` decisions (400 = 2000 s), and a
+tube-only experiment for Fig. 13 (coasting nominal + κ on the truth for one period of the
+disturbance, k1 in {1, 2, 4}, k2 = 4). One row per controller and case:
+
+``convergence_time_s`` (all satellites within 1 m of their targets and staying there; ``None``
+if not reached), ``final_error_m`` (max over satellites), ``min_pair_distance_m``,
+``min_obstacle_distance_m``, ``min_target_distance_m`` (centre distances, minima over the
+physics steps), ``max_thrust_N``, ``delta_v_total_mps``, ``collisions`` ((decision, satellite)
+safety flags), ``solve_ms_median`` (per satellite solve; APF: compute time per decision / M),
+``max_tube_error_m`` (``||q - q~||``, RDMPC), plus fallback / relaxed-solve counts.
+
+Paper claims checked (li2022 §4.3): RDMPC converges in about 1000 s (target: <= 1500 s) to about
+0.071 m (target: final error <= 0.071 m), no collisions, thrust <= 1 N; APF collision-free and
+within 1 N too, but slower (later convergence, or none) and less accurate (larger final error).
+
+Figures (``--plots DIR``): analogues of Fig. 5 (3-D trajectories, actual and nominal), Fig. 13
+(tube error vs k1 with the bound (15)), Fig. 14 (κ of Sat 1), Fig. 15/16 (distance to target),
+Fig. 17/18 (to the obstacle), Fig. 19/20 (to the nearest satellite), Fig. 21/22 (to the target
+spacecraft), Fig. 23/24 (thrust of Sat 1), RDMPC left / APF right.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PAPER = "li2022"
+CASES = (1, 2)
+CONTROLLERS = ("tube_rdmpc", "apf")
+CLAIMS = {"convergence_time_s": 1000.0, "accuracy_m": 0.071, "thrust_N": 1.0}
+TARGETS = {"rdmpc_convergence_time_max_s": 1500.0, "rdmpc_final_error_max_m": 0.071,
+           "thrust_max_N": 1.0}
+
+
+def _preset(case: int) -> str:
+    if case not in CASES:
+        raise ValueError(f"case must be 1 or 2 (li2022 Table 2 / Table 3), got {case!r}")
+    return f"li2022-case{case}"
+
+
+def make_env(case: int, **overrides):
+    from satenv.envs.cluster_v0 import parallel_env
+
+    return parallel_env(preset=_preset(case), terminate_on_collision=False, **overrides)
+
+
+def make_policy(controller: str, env, **options):
+    if controller == "tube_rdmpc":
+        from baselines.tube_rdmpc import TubeRDMPC
+
+        return TubeRDMPC(env, **options)
+    if controller == "apf":
+        from baselines.apf import APF
+
+        return APF(env, **options)
+    raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+
+
+def run_controller(case: int, controller: str, seed: int = 0, max_steps: int | None = None,
+                   env_overrides: dict | None = None, policy_options: dict | None = None):
+    """One episode; returns ``(trajectory, env, policy, wall_time_s)``."""
+    from satenv.rollout import rollout
+
+    env = make_env(case, **(env_overrides or {}))
+    policy = make_policy(controller, env, **(policy_options or {}))
+    start = time.perf_counter()
+    traj = rollout(env, policy, seed=seed, max_steps=max_steps)
+    return traj, env, policy, time.perf_counter() - start
+
+
+def _none_if_nan(v: float) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+def summarise(traj, env, policy, controller: str, case: int, wall: float) -> dict[str, Any]:
+    """The reproduction row of one episode (see the module docstring)."""
+    from satenv import metrics
+
+    sc = env.scenario
+    m = sc.n_agents
+    ttc = metrics.time_to_converge(traj, tol=1.0)
+    final = metrics.final_position_error(traj)
+    info = policy.info
+    if controller == "tube_rdmpc":
+        solve = np.asarray(info["solve_ms"], dtype=float)
+    else:
+        solve = np.asarray(traj.compute_time, dtype=float) * 1e3 / m
+    row = {
+        "controller": controller,
+        "case": case,
+        "convergence_time_s": _none_if_nan(float(np.max(ttc))) if np.all(np.isfinite(ttc)) else None,
+        "convergence_time_per_sat_s": [_none_if_nan(v) for v in ttc.tolist()],
+        "final_error_m": float(np.max(final)),
+        "final_error_per_sat_m": final.tolist(),
+        "satellites_within_1m_at_end": int(np.sum(final <= 1.0)),
+        "min_pair_distance_m": float(np.min(traj.info["pair_distance"])),
+        "min_obstacle_distance_m": float(np.min(traj.info["obstacle_distance"])),
+        "min_target_distance_m": float(np.min(traj.info["target_distance"])),
+        "max_thrust_N": float(np.max(traj.info["thrust_peak"]) * sc.mass),
+        "delta_v_total_mps": float(np.sum(metrics.delta_v_total(traj))),
+        "collisions": metrics.collisions(traj),
+        "solve_ms_median": float(np.median(solve)) if solve.size else 0.0,
+        "solve_ms_p90": float(np.percentile(solve, 90)) if solve.size else 0.0,
+        "fallbacks": int(info.get("fallbacks", 0)),
+        "sim_time_s": float(traj.t[-1]),
+        "wall_time_s": float(wall),
+    }
+    if controller == "tube_rdmpc":
+        row.update({"max_tube_error_m": float(info["tube_error_max_m"]),
+                    "tube_bound_m": float(info["tube_bound_m"]),
+                    "relaxed_solves": int(info["relaxed"]), "nlp_solves": int(info["solves"])})
+    else:
+        row.update({"max_tube_error_m": None})
+    return row
+
+
+def tube_experiment(k1_values=(1.0, 2.0, 4.0), k2: float = 4.0, steps: int = 64) -> dict[str, Any]:
+    """Fig. 13: coasting nominal + κ on the J2 + drag + w truth for one disturbance period.
+
+    Returns per k1 the largest ``||q - q~||`` over all satellites, Sat 1's series, and the bounds:
+    (15) with eta = 1 and with the smallest eta Theorem 1 allows (1 / (4 k2)), and the exact
+    peak gain ``w_bar / (1 + k1)`` of the κ of eq. (13).
+    """
+    from baselines.tube_rdmpc import TubeController
+
+    out: dict[str, Any] = {"k2": k2, "steps": steps, "runs": []}
+    for k1 in k1_values:
+        env = make_env(1, max_steps=steps)
+        env.reset(seed=0)
+        sc = env.scenario
+        tube = TubeController(sc.orbit.n, sc.physics_dt, k1=k1, k2=k2)
+        tube.sync(env.state()[:6 * sc.n_agents].reshape(sc.n_agents, 6), 0.0)
+        env.set_inner_loop(tube)
+        for _ in range(steps):
+            env.step({a: np.zeros(3) for a in env.agents})
+        eps = np.array(tube.eps)
+        w = sc.disturbance_bound
+        out["runs"].append({
+            "k1": k1, "max_error_m": float(eps.max()),
+            "bound_15_eta1_m": math.sqrt(1.0 / k1) * w,
+            "bound_15_eta_min_m": math.sqrt(1.0 / (4.0 * k2) / k1) * w,
+            "exact_peak_m": w / (1.0 + k1),
+            "sat1_error_m": eps[:, 0].tolist(), "dt": sc.physics_dt,
+            "sat1_kappa_N": (np.array(tube.kappa)[:, 0] * sc.mass).tolist(),
+        })
+        out["disturbance_bound_mps2"] = w
+    return out
+
+
+def check_claims(rows: list[dict]) -> list[dict[str, Any]]:
+    """Each paper claim per case: measured value, target, met?"""
+    checks = []
+    for case in sorted({r["case"] for r in rows}):
+        by = {r["controller"]: r for r in rows if r["case"] == case}
+        rd, apf = by.get("tube_rdmpc"), by.get("apf")
+
+        def add(claim, measured, target, met, case=case):
+            checks.append({"case": case, "claim": claim, "measured": measured, "target": target,
+                           "met": bool(met)})
+
+        if rd is not None:
+            ct = rd["convergence_time_s"]
+            add("RDMPC converges in about 1000 s", ct, f"<= {TARGETS['rdmpc_convergence_time_max_s']:.0f} s",
+                ct is not None and ct <= TARGETS["rdmpc_convergence_time_max_s"])
+            add("RDMPC accuracy about 0.071 m", rd["final_error_m"], "<= 0.071 m",
+                rd["final_error_m"] <= TARGETS["rdmpc_final_error_max_m"])
+            add("RDMPC no collisions", rd["collisions"], 0, rd["collisions"] == 0)
+            add("RDMPC thrust within 1 N", rd["max_thrust_N"], "<= 1 N",
+                rd["max_thrust_N"] <= TARGETS["thrust_max_N"] * (1 + 1e-9))
+        if apf is not None:
+            add("APF no collisions", apf["collisions"], 0, apf["collisions"] == 0)
+            add("APF thrust within 1 N", apf["max_thrust_N"], "<= 1 N",
+                apf["max_thrust_N"] <= TARGETS["thrust_max_N"] * (1 + 1e-9))
+        if rd is not None and apf is not None:
+            ct_r, ct_a = rd["convergence_time_s"], apf["convergence_time_s"]
+            slower = ct_r is not None and (ct_a is None or ct_a > ct_r)
+            add("APF slower than RDMPC", {"rdmpc": ct_r, "apf": ct_a}, "apf > rdmpc", slower)
+            add("APF less accurate than RDMPC", {"rdmpc": rd["final_error_m"], "apf": apf["final_error_m"]},
+                "apf > rdmpc", apf["final_error_m"] > rd["final_error_m"])
+    return checks
+
+
+def run(case: int | None = None, out: str | Path | None = None, plots_dir: str | Path | None = None,
+        seed: int = 0, max_steps: int | None = None, controllers=CONTROLLERS,
+        policy_options: dict[str, dict] | None = None, tube: bool = True) -> dict[str, Any]:
+    """Run the reproduction for ``case`` (1, 2, or ``None`` for both); write JSON / figures."""
+    cases = CASES if case is None else (int(case),)
+    for c in cases:
+        _preset(c)
+    start = time.perf_counter()
+    rows, episodes = [], {}
+    for c in cases:
+        for ctrl in controllers:
+            traj, env, pol, wall = run_controller(c, ctrl, seed=seed, max_steps=max_steps,
+                                                  policy_options=(policy_options or {}).get(ctrl))
+            rows.append(summarise(traj, env, pol, ctrl, c, wall))
+            episodes[(c, ctrl)] = (traj, env, pol)
+    tube_res = tube_experiment() if tube else None
+    checks = check_claims(rows)
+    result: dict[str, Any] = {
+        "paper": PAPER, "cases": list(cases), "rows": rows, "claims": checks,
+        "pass": all(ch["met"] for ch in checks), "paper_claims": CLAIMS, "targets": TARGETS,
+        "seed": seed, "wall_time_s": time.perf_counter() - start,
+        "settings": {
+            "env": "cluster_v0(preset='li2022-case<k>', terminate_on_collision=False): J2 + drag "
+                   "truth, 500 km / 45 deg chief, w_bar = 0.1 N on 50 kg (0.002 m/s^2), dt 5 s, "
+                   "physics 0.25 s",
+            "policies": {c: dict((policy_options or {}).get(c) or {}) for c in controllers},
+        },
+    }
+    if tube_res is not None:
+        result["tube_experiment"] = {k: v for k, v in tube_res.items() if k != "runs"}
+        result["tube_experiment"]["runs"] = [
+            {k: v for k, v in r.items() if not k.startswith("sat1_")} for r in tube_res["runs"]]
+    if plots_dir is not None:
+        result["figures"] = [str(p) for p in save_figures(episodes, tube_res, Path(plots_dir))]
+    if out is not None:
+        out = Path(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(result, indent=2))
+    return result
+
+
+def reproduce(plots: str | Path | None = None, seed: int = 0, case: int | None = None) -> dict[str, Any]:
+    """The ``benchmarks.reproduce`` entry point (both cases unless ``case`` is given)."""
+    return run(case=case, plots_dir=plots, seed=seed)
+
+
+def _fmt(v, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """The rows and the claim checks as plain text."""
+    head = (f"{'case':>4} {'controller':>10} | {'t_conv[s]':>9} {'final[m]':>9} | {'pair[m]':>7} "
+            f"{'obst[m]':>7} {'tgt[m]':>7} | {'F_max[N]':>8} {'dv[m/s]':>8} {'coll':>4} | "
+            f"{'solve[ms]':>9} {'tube[m]':>8} {'fallb':>5} {'relax':>5}")
+    lines = [head, "-" * len(head)]
+    for r in result["rows"]:
+        lines.append(
+            f"{r['case']:>4} {r['controller']:>10} | {_fmt(r['convergence_time_s'], '9.0f')} "
+            f"{r['final_error_m']:9.4f} | {r['min_pair_distance_m']:7.1f} {r['min_obstacle_distance_m']:7.1f} "
+            f"{r['min_target_distance_m']:7.1f} | {r['max_thrust_N']:8.3f} {r['delta_v_total_mps']:8.2f} "
+            f"{r['collisions']:>4} | {r['solve_ms_median']:9.2f} {_fmt(r['max_tube_error_m'], '8.5f')} "
+            f"{r['fallbacks']:>5} {r.get('relaxed_solves', 0):>5}")
+    lines.append("")
+    for ch in result["claims"]:
+        lines.append(f"case {ch['case']}: {ch['claim']:<32} measured {ch['measured']!s:<40} "
+                     f"target {ch['target']!s:<14} {'met' if ch['met'] else 'NOT MET'}")
+    te = result.get("tube_experiment")
+    if te:
+        for r in te["runs"]:
+            lines.append(f"tube (15): k1 = {r['k1']:.0f}: max ||q - q~|| = {r['max_error_m']:.5f} m; "
+                         f"exact peak w/(1+k1) = {r['exact_peak_m']:.5f}; (15) eta=1: "
+                         f"{r['bound_15_eta1_m']:.5f}; (15) eta=1/(4k2): {r['bound_15_eta_min_m']:.5f}")
+    lines.append(f"overall: {'PASS' if result['pass'] else 'FAIL'} (wall time {result['wall_time_s']:.0f} s)")
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------------------------
+# Figures
+# ----------------------------------------------------------------------------------------------
+def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]:
+    """Analogues of li2022 Fig. 5, 13-24 (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from satenv.render import draw_scene
+
+    out.mkdir(parents=True, exist_ok=True)
+    paths: list[Path] = []
+
+    def save(fig, name):
+        p = out / name
+        fig.savefig(p, bbox_inches="tight", dpi=100)
+        plt.close(fig)
+        paths.append(p)
+
+    cases = sorted({c for c, _ in episodes})
+    for c in cases:
+        for ctrl in CONTROLLERS:
+            if (c, ctrl) not in episodes:
+                continue
+            traj, env, pol = episodes[(c, ctrl)]
+            sc = env.scenario
+            fig = plt.figure(figsize=(7, 6))
+            ax = fig.add_subplot(projection="3d")
+            pos = traj.states[..., :3]
+            tmin = int(np.argmin(traj.info["obstacle_distance"].min(axis=1)))
+            scene = {"positions": pos[-1], "targets": sc.targets_array()[traj.info["target_index"][-1]],
+                     "labels": [f"s{i + 1}" for i in range(sc.n_agents)],
+                     "spheres": [(sc.obstacle_at(traj.t[tmin]), sc.obstacle_distance, "obstacle keep-out"),
+                                 (np.asarray(sc.target_spacecraft), sc.target_distance, "target keep-out")],
+                     "title": f"case {c}, {ctrl}: trajectories (obstacle at t = {traj.t[tmin]:.0f} s)"}
+            draw_scene(ax, scene, pos)
+            obs_path = sc.obstacle_at(traj.t)
+            ax.plot(obs_path[:, 0], obs_path[:, 1], obs_path[:, 2], "k--", lw=1, label="obstacle path")
+            if ctrl == "tube_rdmpc" and pol.history["nominal"]:
+                nom = np.array(pol.history["nominal"])[..., :3]
+                for i in range(sc.n_agents):
+                    ax.plot(nom[:, i, 0], nom[:, i, 1], nom[:, i, 2], ":", color="grey", lw=0.8)
+            save(fig, f"fig05_trajectories_case{c}_{ctrl}.png")
+
+        # Fig. 15-22: distances vs time, RDMPC left / APF right
+        panels = [("fig15_16", "tracking_error", "distance to target [m]", True),
+                  ("fig17_18", "obstacle_distance", "distance to obstacle [m]", False),
+                  ("fig19_20", "pair_distance", "distance to nearest satellite [m]", False),
+                  ("fig21_22", "target_distance", "distance to target spacecraft [m]", False)]
+        for name, key, label, is_err in panels:
+            fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+            for ax, ctrl in zip(axes, CONTROLLERS, strict=False):
+                if (c, ctrl) not in episodes:
+                    continue
+                traj, env, _ = episodes[(c, ctrl)]
+                sc = env.scenario
+                y = traj.info[key]
+                y = np.linalg.norm(y[..., :3], axis=-1) if is_err else y
+                for i in range(y.shape[1]):
+                    ax.plot(traj.t, y[:, i], lw=1, label=f"sat {i + 1}")
+                limit = {"obstacle_distance": sc.obstacle_distance, "pair_distance": sc.pair_distance,
+                         "target_distance": sc.target_distance}.get(key)
+                if limit is not None:
+                    ax.axhline(limit, color="r", ls="--", lw=1, label="safety distance")
+                if is_err:
+                    ax.set_yscale("log")
+                ax.set_title(f"case {c}, {ctrl}")
+                ax.set_xlabel("t [s]")
+                ax.grid(alpha=0.3)
+            axes[0].set_ylabel(label)
+            axes[-1].legend(fontsize=7, ncol=2)
+            save(fig, f"{name}_{key}_case{c}.png")
+
+        # Fig. 23/24: thrust of Sat 1
+        fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+        for ax, ctrl in zip(axes, CONTROLLERS, strict=False):
+            if (c, ctrl) not in episodes:
+                continue
+            traj, env, pol = episodes[(c, ctrl)]
+            sc = env.scenario
+            if ctrl == "tube_rdmpc" and pol.tube.u_total:
+                u = np.array(pol.tube.u_total)[:, 0] * sc.mass
+                t = np.arange(len(u)) * sc.physics_dt
+            else:
+                u = traj.info["accel"][1:, 0] * sc.mass
+                t = traj.t[:-1]
+            for k, axis in enumerate("xyz"):
+                ax.plot(t, u[:, k], lw=0.8, label=f"F_{axis}")
+            ax.axhline(sc.thrust_max, color="r", ls="--", lw=1)
+            ax.axhline(-sc.thrust_max, color="r", ls="--", lw=1)
+            ax.set_title(f"case {c}, {ctrl}: thrust of Sat 1")
+            ax.set_xlabel("t [s]")
+            ax.grid(alpha=0.3)
+        axes[0].set_ylabel("force [N]")
+        axes[-1].legend(fontsize=8)
+        save(fig, f"fig23_24_thrust_sat1_case{c}.png")
+
+    if tube_res is not None:
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4))
+        for r in tube_res["runs"]:
+            e = np.array(r["sat1_error_m"])
+            t = np.arange(len(e)) * r["dt"]
+            line, = ax1.plot(t, e * 1e3, lw=1, label=f"k1 = {r['k1']:.0f}")
+            ax1.axhline(r["bound_15_eta1_m"] * 1e3, color=line.get_color(), ls="--", lw=0.8)
+            ax1.axhline(r["bound_15_eta_min_m"] * 1e3, color=line.get_color(), ls=":", lw=0.8)
+            if r["k1"] == 2.0:
+                kap = np.array(r["sat1_kappa_N"])
+                for k, axis in enumerate("xyz"):
+                    ax2.plot(t, kap[:, k], lw=1, label=f"kappa_{axis}")
+        ax1.set_title("Fig. 13: ||q - q~|| of Sat 1 (dashed: (15) eta=1, dotted: eta=1/(4 k2))")
+        ax1.set_xlabel("t [s]")
+        ax1.set_ylabel("error [mm]")
+        ax1.legend()
+        ax1.grid(alpha=0.3)
+        ax2.set_title("Fig. 14: tube control force of Sat 1 (k1 = 2, k2 = 4)")
+        ax2.set_xlabel("t [s]")
+        ax2.set_ylabel("force [N]")
+        ax2.legend()
+        ax2.grid(alpha=0.3)
+        save(fig, "fig13_14_tube.png")
+    return paths
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.repro_li2022",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("--case", type=int, choices=CASES, default=None,
+                        help="1 (Table 2) or 2 (Table 3); default: both")
+    parser.add_argument("--out", type=Path, default=None, help="write the result JSON here")
+    parser.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) here")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--max-steps", type=int, default=None, help="decisions per episode (default 400)")
+    args = parser.parse_args(argv)
+    result = run(case=args.case, out=args.out, plots_dir=args.plots, seed=args.seed,
+                 max_steps=args.max_steps)
+    print(format_table(result))
+    if args.out is not None:
+        print(f"wrote {args.out}")
+    return 0 if result["pass"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
