@@ -102,13 +102,7 @@ from satenv.dynamics import (
     saturate_norm,
     sinusoid_disturbance,
 )
-from satenv.envs.base import (
-    BatchedCore,
-    FormationEnv,
-    SatenvError,
-    StepResult,
-    reject_unknown_kwargs,
-)
+from satenv.envs.base import BatchedCore, FormationEnv, SatenvError, StepResult, resolve_preset
 from satenv.scenarios.cluster import (
     DEFAULT_PRESET,
     PRESETS,
@@ -346,16 +340,7 @@ class ClusterEnv(FormationEnv):
     agent_prefix = "sat"
 
     def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, **kwargs) -> None:
-        if preset not in PRESETS:
-            raise SatenvError(f"cluster_v0: unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
-        allowed = set(ClusterScenario.__dataclass_fields__) - {"name"}
-        reject_unknown_kwargs(kwargs, allowed, "cluster_v0")
-        try:
-            scenario = resolve_scenario(preset, **kwargs)
-        except SatenvError:
-            raise
-        except ValueError as exc:
-            raise SatenvError(f"cluster_v0: {exc}") from None
+        scenario = resolve_preset("cluster_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode)
 
     def reset(self, seed: int | None = None, options: dict | None = None):

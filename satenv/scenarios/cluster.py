@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from satenv.dynamics import MODELS, R_EARTH, Orbit
+from satenv.scenarios import _fields
 
 __all__ = ["ClusterScenario", "PRESETS", "LI2022_TARGETS", "resolve_scenario", "sample_initial_state"]
 
@@ -80,34 +81,18 @@ ALLOCATIONS = ("hungarian", "fixed")
 
 
 def _rows(value: Any, name: str, min_rows: int = 1) -> tuple[tuple[float, float, float], ...]:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric (K, 3) array, got {value!r}") from None
-    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < min_rows or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be a finite (K, 3) array with K >= {min_rows} (one [x, y, z] "
-                         f"row per point, metres), got shape {arr.shape}")
-    return tuple(tuple(float(v) for v in row) for row in arr)
+    arr = _fields.array(value, name)
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < min_rows:
+        raise ValueError(f"{name} must be a (K, 3) array with K >= {min_rows} (one [x, y, z] row per "
+                         f"point, metres), got shape {arr.shape}")
+    return _fields.nested(arr)
 
 
 def _vec3(value: Any, name: str) -> tuple[float, float, float]:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric 3-vector [x, y, z], got {value!r}") from None
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be a finite 3-vector [x, y, z], got {value!r}")
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
+    return _fields.vector(value, name, 3)
 
 
-def _number(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
-    return v
+_number = _fields.number
 
 
 def _integer(value: Any, name: str, minimum: int) -> int:
