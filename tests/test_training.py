@@ -186,6 +186,11 @@ def test_look_ahead_penalty():
     np.testing.assert_allclose(s.closest_approach_penalty(st), [[0.0, 0.0, 0.0]])
     st[0, 1, :3], st[0, 1, 3:] = [7, 0, 0], 0.0  # at rest, 7 m apart: ((8 - 7) / 2)^2
     np.testing.assert_allclose(s.closest_approach_penalty(st), [[0.25, 0.25, 0.0]])
+    gated = RewardShaping(anticipation=1.0, anticipation_distance=8.0, anticipation_width=2.0,
+                          anticipation_horizon=2.0, anticipation_speed=4.0)
+    np.testing.assert_allclose(gated.closest_approach_penalty(st), 0.0)  # at rest: no closing speed
+    st[0, 1, 3:] = [-2.0, 0, 0]  # closing at 2 m/s (half of anticipation_speed), contact ahead
+    np.testing.assert_allclose(gated.closest_approach_penalty(st), [[0.5, 0.5, 0.0]])
 
 
 def test_features_and_action_map_are_reapplied_at_inference(tmp_path):

@@ -23,7 +23,10 @@ target. ``proximity`` is a smooth penalty before contact (the env's collision pe
 ``collision`` re-adds one when ``env_weight = 0``). ``anticipation`` looks ahead: ``d_cpa_ij`` is
 the closest-approach distance of agents i and j over the next ``anticipation_horizon`` seconds
 if both keep their velocity (positions and velocities from ``info["state"][..., :6]``), so fast
-crossings are penalised before the contact.
+crossings are penalised before the contact. With ``anticipation_speed > 0`` the pair's penalty is
+multiplied by ``clip(closing_speed / anticipation_speed, 0, 1)`` (closing speed = rate at which
+the distance shrinks), so slow neighbours holding a tight formation are not penalised while a
+fast crossing is, even with a large ``anticipation_distance``.
 
 Observation features: ``symlog_scale > 0`` appends ``sign(x) log1p(|x| symlog_scale)`` of the
 first ``symlog_dims`` observation entries (for platoon_v0, entries 0-5 are the tracking error in
@@ -64,6 +67,7 @@ class RewardShaping:
     anticipation_distance: float = 8.0
     anticipation_width: float = 2.0
     anticipation_horizon: float = 2.0
+    anticipation_speed: float = 0.0
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -114,6 +118,10 @@ class RewardShaping:
         t = np.clip(-np.sum(p * v, axis=-1) / np.maximum(vv, 1e-12), 0.0, self.anticipation_horizon)
         d = np.linalg.norm(p + v * t[..., None], axis=-1)
         pen = np.clip((self.anticipation_distance - d) / self.anticipation_width, 0.0, 1.0) ** 2
+        if self.anticipation_speed > 0:
+            dist = np.maximum(np.linalg.norm(p, axis=-1), 1e-9)
+            closing = -np.sum(p * v, axis=-1) / dist
+            pen = pen * np.clip(closing / self.anticipation_speed, 0.0, 1.0)
         m = state.shape[-2]
         pen[..., np.arange(m), np.arange(m)] = 0.0
         return pen.sum(axis=-1)
