@@ -405,6 +405,12 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
     return paths
 
 
+def add_arguments(parser) -> None:
+    """``benchmarks.reproduce li2022`` options: ``--case 1|2`` (default: both)."""
+    parser.add_argument("--case", type=int, choices=CASES, default=None,
+                        help="li2022 case (Table 2 = 1, Table 3 = 2); default: both")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.repro_li2022",
                                      description=__doc__.splitlines()[0])
