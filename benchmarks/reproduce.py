@@ -49,15 +49,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="write the result JSON here")
     parser.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) in this directory")
     parser.add_argument("--seed", type=int, default=0, help="seed of the env and the policy (default 0)")
-    known, _ = parser.parse_known_args(argv)
-    try:
-        module = load(known.paper)
-    except ValueError as exc:
-        parser.error(str(exc))
-    base = set(vars(known))
-    if hasattr(module, "add_arguments"):
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("paper", nargs="?")
+    known, _ = pre.parse_known_args(argv)
+    base = {"paper", "out", "plots", "seed"}
+    module = None
+    if known.paper is not None and not known.paper.startswith("-"):
+        try:
+            module = load(known.paper)
+        except ValueError as exc:
+            parser.error(str(exc))
+    if module is not None and hasattr(module, "add_arguments"):
         module.add_arguments(parser)
     args = parser.parse_args(argv)
+    module = module or load(args.paper)
     extra = {k: v for k, v in vars(args).items() if k not in base}
     result = module.reproduce(plots=args.plots, seed=args.seed, **extra)
     print(module.format_table(result))
