@@ -27,6 +27,7 @@ PAPERS: dict[str, str] = {
     "pereira2023": "benchmarks.repro_pereira2023",
     "pereira2022-servicing": "benchmarks.repro_servicing",
     "kannan2022": "benchmarks.repro_kannan2022",
+    "li2022": "benchmarks.repro_li2022",
 }
 """Paper name -> module implementing ``reproduce`` and ``format_table``."""
 
