@@ -241,3 +241,16 @@ def test_rllib_missing_ray_message(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", fake_import)
     with pytest.raises(SystemExit, match=r"satenv\[rllib\]"):
         rllib_train.main(["--iterations", "1"])
+
+
+def test_shipped_platoon_policy_solves_a_held_out_seed():
+    from satenv.envs.platoon_v0 import parallel_env
+    from satenv.metrics import summary
+
+    folder = training.POLICIES_DIR / "platoon_tplf_ppo"
+    meta = json.loads((folder / "env.json").read_text())
+    env = parallel_env(**meta["eval_env_kwargs"])
+    policy = training.load(folder, env=env)
+    s = summary(rollout(env, policy, seed=20001))
+    assert s["success"] and s["collisions"] == 0 and s["steps"] == 180
+    assert s["final_error_m"] < 1.0 and s["rmse"] < 100.0
