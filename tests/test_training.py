@@ -66,7 +66,7 @@ def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     assert (run / "best" / "model.zip").is_file()
 
     # load -> act reproduces the in-memory model with the saved normalisation
-    policy = training.load(final, env=ToyEnv())
+    policy = training.load(final, env=ToyEnv(max_steps=10))
     env = ToyEnv(max_steps=10)
     obs, _ = env.reset(seed=0)
     act = policy.act(obs)
@@ -199,7 +199,7 @@ def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
     cfg = _cfg(tmp_path, obs_symlog_scale=10.0, obs_symlog_dims=3, eval_every=0, checkpoint_every=0,
                action_power=3.0, reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
     final = train(cfg)
-    policy = training.load(final, env=ToyEnv())
+    policy = training.load(final, env=ToyEnv(max_steps=10))
     assert policy.model.observation_space.shape == (9,) and policy.obs_shape == (6,)
     env = ToyEnv()
     obs, _ = env.reset(seed=0)
@@ -214,7 +214,6 @@ def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
 
 
 @pytest.mark.rllib
-@pytest.mark.slow
 def test_rllib_one_iteration(tmp_path):
     pytest.importorskip("ray.rllib", reason="ray[rllib] not installed")
     from training.rllib_train import RLlibConfig, run
@@ -254,3 +253,5 @@ def test_shipped_platoon_policy_solves_a_held_out_seed():
     s = summary(rollout(env, policy, seed=20001))
     assert s["success"] and s["collisions"] == 0 and s["steps"] == 180
     assert s["final_error_m"] < 1.0 and s["rmse"] < 100.0
+    with pytest.warns(UserWarning, match="topology='PLF'"):  # same spaces, other scenario
+        training.load(folder, env=parallel_env(randomize=True))

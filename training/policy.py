@@ -18,6 +18,7 @@ anywhere a scripted baseline is (``satenv.rollout.rollout``, the scoreboard).
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -119,7 +120,30 @@ class LearnedPolicy:
         return {a: actions[i] for i, a in enumerate(agents)}
 
     def check_env(self, env: Any) -> None:
-        """Raise :class:`PolicyLoadError` if ``env``'s per-agent spaces differ from the policy's."""
+        """Raise :class:`PolicyLoadError` if ``env``'s per-agent spaces differ from the policy's.
+
+        Also warns (``UserWarning``) when ``env`` is another env than the one trained on, or its
+        scenario differs from the training kwargs (same spaces, but out of distribution).
+        """
+        trained_on = self.meta.get("env_name")
+        name = env.metadata.get("name") if hasattr(env, "metadata") else None
+        if trained_on and name and trained_on != name:
+            warnings.warn(f"policy trained on {trained_on}, used on {name}", stacklevel=3)
+        scenario = getattr(env, "scenario", None)
+        mismatched = []
+        for key, value in (self.meta.get("eval_env_kwargs") or {}).items():
+            if scenario is None or not hasattr(scenario, key):
+                continue
+            have = getattr(scenario, key)
+            try:
+                same = np.array_equal(np.asarray(have, dtype=float), np.asarray(value, dtype=float))
+            except (TypeError, ValueError):
+                same = have == value
+            if not same:
+                mismatched.append(f"{key}={have!r} (trained with {value!r})")
+        if mismatched:
+            warnings.warn("env scenario differs from the policy's training/evaluation setting: "
+                          + ", ".join(mismatched), stacklevel=3)
         for agent in env.possible_agents:
             o, a = env.observation_space(agent).shape, env.action_space(agent).shape
             if tuple(o) != self.obs_shape or tuple(a) != self.action_shape:
