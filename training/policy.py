@@ -125,6 +125,14 @@ class LearnedPolicy:
         Also warns (``UserWarning``) when ``env`` is another env than the one trained on, or its
         scenario differs from the training kwargs (same spaces, but out of distribution).
         """
+        for agent in env.possible_agents:
+            o, a = env.observation_space(agent).shape, env.action_space(agent).shape
+            if tuple(o) != self.obs_shape or tuple(a) != self.action_shape:
+                raise PolicyLoadError(
+                    f"policy expects observations {self.obs_shape} / actions {self.action_shape}, but "
+                    f"{agent} of {env.metadata.get('name', type(env).__name__)} has {tuple(o)} / {tuple(a)}; "
+                    f"the policy was trained on {self.meta.get('env_id', '?')} with kwargs "
+                    f"{self.meta.get('env_kwargs', {})}")
         trained_on = self.meta.get("env_name")
         name = env.metadata.get("name") if hasattr(env, "metadata") else None
         if trained_on and name and trained_on != name:
@@ -144,14 +152,6 @@ class LearnedPolicy:
         if mismatched:
             warnings.warn("env scenario differs from the policy's training/evaluation setting: "
                           + ", ".join(mismatched), stacklevel=3)
-        for agent in env.possible_agents:
-            o, a = env.observation_space(agent).shape, env.action_space(agent).shape
-            if tuple(o) != self.obs_shape or tuple(a) != self.action_shape:
-                raise PolicyLoadError(
-                    f"policy expects observations {self.obs_shape} / actions {self.action_shape}, but "
-                    f"{agent} of {env.metadata.get('name', type(env).__name__)} has {tuple(o)} / {tuple(a)}; "
-                    f"the policy was trained on {self.meta.get('env_id', '?')} with kwargs "
-                    f"{self.meta.get('env_kwargs', {})}")
 
 
 def features_from_config(config: dict[str, Any]):
