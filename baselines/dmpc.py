@@ -226,17 +226,18 @@ class OneHopDMPC:
         q, w = _stack_weights(sc, hz)
         btq = cb.T * q[None, :]
         btqb, btqa = btq @ cb, btq @ ca
-        ed_bar = np.tile(np.asarray(sc.desired_error), hz)
-        btq_ed = btq @ ed_bar
         nf = topo.n_followers
         c = topo.gains.astype(float)
         alpha = np.asarray(sc.alpha, dtype=float)
         self.c = c
+        # Target of each neighbourhood error over the horizon: (g_f + d_f) E_d for pereira2023's
+        # formation (eq. 15); in general (L_bar x*)_f, e.g. for the chain formation.
+        target = np.asarray(sc.desired_neighbourhood_error(), dtype=float)  # (N, 6)
         # Gradient of V_f: H_f U + M1_f E_f - M2_f sum U_i - m3_f, with H_f = 2 S_f.
         self.H = np.stack([2 * alpha[f] * (c[f] ** 2 * btqb + np.diag(w)) for f in range(nf)])
         self.M1 = np.stack([2 * alpha[f] * c[f] * btqa for f in range(nf)])
         self.M2 = np.stack([2 * alpha[f] * c[f] * btqb for f in range(nf)])
-        self.m3 = np.stack([2 * alpha[f] * c[f] ** 2 * btq_ed for f in range(nf)])
+        self.m3 = np.stack([2 * alpha[f] * c[f] * btq @ np.tile(target[f], hz) for f in range(nf)])
         hinv = np.linalg.inv(self.H)
         self.K1 = np.einsum("fij,fjk->fik", hinv, self.M1)
         self.K2 = np.einsum("fij,fjk->fik", hinv, self.M2)

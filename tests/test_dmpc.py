@@ -273,3 +273,16 @@ def test_custom_topology_object_is_accepted():
     ctl = OneHopDMPC(P23, topology=topo, seed=0)
     assert ctl.topology is topo
     assert ctl.solve(P23.initial_array()).shape == (4, 3)
+
+
+def test_dmpc_reaches_the_chain_formation_without_collision():
+    """The 1-hop DMPC targets (L_bar x*)_f, so it serves the collision-free chain formation too."""
+    from baselines.dmpc import DMPC
+    from satenv import metrics
+    from satenv.envs.platoon_v0 import parallel_env
+    from satenv.rollout import rollout
+
+    env = parallel_env(formation="chain", terminate_on_collision=True)
+    traj = rollout(env, DMPC(env), seed=0)
+    assert traj.steps == env.scenario.n_steps and metrics.collisions(traj) == 0
+    np.testing.assert_allclose(traj.states[-1, :, 1], [-8.0, -16.0, -24.0, -32.0], atol=1e-3)
