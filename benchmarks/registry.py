@@ -259,6 +259,14 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
     _platoon("platoon-random-j2", f"pereira2023 PLF with randomised initial states, j2 (51.6 deg); "
              f"{_TABLE1_NOTE}", preset="pereira2023", randomize=True, dynamics="j2",
              inclination=_ISS_INCLINATION, terminate_on_collision=False),
+    _platoon("platoon-chain-cw", "pereira2023 Table I start, PLF, chain formation (followers 8 m apart, "
+             "collision-free target); a collision ends the episode", collision_free_success=True,
+             preset="pereira2023", formation="chain", terminate_on_collision=True),
+    _platoon("platoon-tplf30-random-cw", "pereira2023 TPLF with E_d = [0, -30, 0] (targets 8-15 m apart) "
+             "and randomised initial states, cw; a collision ends the episode (the shipped "
+             "policy's scenario)", collision_free_success=True, preset="pereira2023",
+             topology="TPLF", desired_error=(0.0, -30.0, 0.0, 0.0, 0.0, 0.0), randomize=True,
+             terminate_on_collision=True),
     _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, LOS cone "
              "(collision-free success)", collision_free_success=True, preset="pereira2022"),
     ScenarioSpec("cluster-case1", _CLUSTER, {"preset": "li2022-case1"},
@@ -293,8 +301,8 @@ POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
 :func:`discover_trained_policies`."""
 
 QUICK: dict[str, Any] = {
-    "scenarios": ["platoon-PLF-cw", "platoon-BDL-j2", "platoon-random-cw", "platoon-pereira2022",
-                  "formation-kannan2022-position", "cluster-case1"],
+    "scenarios": ["platoon-PLF-cw", "platoon-BDL-j2", "platoon-chain-cw", "platoon-tplf30-random-cw",
+                  "platoon-pereira2022", "formation-kannan2022-position", "cluster-case1"],
     "policies": ["zero", "random", "dmpc", "apf", "cgmres", "trained:*"],
     "seeds": [0, 1, 2],
     "scenario_seeds": {"cluster-case1": [0]},   # ~10 s per episode: one seed in the quick board
