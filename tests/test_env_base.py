@@ -155,3 +155,17 @@ def test_time_to_converge():
         info = {"tracking_error": np.array([[[3, 0, 0]], [[0.5, 0, 0]], [[2, 0, 0]], [[0.5, 0, 0]], [[0.2, 0, 0]]])}
     assert metrics.time_to_converge(T, tol=1.0)[0] == 3.0
     assert np.isnan(metrics.time_to_converge(T, tol=0.1)[0])
+
+
+def test_trajectory_plot_and_gif(tmp_path):
+    from satenv.render import plot_trajectory, save_gif
+
+    env = ToyEnv(max_steps=6)
+    traj = rollout(env, RandomPolicy(env), seed=2)
+    png = plot_trajectory(traj, tmp_path / "traj.png")
+    gif = save_gif(traj, tmp_path / "traj.gif", every=2)
+    assert png.stat().st_size > 1000 and gif.stat().st_size > 1000
+    from PIL import Image
+
+    with Image.open(gif) as im:
+        assert im.n_frames == 4  # frames 0, 2, 4, 6
