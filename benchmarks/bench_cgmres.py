@@ -13,13 +13,14 @@ ipopt solves, their ratio, and the largest difference of the first inputs (m/s^2
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks._io import write_json
 
 SCENARIOS = ("kannan2022-position", "kannan2022-collision")
 
@@ -82,8 +83,7 @@ def main(argv: list[str] | None = None) -> int:
               f"x{r['speedup_vs_ipopt_cold']:.0f} | max |du0| {r['max_first_input_diff_mps2']:.2f} m/s^2 "
               f"| {r['unknowns']} unknowns")
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2))
+        write_json(args.out, result)
         print(f"wrote {args.out}")
     return 0
 

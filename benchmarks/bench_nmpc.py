@@ -13,7 +13,6 @@ statuses, to decide whether fatrop "holds the same solutions" (DESIGN.md).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -21,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks._io import write_json
 
 
 def _stats(ms: np.ndarray) -> dict[str, float]:
@@ -113,8 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"median {cmp['fatrop_ms_median']:.1f} ms vs ipopt {cmp['ipopt_ms_median']:.1f} ms; "
                   f"same solutions: {cmp['same_solutions']}")
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2))
+        write_json(args.out, result)
         print(f"wrote {args.out}")
     return 0
 

@@ -22,13 +22,14 @@ solver fallback.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks._io import write_json
 
 PAPER = "kannan2022"
 SCENARIOS: dict[str, dict[str, Any]] = {
@@ -219,8 +220,7 @@ def run(out: str | Path | None = None, plots_dir: str | Path | None = None, seed
     result = reproduce(plots=plots_dir, seed=seed)
     if out is not None:
         out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(result, indent=2))
+        write_json(out, result)
     return result
 
 

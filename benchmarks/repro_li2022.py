@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import sys
 import time
@@ -45,6 +44,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks._io import write_json
 
 PAPER = "li2022"
 CASES = (1, 2)
@@ -239,8 +240,7 @@ def run(case: int | None = None, out: str | Path | None = None, plots_dir: str |
         result["figures"] = [str(p) for p in save_figures(episodes, tube_res, Path(plots_dir))]
     if out is not None:
         out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(result, indent=2))
+        write_json(out, result)
     return result
 
 

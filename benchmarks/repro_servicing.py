@@ -27,12 +27,13 @@ with N = 30 and N = 100, which separates the horizon's effect on the attitude se
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks._io import write_json
 
 PAPER = "pereira2022-servicing"
 COMMAND = "python -m benchmarks.reproduce pereira2022-servicing --out FILE.json --plots DIR"
@@ -305,8 +306,7 @@ def run(out: str | Path, plots_dir: str | Path | None = None, seed: int = 0) -> 
     """Reproduce, write the JSON to ``out`` (and figures to ``plots_dir``), return the result."""
     result = reproduce(plots=plots_dir, seed=seed)
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    write_json(out, result)
     return result
 
 

@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from pathlib import Path
 from types import ModuleType
+
+from benchmarks._io import write_json
 
 PAPERS: dict[str, str] = {
     "pereira2023": "benchmarks.repro_pereira2023",
@@ -68,8 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     result = module.reproduce(plots=args.plots, seed=args.seed, **extra)
     print(module.format_table(result))
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2))
+        write_json(args.out, result)
         print(f"wrote {args.out}")
     return 0 if result.get("pass", True) else 1
 
