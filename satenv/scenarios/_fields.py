@@ -55,3 +55,11 @@ def vector(value: Any, name: str, length: int | None = None) -> tuple[float, ...
 def nested(arr: np.ndarray):
     """An array as nested tuples of floats (hashable, for frozen dataclasses)."""
     return tuple(nested(a) for a in arr) if arr.ndim > 1 else tuple(float(v) for v in arr)
+
+
+def from_preset(presets: dict[str, Any], preset: str, kind: str, overrides: dict[str, Any]) -> Any:
+    """``presets[preset]`` with ``overrides`` applied through its ``with_overrides`` (validated)."""
+    if preset not in presets:
+        raise ValueError(f"unknown {kind} preset {preset!r}; expected one of {sorted(presets)}")
+    base = presets[preset]
+    return base.with_overrides(**overrides) if overrides else base

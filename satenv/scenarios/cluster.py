@@ -310,10 +310,7 @@ DEFAULT_PRESET = "li2022-case1"
 
 def resolve_scenario(preset: str = DEFAULT_PRESET, **overrides) -> ClusterScenario:
     """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
-    if preset not in PRESETS:
-        raise ValueError(f"unknown cluster preset {preset!r}; expected one of {sorted(PRESETS)}")
-    base = PRESETS[preset]
-    return base.with_overrides(**overrides) if overrides else base
+    return _fields.from_preset(PRESETS, preset, "cluster", overrides)
 
 
 def safety_ok(scenario: ClusterScenario, positions: np.ndarray, t: float = 0.0, margin: float = 0.0) -> bool:

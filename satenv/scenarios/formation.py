@@ -54,7 +54,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from satenv.scenarios._fields import number, vector
+from satenv.scenarios._fields import from_preset, number, vector
 
 __all__ = ["FormationScenario", "PRESETS", "resolve_scenario", "sample_initial_state",
            "proximity_components"]
@@ -247,10 +247,7 @@ PRESETS: dict[str, FormationScenario] = {
 
 def resolve_scenario(preset: str = "kannan2022-position", **overrides) -> FormationScenario:
     """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
-    if preset not in PRESETS:
-        raise ValueError(f"unknown formation preset {preset!r}; expected one of {sorted(PRESETS)}")
-    base = PRESETS[preset]
-    return base.with_overrides(**overrides) if overrides else base
+    return from_preset(PRESETS, preset, "formation", overrides)
 
 
 def proximity_components(positions: np.ndarray, delta: float) -> np.ndarray:

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from satenv.graph import make_topology
-from satenv.scenarios._fields import number, vector
+from satenv.scenarios._fields import from_preset, number, vector
 
 __all__ = ["PlatoonScenario", "PRESETS", "resolve_scenario", "sample_initial_state"]
 
@@ -319,10 +319,7 @@ PRESETS: dict[str, PlatoonScenario] = {
 
 def resolve_scenario(preset: str = "pereira2023", **overrides) -> PlatoonScenario:
     """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
-    if preset not in PRESETS:
-        raise ValueError(f"unknown platoon preset {preset!r}; expected one of {sorted(PRESETS)}.")
-    base = PRESETS[preset]
-    return base.with_overrides(**overrides) if overrides else base
+    return from_preset(PRESETS, preset, "platoon", overrides)
 
 
 def pair_states(scenario: PlatoonScenario, x: np.ndarray) -> np.ndarray:

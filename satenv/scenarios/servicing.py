@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from satenv.dynamics import MU_EARTH
-from satenv.scenarios._fields import array, nested, number
+from satenv.scenarios._fields import array, from_preset, nested, number
 
 __all__ = ["PRESETS", "ServicingScenario", "resolve_scenario", "sample_initial_state"]
 
@@ -276,10 +276,7 @@ PRESETS: dict[str, ServicingScenario] = {
 
 def resolve_scenario(preset: str = "pereira2022", **overrides) -> ServicingScenario:
     """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
-    if preset not in PRESETS:
-        raise ValueError(f"unknown servicing preset {preset!r}; expected one of {sorted(PRESETS)}")
-    base = PRESETS[preset]
-    return base.with_overrides(**overrides) if overrides else base
+    return from_preset(PRESETS, preset, "servicing", overrides)
 
 
 def sample_initial_state(scenario: ServicingScenario, rng: np.random.Generator) -> np.ndarray:
