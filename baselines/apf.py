@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.base import config_from_options
 from satenv.cluster_graph import nearest_neighbour_graph
 from satenv.dynamics import cw_continuous, saturate_norm
 
@@ -107,11 +108,7 @@ class APF:
     name = "apf"
 
     def __init__(self, env: Any, **options: Any) -> None:
-        known = {f.name for f in fields(APFConfig)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(f"APF: unknown option(s) {unknown}; accepted: {sorted(known)}")
-        self.cfg = APFConfig(**options)
+        self.cfg = config_from_options(APFConfig, options, "APF")
         sc = getattr(env, "scenario", None)
         if sc is None or not hasattr(sc, "obstacle_velocity"):
             raise ValueError(f"APF controls satenv.cluster_v0 envs, got {type(env).__name__}")

@@ -8,9 +8,21 @@ actions normalised to ``[-1, 1]^3``), and an ``info`` dict with diagnostics such
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from dataclasses import fields
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
+
+C = TypeVar("C")
+
+
+def config_from_options(config_cls: type[C], options: dict[str, Any], owner: str) -> C:
+    """Build a baseline's frozen config dataclass from keyword options, rejecting unknown ones."""
+    known = {f.name for f in fields(config_cls)}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(f"{owner}: unknown option(s) {unknown}; accepted: {sorted(known)}")
+    return config_cls(**options)
 
 
 @runtime_checkable

@@ -74,6 +74,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.base import config_from_options
 from satenv.cluster_graph import nearest_neighbour_graph
 from satenv.dynamics import cw_continuous, cw_matrices, prediction_matrices
 
@@ -370,11 +371,7 @@ class TubeRDMPC:
     name = "tube_rdmpc"
 
     def __init__(self, env: Any, **options: Any) -> None:
-        known = {f.name for f in fields(TubeRDMPCConfig)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(f"TubeRDMPC: unknown option(s) {unknown}; accepted: {sorted(known)}")
-        self.cfg = TubeRDMPCConfig(**options)
+        self.cfg = config_from_options(TubeRDMPCConfig, options, "TubeRDMPC")
         sc = getattr(env, "scenario", None)
         if sc is None or not hasattr(sc, "obstacle_velocity") or not hasattr(env, "set_inner_loop"):
             raise ValueError(f"TubeRDMPC controls satenv.cluster_v0 envs, got {type(env).__name__}")
