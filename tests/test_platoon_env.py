@@ -141,6 +141,59 @@ def test_observation_layout_and_infos():
         min(np.linalg.norm(x[0, :3]), *(np.linalg.norm(x[0, :3] - x[j, :3]) for j in (1, 2, 3))))
 
 
+def _reference_observation(core, x, t):
+    """The observation layout of the module docstring, entry by entry (one copy, loops)."""
+    n, sc, topo = core.n_agents, core.scenario, core.topology
+    scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
+    err = topo.neighbourhood_error(x) - sc.desired_neighbourhood_error()
+    obs = np.zeros((n, 15 + 7 * (n - 1)))
+    for f in range(n):
+        obs[f, 0:6] = err[f] / scale
+        obs[f, 6:12] = x[f] / scale
+        obs[f, 12:15] = topo.pinning[f], topo.gains[f] / n, 1 - t / sc.n_steps
+        for k, j in enumerate(j for j in range(n) if j != f):
+            if topo.adjacency[f, j]:
+                obs[f, 15 + 7 * k] = 1.0
+                obs[f, 16 + 7 * k:22 + 7 * k] = (x[j] - x[f]) / scale
+    return obs
+
+
+@pytest.mark.parametrize("topology", ["PLF", "BDL", "TPLF", [[0, 1, 1], [1, 0, 0], [0, 1, 0]]])
+def test_batched_observation_and_separation_match_the_layout(topology):
+    from satenv.envs.platoon_v0 import PlatoonCore
+    from satenv.scenarios.platoon import resolve_scenario
+
+    n = 3 if isinstance(topology, list) else 4
+    sc = resolve_scenario("pereira2023", topology=topology, randomize=True,
+                          **({"initial_state": np.zeros((3, 6))} if n == 3 else {}))
+    core = PlatoonCore(sc, batch=5)
+    rng = np.random.default_rng(3)
+    core.reset(rng.normal(0, 40, (5, n, 6)))
+    info = core.step(rng.uniform(-6, 6, (5, n, 3))).info
+    core.t[2] = 7
+    obs = core.observe()
+    assert obs.dtype == np.float32 and obs.shape == (5, n, core.obs_dim)
+    for b in range(5):
+        np.testing.assert_allclose(obs[b], _reference_observation(core, core.x[b], core.t[b]),
+                                   rtol=1e-6, atol=1e-6)
+        pos = np.vstack([np.zeros(3), core.x[b, :, :3]])
+        d = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.diag(np.full(n + 1, np.inf))
+        np.testing.assert_allclose(info["min_separation"][b], d[1:].min(axis=1), rtol=1e-12)
+        np.testing.assert_array_equal(info["collision"][b], (d[1:] < 6.0).any(axis=1))
+
+
+def test_step_infos_survive_a_later_partial_reset():
+    from satenv.envs.platoon_v0 import PlatoonCore
+
+    core = PlatoonCore(PRESETS["pereira2023"], batch=3)
+    core.reset(np.tile(PRESETS["pereira2023"].initial_array(), (3, 1, 1)))
+    info = core.step(np.ones((3, 4, 3)))
+    kept = {k: v.copy() for k, v in info.info.items()}
+    core.reset(np.zeros((1, 4, 6)) + 50.0, np.array([1]))
+    for k, v in info.info.items():
+        np.testing.assert_array_equal(v, kept[k], err_msg=k)
+
+
 def test_step_matches_dynamics_and_reward_formula():
     for model in ("cw", "nonlinear"):
         e = parallel_env(dynamics=model)

@@ -84,7 +84,7 @@ from typing import Any
 import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from satenv.dynamics import Orbit, RelativeModel, delta_v
+from satenv.dynamics import Orbit, RelativeModel
 from satenv.envs.base import BatchedCore, FormationEnv, StepResult, resolve_preset
 from satenv.scenarios.platoon import (
     PRESETS,
@@ -123,25 +123,49 @@ class PlatoonCore(BatchedCore):
         self.alpha = np.asarray(scenario.alpha)
         radii = np.full(n + 1, scenario.follower_radius)
         radii[0] = scenario.leader_radius
-        self.contact = radii[:, None] + radii[None, :]  # (N+1, N+1) body 0 = leader
+        # body pairs (f, other body): the leader first, then the other followers in ascending order
         others = [[j for j in range(n) if j != i] for i in range(n)]
         self.others = np.array(others, dtype=np.int64).reshape(n, max(n - 1, 0))
+        pair_op = np.zeros((n, n, n))  # position of f minus that of its k-th other body
+        pair_op[:, 0] = np.eye(n)
+        for f in range(n):
+            pair_op[f, np.arange(1, n), f] = 1.0
+            pair_op[f, np.arange(1, n), self.others[f]] = -1.0
+        # one product gives E (first N rows, eq. 9) and the N*N relative positions (the rest)
+        self._linear_op = np.vstack([self.lbar, pair_op.reshape(n * n, n)])
+        self._pair_contact = np.column_stack([np.full(n, radii[0] + radii[1]),
+                                              np.full((n, n - 1), 2 * radii[1])])
         self.x = np.zeros((self.batch, n, 6))
         self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
         self.accel = np.zeros((self.batch, n, 3))
-        self.err_raw = np.zeros((self.batch, n, 6))  # E_f of the current state (cached for observe)
-        # constant pieces of the hot path
         self._scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
-        self._self_diag = np.where(np.eye(n + 1, dtype=bool), np.inf, 0.0)
-        self._vbound = (self.gains * scenario.v_max)[:, None]
-        mask = np.take_along_axis(self.adj, self.others, axis=1) if n > 1 else np.zeros((n, 0))
-        self._slot_mask = mask[..., None]                      # (N, N-1, 1)
-        obs0 = np.zeros((n, self.obs_dim))
-        obs0[:, 12] = self.topology.pinning
-        obs0[:, 13] = self.gains / n
-        if n > 1:
-            obs0[:, 15:] = np.concatenate([self._slot_mask, np.zeros((n, n - 1, 6))], -1).reshape(n, -1)
-        self._obs0 = obs0
+        self._ones3 = np.ones(3)
+        self._vbound = self.gains * scenario.v_max
+        self._reward_gain = self.alpha / scenario.reward_scale
+        self._obs_map, self._obs_offset = self._observation_map()
+
+    def _observation_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """The observation is affine in the state: ``obs = x.ravel() @ map + offset - t / n_k``
+        (entry 14). Returns ``map`` ``(6 N, N obs_dim)`` and ``offset`` ``(N, obs_dim)`` built from
+        the layout in the module docstring."""
+        n, d = self.n_agents, self.obs_dim
+        inv = np.diag(1.0 / self._scale)                          # (6, 6)
+        a = np.zeros((n, d, n, 6))                                 # obs[f, k] = a[f, k, j, c] x[j, c]
+        offset = np.zeros((n, d))
+        for f in range(n):
+            a[f, 0:6] = np.einsum("j,kc->kjc", self.lbar[f], inv)  # (E_f - E_f*) / scale
+            a[f, 6:12, f] = inv                                    # x_f / scale
+            for k, j in enumerate(self.others[f]):
+                slot = 15 + 7 * k
+                if self.adj[f, j]:                                 # masked slot: (x_j - x_f) / scale
+                    offset[f, slot] = 1.0
+                    a[f, slot + 1:slot + 7, j] += inv
+                    a[f, slot + 1:slot + 7, f] -= inv
+        offset[:, 0:6] = -self.target / self._scale
+        offset[:, 12] = self.topology.pinning
+        offset[:, 13] = self.gains / n
+        offset[:, 14] = 1.0
+        return a.reshape(n * d, n * 6).T.copy(), offset
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -156,24 +180,17 @@ class PlatoonCore(BatchedCore):
         self.t[sel] = 0
         self.chief[sel] = self.model.initial_chief()
         self.accel[sel] = 0.0
-        info = self._info(self.x[sel], self.accel[sel])
-        self.err_raw[sel] = info["neighbourhood_error"]
-        return info
+        return self._evaluate(self.x[sel], self.accel[sel])[0]
 
     def step(self, accel, rng=None) -> StepResult:
         accel = np.asarray(accel, dtype=float)
         self.x, self.chief = self.model.step(self.x, accel, self.chief)
         self.accel = accel
         self.t += 1
-        info = self._info(self.x, accel)
-        self.err_raw = info["neighbourhood_error"]
-        e = info["tracking_error"]
-        stage = (e * e) @ self.q + (accel * accel) @ self.w
+        info, stage, far = self._evaluate(self.x, accel)
         sc = self.scenario
-        rewards = (-self.alpha * stage / sc.reward_scale
-                   - sc.collision_penalty * info["collision"]
-                   - sc.violation_penalty * info["violations"])
-        far = np.sum(self.x[..., :3] ** 2, axis=-1) > sc.max_distance**2
+        rewards = -(self._reward_gain * stage + sc.collision_penalty * info["collision"]
+                    + sc.violation_penalty * info["violations"])
         terminated = far.any(axis=-1)
         if sc.terminate_on_collision:
             terminated |= info["collision"].any(axis=-1)
@@ -184,51 +201,59 @@ class PlatoonCore(BatchedCore):
         """``E_f`` (eq. 9) for states ``(B, N, 6)``: the augmented Laplacian times the states."""
         return self.lbar @ x
 
-    def _info(self, x: np.ndarray, accel: np.ndarray) -> dict[str, np.ndarray]:
+    def _evaluate(self, x: np.ndarray, accel: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+        """The info arrays of states ``x`` under ``accel``, the stage cost ``e^T Q e + u^T W u``
+        ``(B, N)`` and which followers are beyond ``max_distance`` ``(B, N)``."""
         sc = self.scenario
-        err_raw = self.neighbourhood_error(x)
+        n = self.n_agents
+        y = self._linear_op @ x
+        err_raw = y[:, :n]
         err = err_raw - self.target
-        pos = np.concatenate([np.zeros((x.shape[0], 1, 3)), x[..., :3]], axis=1)
-        diff = pos[:, :, None] - pos[:, None]
-        dist = np.sqrt(np.sum(diff * diff, axis=-1)) + self._self_diag  # (B, N+1, N+1)
-        min_sep = dist[:, 1:].min(axis=-1)
-        collision = (dist[:, 1:] < self.contact[1:]).any(axis=-1)
-        viol = (np.abs(err_raw[..., 3:]) > self._vbound).any(axis=-1).astype(np.int64)
-        if sc.min_error_constraint:
-            viol += np.linalg.norm(err_raw[..., :3], axis=-1) < self.gains * sc.follower_radius
-        if sc.keepout_radius > 0 or sc.los_slopes is not None:
-            prev = np.concatenate([np.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
-            p = (x - prev)[..., :3]
-            if sc.keepout_radius > 0:
-                viol += np.linalg.norm(p - np.asarray(sc.keepout_center), axis=-1) < sc.keepout_radius
-            if sc.los_slopes is not None:
-                cx, cz = sc.los_slopes
-                xr, yr, zr = sc.port
-                inside = ((p[..., 1] <= -yr) & (cx * np.abs(p[..., 0]) + p[..., 1] <= cx * xr)
-                          & (cz * np.abs(p[..., 2]) + p[..., 1] <= cz * zr))
-                viol += ~inside
-        viol = viol.astype(np.int64)
-        return {
+        diff = y[:, n:, :3]                                      # (B, N*N, 3) to every other body
+        dist = np.sqrt((diff * diff) @ self._ones3).reshape(x.shape[0], n, n)
+        collision = (dist < self._pair_contact).any(axis=-1)
+        viol = np.abs(err_raw[..., 3:]).max(axis=-1) > self._vbound  # velocity bound (40)
+        if sc.min_error_constraint or sc.keepout_radius > 0 or sc.los_slopes is not None:
+            viol = viol + self._extra_violations(x, err_raw)
+        accel2 = accel * accel
+        stage = (err * err) @ self.q + accel2 @ self.w
+        info = {
             "state": x.copy(),
             "accel": accel.copy(),
-            "delta_v": delta_v(accel, sc.dt),
+            "delta_v": np.sqrt(accel2.sum(axis=-1)) * sc.dt,
             "tracking_error": err,
             "neighbourhood_error": err_raw,
-            "min_separation": min_sep,
+            "min_separation": dist.min(axis=-1),
             "collision": collision,
-            "violations": viol,
-            "cost": collision.astype(float) + viol,
+            "violations": viol.astype(np.int64),
+            "cost": np.add(collision, viol, dtype=float),
         }
+        return info, stage, dist[..., 0] > sc.max_distance
+
+    def _extra_violations(self, x: np.ndarray, err_raw: np.ndarray) -> np.ndarray:
+        """Violations of the optional constraints: minimum tracking error (41), keep-out sphere
+        (eq. 31) and LOS cone (eq. 34) of each target–chaser pair ``(f - 1, f)``."""
+        sc = self.scenario
+        viol = np.zeros(x.shape[:2], dtype=np.int64)
+        if sc.min_error_constraint:
+            viol += np.linalg.norm(err_raw[..., :3], axis=-1) < self.gains * sc.follower_radius
+        prev = np.concatenate([np.zeros_like(x[:, :1]), x[:, :-1]], axis=1)
+        p = (x - prev)[..., :3]
+        if sc.keepout_radius > 0:
+            viol += np.linalg.norm(p - np.asarray(sc.keepout_center), axis=-1) < sc.keepout_radius
+        if sc.los_slopes is not None:
+            cx, cz = sc.los_slopes
+            xr, yr, zr = sc.port
+            inside = ((p[..., 1] <= -yr) & (cx * np.abs(p[..., 0]) + p[..., 1] <= cx * xr)
+                      & (cz * np.abs(p[..., 2]) + p[..., 1] <= cz * zr))
+            viol += ~inside
+        return viol
 
     def observe(self) -> np.ndarray:
-        n = self.n_agents
-        obs = np.broadcast_to(self._obs0, (self.batch, n, self.obs_dim)).copy()
-        obs[..., 0:6] = (self.err_raw - self.target) / self._scale
-        obs[..., 6:12] = self.x / self._scale
-        obs[..., 14] = 1.0 - self.t[:, None] / self.scenario.n_steps
-        if n > 1:
-            rel = (self.x[:, self.others] - self.x[:, :, None]) / self._scale  # (B, N, N-1, 6)
-            obs[..., 15:].reshape(self.batch, n, n - 1, 7)[..., 1:] = rel * self._slot_mask
+        b = self.batch
+        obs = (self.x.reshape(b, -1) @ self._obs_map).reshape(b, self.n_agents, self.obs_dim)
+        obs += self._obs_offset
+        obs[..., 14] -= (self.t / self.scenario.n_steps)[:, None]
         return obs.astype(np.float32)
 
     def global_state(self) -> np.ndarray:
