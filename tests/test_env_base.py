@@ -169,3 +169,28 @@ def test_trajectory_plot_and_gif(tmp_path):
 
     with Image.open(gif) as im:
         assert im.n_frames == 4  # frames 0, 2, 4, 6
+
+
+@pytest.mark.parametrize("name", ["platoon_v0", "cluster_v0", "servicing_v0", "formation_v0"])
+def test_infos_are_not_changed_by_later_steps_or_resets(name):
+    """The env hands out views of the core's info arrays: the core must never write into them."""
+    import copy
+
+    import satenv
+
+    e = getattr(satenv, name)()
+
+    def act(value):
+        return {a: np.full(e.action_space(a).shape, value, np.float32) for a in e.agents}
+
+    _, at_reset = e.reset(seed=0)
+    kept_reset = copy.deepcopy(at_reset)
+    e.reset(seed=1)
+    _, _, _, _, at_step = e.step(act(0.5))
+    kept_step = copy.deepcopy(at_step)
+    e.reset(seed=2)
+    e.step(act(-0.5))
+    for got, want in ((at_reset, kept_reset), (at_step, kept_step)):
+        for agent, info in want.items():
+            for key, value in info.items():
+                np.testing.assert_array_equal(got[agent][key], value, err_msg=f"{name} {agent} {key}")

@@ -89,8 +89,8 @@ class RelativeModel:
             a, b = self._cache["ab"] = cw_matrices(self.orbit.n, self.dt)
             self._cache["abT"] = (np.ascontiguousarray(a.T), np.ascontiguousarray(b.T))
             rot = _plane_rotation(self.orbit, self.orbit.n * self.dt)
-            self._cache["chief_rot"] = rot
-            self._cache["chief_rotT"] = np.ascontiguousarray(rot.T)
+            # position and velocity rotate alike: one (6, 6) block-diagonal product per step
+            self._cache["chief_rotT"] = np.kron(np.eye(2), rot).T.copy()
         self._cache["f"] = derivative_soa(self.force) if self.force else None
 
     @property
@@ -114,11 +114,9 @@ class RelativeModel:
             u = np.zeros((*x.shape[:-1], 3))
         if self.model == "cw":
             a_t, b_t = self._cache["abT"]
-            chief = np.asarray(chief, dtype=float)
-            # (3,)-row matmuls on the flattened copies: one BLAS call each instead of a Python-level
+            chief_next = np.asarray(chief, dtype=float) @ self._cache["chief_rotT"]
+            # row matmuls on the flattened states: one BLAS call each instead of a Python-level
             # loop over the stacked (M, 6) @ (6, 6) products that a batched ``@`` performs.
-            chief_next = (np.ascontiguousarray(chief).reshape(-1, 3) @ self._cache["chief_rotT"]
-                          ).reshape(chief.shape)
             if u.shape[:-1] != x.shape[:-1]:          # broadcasting inputs: the general form
                 return x @ a_t + u @ b_t, chief_next
             out = x.reshape(-1, 6) @ a_t

@@ -87,12 +87,16 @@ class BatchedCore(ABC):
               rng: np.random.Generator | None = None) -> dict[str, np.ndarray]:
         """Reset copies ``idx`` (all when ``None``) to ``x0`` ``(len(idx), M, state_dim)``.
 
-        Returns the info arrays ``(len(idx), M, ...)`` of the reset copies (``INFO_KEYS``).
+        Returns the info arrays ``(len(idx), M, ...)`` of the reset copies (``INFO_KEYS``), new
+        arrays as in :meth:`step`.
         """
 
     @abstractmethod
     def step(self, accel: np.ndarray, rng: np.random.Generator | None = None) -> StepResult:
-        """Advance every copy one decision period under inputs ``(B, M, action_dim)`` (SI)."""
+        """Advance every copy one decision period under inputs ``(B, M, action_dim)`` (SI).
+
+        The returned arrays are new: the core never writes into them later (the env hands out
+        views of them in ``infos``)."""
 
     @abstractmethod
     def observe(self) -> np.ndarray:
@@ -211,7 +215,7 @@ class FormationEnv(ParallelEnv):
         truncated = bool(self.core.t[0] >= self.scenario.max_steps)
         terminated = bool(res.terminated[0])
         obs = self._obs_dict()
-        rewards = {ag: float(res.rewards[0, i]) for ag, i in self._index.items()}
+        rewards = dict(zip(self.possible_agents, res.rewards[0].tolist(), strict=True))
         terms = dict.fromkeys(self.agents, terminated)
         truncs = dict.fromkeys(self.agents, truncated and not terminated)
         infos = self._info_dicts(res.info)
@@ -254,14 +258,12 @@ class FormationEnv(ParallelEnv):
         return out
 
     def _obs_dict(self) -> dict[str, np.ndarray]:
-        obs = self.core.observe()[0]
-        return {ag: obs[i] for ag, i in self._index.items()}
+        return dict(zip(self.possible_agents, self.core.observe()[0], strict=True))
 
     def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
-        # one conversion per key: python scalars for per-agent scalars, rows of a private copy
-        # for per-agent vectors (the env never writes into them)
-        columns = {key: (arr[0].tolist() if arr.ndim == 2 else list(np.array(arr[0])))
-                   for key, arr in info.items()}
+        # one conversion per key: python scalars for per-agent scalars, rows for per-agent vectors
+        # (views of the core's info arrays, which it never writes into again)
+        columns = {key: (arr[0].tolist() if arr.ndim == 2 else list(arr[0])) for key, arr in info.items()}
         return {ag: {key: col[i] for key, col in columns.items()} for ag, i in self._index.items()}
 
     def state(self) -> np.ndarray:

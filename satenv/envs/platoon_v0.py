@@ -141,7 +141,7 @@ class PlatoonCore(BatchedCore):
         self._scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
         self._ones3 = np.ones(3)
         self._vbound = self.gains * scenario.v_max
-        self._reward_gain = self.alpha / scenario.reward_scale
+        self._neg_reward_gain = -self.alpha / scenario.reward_scale
         self._obs_map, self._obs_offset = self._observation_map()
 
     def _observation_map(self) -> tuple[np.ndarray, np.ndarray]:
@@ -189,11 +189,12 @@ class PlatoonCore(BatchedCore):
         self.t += 1
         info, stage, far = self._evaluate(self.x, accel)
         sc = self.scenario
-        rewards = -(self._reward_gain * stage + sc.collision_penalty * info["collision"]
-                    + sc.violation_penalty * info["violations"])
-        terminated = far.any(axis=-1)
+        rewards = stage * self._neg_reward_gain
+        rewards -= sc.collision_penalty * info["collision"]
+        rewards -= sc.violation_penalty * info["violations"]
         if sc.terminate_on_collision:
-            terminated |= info["collision"].any(axis=-1)
+            far |= info["collision"]
+        terminated = far.any(axis=-1)
         return StepResult(rewards, terminated, info)
 
     # ------------------------------------------------------------------ quantities
