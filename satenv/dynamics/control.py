@@ -19,7 +19,7 @@ def saturate_norm(u: np.ndarray, u_max: float) -> np.ndarray:
 
 def delta_v(u: np.ndarray, dt: float) -> np.ndarray:
     """Delta-v [m/s] spent by accelerations ``u`` (..., 3) held for ``dt``: ``|u| dt``."""
-    return np.linalg.norm(u, axis=-1) * dt
+    return np.sqrt((u * u).sum(axis=-1)) * dt
 
 
 def unit_box_to_accel(action: np.ndarray, u_max, mode: str = "box") -> np.ndarray:

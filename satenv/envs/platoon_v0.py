@@ -84,7 +84,7 @@ from typing import Any
 import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from satenv.dynamics import Orbit, RelativeModel
+from satenv.dynamics import Orbit, RelativeModel, delta_v
 from satenv.envs.base import BatchedCore, FormationEnv, StepResult, resolve_preset
 from satenv.scenarios.platoon import (
     PRESETS,
@@ -121,8 +121,6 @@ class PlatoonCore(BatchedCore):
         self.q = np.asarray(scenario.state_weight)
         self.w = np.asarray(scenario.input_weight)
         self.alpha = np.asarray(scenario.alpha)
-        radii = np.full(n + 1, scenario.follower_radius)
-        radii[0] = scenario.leader_radius
         # body pairs (f, other body): the leader first, then the other followers in ascending order
         others = [[j for j in range(n) if j != i] for i in range(n)]
         self.others = np.array(others, dtype=np.int64).reshape(n, max(n - 1, 0))
@@ -133,8 +131,9 @@ class PlatoonCore(BatchedCore):
             pair_op[f, np.arange(1, n), self.others[f]] = -1.0
         # one product gives E (first N rows, eq. 9) and the N*N relative positions (the rest)
         self._linear_op = np.vstack([self.lbar, pair_op.reshape(n * n, n)])
-        self._pair_contact = np.column_stack([np.full(n, radii[0] + radii[1]),
-                                              np.full((n, n - 1), 2 * radii[1])])
+        r_f = scenario.follower_radius
+        self._pair_contact = np.column_stack([np.full(n, scenario.leader_radius + r_f),
+                                              np.full((n, n - 1), 2 * r_f)])
         self.x = np.zeros((self.batch, n, 6))
         self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
         self.accel = np.zeros((self.batch, n, 3))
@@ -198,10 +197,6 @@ class PlatoonCore(BatchedCore):
         return StepResult(rewards, terminated, info)
 
     # ------------------------------------------------------------------ quantities
-    def neighbourhood_error(self, x: np.ndarray) -> np.ndarray:
-        """``E_f`` (eq. 9) for states ``(B, N, 6)``: the augmented Laplacian times the states."""
-        return self.lbar @ x
-
     def _evaluate(self, x: np.ndarray, accel: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
         """The info arrays of states ``x`` under ``accel``, the stage cost ``e^T Q e + u^T W u``
         ``(B, N)`` and which followers are beyond ``max_distance`` ``(B, N)``."""
@@ -216,12 +211,11 @@ class PlatoonCore(BatchedCore):
         viol = np.abs(err_raw[..., 3:]).max(axis=-1) > self._vbound  # velocity bound (40)
         if sc.min_error_constraint or sc.keepout_radius > 0 or sc.los_slopes is not None:
             viol = viol + self._extra_violations(x, err_raw)
-        accel2 = accel * accel
-        stage = (err * err) @ self.q + accel2 @ self.w
+        stage = (err * err) @ self.q + (accel * accel) @ self.w
         info = {
             "state": x.copy(),
             "accel": accel.copy(),
-            "delta_v": np.sqrt(accel2.sum(axis=-1)) * sc.dt,
+            "delta_v": delta_v(accel, sc.dt),
             "tracking_error": err,
             "neighbourhood_error": err_raw,
             "min_separation": dist.min(axis=-1),

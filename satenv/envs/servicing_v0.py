@@ -101,7 +101,7 @@ from typing import Any
 import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from satenv.dynamics import Orbit, RelativeModel, saturate_box
+from satenv.dynamics import Orbit, RelativeModel, delta_v, saturate_box
 from satenv.dynamics.attitude import (
     attitude_step,
     desired_angular_velocity,
@@ -268,7 +268,7 @@ class ServicingCore(BatchedCore):
         return {
             "state": x.copy(),
             "accel": accel.copy(),
-            "delta_v": np.linalg.norm(accel, axis=-1) * sc.dt,
+            "delta_v": delta_v(accel, sc.dt),
             "tracking_error": f["e_p"].copy(),
             "min_separation": np.minimum(f["d_obj"], d_other),
             "collision": keepout | (pair > 0),
