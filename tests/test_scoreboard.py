@@ -1,4 +1,4 @@
-"""The scoreboard (benchmarks.scoreboard / registry): files and schema, resume, workers, bad input."""
+"""The scoreboard (benchmarks.scoreboard): files and schema, resume, workers, bad input."""
 
 import json
 import math
@@ -7,28 +7,36 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from benchmarks import registry
-from benchmarks.registry import POLICIES, PolicySpec, ScenarioSpec, ScoreboardError, Unavailable
 from benchmarks.scoreboard import (
     EPISODES_FILE,
     METRICS,
+    POLICIES,
     TIMING_FIELDS,
+    PolicySpec,
+    ScenarioSpec,
+    ScoreboardError,
+    ScoreboardWarning,
+    Unavailable,
     aggregate,
     main,
     parse_seeds,
     rank,
     read_episodes,
+    registry,
     run_scoreboard,
+    specs,
+    user_policy_name,
 )
 
 TESTS = Path(__file__).resolve().parent
-# the toy env of tests/test_env_base.py (importable as ``test_env_base``: tests/ is on sys.path)
-TOY = {"toy": ScenarioSpec("toy", ("test_env_base:ToyEnv",), {}, "3 double integrators to the origin")}
+# a cheap scenario: the default platoon, 20 steps
+TOY = {"toy": ScenarioSpec("toy", "platoon_v0", {"n_steps": 20}, "4 followers, 20 steps")}
 TWO = {k: POLICIES[k] for k in ("zero", "random")}
 
 
@@ -68,11 +76,11 @@ def test_end_to_end_files_and_schema(tmp_path):
     for line in lines:
         rec = json.loads(line)
         assert {"scenario", "policy", "seed", "env", "error", "wall_s", *METRICS} <= set(rec)
-        assert rec["env"] == "toy_v0" and rec["error"] is None and rec["steps"] == 20
+        assert rec["env"] == "platoon_v0" and rec["error"] is None and rec["steps"] == 20
     data = json.loads((tmp_path / "scoreboard.json").read_text())
     assert set(data) == {"header", "ranking", "aggregates", "episodes"}
     h = data["header"]
-    assert h["seeds"] == [0, 1] and h["env_versions"] == ["toy_v0"] and h["satenv_version"]
+    assert h["seeds"] == [0, 1] and h["env_versions"] == ["platoon_v0"] and h["satenv_version"]
     assert {"cpu", "cpus", "platform", "python"} <= set(h["machine"])
     assert data["ranking"] == {"toy": board.ranking["toy"]} and sorted(board.ranking["toy"]) == ["random", "zero"]
     for pol in ("zero", "random"):
@@ -84,7 +92,7 @@ def test_end_to_end_files_and_schema(tmp_path):
     assert data["aggregates"]["toy"]["zero"]["delta_v"]["mean"] == 0.0
     assert data["aggregates"]["toy"]["random"]["delta_v"]["mean"] > 0.0
     md = (tmp_path / "scoreboard.md").read_text()
-    assert "## toy (toy_v0)" in md and "| 1 |" in md and "| 2 |" in md and "seeds 0–1" in md
+    assert "## toy (platoon_v0)" in md and "| 1 |" in md and "| 2 |" in md and "seeds 0–1" in md
     csv_rows = (tmp_path / "scoreboard.csv").read_text().splitlines()
     assert len(csv_rows) == 3 and csv_rows[0].startswith("scenario,rank,policy,n,errors,success_mean")
     assert len((tmp_path / "episodes.csv").read_text().splitlines()) == 5
@@ -108,7 +116,8 @@ def test_resume_after_an_exception_gives_exactly_the_uninterrupted_episodes(tmp_
         fh.write('{"scenario": "toy", "pol')
     with pytest.raises(ScoreboardError, match="--resume"):
         _board(tmp_path / "run", seeds="0-2")
-    resumed = _board(tmp_path / "run", seeds="0-2", resume=True)
+    with pytest.warns(ScoreboardWarning, match="1 torn or corrupt line"):
+        resumed = _board(tmp_path / "run", seeds="0-2", resume=True)
     lines = log.read_text().splitlines()
     assert len(lines) == 6 and len({(json.loads(x)["policy"], json.loads(x)["seed"]) for x in lines}) == 6
     assert _strip(resumed.records) == _strip(reference.records)
@@ -163,7 +172,7 @@ def test_ray_backend_runs_locally(tmp_path, monkeypatch):
     ({"policies": "zero,zeroo"}, "unknown policy 'zeroo'"),
     ({"scenarios": "toy,platoon-XYZ"}, "unknown scenario 'platoon-XYZ'"),
     ({"checkpoints": ["/nonexistent/policy"]}, "no such file"),
-    ({"policy_registry": {"wrong": PolicySpec("wrong", ("test_scoreboard:WrongObsPolicy",), learned=True)},
+    ({"policy_registry": {"wrong": PolicySpec("wrong", "test_scoreboard:WrongObsPolicy", learned=True)},
       "policies": "wrong", "scenarios": "toy"}, r"expects observations of shape \(5,\)"),
     ({"seeds": "3-1"}, "--seeds"),
     ({"workers": 0}, "--workers"),
@@ -195,34 +204,41 @@ def test_cli_errors_and_list(capsys):
 
 def test_platoon_with_dmpc_through_the_board(tmp_path):
     try:
-        POLICIES["dmpc"].factory()
-        registry.SCENARIOS["platoon-PLF-cw"].factory()
+        POLICIES["dmpc"].check_available()
     except Unavailable as why:
         pytest.skip(str(why))
     scen = registry.SCENARIOS["platoon-PLF-cw"]
-    short = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "n_steps": 100})}
+    short = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "n_steps": 100})}
     board = _board(tmp_path, seeds="0", scenario_registry=short,
                    policy_registry={k: POLICIES[k] for k in ("zero", "dmpc")})
     assert board.ranking["platoon-short"] == ["dmpc", "zero"]   # closer to the formation than coasting
     assert all(r["error"] is None for r in board.records)
 
 
-def test_registry_skips_only_the_missing_module(tmp_path, monkeypatch):
-    with pytest.raises(Unavailable, match="not_landed_yet_xyz"):
-        registry.resolve(("satenv.envs.not_landed_yet_xyz:parallel_env",))
-    with pytest.raises(Unavailable, match="has no Nope"):
-        registry.resolve(("baselines.base:Nope",))
+def test_only_a_missing_optional_dependency_makes_an_entry_unavailable(tmp_path, monkeypatch):
     with pytest.raises(Unavailable, match="optional dependency"):
-        registry.resolve(("baselines.base:ZeroPolicy",), requires=("no_such_dependency_xyz",))
-    # an existing module whose own import is broken is a bug: it must propagate
-    pkg = tmp_path / "brokenpkg_xyz"
-    pkg.mkdir()
-    (pkg / "__init__.py").write_text("")
-    (pkg / "env.py").write_text("import no_such_dependency_xyz\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with pytest.raises(ModuleNotFoundError, match="no_such_dependency_xyz"):
-        registry.resolve(("brokenpkg_xyz.env:parallel_env",))
-    assert registry.resolve(("nope_xyz:f", "baselines.base:ZeroPolicy")) is POLICIES["zero"].factory()
+        specs.resolve("baselines.base:ZeroPolicy", requires=("no_such_dependency_xyz",))
+    with pytest.raises(ScoreboardError, match="has no attribute 'Nope'"):
+        specs.resolve("baselines.base:Nope")
+    with pytest.raises(ModuleNotFoundError):          # no "not landed yet" tolerance
+        specs.resolve("satenv.envs.not_landed_yet_xyz:parallel_env")
+    assert specs.resolve("baselines.base:ZeroPolicy") is POLICIES["zero"].factory()
+    with pytest.raises(ScoreboardError, match="env_id must be one of"):
+        ScenarioSpec("x", "no_such_env_v0")
+    with pytest.raises(ScoreboardError, match="'module:attribute'"):
+        PolicySpec("x", ("baselines:DMPC",))
+
+
+def test_policy_fits_by_env_id():
+    envs = {i: specs.ScenarioSpec("s", i).make() for i in ("platoon_v0", "cluster_v0")}
+    fits = {(name, i) for name, spec in POLICIES.items() for i, env in envs.items()
+            if specs.policy_fits(spec, env)}
+    assert fits == {("zero", "platoon_v0"), ("zero", "cluster_v0"), ("random", "platoon_v0"),
+                    ("random", "cluster_v0"), ("dmpc", "platoon_v0"), ("tube_rdmpc", "cluster_v0"),
+                    ("apf", "cluster_v0")}
+    trained = registry.discover_trained_policies()
+    assert all(specs.policy_fits(spec, envs["platoon_v0"]) and not specs.policy_fits(spec, envs["cluster_v0"])
+               for spec in trained.values())
 
 
 def test_aggregate_intervals_and_ranking():
@@ -268,10 +284,6 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
     training = pytest.importorskip("training")
     if not callable(getattr(training, "load", None)):
         pytest.skip("training.load not available")
-    try:
-        registry.SCENARIOS["platoon-random-cw"].factory()
-    except Unavailable as why:
-        pytest.skip(str(why))
     run = tmp_path / "run"
     proc = subprocess.run([sys.executable, "-m", "training.train", "--total-timesteps", "256", "--n-copies", "2",
                            "--n-steps", "32", "--batch-size", "64", "--eval-every", "0", "--test-seeds", "0",
@@ -280,13 +292,172 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
                           capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
     assert proc.returncode == 0, proc.stderr[-2000:]
     scen = registry.SCENARIOS["platoon-random-cw"]
-    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "n_steps": 20}),
-           "platoon-2022": ScenarioSpec("platoon-2022", scen.targets, {"preset": "pereira2022"})}  # 2 followers
+    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "n_steps": 20}),
+           "platoon-2022": ScenarioSpec("platoon-2022", scen.env_id, {"preset": "pereira2022"})}  # 2 followers
     board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero",
                    scenarios="platoon-short", checkpoints=[str(run / "final")])
-    assert {r["policy"] for r in board.records} == {"zero", "user:final"}
+    assert {r["policy"] for r in board.records} == {"zero", "user:run"}   # named after the run folder
     assert all(r["error"] is None for r in board.records)
-    with pytest.raises(ScoreboardError, match=r"user:final cannot run on scenario platoon-2022.*\(36,\)"):
+    with pytest.raises(ScoreboardError, match=r"user:run cannot run on scenario platoon-2022.*\(36,\)"):
         _board(tmp_path / "bad", seeds="0", scenario_registry=reg, policies="zero",
                scenarios="platoon-2022", checkpoints=[str(run / "final")])
     assert not (tmp_path / "bad" / EPISODES_FILE).exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# --policy names, a corrupt log, dying workers, a dying parent.
+# ----------------------------------------------------------------------------------------------
+def test_user_policy_names_come_from_the_run_folder(tmp_path):
+    assert user_policy_name(tmp_path / "runs" / "a" / "final") == "user:a"
+    assert user_policy_name(tmp_path / "runs" / "b" / "best") == "user:b"
+    assert user_policy_name(tmp_path / "runs" / "c" / "checkpoint-4096") == "user:c"
+    assert user_policy_name(tmp_path / "runs" / "my_ppo") == "user:my_ppo"
+
+
+def _shipped_copy(dst: Path) -> str:
+    import shutil
+
+    shutil.copytree(registry.SHIPPED_POLICY_DIR / "platoon_tplf_ppo", dst)
+    return str(dst)
+
+
+def test_two_run_folders_get_two_names_and_a_clash_is_an_error(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    a = _shipped_copy(tmp_path / "runs" / "a" / "final")
+    b = _shipped_copy(tmp_path / "runs" / "b" / "final")
+    scen = registry.SCENARIOS["platoon-tplf30-random-cw"]
+    reg = {"short": ScenarioSpec("short", scen.env_id, {**scen.kwargs, "n_steps": 10})}
+    board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero", checkpoints=[a, b])
+    assert {r["policy"] for r in board.records} == {"zero", "user:a", "user:b"}
+    assert all(r["error"] is None for r in board.records)
+    c = _shipped_copy(tmp_path / "other" / "a" / "final")
+    with pytest.raises(ScoreboardError, match="both named 'user:a'.*rename"):
+        _board(tmp_path / "clash", seeds="0", scenario_registry=reg, policies="zero", checkpoints=[a, c])
+
+
+def test_resume_quarantines_torn_and_corrupt_lines(tmp_path):
+    reference = _board(tmp_path / "ref", seeds="0-2")
+    run = tmp_path / "run"
+    _board(run, seeds="0-2")
+    log = run / EPISODES_FILE
+    lines = log.read_text().splitlines(keepends=True)
+    lines[2] = '{"scenario": "toy", "garbage\n'               # corrupt in the middle
+    log.write_text("".join(lines) + '{"scenario": "toy", "pol')  # and torn at the end
+    with pytest.warns(ScoreboardWarning, match=r"2 torn or corrupt line\(s\) \(line 3, 7\)"):
+        resumed = _board(run, seeds="0-2", resume=True)
+    assert _strip(resumed.records) == _strip(reference.records)
+    assert len(log.read_text().splitlines()) == 6                 # 5 kept + the one re-run
+    assert (run / (EPISODES_FILE + ".corrupt")).read_text().splitlines() == [
+        '{"scenario": "toy", "garbage', '{"scenario": "toy", "pol']
+
+
+class SlowPolicy:
+    """Zero thrust, 20 ms per decision; with ``die_on_seed`` its process SIGKILLs itself in the
+    first decision of that seed (every time, or with ``once`` only the first time)."""
+
+    die_on_seed: int | None = None
+    once: str | None = None     # a marker file: die only if it does not exist yet
+
+    def __init__(self, env):
+        self.info = {}
+        self.seed = None
+
+    def reset(self, seed=None):
+        self.seed = seed
+        marker = os.environ.get("SCOREBOARD_TEST_STARTED")
+        if marker:
+            Path(marker, f"{os.getpid()}").touch()
+
+    def act(self, observations):
+        import time
+
+        if self.seed == self.die_on_seed:
+            if self.once is None or not Path(self.once).exists():
+                if self.once is not None:
+                    Path(self.once).touch()
+                os.kill(os.getpid(), signal.SIGKILL)
+        time.sleep(0.02)
+        return {a: np.zeros(3) for a in observations}
+
+
+class DiesOnSeed1(SlowPolicy):
+    die_on_seed = 1
+
+
+def test_a_worker_that_dies_costs_only_its_episode(tmp_path):
+    pols = {"dies": PolicySpec("dies", "test_scoreboard:DiesOnSeed1", dry_run=False)}
+    board = _board(tmp_path, seeds="0-3", workers=2, policy_registry=pols,
+                   scenario_registry={"toy": ScenarioSpec("toy", "platoon_v0", {"n_steps": 5})})
+    errors = {r["seed"]: r["error"] for r in board.records}
+    assert sorted(errors) == [0, 1, 2, 3]
+    assert errors[1].startswith("WorkerDied") and [errors[s] for s in (0, 2, 3)] == [None] * 3
+    assert board.aggregates["toy"]["dies"]["errors"] == 1
+
+
+def test_a_worker_killed_once_is_retried(tmp_path, monkeypatch):
+    marker = tmp_path / "killed"
+    # the workers import this module afresh: the marker goes through the environment
+    monkeypatch.setenv("SCOREBOARD_TEST_ONCE", str(marker))
+    pols = {"once": PolicySpec("once", "test_scoreboard:DiesOnceViaEnv", dry_run=False)}
+    scen = {"toy": ScenarioSpec("toy", "platoon_v0", {"n_steps": 5})}
+    board = _board(tmp_path / "run", seeds="0-3", workers=2, policy_registry=pols, scenario_registry=scen)
+    assert marker.exists()                                          # a worker did die
+    assert all(r["error"] is None for r in board.records) and len(board.records) == 4
+
+
+class DiesOnceViaEnv(SlowPolicy):
+    die_on_seed = 1
+
+    @property
+    def once(self):
+        return os.environ["SCOREBOARD_TEST_ONCE"]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in ("Z", "X")
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(stat.parent.name))
+        except (OSError, ValueError, IndexError):
+            pass
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_workers_die_with_a_killed_parent(tmp_path):
+    started = tmp_path / "started"
+    started.mkdir()
+    script = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(TESTS)!r})
+        from test_scoreboard import _board, PolicySpec, ScenarioSpec
+        _board({str(tmp_path / "run")!r}, seeds="0-9", workers=2,
+               policy_registry={{"slow": PolicySpec("slow", "test_scoreboard:SlowPolicy", dry_run=False)}},
+               scenario_registry={{"toy": ScenarioSpec("toy", "platoon_v0", {{"n_steps": 200}})}})
+    """)
+    env = dict(os.environ, SCOREBOARD_TEST_STARTED=str(started))
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=TESTS.parent, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(started.iterdir())) < 2 and time.monotonic() < deadline:   # both workers busy
+            time.sleep(0.05)
+        children = _children(proc.pid)
+        assert len(children) >= 2, children                 # two workers (+ the resource tracker)
+        proc.kill()
+        proc.wait(10)
+        deadline = time.monotonic() + 10
+        while any(_alive(c) for c in children) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not [c for c in children if _alive(c)]
+    finally:
+        proc.kill()

@@ -1,7 +1,7 @@
-"""Scoreboard results: aggregation (mean and 95 % CI), ranking, and the written outputs
-(``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``, ``episodes.csv``, ``plots/``).
+"""Scoreboard results: the header, aggregation (mean and 95 % CI), ranking, and the written
+outputs (``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``, ``episodes.csv``, ``plots/``).
 
-Pure functions of the episode records written by :mod:`benchmarks.scoreboard`.
+Pure functions of the episode records written by :mod:`benchmarks.scoreboard.runner`.
 """
 
 from __future__ import annotations
@@ -9,6 +9,9 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
+import platform
+import subprocess
 import sys
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -17,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["KEY", "METRICS", "TIMING_FIELDS", "Board", "aggregate", "jsonable", "rank", "render_markdown",
-           "write_outputs", "write_plots"]
+__all__ = ["KEY", "METRICS", "TIMING_FIELDS", "Board", "aggregate", "jsonable", "machine", "rank",
+           "render_markdown", "write_outputs", "write_plots"]
 
 KEY = ("scenario", "policy", "seed")
 METRICS: tuple[str, ...] = (
@@ -159,8 +162,7 @@ def _cell(stat: dict[str, Any], metric: str) -> str:
     return f"{_fmt(mean)} ± {_fmt(half)}"
 
 
-def render_markdown(board: Board) -> str:
-    h = board.header
+def _preamble(h: dict[str, Any]) -> list[str]:
     m = h["machine"]
     seeds = h["seeds"]
     seed_text = f"{seeds[0]}–{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else str(seeds)
@@ -173,41 +175,48 @@ def render_markdown(board: Board) -> str:
     if h.get("scenario_seeds"):
         lines += ["Fewer seeds for the expensive scenarios: "
                   + ", ".join(f"{n}: {v}" for n, v in h["scenario_seeds"].items()), ""]
-    lines += [
-             f"Ranked by {h['ranking']}. Cells: mean ± 95 % CI half-width over seeds (Student t; "
-             "success: Wilson interval). * t_conv: mean over the episodes that converged "
-             "(n in scoreboard.json). RMSE, RMSEE, FOE: the env's tracking error as defined by "
-             "its paper (satenv.metrics); Δv summed over agents; ms/decision: wall time of act().", ""]
-    for scen, entries in board.aggregates.items():
-        info = h["scenarios"].get(scen, {})
-        rule = (f"success: every agent within {info.get('success_tol_m', '?')} m of its target at the end"
-                + (" and no collision" if info.get("collision_free_success", True) else ""))
-        desc = info.get("description", "")
-        lines += [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
-        cols = ["#", "policy", "n"] + [c for _, c in _TABLE] + ["errors"]
-        lines.append("| " + " | ".join(cols) + " |")
-        lines.append("|" + "|".join("---" if i < 2 else "--:" for i in range(len(cols))) + "|")
-        for i, pol in enumerate(board.ranking[scen], 1):
-            e = entries[pol]
-            row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in _TABLE]
-            row.append(str(e["errors"]))
-            lines.append("| " + " | ".join(row) + " |")
-        lines.append("")
+    return lines + [
+        f"Ranked by {h['ranking']}. Cells: mean ± 95 % CI half-width over seeds (Student t; "
+        "success: Wilson interval). * t_conv: mean over the episodes that converged "
+        "(n in scoreboard.json). RMSE, RMSEE, FOE: the env's tracking error as defined by "
+        "its paper (satenv.metrics); Δv summed over agents; ms/decision: wall time of act().", ""]
+
+
+def _scenario_section(board: Board, scen: str) -> list[str]:
+    info = board.header["scenarios"].get(scen, {})
+    rule = (f"success: every agent within {info.get('success_tol_m', '?')} m of its target at the end"
+            + (" and no collision" if info.get("collision_free_success", True) else ""))
+    desc = info.get("description", "")
+    lines = [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
+    cols = ["#", "policy", "n"] + [c for _, c in _TABLE] + ["errors"]
+    lines.append("| " + " | ".join(cols) + " |")
+    lines.append("|" + "|".join("---" if i < 2 else "--:" for i in range(len(cols))) + "|")
+    for i, pol in enumerate(board.ranking[scen], 1):
+        e = board.aggregates[scen][pol]
+        row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in _TABLE] + [str(e["errors"])]
+        lines.append("| " + " | ".join(row) + " |")
+    return lines + [""]
+
+
+def render_markdown(board: Board) -> str:
+    lines = _preamble(board.header)
+    for scen in board.aggregates:
+        lines += _scenario_section(board, scen)
     if board.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in board.notes] + [""]
     return "\n".join(lines)
 
 
-def write_outputs(board: Board, plots: bool = True) -> None:
-    out = board.out
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scoreboard.md").write_text(board.markdown)
+def _write_json(board: Board) -> None:
     payload = {"header": board.header, "ranking": board.ranking, "aggregates": board.aggregates,
                "episodes": [{k: v for k, v in r.items() if k != "traceback"} for r in board.records]}
-    tmp = out / "scoreboard.json.tmp"
+    tmp = board.out / "scoreboard.json.tmp"
     tmp.write_text(json.dumps(jsonable(payload), indent=1, allow_nan=False))
-    tmp.replace(out / "scoreboard.json")
-    with open(out / "scoreboard.csv", "w", newline="") as fh:
+    tmp.replace(board.out / "scoreboard.json")
+
+
+def _write_csv(board: Board) -> None:
+    with open(board.out / "scoreboard.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["scenario", "rank", "policy", "n", "errors"]
                    + [f"{m}_{s}" for m in METRICS for s in ("mean", "ci95_lo", "ci95_hi", "n")])
@@ -216,13 +225,25 @@ def write_outputs(board: Board, plots: bool = True) -> None:
                 e = board.aggregates[scen][pol]
                 w.writerow([scen, i, pol, e["n"], e["errors"]]
                            + [v for m in METRICS for v in (e[m]["mean"], *e[m]["ci95"], e[m]["n"])])
+
+
+def _write_episodes_csv(board: Board) -> None:
     fields = list(KEY) + ["env"] + list(METRICS) + [k for k in ("final_error_m", "terminated",
                                                                  "wall_s", "error") if k not in METRICS]
-    with open(out / "episodes.csv", "w", newline="") as fh:
+    with open(board.out / "episodes.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         w.writeheader()
         for r in board.records:
             w.writerow(r)
+
+
+def write_outputs(board: Board, plots: bool = True) -> None:
+    """Write every output file of ``board`` into ``board.out``."""
+    board.out.mkdir(parents=True, exist_ok=True)
+    (board.out / "scoreboard.md").write_text(board.markdown)
+    _write_json(board)
+    _write_csv(board)
+    _write_episodes_csv(board)
     if plots:
         try:
             write_plots(board)
@@ -230,52 +251,53 @@ def write_outputs(board: Board, plots: bool = True) -> None:
             print(f"warning: plots not written ({type(exc).__name__}: {exc})", file=sys.stderr)
 
 
-def write_plots(board: Board) -> list[Path]:
-    """Bar charts (mean with 95 % CI) per metric, and the example trajectories."""
-    import matplotlib
+def _bars(ax, board: Board, scen: str, metric: str, colors: dict[str, str]) -> None:
+    """One panel: a bar per policy of ``scen`` (ranked order) with its 95 % CI."""
+    names, ys, errs = [], [], [[], []]
+    for pol in board.ranking[scen]:
+        stat = board.aggregates[scen][pol][metric]
+        mean, (lo, hi) = stat["mean"], stat["ci95"]
+        if mean is None:
+            continue
+        names.append(pol)
+        ys.append(mean)
+        errs[0].append(0.0 if lo is None else max(0.0, mean - lo))
+        errs[1].append(0.0 if hi is None else max(0.0, hi - mean))
+    if names:
+        ax.bar(range(len(names)), ys, yerr=errs, capsize=3, color=[colors[n] for n in names])
+        ax.set_xticks(range(len(names)))
+        ax.set_xticklabels(names, rotation=20, ha="right", fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no finite values", ha="center", va="center", transform=ax.transAxes)
+    ax.set_title(scen, fontsize=9)
 
-    matplotlib.use("Agg")
+
+def _metric_figure(board: Board, metric: str, path: Path) -> Path:
+    """One panel per scenario (own y scale), one bar per policy."""
     import matplotlib.pyplot as plt
 
-    from satenv.render import plot_trajectory
-    from satenv.rollout import Trajectory
-
-    pdir = board.out / "plots"
-    pdir.mkdir(parents=True, exist_ok=True)
-    written = []
     scens = list(board.aggregates)
     pols = sorted({p for s in scens for p in board.aggregates[s]})
     colors = {p: f"C{j % 10}" for j, p in enumerate(pols)}
     ncols = min(3, len(scens))
     nrows = math.ceil(len(scens) / ncols)
-    for metric in _PLOTS:   # one panel per scenario (own y scale), one bar per policy, ranked order
-        fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), dpi=90, squeeze=False)
-        for ax, scen in zip(axes.ravel(), scens, strict=False):
-            names, ys, errs = [], [], [[], []]
-            for pol in board.ranking[scen]:
-                stat = board.aggregates[scen][pol][metric]
-                mean, (lo, hi) = stat["mean"], stat["ci95"]
-                if mean is None:
-                    continue
-                names.append(pol)
-                ys.append(mean)
-                errs[0].append(0.0 if lo is None else max(0.0, mean - lo))
-                errs[1].append(0.0 if hi is None else max(0.0, hi - mean))
-            if names:
-                ax.bar(range(len(names)), ys, yerr=errs, capsize=3, color=[colors[n] for n in names])
-                ax.set_xticks(range(len(names)))
-                ax.set_xticklabels(names, rotation=20, ha="right", fontsize=8)
-            else:
-                ax.text(0.5, 0.5, "no finite values", ha="center", va="center", transform=ax.transAxes)
-            ax.set_title(scen, fontsize=9)
-        for ax in axes.ravel()[len(scens):]:
-            ax.set_visible(False)
-        fig.suptitle(f"{metric} (mean, 95 % CI over seeds)")
-        fig.tight_layout()
-        path = pdir / f"{metric}.png"
-        fig.savefig(path)
-        plt.close(fig)
-        written.append(path)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), dpi=90, squeeze=False)
+    for ax, scen in zip(axes.ravel(), scens, strict=False):
+        _bars(ax, board, scen, metric, colors)
+    for ax in axes.ravel()[len(scens):]:
+        ax.set_visible(False)
+    fig.suptitle(f"{metric} (mean, 95 % CI over seeds)")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def _trajectory_plots(board: Board, pdir: Path) -> list[Path]:
+    from satenv.render import plot_trajectory
+    from satenv.rollout import Trajectory
+
+    written = []
     for npz in sorted((board.out / "trajectories").glob("*.npz")):
         scen, pol, seed = npz.stem.split("__")
         try:
@@ -285,3 +307,53 @@ def write_plots(board: Board) -> list[Path]:
         written.append(plot_trajectory(traj, pdir / "trajectories" / f"{npz.stem}.png",
                                        title=f"{scen} · {pol} · {seed}"))
     return written
+
+
+def write_plots(board: Board) -> list[Path]:
+    """Bar charts (mean with 95 % CI) per metric, and the example trajectories."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    pdir = board.out / "plots"
+    pdir.mkdir(parents=True, exist_ok=True)
+    written = [_metric_figure(board, metric, pdir / f"{metric}.png") for metric in _PLOTS]
+    return written + _trajectory_plots(board, pdir)
+
+
+# ----------------------------------------------------------------------------------------------
+# The header: where and how the board was made.
+# ----------------------------------------------------------------------------------------------
+def machine() -> dict[str, Any]:
+    """CPU, core count, platform, Python and numpy versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"platform": platform.platform(), "cpu": cpu, "cpus": os.cpu_count(),
+            "python": platform.python_version(), "numpy": np.__version__}
+
+
+def git_revision() -> str | None:
+    """Short git revision of the checkout (``-dirty`` with uncommitted changes), if any."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                             text=True, timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return rev + ("-dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def satenv_version() -> str:
+    try:
+        import satenv
+
+        return satenv.__version__
+    except (ImportError, AttributeError):
+        return "unknown"

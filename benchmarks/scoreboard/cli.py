@@ -1,0 +1,109 @@
+"""The command line: ``python -m benchmarks.scoreboard`` / ``satenv-scoreboard``.
+
+:func:`main` first sets one BLAS thread per process (``OPENBLAS_NUM_THREADS``,
+``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` = 1 unless already set; fair, stable solve timings),
+before numpy is imported by the board, so it holds for this process and every worker.
+Importing this module changes no environment variable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from benchmarks._env import single_thread_blas
+from benchmarks.scoreboard.registry import FULL, POLICIES, QUICK, SCENARIOS, discover_trained_policies
+from benchmarks.scoreboard.specs import ScoreboardError, Unavailable
+
+__all__ = ["build_parser", "main"]
+
+
+def _status(spec) -> str:
+    try:
+        spec.check_available()
+        return "available"
+    except Unavailable as why:
+        return f"not available ({why})"
+
+
+def list_registry() -> str:
+    """The ``--list`` text: every scenario and policy, whether it can run here, where it fits."""
+    lines = ["scenarios:"]
+    for name, spec in SCENARIOS.items():
+        lines.append(f"  {name:<32} {_status(spec):<12}  {spec.env_id:<13} {spec.description}")
+    lines.append("policies:")
+    for name, spec in {**POLICIES, **discover_trained_policies()}.items():
+        fits = ",".join(spec.env_ids or ("any env",))
+        lines.append(f"  {name:<32} {_status(spec):<12}  fits {fits}  {spec.description}")
+    lines.append(f"quick: {QUICK}")
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.scoreboard",
+                                description="Rank every policy on every scenario (satenv scoreboard).",
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true",
+                   help=f"the small embedded board: {QUICK['scenarios']} x {QUICK['policies']} x seeds "
+                        f"{QUICK['seeds']} (a few minutes on 2 cores)")
+    p.add_argument("--scenarios", help="comma-separated scenario names or globs (default: all available)")
+    p.add_argument("--policies", help="comma-separated policy names or globs (default: all available)")
+    p.add_argument("--seeds", help=f"seeds: '0-9', '0,3,7' (default: {FULL['seeds']} with fewer for "
+                                   f"{sorted(FULL['scenario_seeds'])}; quick: {QUICK['seeds']})")
+    p.add_argument("--policy", action="append", default=[], metavar="PATH",
+                   help="also run a trained policy folder (training.load(PATH)), named after its run "
+                        "folder (runs/a/final -> user:a); repeatable")
+    p.add_argument("--out", help="output directory (default: results/scoreboard, "
+                                 "results/scoreboard/quick with --quick)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
+    p.add_argument("--overwrite", action="store_true", help="discard the episodes already in --out")
+    p.add_argument("--workers", type=int, default=1, help="parallel worker processes")
+    p.add_argument("--backend", choices=("process", "ray"), default="process",
+                   help="where episodes run: local processes or Ray")
+    p.add_argument("--ray-address", default=None,
+                   help="address of an existing Ray cluster (default: start a local one)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots and trajectories")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--list", action="store_true", help="list scenarios and policies, then exit")
+    return p
+
+
+def _report(board, plots: bool) -> int:
+    from benchmarks.scoreboard.runner import EPISODES_FILE
+
+    print(board.markdown)
+    print(f"wrote {board.out}/scoreboard.md, scoreboard.json, scoreboard.csv, episodes.csv"
+          + (", plots/" if plots else ""))
+    errors = sum(1 for r in board.records if r.get("error"))
+    if errors:
+        print(f"warning: {errors} episode(s) raised an error (see the 'error' field in "
+              f"{board.out}/{EPISODES_FILE})", file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    single_thread_blas()
+    args_list = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(args_list)
+    if args.list:
+        print(list_registry())
+        return 0
+    from benchmarks.scoreboard.board import run_scoreboard   # (imports numpy: after the BLAS setting)
+    from benchmarks.scoreboard.runner import EPISODES_FILE
+
+    out = args.out or ("results/scoreboard/quick" if args.quick else "results/scoreboard")
+    try:
+        board = run_scoreboard(out, scenarios=args.scenarios, policies=args.policies, seeds=args.seeds,
+                               checkpoints=args.policy, quick=args.quick, workers=args.workers,
+                               backend=args.backend, ray_address=args.ray_address, resume=args.resume,
+                               overwrite=args.overwrite, plots=not args.no_plots,
+                               progress=not args.no_progress, argv=args_list)
+    except ScoreboardError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished episodes are in {out}/{EPISODES_FILE}; "
+              "rerun with --resume to continue", file=sys.stderr)
+        return 130
+    return _report(board, not args.no_plots)

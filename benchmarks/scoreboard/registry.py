@@ -1,0 +1,181 @@
+"""The scoreboard's tables: every scenario and scripted policy by name, the ``--quick`` and full
+boards, shipped trained policies (``training/policies/*``) and user checkpoints (``--policy``).
+
+Adding an env configuration or a baseline is one entry here::
+
+    SCENARIOS["cluster-case1"] = ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"})
+    POLICIES["apf"] = PolicySpec("apf", "baselines:APF", env_ids=("cluster_v0",))
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from benchmarks.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
+
+__all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "discover_trained_policies", "user_policy",
+           "user_policy_name"]
+
+SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
+
+_ISS_INCLINATION = math.radians(51.6)
+_TABLE1_NOTE = ("the Table I formation puts followers closer than 2 r_f, so collisions are counted "
+                "but do not end the episode or void success")
+
+
+def _platoon(name: str, description: str, collision_free_success: bool = False, **kwargs) -> ScenarioSpec:
+    """A platoon_v0 scenario; pereira2023-based ones run without collision termination (as the
+    paper's reproduction): its target formation itself is closer than 2 r_f."""
+    return ScenarioSpec(name, "platoon_v0", kwargs, description,
+                        collision_free_success=collision_free_success)
+
+
+SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
+    *[_platoon(f"platoon-{topo}-{dyn}",
+               f"pereira2023 Table I, {topo} topology, {dyn} truth"
+               + (" (chief inclination 51.6 deg)" if dyn == "j2" else "") + f"; {_TABLE1_NOTE}",
+               preset="pereira2023", topology=topo, dynamics=dyn, terminate_on_collision=False,
+               **({"inclination": _ISS_INCLINATION} if dyn == "j2" else {}))
+      for dyn in ("cw", "j2") for topo in ("PLF", "BDL", "TPLF")],
+    _platoon("platoon-random-cw", f"pereira2023 PLF with randomised initial states, cw; {_TABLE1_NOTE}",
+             preset="pereira2023", randomize=True, terminate_on_collision=False),
+    _platoon("platoon-random-j2", f"pereira2023 PLF with randomised initial states, j2 (51.6 deg); "
+             f"{_TABLE1_NOTE}", preset="pereira2023", randomize=True, dynamics="j2",
+             inclination=_ISS_INCLINATION, terminate_on_collision=False),
+    _platoon("platoon-chain-cw", "pereira2023 Table I start, PLF, chain formation (followers 8 m apart, "
+             "collision-free target); a collision ends the episode", collision_free_success=True,
+             preset="pereira2023", formation="chain", terminate_on_collision=True),
+    _platoon("platoon-tplf30-random-cw", "pereira2023 TPLF with E_d = [0, -30, 0] (targets 8-15 m apart) "
+             "and randomised initial states, cw; a collision ends the episode (the shipped "
+             "policy's scenario)", collision_free_success=True, preset="pereira2023",
+             topology="TPLF", desired_error=(0.0, -30.0, 0.0, 0.0, 0.0, 0.0), randomize=True,
+             terminate_on_collision=True),
+    _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, LOS cone "
+             "(collision-free success)", collision_free_success=True, preset="pereira2022"),
+    ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"},
+                 "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
+    ScenarioSpec("cluster-case2", "cluster_v0", {"preset": "li2022-case2"},
+                 "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
+    ScenarioSpec("servicing-pereira2022", "servicing_v0", {"preset": "pereira2022"},
+                 "pereira2022 §5.2: 6-DOF servicing around a passive object", success_tol=0.5),
+    ScenarioSpec("formation-kannan2022-position", "formation_v0", {"preset": "kannan2022-position"},
+                 "kannan2022 §5.1: 3 spacecraft to a connected in-plane network"),
+    ScenarioSpec("formation-kannan2022-collision", "formation_v0", {"preset": "kannan2022-collision"},
+                 "kannan2022 §5.2: leader-follower y-spacing of 10 m"),
+]}
+"""Every scenario of the scoreboard by name."""
+
+POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
+    PolicySpec("zero", "baselines.base:ZeroPolicy", description="no thrust (coasting)"),
+    PolicySpec("random", "baselines.base:RandomPolicy", description="uniform random thrust"),
+    PolicySpec("dmpc", "baselines:DMPC", env_ids=("platoon_v0",), requires=("daqp",),
+               description="1-hop distributed MPC (pereira2023/2022)"),
+    PolicySpec("tube_rdmpc", "baselines:TubeRDMPC", env_ids=("cluster_v0",), requires=("casadi",),
+               dry_run=False, description="tube-based robust DMPC (li2022)"),
+    PolicySpec("apf", "baselines:APF", env_ids=("cluster_v0",),
+               description="artificial potential field (li2022)"),
+    PolicySpec("nmpc", "baselines:NMPC", env_ids=("servicing_v0",), requires=("casadi",),
+               dry_run=False, description="cooperative NMPC (pereira2022 §4)"),
+    PolicySpec("cgmres", "baselines:CGMRES", env_ids=("formation_v0",), requires=("casadi",),
+               dry_run=False, description="centralised C/GMRES NMPC (kannan2022)"),
+]}
+"""Every scripted policy by name; shipped trained policies are added by
+:func:`discover_trained_policies`."""
+
+QUICK: dict[str, Any] = {
+    "scenarios": ["platoon-PLF-cw", "platoon-BDL-j2", "platoon-chain-cw", "platoon-tplf30-random-cw",
+                  "platoon-pereira2022", "formation-kannan2022-position", "cluster-case1"],
+    "policies": ["zero", "random", "dmpc", "apf", "cgmres", "trained:*"],
+    "seeds": [0, 1, 2],
+    "scenario_seeds": {"cluster-case1": [0]},   # ~10 s per episode: one seed in the quick board
+}
+"""The ``--quick`` board (the README's first command): a few minutes on 2 cores at most."""
+
+FULL: dict[str, Any] = {
+    "seeds": "0-9",
+    # the costliest pairs: tube-RDMPC ~0.6 s x 400 decisions per cluster episode, NMPC ~0.8 s x
+    # 1200 decisions per servicing episode (measured on 2 shared cores)
+    "scenario_seeds": {"cluster-case1": [0, 1, 2, 3, 4], "cluster-case2": [0, 1, 2, 3, 4],
+                       "servicing-pereira2022": [0, 1, 2]},
+}
+"""The full (published) board: every scenario x fitting policy x these seeds."""
+
+
+def _folder_env_ids(path: Path) -> tuple[str, ...] | None:
+    """The env id of a policy folder's ``env.json`` (``None`` when it has none)."""
+    try:
+        env_id = json.loads((path / "env.json").read_text()).get("env_id")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return (env_id,) if isinstance(env_id, str) and env_id else None
+
+
+def _learned(name: str, path: Path, description: str) -> PolicySpec:
+    return PolicySpec(name, "training:load", env_ids=_folder_env_ids(path), checkpoint=str(path),
+                      learned=True, requires=("stable_baselines3",), description=description)
+
+
+def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, PolicySpec]:
+    """One ``trained:<name>`` entry per shipped artefact folder under ``training/policies/``; it
+    fits the env it was trained on (``env.json``'s ``env_id``)."""
+    if not root.is_dir():
+        return {}
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
+    return {f"trained:{p.name}": _learned(f"trained:{p.name}", p, f"shipped trained policy {p.name}")
+            for p in folders}
+
+
+GENERIC_FOLDER_NAMES = ("final", "best", "last", "latest", "model", "policy")
+"""Folder names that say which checkpoint of a run, not which run: ``--policy`` names them by
+their parent (``runs/a/final`` -> ``user:a``); so are ``checkpoint*`` / ``ckpt*`` / ``step*``."""
+
+
+def user_policy_name(path: str | Path) -> str:
+    """``user:<run>`` for a ``--policy`` folder: its own name, or its parent's when the folder's
+    name is generic (``runs/a/final`` -> ``user:a``, ``runs/b/checkpoint-4096`` -> ``user:b``)."""
+    p = Path(path).resolve()
+    generic = (p.name.lower() in GENERIC_FOLDER_NAMES
+               or p.name.lower().startswith(("checkpoint", "ckpt", "step")))
+    return f"user:{p.parent.name if generic and p.parent.name else p.name}"
+
+
+def _load_or_raise(path: str) -> None:
+    try:
+        import training
+    except ModuleNotFoundError as exc:
+        raise ScoreboardError(f"--policy needs the training package ({exc})") from None
+    try:
+        training.load(path)
+    except Exception as exc:
+        raise ScoreboardError(f"--policy {path}: cannot load this checkpoint: {type(exc).__name__}: "
+                              f"{exc}") from None
+
+
+def user_policy(path: str) -> PolicySpec:
+    """The spec of a ``--policy`` folder, after checking that it exists and loads."""
+    p = Path(path)
+    if not p.exists():
+        raise ScoreboardError(f"--policy {path}: no such file or directory; pass the path of a "
+                              "checkpoint saved by training (e.g. runs/<run>/final)")
+    if not os.access(p, os.R_OK):
+        raise ScoreboardError(f"--policy {path}: not readable (check its permissions)")
+    _load_or_raise(str(p))
+    return _learned(user_policy_name(p), p, f"user checkpoint {path}")
+
+
+def user_policies(paths: list[str], taken: dict[str, PolicySpec]) -> list[PolicySpec]:
+    """Specs of the ``--policy`` folders; a name clash (with each other or ``taken``) is an error."""
+    specs: dict[str, PolicySpec] = {}
+    for path in paths:
+        spec = user_policy(path)
+        other = specs.get(spec.name) or taken.get(spec.name)
+        if other is not None:
+            raise ScoreboardError(f"--policy {path} and {other.checkpoint or other.name} are both named "
+                                  f"{spec.name!r} (named after the run folder): rename one of the run "
+                                  "folders or pass distinct runs")
+        specs[spec.name] = spec
+    return list(specs.values())

@@ -1,0 +1,226 @@
+"""What a scoreboard entry is: a named scenario (an env id + kwargs) and a named policy.
+
+A scenario spec builds its env with ``satenv.make(env_id, **kwargs)``; a policy spec builds a
+policy with ``factory(env, **kwargs)`` (``factory`` given as ``"module:attribute"``) or, for a
+trained policy folder, with ``training.load(folder)``. Two rules live here, one function each:
+:func:`policy_fits` (which policy runs on which env) and :func:`episode_metrics` (how one episode
+is scored, success included).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.util
+import inspect
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["PolicySpec", "ScenarioSpec", "ScoreboardError", "Unavailable", "checkpoint_policy",
+           "episode_metrics", "policy_fits", "resolve"]
+
+
+class ScoreboardError(ValueError):
+    """Bad scoreboard input (unknown name, unreadable checkpoint, incompatible policy, ...)."""
+
+
+class Unavailable(Exception):
+    """An entry whose optional third-party dependency is not installed; ``str`` says which."""
+
+
+def _check_requires(requires: tuple[str, ...]) -> None:
+    for dep in requires:
+        if importlib.util.find_spec(dep) is None:
+            raise Unavailable(f"optional dependency {dep!r} is not installed")
+
+
+def resolve(target: str, requires: tuple[str, ...] = ()) -> Callable[..., Any]:
+    """The object named by ``"module:attribute"``; :class:`Unavailable` if a ``requires`` module
+    (optional third-party dependency) is missing. Any other import error propagates."""
+    _check_requires(requires)
+    module, _, attr = target.partition(":")
+    obj = getattr(importlib.import_module(module), attr, None)
+    if obj is None:
+        raise ScoreboardError(f"{target!r}: module {module} has no attribute {attr!r}")
+    return obj
+
+
+def _fingerprint(payload: Mapping[str, Any]) -> str:
+    """Short stable hash of a JSON-able description (records which definition made an episode)."""
+    text = json.dumps(payload, sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def _env_ids() -> tuple[str, ...]:
+    import satenv
+
+    return tuple(getattr(satenv, "ENV_IDS", None) or satenv._ENVS)
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """A named env configuration: ``satenv.make(env_id, **kwargs)``.
+
+    Args:
+        name: scoreboard name, e.g. ``"platoon-PLF-cw"``.
+        env_id: a ``satenv.make`` id, e.g. ``"platoon_v0"``.
+        kwargs: keyword arguments of the env.
+        description: one line for the scoreboard header.
+        success_tol: position tolerance [m] of success / convergence.
+        collision_free_success: success also requires zero collisions; ``False`` where the
+            scenario's own target formation puts bodies closer than their collision distance.
+        requires: optional third-party modules the env needs.
+    """
+
+    name: str
+    env_id: str
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+    description: str = ""
+    success_tol: float = 1.0
+    collision_free_success: bool = True
+    requires: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ScoreboardError(f"scenario name must be a non-empty string, got {self.name!r}")
+        if self.env_id not in _env_ids():
+            raise ScoreboardError(f"scenario {self.name}: env_id must be one of {list(_env_ids())}, "
+                                  f"got {self.env_id!r}")
+        if not self.success_tol > 0:
+            raise ScoreboardError(f"scenario {self.name}: success_tol must be > 0, got {self.success_tol!r}")
+
+    def check_available(self) -> None:
+        """Raise :class:`Unavailable` if an optional dependency is missing."""
+        _check_requires(self.requires)
+
+    def make(self):
+        """A fresh env."""
+        import satenv
+
+        self.check_available()
+        return satenv.make(self.env_id, **dict(self.kwargs))
+
+    def fingerprint(self) -> str:
+        # the payload keeps the format of logs written before env ids (the env factory as a
+        # "module:attribute" target) so that those logs stay resumable: the same definition
+        return _fingerprint({"targets": [f"satenv.envs.{self.env_id}:parallel_env"],
+                             "kwargs": dict(self.kwargs), "success_tol": self.success_tol,
+                             "collision_free_success": self.collision_free_success})
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """A named policy: ``factory(env, **kwargs)``, or ``training.load(checkpoint)``.
+
+    Args:
+        name: scoreboard name, e.g. ``"dmpc"``.
+        target: ``"module:attribute"`` of the policy class / factory (``"training:load"`` for a
+            checkpoint).
+        kwargs: keyword arguments after ``env``.
+        env_ids: the env ids the policy controls (``None``: any env); a learned policy's comes
+            from its folder's ``env.json``.
+        description: one line for the scoreboard header.
+        checkpoint: path of a trained policy folder.
+        requires: optional third-party modules (e.g. the QP solver).
+        dry_run: act once on a reset env before the run to check compatibility (cheap policies).
+        learned: a trained network (its observation space is checked against the env's).
+    """
+
+    name: str
+    target: str
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+    env_ids: tuple[str, ...] | None = None
+    description: str = ""
+    checkpoint: str | None = None
+    requires: tuple[str, ...] = ()
+    dry_run: bool = True
+    learned: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ScoreboardError(f"policy name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.target, str) or ":" not in self.target:
+            raise ScoreboardError(f"policy {self.name}: target must be a 'module:attribute' string, "
+                                  f"got {self.target!r}")
+        if self.env_ids is not None and (isinstance(self.env_ids, str) or not self.env_ids):
+            raise ScoreboardError(f"policy {self.name}: env_ids must be a non-empty tuple of env ids "
+                                  f"or None, got {self.env_ids!r}")
+
+    def factory(self) -> Callable[..., Any]:
+        return resolve(self.target, self.requires)
+
+    def check_available(self) -> None:
+        """Raise :class:`Unavailable` if an optional dependency is missing."""
+        _check_requires(self.requires)
+
+    def make(self, env):
+        """A fresh policy for ``env``."""
+        fn = self.factory()
+        if self.checkpoint is not None:
+            return checkpoint_policy(fn, self.checkpoint, env)
+        return fn(env, **dict(self.kwargs))
+
+    def fingerprint(self) -> str:
+        payload: dict[str, Any] = {"targets": [self.target], "kwargs": dict(self.kwargs)}
+        if self.checkpoint is not None:
+            payload["checkpoint"] = _content_hash(Path(self.checkpoint))
+        return _fingerprint(payload)
+
+
+def policy_fits(spec: PolicySpec, env) -> bool:
+    """Whether the policy ``spec`` can control ``env`` (THE applicability rule of the board).
+
+    Today: by the env's id (``env.metadata["name"]``) against the spec's ``env_ids``, which for a
+    learned policy come from its folder's ``env.json``.
+    """
+    return spec.env_ids is None or env.metadata.get("name") in spec.env_ids
+
+
+def episode_metrics(traj, scenario: ScenarioSpec) -> dict[str, Any]:
+    """The metrics of one episode, success included (THE scoring rule of the board).
+
+    ``satenv.metrics.summary`` at the scenario's tolerance; where the scenario's own formation
+    overlaps (``collision_free_success=False``) success is the formation reached alone.
+    """
+    from satenv import metrics
+
+    summary = metrics.summary(traj, tol=scenario.success_tol)
+    if not scenario.collision_free_success:
+        summary["success"] = bool(summary["final_error_m"] <= scenario.success_tol)
+    return summary
+
+
+def _content_hash(path: Path) -> str:
+    """Hash of a checkpoint file, or of every file under a checkpoint directory."""
+    h = hashlib.sha256()
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for p in files:
+        h.update(str(p.relative_to(path) if path.is_dir() else p.name).encode())
+        try:
+            h.update(p.read_bytes())
+        except OSError:
+            h.update(b"<unreadable>")
+    return h.hexdigest()[:16]
+
+
+def checkpoint_policy(load: Callable[..., Any], path: str, env) -> Any:
+    """``load(path)`` (passing ``env=env`` when the loader accepts it) as a policy for ``env``."""
+    try:
+        params = inspect.signature(load).parameters
+    except (TypeError, ValueError):
+        params = {}
+    policy = load(path, env=env) if "env" in params else load(path)
+    for method in ("reset", "act"):
+        if not callable(getattr(policy, method, None)):
+            raise ScoreboardError(f"training.load({path!r}) returned {type(policy).__name__}, which has "
+                                  f"no {method}() method; expected a policy with reset(seed) and "
+                                  f"act(observations)")
+    if not hasattr(policy, "info"):
+        try:
+            policy.info = {}
+        except AttributeError:
+            pass
+    return policy
