@@ -14,8 +14,15 @@ Agent-steps per second (one agent advanced by one decision step) of
 * ``vmas``    VMAS ``navigation`` (4 agents, continuous, CPU, one torch thread) at the same batch
               sizes, ``env.step`` (skipped with a note when ``vmas`` is not installed);
 * ``limit``   the machine's limit: a numpy copy of the same state + action (+ chief) bytes;
-* ``solvers`` per-decision solve times of the scripted MPC baselines that exist (DMPC on
-              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios when they land).
+* ``solvers`` per-decision solve times of the scripted MPC baselines (DMPC on
+              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too.
+
+Two more sections run only when named in ``--sections`` (they take minutes):
+
+* ``cgmres_ipopt`` one C/GMRES update against an ipopt solve (warm and cold) of the same NMPC
+              problem along the closed loop on both kannan2022 scenarios, and the first-input gap;
+* ``training`` SB3 PPO ``learn()`` on satenv's batched ``SatVecEnv`` against SB3's
+              ``DummyVecEnv`` of one PettingZoo env per copy (env-steps/s, learning and raw).
 
 Every rate is the best of 3 repeats of at least ``--min-time`` seconds, single-threaded
 (``OPENBLAS_NUM_THREADS=1``, ``torch.set_num_threads(1)``). The JSON holds the figures, the
@@ -24,26 +31,26 @@ ratios satenv/peer and satenv/limit and the issue's targets with ``met`` flags.
 
 from __future__ import annotations
 
+import argparse
+import json
+import math
 import os
+import platform
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import math  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable  # noqa: E402
-from typing import Any  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from satenv.dynamics import R_EARTH, Orbit, RelativeModel  # noqa: E402
+from benchmarks._env import single_thread_blas
+from satenv.dynamics import R_EARTH, Orbit, RelativeModel
 
 AGENTS = 4
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers")
+"""The default sections."""
+EXTRA_SECTIONS = ("cgmres_ipopt", "training")
+"""Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
 
@@ -225,7 +232,8 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
                  policies: tuple[str, ...] | None = None) -> dict:
     """Median / p95 wall time of ``act()`` (all agents) and of the solver's own ``solve_ms`` /
     ``qp_ms`` entries, over the first decisions of one episode (seed 0)."""
-    from benchmarks.registry import POLICIES, SCENARIOS, Unavailable
+    from benchmarks.scoreboard.registry import POLICIES, SCENARIOS
+    from benchmarks.scoreboard.specs import Unavailable
 
     out: dict[str, Any] = {}
     for pol_name, scen_name, decisions in SOLVERS:
@@ -254,7 +262,7 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
                "act_ms_median": float(np.median(times)), "act_ms_p95": float(np.percentile(times, 95)),
                "act_ms_per_agent_median": float(np.median(times)) / n,
                "fallbacks": int(info.get("fallbacks", 0))}
-        for k in ("solve_ms", "qp_ms"):
+        for k in ("solve_ms", "qp_ms", "agent_solve_ms"):
             v = np.asarray(info.get(k, []), dtype=float).ravel()
             if v.size:
                 row[f"{k}_median"] = float(np.median(v))
@@ -263,6 +271,137 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
         out[key] = row
         env.close()
     return out
+
+
+# ----------------------------------------------------------------------------------------------
+# C/GMRES against ipopt on the same problem (kannan2022).
+# ----------------------------------------------------------------------------------------------
+def _ms_stats(seconds: list[float]) -> tuple[float, float]:
+    return float(np.median(seconds) * 1e3), float(np.percentile(seconds, 95) * 1e3)
+
+
+def _cgmres_loop(env, pol, steps: int, stride: int) -> dict[str, list[float]]:
+    """Closed loop of ``steps`` C/GMRES updates; at every ``stride``-th one, the same problem
+    (state, horizon ``T(t)``, N, cost) solved by ipopt (tol 1e-8) warm- and cold-started."""
+    ocp, warm = pol.ocp, None
+    times: dict[str, list[float]] = {"cgmres": [], "warm": [], "cold": [], "diff": []}
+    for k in range(steps):
+        x, t = env.state(), pol.time
+        start = time.perf_counter()
+        w = pol.update(x)
+        times["cgmres"].append(time.perf_counter() - start)
+        if k % stride == 0 and k > 0:
+            ref = ocp.solve_ipopt(x, pol.horizon_at(t), guess=warm, tol=1e-8)
+            cold = ocp.solve_ipopt(x, pol.horizon_at(t), tol=1e-8)
+            warm = ref["U"]
+            times["warm"].append(ref["time_s"])
+            times["cold"].append(cold["time_s"])
+            times["diff"].append(float(np.abs(w - ref["w0"]).max() * env.scenario.u_max))
+        act = w.reshape(ocp.m, 3)
+        env.step({a: act[i] for i, a in enumerate(env.possible_agents)})
+    return times
+
+
+def cgmres_vs_ipopt(preset: str, steps: int = 1000, stride: int = 10) -> dict:
+    """Median / p95 ms of one C/GMRES update and of ipopt solves of the same NMPC problem on
+    ``formation_v0(preset=preset)``, their ratios and the largest first-input gap [m/s^2]."""
+    import satenv
+    from baselines.cgmres import CGMRES
+
+    env = satenv.make("formation_v0", preset=preset)
+    pol = CGMRES(env)
+    env.reset(seed=0)
+    pol.reset(seed=0)
+    pol.ocp.solve_ipopt(np.zeros(pol.ocp.nx), 1.0, tol=1e-8)  # build the NLP outside the timings
+    times = _cgmres_loop(env, pol, steps, stride)
+    (cg, cg95), (ipw, ipw95), (ipc, ipc95) = (_ms_stats(times[k]) for k in ("cgmres", "warm", "cold"))
+    return {"scenario": preset, "steps": steps, "ipopt_solves": len(times["warm"]),
+            "unknowns": pol.ocp.dim, "horizon_steps": pol.ocp.N, "kmax": pol.options["kmax"],
+            "cgmres_update_ms_median": cg, "cgmres_update_ms_p95": cg95,
+            "ipopt_warm_ms_median": ipw, "ipopt_warm_ms_p95": ipw95,
+            "ipopt_cold_ms_median": ipc, "ipopt_cold_ms_p95": ipc95,
+            "speedup_vs_ipopt_warm": ipw / cg, "speedup_vs_ipopt_cold": ipc / cg,
+            "max_first_input_diff_mps2": max(times["diff"]), "fallbacks": pol.info["fallbacks"]}
+
+
+# ----------------------------------------------------------------------------------------------
+# Training throughput: SB3 PPO on the batched env against DummyVecEnv.
+# ----------------------------------------------------------------------------------------------
+def _ppo(venv, n_steps: int, n_epochs: int, seed: int):
+    from stable_baselines3 import PPO
+
+    rollout = n_steps * venv.num_envs
+    return PPO("MlpPolicy", venv, n_steps=n_steps, batch_size=max(rollout // 4, 2), n_epochs=n_epochs,
+               seed=seed, device="cpu", verbose=0, policy_kwargs={"net_arch": [64, 64]})
+
+
+def _raw_rate(venv, steps: int) -> float:
+    """Vector steps per second with uniform random actions."""
+    venv.reset()
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, size=(steps, venv.num_envs, *venv.action_space.shape)).astype(np.float32)
+    t0 = time.perf_counter()
+    for k in range(steps):
+        venv.step(actions[k])
+    return steps / (time.perf_counter() - t0)
+
+
+def _learn_rates(venv, rows_per_copy: int, agents: int, copies: int, n_steps: int, rollouts: int,
+                 n_epochs: int, seed: int) -> dict:
+    rate = _raw_rate(venv, 200)
+    model = _ppo(venv, n_steps, n_epochs, seed)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=rollouts * n_steps * venv.num_envs)
+    wall = time.perf_counter() - t0
+    env_steps = model.num_timesteps // rows_per_copy
+    return {"rows": venv.num_envs, "learn_wall_s": round(wall, 3), "learn_scenario_steps": int(env_steps),
+            "learn_env_steps_per_s": env_steps / wall, "learn_agent_steps_per_s": env_steps * agents / wall,
+            "raw_env_steps_per_s": rate * copies, "raw_agent_steps_per_s": rate * copies * agents}
+
+
+def training_throughput(env_id: str = "platoon_v0", env_kwargs: dict | None = None, copies: int = 64,
+                        n_steps: int = 128, rollouts: int = 3, n_epochs: int = 10, seed: int = 0) -> dict:
+    """SB3 PPO ``learn()`` env-steps/s on ``SatVecEnv`` (one batched core step for all copies,
+    one row per agent) and on ``DummyVecEnv`` of ``CentralisedEnv`` (one PettingZoo env per copy,
+    one row per copy), same PPO settings; and their raw stepping rates (random actions)."""
+    import torch
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from training.gym_view import CentralisedEnv
+    from training.vec_env import SatVecEnv, make_env
+
+    env_kwargs = {"randomize": True} if env_kwargs is None else env_kwargs
+    torch.set_num_threads(1)
+    m = len(make_env(env_id, **env_kwargs).possible_agents)
+    venvs = {"satenv": (lambda: SatVecEnv(make_env(env_id, **env_kwargs), copies, seed=seed), m),
+             "dummy": (lambda: DummyVecEnv([lambda: CentralisedEnv(make_env(env_id, **env_kwargs))
+                                            for _ in range(copies)]), 1)}
+    out: dict[str, Any] = {"env_id": env_id, "env_kwargs": env_kwargs, "copies": copies}
+    for name, (make, rows_per_copy) in venvs.items():
+        venv = make()
+        out[name] = _learn_rates(venv, rows_per_copy, m, copies, n_steps, rollouts, n_epochs, seed)
+        venv.close()
+    for kind in ("learn", "raw"):
+        out[f"ratio_{kind}_env_steps_per_s"] = (out["satenv"][f"{kind}_env_steps_per_s"]
+                                                / out["dummy"][f"{kind}_env_steps_per_s"])
+    return out
+
+
+def _extra_sections(result: dict, sections: tuple[str, ...], scale: float, log: Callable[[str], None]) -> None:
+    """The opt-in sections (:data:`EXTRA_SECTIONS`); ``scale`` shrinks their loops (smoke runs)."""
+    if "cgmres_ipopt" in sections:
+        steps = max(2, int(1000 * scale))
+        result["cgmres_ipopt"] = [cgmres_vs_ipopt(p, steps, max(1, min(10, steps - 1)))
+                                  for p in ("kannan2022-position", "kannan2022-collision")]
+        for r in result["cgmres_ipopt"]:
+            log(f"C/GMRES {r['scenario']}: update {r['cgmres_update_ms_median']:.2f} ms, ipopt warm "
+                f"{r['ipopt_warm_ms_median']:.1f} ms / cold {r['ipopt_cold_ms_median']:.1f} ms")
+    if "training" in sections:
+        copies = max(2, int(64 * scale))
+        result["training"] = training_throughput(copies=copies, n_steps=max(8, int(128 * scale)),
+                                                 rollouts=1 if scale < 1 else 3, n_epochs=1 if scale < 1 else 10)
+        log(f"training: satenv/dummy learn x{result['training']['ratio_learn_env_steps_per_s']:.1f}, "
+            f"raw x{result['training']['ratio_raw_env_steps_per_s']:.1f}")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -309,15 +448,9 @@ def _ratios(result: dict) -> tuple[dict, list[dict]]:
 
 
 def _machine() -> dict:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"platform": platform.platform(), "cpu": cpu, "cpus": os.cpu_count(),
-            "python": platform.python_version(), "numpy": np.__version__,
-            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+    from benchmarks.scoreboard.report import machine
+
+    return {**machine(), "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
             "load_average_at_start": _loadavg()}
 
 
@@ -376,22 +509,27 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
         for k, v in result["solvers"].items():
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
                                    f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
+    _extra_sections(result, sections, solver_scale, log)
     result["ratios"], result["targets"] = _ratios(result)
     result["machine"]["load_average_at_end"] = _loadavg()
     return result
 
 
 def main(argv: list[str] | None = None) -> dict:
+    """The command line; sets one BLAS thread (``benchmarks._env.single_thread_blas``) first."""
+    single_thread_blas()
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="perf.json", help="output JSON file")
     parser.add_argument("--batches", default=DEFAULT_BATCHES, help="comma-separated batch sizes")
     parser.add_argument("--sections", default=",".join(SECTIONS),
-                        help=f"comma-separated subset of {','.join(SECTIONS)}")
+                        help=f"comma-separated subset of {','.join(SECTIONS)} (the default), or of the "
+                             f"opt-in {','.join(EXTRA_SECTIONS)}")
     parser.add_argument("--min-time", type=float, default=0.2, help="seconds per timing repeat (batched)")
     parser.add_argument("--api-time", type=float, default=0.5, help="seconds per timing repeat (PettingZoo loops)")
     parser.add_argument("--solver-scale", type=float, default=1.0,
-                        help="fraction of the default number of solver decisions to time")
+                        help="fraction of the default number of solver decisions (and of the opt-in "
+                             "sections' loops) to time")
     parser.add_argument("--solvers", default=",".join(p for p, _, _ in SOLVERS),
                         help="comma-separated baselines whose solve times to measure")
     args = parser.parse_args(argv)
@@ -402,9 +540,9 @@ def main(argv: list[str] | None = None) -> dict:
     except ValueError:
         parser.error(f"--batches must be comma-separated positive integers, got {args.batches!r}")
     sections = tuple(s.strip() for s in args.sections.split(",") if s.strip())
-    bad = sorted(set(sections) - set(SECTIONS))
+    bad = sorted(set(sections) - set(SECTIONS + EXTRA_SECTIONS))
     if bad:
-        parser.error(f"unknown --sections {bad}; choose from {list(SECTIONS)}")
+        parser.error(f"unknown --sections {bad}; choose from {list(SECTIONS + EXTRA_SECTIONS)}")
     if args.min_time <= 0 or args.api_time <= 0 or args.solver_scale <= 0:
         parser.error("--min-time, --api-time and --solver-scale must be > 0")
     solvers = tuple(s.strip() for s in args.solvers.split(",") if s.strip())

@@ -31,3 +31,21 @@ def test_perf_smoke_writes_figures_and_ratios(tmp_path):
     names = {t["name"] for t in data["targets"]}
     assert any(n.startswith("(b) cw") for n in names) and all(isinstance(t["met"], bool) for t in data["targets"])
     assert result["ratios"] == json.loads(json.dumps(result["ratios"]))  # JSON round trip
+
+
+def test_perf_opt_in_sections_smoke(tmp_path):
+    """The sections folded in from the former bench_cgmres / bench_training scripts."""
+    import pytest
+
+    pytest.importorskip("casadi")
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path / "perf.json"
+    perf.main(["--out", str(out), "--sections", "cgmres_ipopt,training", "--solver-scale", "0.003"])
+    data = json.loads(out.read_text())
+    rows = data["cgmres_ipopt"]
+    assert [r["scenario"] for r in rows] == ["kannan2022-position", "kannan2022-collision"]
+    assert all(r["ipopt_solves"] >= 1 and r["cgmres_update_ms_median"] > 0 for r in rows)
+    train = data["training"]
+    assert train["satenv"]["learn_env_steps_per_s"] > 0 and train["dummy"]["raw_env_steps_per_s"] > 0
+    assert train["ratio_raw_env_steps_per_s"] == (train["satenv"]["raw_env_steps_per_s"]
+                                                  / train["dummy"]["raw_env_steps_per_s"])
