@@ -5,7 +5,7 @@ the concatenation of every agent's observation (agent order of ``possible_agents
 the concatenation of every agent's normalised action, the reward the team sum (or mean) of the
 agents' rewards. Terminated/truncated follow the team. It passes
 ``gymnasium.utils.env_checker.check_env`` and serves single-agent algorithms and SB3's
-``DummyVecEnv`` (the per-copy baseline of ``benchmarks/bench_training.py``).
+``DummyVecEnv`` (the per-copy baseline of ``python -m benchmarks.perf --sections training``).
 """
 
 from __future__ import annotations
