@@ -239,6 +239,8 @@ def test_policy_fits_by_env_id():
     trained = registry.discover_trained_policies()
     assert all(specs.policy_fits(spec, envs["platoon_v0"]) and not specs.policy_fits(spec, envs["cluster_v0"])
                for spec in trained.values())
+    shipped = trained["trained:platoon_tplf_ppo"]          # its scoreboard.json: its own scenario only
+    assert shipped.ranked_on("platoon-tplf30-random-cw") and not shipped.ranked_on("platoon-PLF-cw")
 
 
 def test_aggregate_intervals_and_ranking():

@@ -34,7 +34,8 @@ def list_registry() -> str:
     lines.append("policies:")
     for name, spec in {**POLICIES, **discover_trained_policies()}.items():
         fits = ",".join(spec.env_ids or ("any env",))
-        lines.append(f"  {name:<32} {_status(spec):<12}  fits {fits}  {spec.description}")
+        ranked = f" (ranked on {','.join(spec.scenarios)})" if spec.scenarios else ""
+        lines.append(f"  {name:<32} {_status(spec):<12}  fits {fits}{ranked}  {spec.description}")
     lines.append(f"quick: {QUICK}")
     return "\n".join(lines)
 

@@ -189,7 +189,7 @@ def preflight(scenarios: list[ScenarioSpec], policies: list[PolicySpec], seed: i
     for scen in scenarios:
         env = _build_env(scen)
         env_ids[scen.name] = env.metadata.get("name", type(env).__name__)
-        for pol in (p for p in policies if policy_fits(p, env)):
+        for pol in (p for p in policies if p.ranked_on(scen.name) and policy_fits(p, env)):
             why = _try_pair(pol, env, seed)
             if why is None:
                 pairs.append((scen.name, pol.name))

@@ -114,18 +114,33 @@ def _folder_env_ids(path: Path) -> tuple[str, ...] | None:
     return (env_id,) if isinstance(env_id, str) and env_id else None
 
 
-def _learned(name: str, path: Path, description: str) -> PolicySpec:
-    return PolicySpec(name, "training:load", env_ids=_folder_env_ids(path), checkpoint=str(path),
-                      learned=True, requires=("stable_baselines3",), description=description)
+def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
+    """The scenario patterns of a policy folder's optional ``scoreboard.json``."""
+    meta = path / "scoreboard.json"
+    if not meta.is_file():
+        return None
+    try:
+        return tuple(json.loads(meta.read_text())["scenarios"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ScoreboardError(f"{meta}: expected JSON {{\"scenarios\": [patterns]}}, got an "
+                              f"unreadable file ({exc})") from None
+
+
+def _learned(name: str, path: Path, description: str, scenarios: tuple[str, ...] | None) -> PolicySpec:
+    return PolicySpec(name, "training:load", env_ids=_folder_env_ids(path), scenarios=scenarios,
+                      checkpoint=str(path), learned=True, requires=("stable_baselines3",),
+                      description=description)
 
 
 def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, PolicySpec]:
     """One ``trained:<name>`` entry per shipped artefact folder under ``training/policies/``; it
-    fits the env it was trained on (``env.json``'s ``env_id``)."""
+    fits the env it was trained on (``env.json``'s ``env_id``) and is ranked on the scenarios of
+    its optional ``scoreboard.json``."""
     if not root.is_dir():
         return {}
     folders = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
-    return {f"trained:{p.name}": _learned(f"trained:{p.name}", p, f"shipped trained policy {p.name}")
+    return {f"trained:{p.name}": _learned(f"trained:{p.name}", p, f"shipped trained policy {p.name}",
+                                          _folder_scenarios(p))
             for p in folders}
 
 
@@ -156,7 +171,8 @@ def _load_or_raise(path: str) -> None:
 
 
 def user_policy(path: str) -> PolicySpec:
-    """The spec of a ``--policy`` folder, after checking that it exists and loads."""
+    """The spec of a ``--policy`` folder, after checking that it exists and loads; it runs on
+    every selected scenario of its env (``--scenarios`` chooses; its ``scoreboard.json`` does not)."""
     p = Path(path)
     if not p.exists():
         raise ScoreboardError(f"--policy {path}: no such file or directory; pass the path of a "
@@ -164,7 +180,7 @@ def user_policy(path: str) -> PolicySpec:
     if not os.access(p, os.R_OK):
         raise ScoreboardError(f"--policy {path}: not readable (check its permissions)")
     _load_or_raise(str(p))
-    return _learned(user_policy_name(p), p, f"user checkpoint {path}")
+    return _learned(user_policy_name(p), p, f"user checkpoint {path}", None)
 
 
 def user_policies(paths: list[str], taken: dict[str, PolicySpec]) -> list[PolicySpec]:

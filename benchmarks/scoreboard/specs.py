@@ -9,6 +9,7 @@ is scored, success included).
 
 from __future__ import annotations
 
+import fnmatch
 import hashlib
 import importlib
 import importlib.util
@@ -122,6 +123,9 @@ class PolicySpec:
         kwargs: keyword arguments after ``env``.
         env_ids: the env ids the policy controls (``None``: any env); a learned policy's comes
             from its folder's ``env.json``.
+        scenarios: ``fnmatch`` patterns of the scoreboard scenarios the policy is ranked on
+            (``None``: every scenario it fits); a policy folder may ask for this in its
+            ``scoreboard.json`` (``{"scenarios": [...]}``), e.g. only the scenario it was trained for.
         description: one line for the scoreboard header.
         checkpoint: path of a trained policy folder.
         requires: optional third-party modules (e.g. the QP solver).
@@ -133,6 +137,7 @@ class PolicySpec:
     target: str
     kwargs: Mapping[str, Any] = field(default_factory=dict)
     env_ids: tuple[str, ...] | None = None
+    scenarios: tuple[str, ...] | None = None
     description: str = ""
     checkpoint: str | None = None
     requires: tuple[str, ...] = ()
@@ -145,9 +150,15 @@ class PolicySpec:
         if not isinstance(self.target, str) or ":" not in self.target:
             raise ScoreboardError(f"policy {self.name}: target must be a 'module:attribute' string, "
                                   f"got {self.target!r}")
-        if self.env_ids is not None and (isinstance(self.env_ids, str) or not self.env_ids):
-            raise ScoreboardError(f"policy {self.name}: env_ids must be a non-empty tuple of env ids "
-                                  f"or None, got {self.env_ids!r}")
+        for attr in ("env_ids", "scenarios"):
+            value = getattr(self, attr)
+            if value is not None and (isinstance(value, str) or not value):
+                raise ScoreboardError(f"policy {self.name}: {attr} must be a non-empty tuple of "
+                                      f"strings or None, got {value!r}")
+
+    def ranked_on(self, scenario: str) -> bool:
+        """Whether the board runs this policy on the scenario named ``scenario`` (if it fits)."""
+        return self.scenarios is None or any(fnmatch.fnmatchcase(scenario, p) for p in self.scenarios)
 
     def factory(self) -> Callable[..., Any]:
         return resolve(self.target, self.requires)
