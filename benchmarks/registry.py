@@ -7,7 +7,7 @@ import error inside an existing module is a bug and propagates.
 
 Adding an env or a baseline is one entry here::
 
-    SCENARIOS["cluster-case1"] = ScenarioSpec("cluster-case1", ("satenv.envs.cluster_v0:parallel_env",),
+    SCENARIOS["cluster-case1"] = ScenarioSpec("cluster-case1", ("satenv:cluster_v0",),
                                               {"preset": "li2022-case1"})
     POLICIES["apf"] = PolicySpec("apf", ("baselines:APF",), scenarios=("cluster-*",))
 
@@ -99,20 +99,16 @@ class ScenarioSpec:
         targets: ``"module:attribute"`` candidates of the env factory.
         kwargs: keyword arguments of the factory.
         description: one line for the scoreboard header.
-        success_tol: position tolerance [m] of ``satenv.metrics.summary``'s success / convergence.
-        collision_free_success: success also requires zero collisions (``metrics.success``); set
-            ``False`` where the scenario's own target formation puts bodies closer than their
-            collision distance (then success = every agent within ``success_tol`` at the end, and
-            collisions are still counted and shown).
         requires: optional third-party modules the env needs.
+
+    Success is the env scenario's rule (``success_tol``, ``collision_voids_success``;
+    :func:`satenv.metrics.success`), set through ``kwargs`` like any scenario field.
     """
 
     name: str
     targets: tuple[str, ...]
     kwargs: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
-    success_tol: float = 1.0
-    collision_free_success: bool = True
     requires: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
@@ -121,8 +117,6 @@ class ScenarioSpec:
         if isinstance(self.targets, str) or not self.targets:
             raise ScoreboardError(f"scenario {self.name}: targets must be a tuple of 'module:attr', "
                                   f"got {self.targets!r}")
-        if not self.success_tol > 0:
-            raise ScoreboardError(f"scenario {self.name}: success_tol must be > 0, got {self.success_tol!r}")
 
     def factory(self) -> Callable[..., Any]:
         return resolve(self.targets, self.requires)
@@ -132,9 +126,7 @@ class ScenarioSpec:
         return self.factory()(**dict(self.kwargs))
 
     def fingerprint(self) -> str:
-        return _fingerprint({"targets": self.targets, "kwargs": dict(self.kwargs),
-                             "success_tol": self.success_tol,
-                             "collision_free_success": self.collision_free_success})
+        return _fingerprint({"targets": self.targets, "kwargs": dict(self.kwargs)})
 
 
 @dataclass(frozen=True)
@@ -229,10 +221,10 @@ def checkpoint_policy(load: Callable[..., Any], path: str, env) -> Any:
 # ----------------------------------------------------------------------------------------------
 # The registry.
 # ----------------------------------------------------------------------------------------------
-_PLATOON = ("satenv.envs.platoon_v0:parallel_env",)
-_CLUSTER = ("satenv.envs.cluster_v0:parallel_env",)
-_SERVICING = ("satenv.envs.servicing_v0:parallel_env",)
-_FORMATION = ("satenv.envs.formation_v0:parallel_env",)
+_PLATOON = ("satenv:platoon_v0",)       # the factories of satenv.make, the one env table
+_CLUSTER = ("satenv:cluster_v0",)
+_SERVICING = ("satenv:servicing_v0",)
+_FORMATION = ("satenv:formation_v0",)
 
 
 _ISS_INCLINATION = math.radians(51.6)
@@ -240,11 +232,11 @@ _TABLE1_NOTE = ("the Table I formation puts followers closer than 2 r_f, so coll
                 "but do not end the episode or void success")
 
 
-def _platoon(name: str, description: str, collision_free_success: bool = False, **kwargs) -> ScenarioSpec:
+def _platoon(name: str, description: str, **kwargs) -> ScenarioSpec:
     """A platoon_v0 scenario; pereira2023-based ones run without collision termination (as the
-    paper's reproduction): its target formation itself is closer than 2 r_f."""
-    return ScenarioSpec(name, _PLATOON, kwargs, description,
-                        collision_free_success=collision_free_success)
+    paper's reproduction): its target formation itself is closer than 2 r_f (the scenario then
+    derives ``collision_voids_success=False``)."""
+    return ScenarioSpec(name, _PLATOON, kwargs, description)
 
 
 SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
@@ -260,21 +252,21 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
              f"{_TABLE1_NOTE}", preset="pereira2023", randomize=True, dynamics="j2",
              inclination=_ISS_INCLINATION, terminate_on_collision=False),
     _platoon("platoon-chain-cw", "pereira2023 Table I start, PLF, chain formation (followers 8 m apart, "
-             "collision-free target); a collision ends the episode", collision_free_success=True,
+             "collision-free target); a collision ends the episode",
              preset="pereira2023", formation="chain", terminate_on_collision=True),
     _platoon("platoon-tplf30-random-cw", "pereira2023 TPLF with E_d = [0, -30, 0] (targets 8-15 m apart) "
              "and randomised initial states, cw; a collision ends the episode (the shipped "
-             "policy's scenario)", collision_free_success=True, preset="pereira2023",
+             "policy's scenario)", preset="pereira2023",
              topology="TPLF", desired_error=(0.0, -30.0, 0.0, 0.0, 0.0, 0.0), randomize=True,
              terminate_on_collision=True),
     _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, LOS cone "
-             "(collision-free success)", collision_free_success=True, preset="pereira2022"),
+             "(collision-free success)", preset="pereira2022"),
     ScenarioSpec("cluster-case1", _CLUSTER, {"preset": "li2022-case1"},
                  "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
     ScenarioSpec("cluster-case2", _CLUSTER, {"preset": "li2022-case2"},
                  "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
     ScenarioSpec("servicing-pereira2022", _SERVICING, {"preset": "pereira2022"},
-                 "pereira2022 §5.2: 6-DOF servicing around a passive object", success_tol=0.5),
+                 "pereira2022 §5.2: 6-DOF servicing around a passive object"),
     ScenarioSpec("formation-kannan2022-position", _FORMATION, {"preset": "kannan2022-position"},
                  "kannan2022 §5.1: 3 spacecraft to a connected in-plane network"),
     ScenarioSpec("formation-kannan2022-collision", _FORMATION, {"preset": "kannan2022-collision"},

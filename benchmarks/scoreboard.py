@@ -120,9 +120,7 @@ def run_episode(task: Task) -> dict[str, Any]:
         record["env"] = env.metadata.get("name", type(env).__name__)
         policy = task.policy.make(env)
         traj = rollout(env, policy, seed=int(task.seed))
-        record.update(metrics.summary(traj, tol=task.scenario.success_tol))
-        if not task.scenario.collision_free_success:   # success = formation reached (see registry)
-            record["success"] = bool(record["final_error_m"] <= task.scenario.success_tol)
+        record.update(metrics.summary(traj))
         record["episode_return"] = float(np.mean(np.sum(traj.rewards, axis=0))) if traj.steps else 0.0
         record["error"] = None
         if task.trajectory_path is not None:
@@ -284,15 +282,15 @@ def _observation_mismatch(policy, env) -> str | None:
 
 def preflight(scenarios: list[ScenarioSpec], policies: list[PolicySpec], seed: int,
               strict: Callable[[str, str], bool], notes: list[str]
-              ) -> tuple[list[tuple[str, str]], dict[str, str]]:
+              ) -> tuple[list[tuple[str, str]], dict[str, str], dict[str, dict[str, Any]]]:
     """Build every applicable (scenario, policy) pair once, before any episode runs.
 
     Learned policies' observation spaces are compared with the env's, and policies with
     ``dry_run`` act once on a reset env. A failing pair raises :class:`ScoreboardError` when
     ``strict(scenario, policy)`` (the user named both), else it is skipped with a note.
-    Returns the runnable pairs and each scenario's env id.
+    Returns the runnable pairs, each scenario's env id and its success rule (header fields).
     """
-    pairs, env_ids = [], {}
+    pairs, env_ids, rules = [], {}, {}
     for scen in scenarios:
         try:
             env = scen.make()
@@ -300,6 +298,8 @@ def preflight(scenarios: list[ScenarioSpec], policies: list[PolicySpec], seed: i
             raise ScoreboardError(f"scenario {scen.name}: building the env {scen.targets[0]}"
                                   f"(**{dict(scen.kwargs)}) failed: {type(exc).__name__}: {exc}") from exc
         env_ids[scen.name] = env.metadata.get("name", type(env).__name__)
+        rules[scen.name] = {"success_tol_m": env.scenario.success_tol,
+                            "collision_free_success": env.scenario.collision_voids_success}
         for pol in policies:
             if not pol.applies_to(scen.name):
                 continue
@@ -322,7 +322,7 @@ def preflight(scenarios: list[ScenarioSpec], policies: list[PolicySpec], seed: i
                                       "Choose compatible scenarios with --scenarios.")
             pairs.append((scen.name, pol.name))
         env.close()
-    return pairs, env_ids
+    return pairs, env_ids, rules
 
 
 def _user_policy(path: str) -> PolicySpec:
@@ -503,7 +503,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
         raise ScoreboardError(f"{log_path} already holds episodes of an earlier run: pass --resume to "
                               "continue it, --overwrite to discard it, or choose another --out")
 
-    pairs, env_ids = preflight([scen_reg[n] for n in scen_names], [pol_reg[n] for n in pol_names],
+    pairs, env_ids, rules = preflight([scen_reg[n] for n in scen_names], [pol_reg[n] for n in pol_names],
                                seeds[0], lambda s, p: s in scen_explicit and p in pol_explicit, notes)
     if not pairs:
         raise ScoreboardError("no (scenario, policy) pair applies: " + "; ".join(notes))
@@ -555,9 +555,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
         "scenario_seeds": {n: v for n, v in scen_seeds.items() if n in scen_names},
         "env_versions": sorted(set(env_ids.values())),
         "scenarios": {n: {"env": env_ids[n], "kwargs": dict(scen_reg[n].kwargs),
-                          "description": scen_reg[n].description,
-                          "success_tol_m": scen_reg[n].success_tol,
-                          "collision_free_success": scen_reg[n].collision_free_success}
+                          "description": scen_reg[n].description, **rules[n]}
                       for n in scen_names if n in env_ids},
         "policies": {n: {"description": pol_reg[n].description,
                          **({"checkpoint": pol_reg[n].checkpoint} if pol_reg[n].checkpoint else {})}

@@ -200,7 +200,7 @@ def test_platoon_with_dmpc_through_the_board(tmp_path):
     except Unavailable as why:
         pytest.skip(str(why))
     scen = registry.SCENARIOS["platoon-PLF-cw"]
-    short = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "n_steps": 100})}
+    short = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "max_steps": 100})}
     board = _board(tmp_path, seeds="0", scenario_registry=short,
                    policy_registry={k: POLICIES[k] for k in ("zero", "dmpc")})
     assert board.ranking["platoon-short"] == ["dmpc", "zero"]   # closer to the formation than coasting
@@ -280,7 +280,7 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
                           capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
     assert proc.returncode == 0, proc.stderr[-2000:]
     scen = registry.SCENARIOS["platoon-random-cw"]
-    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "n_steps": 20}),
+    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.targets, {**scen.kwargs, "max_steps": 20}),
            "platoon-2022": ScenarioSpec("platoon-2022", scen.targets, {"preset": "pereira2022"})}  # 2 followers
     board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero",
                    scenarios="platoon-short", checkpoints=[str(run / "final")])
