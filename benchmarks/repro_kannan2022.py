@@ -47,11 +47,11 @@ TOLERANCES = {"final_position_m": 1.0, "y_offset_m": 0.1}
 
 def run_scenario(preset: str, seed: int = 0, max_steps: int | None = None, **cgmres_options):
     """One episode of ``preset`` under C/GMRES; returns ``(trajectory, env, policy)``."""
+    import satenv
     from baselines.cgmres import CGMRES
-    from satenv.envs.formation_v0 import parallel_env
     from satenv.rollout import rollout
 
-    env = parallel_env(preset=preset)
+    env = satenv.make("formation_v0", preset=preset)
     policy = CGMRES(env, **cgmres_options)
     traj = rollout(env, policy, seed=seed, max_steps=max_steps)
     return traj, env, policy

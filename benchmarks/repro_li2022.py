@@ -62,9 +62,9 @@ def _preset(case: int) -> str:
 
 
 def make_env(case: int, **overrides):
-    from satenv.envs.cluster_v0 import parallel_env
+    import satenv
 
-    return parallel_env(preset=_preset(case), terminate_on_collision=False, **overrides)
+    return satenv.make("cluster_v0", preset=_preset(case), terminate_on_collision=False, **overrides)
 
 
 def make_policy(controller: str, env, **options):

@@ -37,11 +37,11 @@ TARGETS = {"rmse_rel_tol": 0.10, "rmsee_rel_tol": 0.25, "foe_max": 1e-4}
 
 def run_topology(topology: str, seed: int = 0, **dmpc_options):
     """One Table I episode under ``topology``; returns ``(trajectory, env, policy)``."""
+    import satenv
     from baselines.dmpc import DMPC
-    from satenv.envs.platoon_v0 import parallel_env
     from satenv.rollout import rollout
 
-    env = parallel_env(preset=PAPER, topology=topology, terminate_on_collision=False)
+    env = satenv.make("platoon_v0", preset=PAPER, topology=topology, terminate_on_collision=False)
     policy = DMPC(env, seed=seed, **dmpc_options)
     traj = rollout(env, policy, seed=seed)
     return traj, env, policy

@@ -103,7 +103,7 @@ def analyse(traj, env, policy) -> dict[str, Any]:
         and info["dist_other"].min() >= sc.separation_radius - tol
         and np.abs(states[..., 3:6]).max() <= sc.v_max
         and np.abs(states[..., 10:]).max() <= sc.omega_max
-        and np.abs(info["thrust"]).max() <= sc.thrust_limit + 1e-9)
+        and np.abs(info["thrust"]).max() <= max(sc.u_max) + 1e-9)
     waypoints_ok = all(p["time_to_reach_s"] is not None and p["error_at_phase_end_m"] <= REACH_TOL
                        for r in rows for p in r["phases"])
     pointing_ok = all(p["pointing_at_phase_end_deg"] <= POINTING_TOL_DEG for r in rows for p in r["phases"])
@@ -116,18 +116,18 @@ def analyse(traj, env, policy) -> dict[str, Any]:
 
 def attitude_step_response(horizons=(30, 100), seconds: float = 25.0) -> dict[str, Any]:
     """Attitude error [deg] every 2.5 s from a 30 deg error at rest, per NMPC horizon."""
+    import satenv
     from baselines.nmpc import NMPC
     from satenv.dynamics.attitude import matrix_to_quat, pointing_frame, quat_multiply
-    from satenv.envs.servicing_v0 import parallel_env
     from satenv.rollout import rollout
 
     p = np.array([[0.0, 40.0, 0.0]])
     steps = int(round(seconds / 0.1))
     out: dict[str, Any] = {"initial_error_deg": 30.0, "t_s": list(np.arange(0, steps + 1, 25) * 0.1)}
     for n_h in horizons:
-        env = parallel_env(initial_position=p, initial_velocity=[[0, 0, 0]],
-                           initial_quaternion=[[1, 0, 0, 0]], initial_angular_velocity=[[0, 0, 0]],
-                           waypoints=[p], waypoint_times=[], n_steps=steps)
+        env = satenv.make("servicing_v0", initial_position=p, initial_velocity=[[0, 0, 0]],
+                          initial_quaternion=[[1, 0, 0, 0]], initial_angular_velocity=[[0, 0, 0]],
+                          waypoints=[p], waypoint_times=[], max_steps=steps)
         q_d = matrix_to_quat(pointing_frame(p, reference=env.scenario.pointing_reference))
         axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
         half = np.radians(30.0) / 2
@@ -242,12 +242,12 @@ def plot_figures(traj, env, plots: Path) -> list[str]:
 
 def reproduce(plots: str | Path | None = None, seed: int = 0, diagnostics: bool = True) -> dict[str, Any]:
     """Run §5.2 with the NMPC and compare with the paper's claims."""
+    import satenv
     from baselines.nmpc import NMPC
-    from satenv.envs.servicing_v0 import parallel_env
     from satenv.rollout import rollout
 
     start = time.perf_counter()
-    env = parallel_env(preset="pereira2022")
+    env = satenv.make("servicing_v0", preset="pereira2022")
     policy = NMPC(env)
     traj = rollout(env, policy, seed=seed)
     result: dict[str, Any] = {

@@ -4,6 +4,11 @@ Environments (PettingZoo ``ParallelEnv``s; ``preset="<paper>"`` selects a paper'
 
     import satenv
     env = satenv.platoon_v0()            # leader-follower platooning on V-bar (pereira2023)
+    env = satenv.make("cluster_v0", randomize=True)
+
+``satenv.make`` and the four factories are the one table of envs (``ENV_IDS``). ``import satenv``
+also registers the centralised single-agent Gymnasium view (:mod:`satenv.gym_env`) under the ids
+of ``GYM_IDS``, e.g. ``gymnasium.make("satenv/Platoon-v0", max_steps=100)``.
 """
 
 from __future__ import annotations
@@ -12,45 +17,64 @@ from typing import Any
 
 __version__ = "0.1.0"
 
-_ENVS = {
+_MODULES = {
     "platoon_v0": "satenv.envs.platoon_v0",
     "cluster_v0": "satenv.envs.cluster_v0",
     "servicing_v0": "satenv.envs.servicing_v0",
     "formation_v0": "satenv.envs.formation_v0",
 }
 
+ENV_IDS: tuple[str, ...] = tuple(_MODULES)
+"""Every satenv env id, for :func:`make`."""
 
-def _make(name: str, **kwargs: Any):
-    import importlib
-
-    return importlib.import_module(_ENVS[name]).parallel_env(**kwargs)
-
-
-def platoon_v0(**kwargs: Any):
-    """Leader-follower platooning on V-bar (pereira2023 / pereira2022 §5.1); see ``satenv.envs.platoon_v0``."""
-    return _make("platoon_v0", **kwargs)
-
-
-def cluster_v0(**kwargs: Any):
-    """10-satellite cluster reconfiguration with a moving obstacle (li2022); see ``satenv.envs.cluster_v0``."""
-    return _make("cluster_v0", **kwargs)
-
-
-def servicing_v0(**kwargs: Any):
-    """6-DOF cooperative on-orbit servicing (pereira2022 §4); see ``satenv.envs.servicing_v0``."""
-    return _make("servicing_v0", **kwargs)
-
-
-def formation_v0(**kwargs: Any):
-    """Connected in-plane network formations (kannan2022); see ``satenv.envs.formation_v0``."""
-    return _make("formation_v0", **kwargs)
+GYM_IDS: dict[str, str] = {
+    "satenv/Platoon-v0": "platoon_v0",
+    "satenv/Cluster-v0": "cluster_v0",
+    "satenv/Servicing-v0": "servicing_v0",
+    "satenv/Formation-v0": "formation_v0",
+}
+"""Gymnasium id -> satenv env id of the centralised single-agent view (registered on import)."""
 
 
 def make(env_id: str, **kwargs: Any):
     """Build an environment by id, e.g. ``satenv.make("platoon_v0", topology="BDL")``."""
-    if env_id not in _ENVS:
-        raise ValueError(f"unknown env id {env_id!r}; expected one of {sorted(_ENVS)}")
-    return _make(env_id, **kwargs)
+    if env_id not in _MODULES:
+        raise ValueError(f"unknown env id {env_id!r}; expected one of {list(ENV_IDS)}")
+    import importlib
+
+    return importlib.import_module(_MODULES[env_id]).parallel_env(**kwargs)
 
 
-__all__ = ["__version__", "cluster_v0", "formation_v0", "make", "platoon_v0", "servicing_v0"]
+def platoon_v0(**kwargs: Any):
+    """Leader-follower platooning on V-bar (pereira2023 / pereira2022 §5.1); see ``satenv.envs.platoon_v0``."""
+    return make("platoon_v0", **kwargs)
+
+
+def cluster_v0(**kwargs: Any):
+    """10-satellite cluster reconfiguration with a moving obstacle (li2022); see ``satenv.envs.cluster_v0``."""
+    return make("cluster_v0", **kwargs)
+
+
+def servicing_v0(**kwargs: Any):
+    """6-DOF cooperative on-orbit servicing (pereira2022 §4); see ``satenv.envs.servicing_v0``."""
+    return make("servicing_v0", **kwargs)
+
+
+def formation_v0(**kwargs: Any):
+    """Connected in-plane network formations (kannan2022); see ``satenv.envs.formation_v0``."""
+    return make("formation_v0", **kwargs)
+
+
+def _register_gymnasium() -> None:
+    """Register ``GYM_IDS`` (entry points as strings: nothing of satenv is imported here)."""
+    from gymnasium.envs.registration import register, registry
+
+    for gym_id, env_id in GYM_IDS.items():
+        if gym_id not in registry:
+            register(id=gym_id, entry_point="satenv.gym_env:CentralisedEnv", kwargs={"env": env_id})
+
+
+_register_gymnasium()
+
+__all__ = ["ENV_IDS", "GYM_IDS", "__version__", "cluster_v0", "formation_v0", "make", "platoon_v0",
+           "servicing_v0"]

@@ -6,6 +6,11 @@ Per-agent metrics return arrays ``(M,)``. The paper definitions (pereira2023 §I
     RMSE  = sqrt(1/n_k sum_{k=0}^{n_k-1} ||e(k)||^2)
     RMSEE = sqrt(1/n_k sum_{k=0}^{n_k-1} ||u(k)||^2)      (u in m/s^2)
     FOE   = ||e(n_k)||
+
+Success (:func:`success`, the one rule the scoreboard and the training evaluation use): every
+agent's final position error is within the scenario's ``success_tol`` and, where the scenario's
+``collision_voids_success`` says so, no collision flag was raised (both are copied onto the
+:class:`~satenv.rollout.Trajectory` by :func:`satenv.rollout.rollout`).
 """
 
 from __future__ import annotations
@@ -63,11 +68,17 @@ def safety_cost(traj) -> float:
     return float(np.sum(traj.info["cost"]))
 
 
-def time_to_converge(traj, tol: float = 1.0) -> np.ndarray:
-    """Per agent, the first time [s] after which the position tracking error stays <= ``tol`` m.
+def _tol(traj, tol: float | None) -> float:
+    return float(traj.success_tol if tol is None else tol)
+
+
+def time_to_converge(traj, tol: float | None = None) -> np.ndarray:
+    """Per agent, the first time [s] after which the position tracking error stays <= ``tol`` m
+    (default ``traj.success_tol``).
 
     ``nan`` for an agent that is not within ``tol`` at the end.
     """
+    tol = _tol(traj, tol)
     err = np.linalg.norm(traj.info["tracking_error"][..., :3], axis=-1)   # (T+1, M)
     out = np.full(err.shape[1], np.nan)
     for i in range(err.shape[1]):
@@ -79,13 +90,16 @@ def time_to_converge(traj, tol: float = 1.0) -> np.ndarray:
     return out
 
 
-def success(traj, tol: float = 1.0) -> bool:
-    """Every agent within ``tol`` m of its target at the end, and no collision."""
-    return bool(np.all(final_position_error(traj) <= tol) and collisions(traj) == 0)
+def success(traj, tol: float | None = None) -> bool:
+    """Every agent within ``tol`` m (default ``traj.success_tol``) of its target at the end and,
+    if ``traj.collision_voids_success``, no collision flag during the episode."""
+    reached = bool(np.all(final_position_error(traj) <= _tol(traj, tol)))
+    return reached and not (traj.collision_voids_success and collisions(traj) > 0)
 
 
-def summary(traj, tol: float = 1.0) -> dict[str, Any]:
-    """Every scoreboard metric of one episode (team aggregates are means / max over agents)."""
+def summary(traj, tol: float | None = None) -> dict[str, Any]:
+    """Every scoreboard metric of one episode (team aggregates are means / max over agents);
+    ``tol`` defaults to ``traj.success_tol``."""
     ttc = time_to_converge(traj, tol)
     pinfo = traj.policy_info
     return {

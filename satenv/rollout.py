@@ -15,7 +15,8 @@ class Trajectory:
 
     ``info[key]`` has shape ``(T + 1, M, ...)``: entry 0 comes from ``reset()``, entry ``k`` from
     the ``k``-th ``step()`` (so ``info["accel"][k]`` is the acceleration applied from ``k-1`` to
-    ``k`` and ``info["accel"][0]`` is zero).
+    ``k`` and ``info["accel"][0]`` is zero). ``success_tol`` [m] and ``collision_voids_success``
+    are the scenario's success rule (:func:`satenv.metrics.success`).
     """
 
     env_id: str
@@ -31,6 +32,8 @@ class Trajectory:
     compute_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (T,) s per act()
     policy_info: dict[str, Any] = field(default_factory=dict)
     seed: int | None = None
+    success_tol: float = 1.0
+    collision_voids_success: bool = True
 
     @property
     def steps(self) -> int:
@@ -42,6 +45,7 @@ class Trajectory:
 
         header = {"env_id": self.env_id, "agents": self.agents, "dt": self.dt,
                   "terminated": self.terminated, "truncated": self.truncated, "seed": self.seed,
+                  "success_tol": self.success_tol, "collision_voids_success": self.collision_voids_success,
                   "policy_info": {k: v for k, v in self.policy_info.items()
                                   if isinstance(v, (int, float, str, bool, type(None)))}}
         arrays = {"t": self.t, "states": self.states, "actions": self.actions,
@@ -71,7 +75,8 @@ def rollout(env, policy, *, seed: int | None = None, options: dict | None = None
 
     The policy's ``reset(seed)`` is called after ``env.reset(seed)``; the wall time of every
     ``act()`` is recorded. The policy's ``info`` dict (fallback counts, solve times) is copied
-    into the trajectory at the end.
+    into the trajectory at the end, with the scenario's ``success_tol`` and
+    ``collision_voids_success`` (the Trajectory's defaults for a scenario without them).
     """
     obs, info = env.reset(seed=seed, options=options)
     agents = list(env.possible_agents)
@@ -92,11 +97,13 @@ def rollout(env, policy, *, seed: int | None = None, options: dict | None = None
             break
     stacked = _stack_infos(infos, agents)
     states = stacked.pop("state")
-    dt = float(env.scenario.dt)
+    sc = env.scenario
+    dt = float(sc.dt)
+    rule = {k: getattr(sc, k) for k in ("success_tol", "collision_voids_success") if hasattr(sc, k)}
     return Trajectory(
         env_id=env.metadata.get("name", type(env).__name__), agents=agents, dt=dt,
         t=np.arange(len(infos)) * dt, states=states,
         actions=np.array(actions).reshape(-1, len(agents), env.action_space(agents[0]).shape[0]), rewards=np.array(rewards).reshape(-1, len(agents)),
         info=stacked, terminated=terminated, truncated=truncated, compute_time=np.array(times),
-        policy_info=dict(getattr(policy, "info", {}) or {}), seed=seed,
+        policy_info=dict(getattr(policy, "info", {}) or {}), seed=seed, **rule,
     )

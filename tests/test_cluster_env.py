@@ -21,14 +21,14 @@ def zero_actions(e):
 
 
 @pytest.mark.parametrize("kwargs", [{}, {"preset": "li2022-case2"},
-                                    {"disturbance": "random", "random_position_spread": 30.0},
+                                    {"disturbance": "random", "randomize": True, "random_position_spread": 30.0},
                                     {"dynamics": "cw", "n_neighbours": 2}])
 def test_pettingzoo_api(kwargs):
     parallel_api_test(parallel_env(**kwargs), num_cycles=8)
 
 
 def test_seeding_and_aec_api():
-    parallel_seed_test(lambda: parallel_env(disturbance="random", random_position_spread=30.0))
+    parallel_seed_test(lambda: parallel_env(disturbance="random", randomize=True, random_position_spread=30.0))
     api_test(parallel_to_aec(parallel_env()), num_cycles=4)
     api_test(env(preset="li2022-case2", max_steps=3), num_cycles=4)
 

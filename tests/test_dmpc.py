@@ -249,7 +249,7 @@ def test_convex_step_keeps_los_and_keepout_on_the_2022_scenario():
 
 
 def test_convex_step_policy_in_env():
-    env = parallel_env(preset="pereira2022", n_steps=20)
+    env = parallel_env(preset="pereira2022", max_steps=20)
     pol = DMPC(env)
     assert pol.variant == "convex_step"
     obs, _ = env.reset(seed=0)
@@ -284,5 +284,5 @@ def test_dmpc_reaches_the_chain_formation_without_collision():
 
     env = parallel_env(formation="chain", terminate_on_collision=True)
     traj = rollout(env, DMPC(env), seed=0)
-    assert traj.steps == env.scenario.n_steps and metrics.collisions(traj) == 0
+    assert traj.steps == env.scenario.max_steps and metrics.collisions(traj) == 0
     np.testing.assert_allclose(traj.states[-1, :, 1], [-8.0, -16.0, -24.0, -32.0], atol=1e-3)

@@ -8,7 +8,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from baselines.base import RandomPolicy, ZeroPolicy
 from satenv import metrics
-from satenv.envs.base import BatchedCore, FormationEnv, SatenvError, StepResult
+from satenv.envs.base import BatchedCore, SatenvError, SatParallelEnv, StepResult
 from satenv.rollout import Trajectory, rollout
 
 
@@ -19,6 +19,8 @@ class ToyScenario:
     max_steps: int = 20
     u_max: float = 0.5
     thrust_mode: str = "box"
+    success_tol: float = 1.0
+    collision_voids_success: bool = True
 
 
 class ToyCore(BatchedCore):
@@ -67,8 +69,8 @@ class ToyCore(BatchedCore):
         return {"positions": self.x[b, :, :3], "title": "toy"}
 
 
-class ToyEnv(FormationEnv):
-    metadata = {**FormationEnv.metadata, "name": "toy_v0"}
+class ToyEnv(SatParallelEnv):
+    metadata = {**SatParallelEnv.metadata, "name": "toy_v0"}
     core_class = ToyCore
 
     def __init__(self, render_mode=None, **kwargs):

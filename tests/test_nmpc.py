@@ -58,7 +58,7 @@ def test_casadi_model_matches_numpy_physics(frame, radius, att_tol):
 
 def test_nmpc_keeps_every_constraint_on_the_paper_start():
     """First 3.5 s of §5.2: keep-out, velocity and input bounds become active, omega nearly."""
-    env = parallel_env(n_steps=35)
+    env = parallel_env(max_steps=35)
     policy = NMPC(env)
     traj = rollout(env, policy, seed=0)
     sc = env.scenario
@@ -86,7 +86,7 @@ def test_coupled_collision_constraint_when_paths_cross():
     p0 = [[-10.0, 25.0, 0.0], [10.0, 25.0, 0.5]]
     goal = [[10.0, 25.0, 0.0], [-10.0, 25.0, 0.5]]
     env = parallel_env(initial_position=p0, initial_velocity=[[0, 0, 0]] * 2, waypoints=[goal],
-                       waypoint_times=[], n_steps=80)
+                       waypoint_times=[], max_steps=80)
     policy = NMPC(env)
     traj = rollout(env, policy, seed=0)
     info = traj.info
@@ -97,7 +97,7 @@ def test_coupled_collision_constraint_when_paths_cross():
 
 
 def test_failed_solves_fall_back_to_a_flagged_safe_action():
-    env = parallel_env(n_steps=3)
+    env = parallel_env(max_steps=3)
     policy = NMPC(env, max_iter=1)        # ipopt stops at its iteration limit: not a success
     obs, _ = env.reset(seed=0)
     policy.reset()

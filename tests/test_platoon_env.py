@@ -150,7 +150,7 @@ def _reference_observation(core, x, t):
     for f in range(n):
         obs[f, 0:6] = err[f] / scale
         obs[f, 6:12] = x[f] / scale
-        obs[f, 12:15] = topo.pinning[f], topo.gains[f] / n, 1 - t / sc.n_steps
+        obs[f, 12:15] = topo.pinning[f], topo.gains[f] / n, 1 - t / sc.max_steps
         for k, j in enumerate(j for j in range(n) if j != f):
             if topo.adjacency[f, j]:
                 obs[f, 15 + 7 * k] = 1.0
@@ -214,8 +214,8 @@ def test_step_matches_dynamics_and_reward_formula():
             assert not term[ag] and not trunc[ag]
 
 
-def test_truncation_at_n_steps():
-    e = parallel_env(n_steps=3)
+def test_truncation_at_max_steps():
+    e = parallel_env(max_steps=3)
     e.reset(seed=0)
     for _ in range(3):
         _, _, term, trunc, _ = e.step(_zero_actions(e))

@@ -36,7 +36,7 @@ from benchmarks.scoreboard import (
 
 TESTS = Path(__file__).resolve().parent
 # a cheap scenario: the default platoon, 20 steps
-TOY = {"toy": ScenarioSpec("toy", "platoon_v0", {"n_steps": 20}, "4 followers, 20 steps")}
+TOY = {"toy": ScenarioSpec("toy", "platoon_v0", {"max_steps": 20}, "4 followers, 20 steps")}
 TWO = {k: POLICIES[k] for k in ("zero", "random")}
 
 
@@ -208,7 +208,7 @@ def test_platoon_with_dmpc_through_the_board(tmp_path):
     except Unavailable as why:
         pytest.skip(str(why))
     scen = registry.SCENARIOS["platoon-PLF-cw"]
-    short = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "n_steps": 100})}
+    short = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "max_steps": 100})}
     board = _board(tmp_path, seeds="0", scenario_registry=short,
                    policy_registry={k: POLICIES[k] for k in ("zero", "dmpc")})
     assert board.ranking["platoon-short"] == ["dmpc", "zero"]   # closer to the formation than coasting
@@ -294,7 +294,7 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
                           capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
     assert proc.returncode == 0, proc.stderr[-2000:]
     scen = registry.SCENARIOS["platoon-random-cw"]
-    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "n_steps": 20}),
+    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "max_steps": 20}),
            "platoon-2022": ScenarioSpec("platoon-2022", scen.env_id, {"preset": "pereira2022"})}  # 2 followers
     board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero",
                    scenarios="platoon-short", checkpoints=[str(run / "final")])
@@ -328,7 +328,7 @@ def test_two_run_folders_get_two_names_and_a_clash_is_an_error(tmp_path):
     a = _shipped_copy(tmp_path / "runs" / "a" / "final")
     b = _shipped_copy(tmp_path / "runs" / "b" / "final")
     scen = registry.SCENARIOS["platoon-tplf30-random-cw"]
-    reg = {"short": ScenarioSpec("short", scen.env_id, {**scen.kwargs, "n_steps": 10})}
+    reg = {"short": ScenarioSpec("short", scen.env_id, {**scen.kwargs, "max_steps": 10})}
     board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero", checkpoints=[a, b])
     assert {r["policy"] for r in board.records} == {"zero", "user:a", "user:b"}
     assert all(r["error"] is None for r in board.records)
@@ -389,7 +389,7 @@ class DiesOnSeed1(SlowPolicy):
 def test_a_worker_that_dies_costs_only_its_episode(tmp_path):
     pols = {"dies": PolicySpec("dies", "test_scoreboard:DiesOnSeed1", dry_run=False)}
     board = _board(tmp_path, seeds="0-3", workers=2, policy_registry=pols,
-                   scenario_registry={"toy": ScenarioSpec("toy", "platoon_v0", {"n_steps": 5})})
+                   scenario_registry={"toy": ScenarioSpec("toy", "platoon_v0", {"max_steps": 5})})
     errors = {r["seed"]: r["error"] for r in board.records}
     assert sorted(errors) == [0, 1, 2, 3]
     assert errors[1].startswith("WorkerDied") and [errors[s] for s in (0, 2, 3)] == [None] * 3
@@ -401,7 +401,7 @@ def test_a_worker_killed_once_is_retried(tmp_path, monkeypatch):
     # the workers import this module afresh: the marker goes through the environment
     monkeypatch.setenv("SCOREBOARD_TEST_ONCE", str(marker))
     pols = {"once": PolicySpec("once", "test_scoreboard:DiesOnceViaEnv", dry_run=False)}
-    scen = {"toy": ScenarioSpec("toy", "platoon_v0", {"n_steps": 5})}
+    scen = {"toy": ScenarioSpec("toy", "platoon_v0", {"max_steps": 5})}
     board = _board(tmp_path / "run", seeds="0-3", workers=2, policy_registry=pols, scenario_registry=scen)
     assert marker.exists()                                          # a worker did die
     assert all(r["error"] is None for r in board.records) and len(board.records) == 4
@@ -444,7 +444,7 @@ def test_workers_die_with_a_killed_parent(tmp_path):
         from test_scoreboard import _board, PolicySpec, ScenarioSpec
         _board({str(tmp_path / "run")!r}, seeds="0-9", workers=2,
                policy_registry={{"slow": PolicySpec("slow", "test_scoreboard:SlowPolicy", dry_run=False)}},
-               scenario_registry={{"toy": ScenarioSpec("toy", "platoon_v0", {{"n_steps": 200}})}})
+               scenario_registry={{"toy": ScenarioSpec("toy", "platoon_v0", {{"max_steps": 200}})}})
     """)
     env = dict(os.environ, SCOREBOARD_TEST_STARTED=str(started))
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=TESTS.parent, env=env,

@@ -39,7 +39,7 @@ def test_pettingzoo_api(kwargs):
 
 
 def test_seeding():
-    parallel_seed_test(lambda: parallel_env(randomize=True, n_steps=30), num_cycles=20)
+    parallel_seed_test(lambda: parallel_env(randomize=True, max_steps=30), num_cycles=20)
     a, b = parallel_env(randomize=True), parallel_env(randomize=True)
     oa, _ = a.reset(seed=7)
     ob, _ = b.reset(seed=7)
@@ -130,7 +130,7 @@ def test_body_fixed_thrusters_rotate_the_force():
 
 
 def test_quaternion_stays_unit_norm_over_long_random_run():
-    env = parallel_env(terminate_on_collision=False, max_distance=1e6, n_steps=600)
+    env = parallel_env(terminate_on_collision=False, max_distance=1e6, max_steps=600)
     rng = np.random.default_rng(0)
     env.reset(seed=0, options={"initial_state": far_state()})
     for _ in range(600):

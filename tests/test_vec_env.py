@@ -119,7 +119,7 @@ def test_seeding_is_reproducible_and_applies_at_next_reset():
 def test_bad_input_errors():
     with pytest.raises(SatenvError, match="n_copies"):
         SatVecEnv(ToyEnv(), n_copies=0)
-    with pytest.raises(SatenvError, match="FormationEnv"):
+    with pytest.raises(SatenvError, match="SatParallelEnv"):
         SatVecEnv(object(), n_copies=2)
     vec = SatVecEnv(ToyEnv(), n_copies=2)
     with pytest.raises(SatenvError, match="before reset"):
@@ -136,7 +136,7 @@ def test_make_env_and_versions():
     assert env.scenario.max_steps == 4
     with pytest.raises(SatenvError, match="unknown env id"):
         make_env("nope_v0")
-    with pytest.raises(SatenvError, match="FormationEnv"):
+    with pytest.raises(SatenvError, match="SatParallelEnv"):
         make_env("test_env_base:ToyScenario")
     assert env_version("platoon_v0") == "v0" and env_version("test_env_base:ToyEnv") == ""
 

@@ -49,7 +49,6 @@ class TrainConfig:
             TensorBoard next to the scripted ``eval_baselines`` (names in ``baselines``;
             missing ones are skipped with a warning).
         test_seeds: held-out seeds of the final evaluation summary (not used for selection).
-        success_tol: position tolerance [m] of ``satenv.metrics.success``.
         checkpoint_every: save model + normalisation every this many agent-steps (0: never).
         out_dir: run directory (``tb/``, ``checkpoints/``, ``best/``, ``final/``).
         torch_threads: ``torch.set_num_threads``; progress: show a tqdm bar.
@@ -92,7 +91,6 @@ class TrainConfig:
     eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_010))
     test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
     eval_baselines: tuple[str, ...] = ("DMPC", "APF", "ZeroPolicy")
-    success_tol: float = 1.0
     checkpoint_every: int = 100_000
     out_dir: str = "runs/train"
     torch_threads: int = 1
@@ -133,7 +131,7 @@ class TrainConfig:
         for name, lo, hi in (("learning_rate", 0.0, math.inf), ("gamma", 0.0, 1.0),
                              ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
                              ("tau", 0.0, 1.0), ("clip_obs", 0.0, math.inf),
-                             ("success_tol", 0.0, math.inf), ("max_grad_norm", 0.0, math.inf)):
+                             ("max_grad_norm", 0.0, math.inf)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo < v <= hi):
                 raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {v!r}")

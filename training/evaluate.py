@@ -35,8 +35,11 @@ def make_baseline(name: str, env: Any):
     return None
 
 
-def evaluate(env: Any, policy: Any, seeds: Iterable[int], tol: float = 1.0) -> dict[str, Any]:
+def evaluate(env: Any, policy: Any, seeds: Iterable[int]) -> dict[str, Any]:
     """Roll ``policy`` out once per seed; returns per-episode summaries and their aggregate.
+
+    Success is the scenario's rule (``satenv.metrics.summary``: ``success_tol``,
+    ``collision_voids_success`` of ``env.scenario``).
 
     Aggregate keys: ``success_rate``, ``collision_episodes`` (episodes with >= 1 collision
     flag), ``rmse``/``delta_v``/``final_error_m``/``violations``/``min_separation_m``/
@@ -46,7 +49,7 @@ def evaluate(env: Any, policy: Any, seeds: Iterable[int], tol: float = 1.0) -> d
     episodes = []
     for seed in seeds:
         traj = rollout(env, policy, seed=int(seed))
-        s = metrics.summary(traj, tol=tol)
+        s = metrics.summary(traj)
         s["seed"] = int(seed)
         episodes.append(s)
     return {"aggregate": aggregate(episodes), "episodes": episodes}
@@ -112,7 +115,7 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int], tol: float) -> dict[str, Any]:
+def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int]) -> dict[str, Any]:
     """Evaluate the named scripted baselines that exist (missing ones: a warning)."""
     seeds = list(seeds)
     out = {}
@@ -125,5 +128,5 @@ def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int], tol
         if policy is None:
             warnings.warn(f"baseline {name!r} not found in the baselines package; skipped", stacklevel=2)
             continue
-        out[name] = evaluate(env, policy, seeds, tol)
+        out[name] = evaluate(env, policy, seeds)
     return out

@@ -151,7 +151,7 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
         def evaluate_now(self) -> None:
             n = self.model.num_timesteps
             policy = LearnedPolicy(self.model, ObsNormalizer.from_vecnormalize(venv), meta=meta, **(maps or {}))
-            res = evaluate(eval_env, policy, cfg.eval_seeds, cfg.success_tol)
+            res = evaluate(eval_env, policy, cfg.eval_seeds)
             agg = res["aggregate"]
             for key in ("success_rate", "rmse", "delta_v", "final_error_m", "collision_episodes",
                         "violations", "min_separation_m", "terminated_rate"):
@@ -280,11 +280,12 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
 
 def _summary(cfg: TrainConfig, eval_env, policy, baselines: dict[str, Any], steps, wall: float) -> dict[str, Any]:
-    learned = evaluate(eval_env, policy, cfg.test_seeds, cfg.success_tol)
+    learned = evaluate(eval_env, policy, cfg.test_seeds)
     results = {"learned": learned, **baselines}
     return {
         "test_seeds": list(cfg.test_seeds),
-        "success_tol_m": cfg.success_tol,
+        "success_tol_m": eval_env.scenario.success_tol,
+        "collision_voids_success": eval_env.scenario.collision_voids_success,
         "steps": steps,
         "train_wall_s_this_session": round(wall, 1),
         "aggregate": {k: v["aggregate"] for k, v in results.items()},
@@ -296,14 +297,15 @@ def _summary(cfg: TrainConfig, eval_env, policy, baselines: dict[str, Any], step
 
 def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str, Any]:
     key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs, "seeds": list(seeds),
-           "baselines": list(cfg.eval_baselines), "tol": cfg.success_tol}
+           "baselines": list(cfg.eval_baselines), "tol": eval_env.scenario.success_tol,
+           "collision_voids_success": eval_env.scenario.collision_voids_success}
     if path.is_file():
         cached = json.loads(path.read_text())
         if cached.get("key") == key:
             return cached["results"]
     with warnings.catch_warnings():
         warnings.simplefilter("always")
-        results = evaluate_baselines(eval_env, cfg.eval_baselines, seeds, cfg.success_tol)
+        results = evaluate_baselines(eval_env, cfg.eval_baselines, seeds)
     path.write_text(json.dumps({"key": key, "results": results}, indent=1, default=float) + "\n")
     return results
 

@@ -6,10 +6,10 @@
 ``r % M`` of copy ``r // M``. One ``step`` is one batched ``core.step`` call — no Python loop over
 copies on the stepping path.
 
-Semantics (matching :class:`satenv.envs.base.FormationEnv`):
+Semantics (matching :class:`satenv.envs.base.SatParallelEnv`):
 
 * actions in ``[-1, 1]^action_dim`` are scaled with :func:`satenv.dynamics.unit_box_to_accel`
-  using ``scenario.u_max`` and ``scenario.thrust_mode``, exactly as ``FormationEnv.step`` does;
+  using ``scenario.u_max`` and ``scenario.thrust_mode``, exactly as ``SatParallelEnv.step`` does;
 * a copy ends when the core reports termination (team termination: every agent of the copy is
   ``done``) or when its step counter reaches ``scenario.max_steps`` (truncation, flagged with
   ``info["TimeLimit.truncated"] = True`` so SB3 bootstraps);
@@ -37,24 +37,27 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
+import satenv
 from satenv.dynamics import unit_box_to_accel
-from satenv.envs.base import FormationEnv, SatenvError
+from satenv.envs.base import SatenvError, SatParallelEnv
 
 __all__ = ["SatVecEnv", "make_env", "env_version"]
 
 
-def make_env(env_id: str, **kwargs: Any) -> FormationEnv:
+def make_env(env_id: str, **kwargs: Any) -> SatParallelEnv:
     """Build the PettingZoo env ``env_id`` with ``kwargs``.
 
-    ``env_id`` is a satenv env module name (``"platoon_v0"`` -> ``satenv.envs.platoon_v0.parallel_env``)
-    or ``"package.module:callable"`` for an env defined elsewhere (e.g. a test fixture).
+    ``env_id`` is a satenv env id (``satenv.ENV_IDS``, built with ``satenv.make``) or
+    ``"package.module:callable"`` for an env defined elsewhere (e.g. a test fixture).
     """
     if not isinstance(env_id, str) or not env_id:
         raise SatenvError(f"env_id must be a non-empty string such as 'platoon_v0', got {env_id!r}")
-    if ":" in env_id:
-        module_name, _, attr = env_id.partition(":")
-    else:
-        module_name, attr = f"satenv.envs.{env_id}", "parallel_env"
+    if ":" not in env_id:
+        if env_id not in satenv.ENV_IDS:
+            raise SatenvError(f"unknown env id {env_id!r}: use one of {list(satenv.ENV_IDS)} or "
+                              "'package.module:callable'")
+        return satenv.make(env_id, **kwargs)
+    module_name, _, attr = env_id.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as err:
@@ -64,9 +67,9 @@ def make_env(env_id: str, **kwargs: Any) -> FormationEnv:
     if factory is None:
         raise SatenvError(f"unknown env id {env_id!r}: {module_name!r} has no attribute {attr!r}")
     env = factory(**kwargs)
-    if not isinstance(env, FormationEnv):
+    if not isinstance(env, SatParallelEnv):
         raise SatenvError(f"env id {env_id!r} built a {type(env).__name__}; expected a "
-                          "satenv.envs.base.FormationEnv subclass (it needs a batched core)")
+                          "satenv.envs.base.SatParallelEnv subclass (it needs a batched core)")
     return env
 
 
@@ -80,7 +83,7 @@ class SatVecEnv(VecEnv):
     """``n_copies`` copies of a satenv scenario as one parameter-shared SB3 ``VecEnv``.
 
     Args:
-        env: a :class:`FormationEnv` instance (only its class, scenario and spaces are used; it
+        env: a :class:`SatParallelEnv` instance (only its class, scenario and spaces are used; it
             is not stepped), or a zero-argument callable returning one.
         n_copies: number of scenario copies ``B`` (>= 1); ``num_envs = B * n_agents``.
         seed: optional seed applied at the first ``reset()`` (see the module docstring).
@@ -92,14 +95,14 @@ class SatVecEnv(VecEnv):
             ``[-1, 1]`` (e.g. :class:`training.shaping.ActionMap`), applied before the scaling.
     """
 
-    def __init__(self, env: FormationEnv | Callable[[], FormationEnv], n_copies: int,
+    def __init__(self, env: SatParallelEnv | Callable[[], SatParallelEnv], n_copies: int,
                  seed: int | None = None, *,
                  reward_fn: Callable[[np.ndarray, dict[str, np.ndarray]], np.ndarray] | None = None,
                  obs_fn: Callable[[np.ndarray], np.ndarray] | None = None,
                  action_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
-        template = env() if callable(env) and not isinstance(env, FormationEnv) else env
-        if not isinstance(template, FormationEnv):
-            raise SatenvError(f"SatVecEnv needs a satenv FormationEnv (or a callable returning one), "
+        template = env() if callable(env) and not isinstance(env, SatParallelEnv) else env
+        if not isinstance(template, SatParallelEnv):
+            raise SatenvError(f"SatVecEnv needs a satenv SatParallelEnv (or a callable returning one), "
                               f"got {type(template).__name__}")
         if isinstance(n_copies, bool) or not isinstance(n_copies, (int, np.integer)) or n_copies < 1:
             raise SatenvError(f"n_copies must be a positive int, got {n_copies!r}")

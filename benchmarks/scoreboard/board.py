@@ -127,9 +127,7 @@ def _header(plan: Plan, scen_reg, pol_reg, pol_names: list[str], notes: list[str
         "machine": machine(), "backend": backend, "workers": workers, "seeds": plan.seeds,
         "scenario_seeds": plan.caps, "env_versions": sorted(set(plan.env_ids.values())),
         "scenarios": {n: {"env": env, "kwargs": dict(scen_reg[n].kwargs),
-                          "description": scen_reg[n].description,
-                          "success_tol_m": scen_reg[n].success_tol,
-                          "collision_free_success": scen_reg[n].collision_free_success}
+                          "description": scen_reg[n].description, **scen_reg[n].success_rule()}
                       for n, env in plan.env_ids.items()},
         "policies": {n: {"description": pol_reg[n].description,
                          **({"checkpoint": pol_reg[n].checkpoint} if pol_reg[n].checkpoint else {})}

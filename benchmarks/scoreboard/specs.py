@@ -70,18 +70,16 @@ class ScenarioSpec:
         env_id: a ``satenv.make`` id, e.g. ``"platoon_v0"``.
         kwargs: keyword arguments of the env.
         description: one line for the scoreboard header.
-        success_tol: position tolerance [m] of success / convergence.
-        collision_free_success: success also requires zero collisions; ``False`` where the
-            scenario's own target formation puts bodies closer than their collision distance.
         requires: optional third-party modules the env needs.
+
+    Success is the env scenario's own rule (``success_tol``, ``collision_voids_success``;
+    :func:`satenv.metrics.success`), set through ``kwargs`` like any scenario field.
     """
 
     name: str
     env_id: str
     kwargs: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
-    success_tol: float = 1.0
-    collision_free_success: bool = True
     requires: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
@@ -90,8 +88,6 @@ class ScenarioSpec:
         if self.env_id not in _env_ids():
             raise ScoreboardError(f"scenario {self.name}: env_id must be one of {list(_env_ids())}, "
                                   f"got {self.env_id!r}")
-        if not self.success_tol > 0:
-            raise ScoreboardError(f"scenario {self.name}: success_tol must be > 0, got {self.success_tol!r}")
 
     def check_available(self) -> None:
         """Raise :class:`Unavailable` if an optional dependency is missing."""
@@ -104,12 +100,19 @@ class ScenarioSpec:
         self.check_available()
         return satenv.make(self.env_id, **dict(self.kwargs))
 
+    def success_rule(self) -> dict[str, Any]:
+        """The env scenario's success rule, as the board's header and fingerprint record it."""
+        scenario = self.make().scenario
+        return {"success_tol_m": float(scenario.success_tol),
+                "collision_free_success": bool(scenario.collision_voids_success)}
+
     def fingerprint(self) -> str:
-        # the payload keeps the format of logs written before env ids (the env factory as a
-        # "module:attribute" target) so that those logs stay resumable: the same definition
+        # the payload keeps the format of logs written before env ids and before the scenario
+        # owned its success rule, so that those logs stay resumable: the same definition
+        rule = self.success_rule()
         return _fingerprint({"targets": [f"satenv.envs.{self.env_id}:parallel_env"],
-                             "kwargs": dict(self.kwargs), "success_tol": self.success_tol,
-                             "collision_free_success": self.collision_free_success})
+                             "kwargs": dict(self.kwargs), "success_tol": rule["success_tol_m"],
+                             "collision_free_success": rule["collision_free_success"]})
 
 
 @dataclass(frozen=True)
@@ -191,17 +194,11 @@ def policy_fits(spec: PolicySpec, env) -> bool:
 
 
 def episode_metrics(traj, scenario: ScenarioSpec) -> dict[str, Any]:
-    """The metrics of one episode, success included (THE scoring rule of the board).
-
-    ``satenv.metrics.summary`` at the scenario's tolerance; where the scenario's own formation
-    overlaps (``collision_free_success=False``) success is the formation reached alone.
-    """
+    """The metrics of one episode: ``satenv.metrics.summary``, whose success is the env
+    scenario's own rule (the same answer as ``metrics.summary`` and the training evaluation)."""
     from satenv import metrics
 
-    summary = metrics.summary(traj, tol=scenario.success_tol)
-    if not scenario.collision_free_success:
-        summary["success"] = bool(summary["final_error_m"] <= scenario.success_tol)
-    return summary
+    return metrics.summary(traj)
 
 
 def _content_hash(path: Path) -> str:

@@ -5,7 +5,7 @@ Every satenv environment has two layers:
 * a :class:`BatchedCore` subclass holding the physics and task logic for ``B`` independent
   copies of the scenario at once (arrays ``(B, M, ...)``, pure numpy, no dicts). The training
   path (``training.vec_env``) drives this core directly with ``B`` = number of env copies.
-* :class:`FormationEnv`, the PettingZoo ``ParallelEnv`` wrapper (``B = 1``), which only
+* :class:`SatParallelEnv`, the PettingZoo ``ParallelEnv`` wrapper (``B = 1``), which only
   converts dicts to arrays and back, validates input, seeds, truncates and renders.
 
 A core subclass implements :meth:`BatchedCore.sample_initial_state`, :meth:`BatchedCore.reset`,
@@ -13,17 +13,24 @@ A core subclass implements :meth:`BatchedCore.sample_initial_state`, :meth:`Batc
 :meth:`BatchedCore.global_state` and :meth:`BatchedCore.render_scene`). An env subclass sets
 ``core_class``, ``agent_prefix``, ``metadata["name"]`` and builds its scenario in ``__init__``.
 
-Conventions (``../shared/DESIGN.md``): float32 ``Box`` spaces cached per env; actions in
+Conventions: float32 ``Box`` spaces cached per env (``observation_spaces`` / ``action_spaces``
+dicts, ``state_space`` a float64 ``Box`` containing ``state()``); actions in
 ``[-1, 1]^3`` scaled to the scenario's ``u_max`` (per axis, or clipped to the ``u_max`` ball when
 ``scenario.thrust_mode == "norm"``); one ``np.random.Generator`` per env seeded in
 ``reset(seed=...)``; team termination (a collision or leaving the allowed region ends the
 episode for every agent); truncation at ``scenario.max_steps``; per-agent ``infos`` carry raw
-physical quantities (``INFO_KEYS``) at reset and after every step.
+physical quantities (``INFO_KEYS``) at reset and after every step; ``metadata["render_fps"]``
+is ``render_speedup / dt`` (playback at ``render_speedup`` x real time), set per instance.
+
+Every scenario has the same surface: ``max_steps``, ``dt`` [s], ``u_max`` (the action scale; unit
+in each env's docstring), ``randomize``, ``terminate_on_collision``, and the success rule of
+:func:`satenv.metrics.success`: ``success_tol`` [m] and ``collision_voids_success``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -112,18 +119,21 @@ class BatchedCore(ABC):
         raise NotImplementedError
 
 
-class FormationEnv(ParallelEnv):
+class SatParallelEnv(ParallelEnv):
     """PettingZoo ``ParallelEnv`` over a :class:`BatchedCore` with ``B = 1``.
 
-    Subclasses set ``core_class`` and ``agent_prefix`` and call ``super().__init__(scenario,
-    render_mode=...)`` with the resolved frozen scenario (which must provide ``n_agents``,
-    ``dt``, ``max_steps``, ``u_max`` and ``thrust_mode``).
+    Subclasses set ``core_class``, ``agent_prefix``, ``metadata["name"]`` (and optionally
+    ``render_speedup``) and call ``super().__init__(scenario, render_mode=...)`` with the resolved
+    frozen scenario (which must provide ``n_agents``, ``dt``, ``max_steps``, ``u_max`` and
+    ``thrust_mode``).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10,
-                                          "name": "formation_v0", "is_parallelizable": True}
+                                          "is_parallelizable": True}
     core_class: ClassVar[type[BatchedCore]]
     agent_prefix: ClassVar[str] = "sat"
+    render_speedup: ClassVar[float] = 1.0
+    """Playback speed of rendered episodes relative to real time (``render_fps = speedup / dt``)."""
     reset_option_keys: ClassVar[frozenset[str]] = frozenset({"initial_state"})
 
     def __init__(self, scenario: Any, *, render_mode: str | None = None) -> None:
@@ -132,6 +142,7 @@ class FormationEnv(ParallelEnv):
                               f"got {render_mode!r}")
         self.scenario = scenario
         self.render_mode = render_mode
+        self.metadata = {**type(self).metadata, "render_fps": self.render_speedup / scenario.dt}
         self.core = self.core_class(scenario, batch=1)
         m = self.core.n_agents
         self.possible_agents = [f"{self.agent_prefix}_{i + 1}" for i in range(m)]
@@ -139,6 +150,8 @@ class FormationEnv(ParallelEnv):
         self.agents: list[str] = []
         self._obs_space = spaces.Box(-np.inf, np.inf, (self.core.obs_dim,), np.float32)
         self._act_space = spaces.Box(-1.0, 1.0, (self.core.action_dim,), np.float32)
+        self.observation_spaces = dict.fromkeys(self.possible_agents, self._obs_space)
+        self.action_spaces = dict.fromkeys(self.possible_agents, self._act_space)
         self._rng: np.random.Generator | None = None
         self._last_info: dict[str, np.ndarray] | None = None
         self._trails: list[np.ndarray] = []
@@ -152,6 +165,11 @@ class FormationEnv(ParallelEnv):
     def action_space(self, agent: str) -> spaces.Box:
         self._check_agent(agent)
         return self._act_space
+
+    @functools.cached_property
+    def state_space(self) -> spaces.Box:
+        """The space of :meth:`state` (float64, unbounded)."""
+        return spaces.Box(-np.inf, np.inf, self.core.global_state()[0].shape, np.float64)
 
     def _check_agent(self, agent: str) -> None:
         if agent not in self._index:

@@ -1,8 +1,8 @@
 """cluster_v0 — satellite-cluster reconfiguration around a target spacecraft (li2022).
 
 ``satenv.envs.cluster_v0.parallel_env(**kwargs)`` (or ``satenv.cluster_v0(**kwargs)``) returns a
-PettingZoo ``ParallelEnv``; ``env(**kwargs)`` the AEC version (``parallel_to_aec``); ``raw_env``
-is the class.
+PettingZoo ``ParallelEnv``; ``env(**kwargs)`` the AEC version; ``raw_env(**kwargs)`` the raw AEC env (no wrappers), as
+PettingZoo names it.
 
 M satellites ``sat_1 … sat_M`` (10 in the presets; 50 kg, 1 N thrusters) fly relative to a virtual
 reference satellite at the origin of its LVLH frame (x radial, y along-track, z orbit normal) and
@@ -19,8 +19,10 @@ Arguments (keywords; all optional)
 ``render_mode``   ``None``, ``"rgb_array"`` or ``"human"``.
 any field of :class:`~satenv.scenarios.cluster.ClusterScenario` overrides the preset, e.g.
 ``disturbance="none" | "sinusoid" | "random"``, ``disturbance_force`` [N], ``dynamics``,
-``physics_dt``, ``max_steps``, ``allocation="fixed"``, ``reallocate_every``,
-``terminate_on_collision``, ``random_position_spread``, ``initial_positions`` (any M).
+``dt``, ``physics_dt``, ``max_steps``, ``u_max`` [m/s^2, bound on the norm], ``allocation="fixed"``,
+``reallocate_every``, ``terminate_on_collision``, ``randomize=True`` (random initial positions
+and target slots from the seed; ``random_position_spread``, ``random_target_radius``),
+``initial_positions`` (any M), ``success_tol`` (1 m), ``collision_voids_success``.
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
 ``reset(seed=..., options={"initial_state": array (M, 6)})`` starts from a given state.
 
@@ -39,7 +41,7 @@ controller registers it again for its episode: ``baselines.TubeRDMPC`` does so i
 Spaces (per agent; float32)
 ---------------------------
 Action ``Box(-1, 1, (3,))``: LVLH acceleration ``u = a * u_max`` clipped to the ball
-``||u|| <= u_max = T_max / m`` (0.02 m/s^2).
+``||u|| <= u_max`` [m/s^2] (li2022: ``T_max / m`` = 1 N / 50 kg = 0.02 m/s^2).
 
 Observation ``Box(-inf, inf, (19 + 7 K,))`` with ``K = min(n_neighbours, M - 1)``, normalised
 with ``L = 1000 m`` and ``V = 1 m/s``:
@@ -85,6 +87,12 @@ three), ``cost`` (float, = violations), ``target_index`` (int, allocated target)
 Version History
 ---------------
 * v0: initial release.
+* v0 (unreleased changes, still v0): one env surface across satenv — ``thrust_max`` [N] replaced by
+  ``u_max`` [m/s^2] (``thrust_max`` is now the derived ``u_max * mass``); new ``randomize`` (random
+  initial positions and target slots; ``random_position_spread`` alone no longer randomises); new
+  ``success_tol`` and ``collision_voids_success``; ``render_speedup = 50``; ``state_space``,
+  ``observation_spaces`` / ``action_spaces`` dicts, ``metadata["render_fps"]`` from ``dt``;
+  ``raw_env`` is the raw AEC env; base class ``SatParallelEnv`` (was ``FormationEnv``).
 """
 
 from __future__ import annotations
@@ -92,7 +100,9 @@ from __future__ import annotations
 from typing import Any, Protocol
 
 import numpy as np
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo import AECEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.allocation import hungarian_assignment
 from satenv.cluster_graph import nearest_neighbour_graph, pairwise_distances
@@ -102,13 +112,14 @@ from satenv.dynamics import (
     saturate_norm,
     sinusoid_disturbance,
 )
-from satenv.envs.base import BatchedCore, FormationEnv, SatenvError, StepResult, resolve_preset
+from satenv.envs.base import BatchedCore, SatenvError, SatParallelEnv, StepResult, resolve_preset
 from satenv.scenarios.cluster import (
     DEFAULT_PRESET,
     PRESETS,
     ClusterScenario,
     resolve_scenario,
     sample_initial_state,
+    sample_targets,
 )
 
 __all__ = ["ClusterCore", "ClusterEnv", "InnerLoop", "POS_SCALE", "VEL_SCALE", "env",
@@ -142,7 +153,7 @@ class ClusterCore(BatchedCore):
         self.obs_dim = N_FIXED_OBS + 7 * self.n_slots
         self.orbit = sc.orbit
         self.model = RelativeModel(sc.dynamics, self.orbit, sc.physics_dt)
-        self.all_targets = sc.targets_array()
+        self.all_targets = np.tile(sc.targets_array(), (self.batch, 1, 1))  # (B, T, 3) slots
         self.q_r = np.asarray(sc.target_spacecraft, dtype=float)
         self.p_obs = np.asarray(sc.obstacle_velocity, dtype=float)
         self.x = np.zeros((self.batch, m, 6))
@@ -161,7 +172,7 @@ class ClusterCore(BatchedCore):
 
     def targets(self) -> np.ndarray:
         """Allocated target positions ``(B, M, 3)``."""
-        return self.all_targets[self.assignment]
+        return np.take_along_axis(self.all_targets, self.assignment[..., None], axis=1)
 
     def obstacle(self, t: np.ndarray | None = None) -> np.ndarray:
         """Obstacle positions ``(B, 3)`` at times ``t`` (default: now)."""
@@ -176,7 +187,7 @@ class ClusterCore(BatchedCore):
         sc = self.scenario
         sel = slice(None) if idx is None else idx
         if sc.allocation == "hungarian":
-            self.assignment[sel] = hungarian_assignment(self.x[sel, :, :3], self.all_targets)
+            self.assignment[sel] = hungarian_assignment(self.x[sel, :, :3], self.all_targets[sel])
         else:
             self.assignment[sel] = np.arange(self.n_agents)
 
@@ -206,7 +217,7 @@ class ClusterCore(BatchedCore):
         sc = self.scenario
         x = self.x[sel]
         err = x.copy()
-        err[..., :3] -= self.all_targets[self.assignment[sel]]
+        err[..., :3] -= np.take_along_axis(self.all_targets[sel], self.assignment[sel][..., None], axis=1)
         flags = np.stack([pair < sc.pair_distance, obs < sc.obstacle_distance,
                           tgt < sc.target_distance], axis=-1)
         viol = flags.sum(axis=-1).astype(np.int64)
@@ -239,8 +250,11 @@ class ClusterCore(BatchedCore):
         self.t[sel] = 0
         self.chief[sel] = self.model.initial_chief()
         self.accel[sel] = 0.0
-        self.allocate(sel)
         k = self.x[sel].shape[0]
+        if self.scenario.randomize:
+            rng = rng if rng is not None else self._own_rng
+            self.all_targets[sel] = np.stack([sample_targets(self.scenario, rng) for _ in range(k)])
+        self.allocate(sel)
         zeros = np.zeros((k, self.n_agents))
         pair, obs, tgt = self._distances(self.x[sel], np.zeros(k))
         return self._info(sel, np.zeros((k, self.n_agents, 3)), zeros, zeros.copy(), pair, obs, tgt)
@@ -332,10 +346,11 @@ class ClusterCore(BatchedCore):
         }
 
 
-class ClusterEnv(FormationEnv):
+class ClusterEnv(SatParallelEnv):
     """The cluster ``ParallelEnv`` (see the module docstring)."""
 
-    metadata = {**FormationEnv.metadata, "name": "cluster_v0"}
+    metadata = {**SatParallelEnv.metadata, "name": "cluster_v0"}
+    render_speedup = 50.0  # one decision (5 s) per frame at 10 fps
     core_class = ClusterCore
     agent_prefix = "sat"
 
@@ -382,14 +397,16 @@ class ClusterEnv(FormationEnv):
         return self.core.graph()[0]
 
 
-raw_env = ClusterEnv
-
-
 def parallel_env(**kwargs) -> ClusterEnv:
     """The PettingZoo ``ParallelEnv`` (keyword arguments: module docstring)."""
     return ClusterEnv(**kwargs)
 
 
-def env(**kwargs):
-    """The AEC version of :func:`parallel_env` (``parallel_to_aec``)."""
-    return parallel_to_aec(ClusterEnv(**kwargs))
+def raw_env(**kwargs) -> AECEnv:
+    """The raw AEC env (``parallel_to_aec_wrapper``, no further wrappers)."""
+    return parallel_to_aec_wrapper(ClusterEnv(**kwargs))
+
+
+def env(**kwargs) -> AECEnv:
+    """The AEC env: :func:`raw_env` with PettingZoo's order-enforcing wrapper."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))

@@ -1,7 +1,8 @@
 """formation_v0 — reaching a predefined connected spacecraft formation (kannan2022 §5).
 
 ``satenv.envs.formation_v0.parallel_env(**kwargs)`` returns a PettingZoo ``ParallelEnv``;
-``env(**kwargs)`` the AEC version (``parallel_to_aec``); ``raw_env`` is the class.
+``env(**kwargs)`` the AEC version; ``raw_env(**kwargs)`` the raw AEC env (no wrappers), as
+PettingZoo names it.
 
 M spacecraft ``sat_1 … sat_M`` (3 in the presets) fly in the LVLH frame of a virtual centre on a
 circular orbit of mean motion ``n0`` (x radial, y along-track, z orbit normal). Each one must reach
@@ -25,8 +26,10 @@ Arguments (keywords; all optional)
                   keeps the C/GMRES continuation error small; for RL a larger ``dt`` may suit).
 ``render_mode``   ``None``, ``"rgb_array"`` or ``"human"``.
 any field of :class:`satenv.scenarios.formation.FormationScenario` overrides the preset, e.g.
-``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"``, ``connection_range``,
-``terminate_on_disconnect=True``, ``collision_distance``, ``randomize=True``, ``goals``, ``dt``.
+``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"``, ``connection_range``, ``max_steps``, ``dt``,
+``u_max`` [m/s^2, per axis], ``terminate_on_disconnect=True``, ``collision_distance``,
+``terminate_on_collision``, ``randomize=True``, ``goals``, ``success_tol`` (1 m),
+``collision_voids_success``.
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
 ``reset(seed=..., options={"initial_state": array (M, 6)})`` starts from a given state.
 
@@ -61,7 +64,7 @@ Termination / truncation
 ------------------------
 Terminated (all agents) when a spacecraft leaves the ball of radius ``max_distance`` around the
 origin, when a pair is closer than ``collision_distance`` (0 by default = never: the paper starts
-all three at the same point), or — only with ``terminate_on_disconnect`` — when the proximity
+all three at the same point; only if ``terminate_on_collision``), or — only with ``terminate_on_disconnect`` — when the proximity
 graph disconnects. Truncated at ``max_steps``.
 
 Infos (per agent, SI units)
@@ -76,6 +79,11 @@ of spacecraft within delta), ``violations`` (int) = ``cut_i``, ``cost`` = ``coll
 Version History
 ---------------
 * v0: initial release.
+* v0 (unreleased changes, still v0): one env surface across satenv — new ``terminate_on_collision``
+  (default True, the previous behaviour), ``success_tol`` and ``collision_voids_success``;
+  ``render_speedup = 0.1``; ``state_space``, ``observation_spaces`` / ``action_spaces`` dicts,
+  ``metadata["render_fps"]`` from ``dt``; ``raw_env`` is the raw AEC env; base class
+  ``SatParallelEnv`` (was ``FormationEnv``).
 """
 
 from __future__ import annotations
@@ -83,10 +91,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo import AECEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import MU_EARTH, Orbit, RelativeModel, delta_v
-from satenv.envs.base import BatchedCore, FormationEnv, StepResult, resolve_preset
+from satenv.envs.base import BatchedCore, SatParallelEnv, StepResult, resolve_preset
 from satenv.scenarios.formation import (
     PRESETS,
     FormationScenario,
@@ -154,7 +164,8 @@ class FormationCore(BatchedCore):
                    - 0.5 * sc.input_weight * np.sum(w * w, axis=-1)
                    - sc.connection_penalty * info["violations"])
         terminated = (np.linalg.norm(self.x[..., :3], axis=-1) > sc.max_distance).any(axis=-1)
-        terminated |= info["collision"].any(axis=-1)
+        if sc.terminate_on_collision:
+            terminated |= info["collision"].any(axis=-1)
         if sc.terminate_on_disconnect:
             terminated |= ~self._connected
         return StepResult(rewards, terminated, info)
@@ -216,10 +227,11 @@ class FormationCore(BatchedCore):
         }
 
 
-class FormationFlyingEnv(FormationEnv):
+class FormationFlyingEnv(SatParallelEnv):
     """The kannan2022 formation ``ParallelEnv`` (see the module docstring)."""
 
-    metadata = {**FormationEnv.metadata, "name": "formation_v0"}
+    metadata = {**SatParallelEnv.metadata, "name": "formation_v0"}
+    render_speedup = 0.1  # slow motion: one decision (0.01 s) per frame at 10 fps
     core_class = FormationCore
     agent_prefix = "sat"
 
@@ -229,14 +241,16 @@ class FormationFlyingEnv(FormationEnv):
         super().__init__(scenario, render_mode=render_mode)
 
 
-raw_env = FormationFlyingEnv
-
-
 def parallel_env(**kwargs) -> FormationFlyingEnv:
     """The PettingZoo ``ParallelEnv`` (keyword arguments: module docstring)."""
     return FormationFlyingEnv(**kwargs)
 
 
-def env(**kwargs):
-    """The AEC version of :func:`parallel_env` (``parallel_to_aec``)."""
-    return parallel_to_aec(FormationFlyingEnv(**kwargs))
+def raw_env(**kwargs) -> AECEnv:
+    """The raw AEC env (``parallel_to_aec_wrapper``, no further wrappers)."""
+    return parallel_to_aec_wrapper(FormationFlyingEnv(**kwargs))
+
+
+def env(**kwargs) -> AECEnv:
+    """The AEC env: :func:`raw_env` with PettingZoo's order-enforcing wrapper."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))

@@ -1,7 +1,8 @@
 """platoon_v0 — leader–follower spacecraft platooning (pereira2023; pereira2022 §3/§5.1).
 
 ``satenv.envs.platoon_v0.parallel_env(**kwargs)`` returns a PettingZoo ``ParallelEnv``;
-``env(**kwargs)`` the AEC version (``parallel_to_aec``); ``raw_env`` is the class.
+``env(**kwargs)`` the AEC version; ``raw_env(**kwargs)`` the raw AEC env (no wrappers), as
+PettingZoo names it.
 
 N active followers ``follower_1 … follower_N`` fly relative to a passive leader at the origin of
 its LVLH frame (x radial, y along-track, z orbit normal) on a circular orbit of radius
@@ -21,7 +22,8 @@ Arguments (keywords; all optional)
 any field of ``PlatoonScenario`` overrides the preset, e.g. ``topology="BDL"``,
 ``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"`` (truth model from ``satenv.dynamics``),
 ``randomize=True`` (random initial states, distribution in :mod:`satenv.scenarios.platoon`),
-``initial_state``, ``n_steps``, ``u_max``, ``terminate_on_collision``, ``reward_scale`` …
+``initial_state``, ``max_steps``, ``dt``, ``u_max`` [m/s^2, per axis], ``terminate_on_collision``,
+``reward_scale``, ``success_tol`` (1 m), ``collision_voids_success`` …
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
 ``reset(seed=..., options={"initial_state": array (N, 6)})`` starts from a given state.
 
@@ -56,11 +58,13 @@ Termination / truncation
 ------------------------
 Terminated (all agents) when two bodies collide (distance < r_i + r_j, the leader included,
 radii ``follower_radius`` / ``leader_radius``; only if ``terminate_on_collision``) or a follower
-leaves the ball of radius ``max_distance`` around the leader. Truncated at ``n_steps``.
+leaves the ball of radius ``max_distance`` around the leader. Truncated at ``max_steps``.
 Note: the pereira2023 Table I formation itself puts bodies closer than ``2 r_f`` (PLF: 1 m
 between followers 3 and 4; BDL: followers 1/4 and 2/3 coincide), so the ``"pereira2023"``
 preset sets ``terminate_on_collision=False`` (as the paper's simulation) and reports the
-collisions; ``formation="chain"`` (followers 8 m apart) is the collision-free variant.
+collisions; ``formation="chain"`` (followers 8 m apart) is the collision-free variant. For the
+same reason a collision voids success only where the target formation is collision-free
+(``collision_voids_success`` is derived from the geometry unless given).
 
 Infos (per agent, SI units)
 ---------------------------
@@ -75,6 +79,10 @@ the keep-out sphere (eq. 31) and the LOS cone (eq. 34) of the follower's target�
 Version History
 ---------------
 * v0: initial release.
+* v0 (unreleased changes, still v0): one env surface across satenv — ``n_steps`` renamed
+  ``max_steps``; new ``success_tol`` and ``collision_voids_success``; ``state_space``,
+  ``observation_spaces`` / ``action_spaces`` dicts, ``metadata["render_fps"]`` from ``dt``;
+  ``raw_env`` is the raw AEC env; base class ``SatParallelEnv`` (was ``FormationEnv``).
 """
 
 from __future__ import annotations
@@ -82,10 +90,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo import AECEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v
-from satenv.envs.base import BatchedCore, FormationEnv, StepResult, resolve_preset
+from satenv.envs.base import BatchedCore, SatParallelEnv, StepResult, resolve_preset
 from satenv.scenarios.platoon import (
     PRESETS,
     PlatoonScenario,
@@ -248,7 +258,7 @@ class PlatoonCore(BatchedCore):
         b = self.batch
         obs = (self.x.reshape(b, -1) @ self._obs_map).reshape(b, self.n_agents, self.obs_dim)
         obs += self._obs_offset
-        obs[..., 14] -= (self.t / self.scenario.n_steps)[:, None]
+        obs[..., 14] -= (self.t / self.scenario.max_steps)[:, None]
         return obs.astype(np.float32)
 
     def global_state(self) -> np.ndarray:
@@ -271,10 +281,10 @@ class PlatoonCore(BatchedCore):
         }
 
 
-class PlatoonEnv(FormationEnv):
+class PlatoonEnv(SatParallelEnv):
     """The platoon ``ParallelEnv`` (see the module docstring)."""
 
-    metadata = {**FormationEnv.metadata, "name": "platoon_v0"}
+    metadata = {**SatParallelEnv.metadata, "name": "platoon_v0"}
     core_class = PlatoonCore
     agent_prefix = "follower"
 
@@ -284,14 +294,16 @@ class PlatoonEnv(FormationEnv):
         self.topology = scenario.graph
 
 
-raw_env = PlatoonEnv
-
-
 def parallel_env(**kwargs) -> PlatoonEnv:
     """The PettingZoo ``ParallelEnv`` (keyword arguments: module docstring)."""
     return PlatoonEnv(**kwargs)
 
 
-def env(**kwargs):
-    """The AEC version of :func:`parallel_env` (``parallel_to_aec``)."""
-    return parallel_to_aec(PlatoonEnv(**kwargs))
+def raw_env(**kwargs) -> AECEnv:
+    """The raw AEC env (``parallel_to_aec_wrapper``, no further wrappers)."""
+    return parallel_to_aec_wrapper(PlatoonEnv(**kwargs))
+
+
+def env(**kwargs) -> AECEnv:
+    """The AEC env: :func:`raw_env` with PettingZoo's order-enforcing wrapper."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))

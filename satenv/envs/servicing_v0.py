@@ -1,7 +1,8 @@
 """servicing_v0 — 6-DOF on-orbit servicing with attitude (pereira2022 §4, §5.2).
 
 ``satenv.envs.servicing_v0.parallel_env(**kwargs)`` returns a PettingZoo ``ParallelEnv``;
-``env(**kwargs)`` the AEC version (``parallel_to_aec``); ``raw_env`` is the class.
+``env(**kwargs)`` the AEC version; ``raw_env(**kwargs)`` the raw AEC env (no wrappers), as
+PettingZoo names it.
 
 M spacecraft ``sat_1 … sat_M`` move around a passive object at the origin of the LVLH frame
 (x radial, y along-track, z orbit normal; circular orbit of radius ``orbit_radius``), reach
@@ -17,9 +18,9 @@ Dynamics (eq. 35), per spacecraft, state ``x = [p (3), v (3), q (4), omega (3)]`
 * attitude — quaternion kinematics (eq. 10) and relative rotational dynamics (eq. 11-17) of
   :mod:`satenv.dynamics.attitude` about the LVLH-fixed object (``omega_lb = [0, 0, n]``), body
   torque ``F_r u``; RK4, the quaternion renormalised after every integration step;
-* six inputs ``u`` (eq. 36, ``F_t``, ``F_r`` from ``dimensions``), per-input limit
-  ``thrust_limit`` (the paper's u_max, "per unit mass": ``F_t u`` is an acceleration [m/s^2]
-  and ``F_r u`` a torque [N m], i.e. m_f = 1 kg as in eq. 35-36).
+* six inputs ``u`` (eq. 36, ``F_t``, ``F_r`` from ``dimensions``), per-input limits ``u_max``
+  (the paper's u_max, "per unit mass": ``F_t u`` is an acceleration [m/s^2] and ``F_r u`` a
+  torque [N m], i.e. m_f = 1 kg as in eq. 35-36; one number or six).
 
 Arguments (keywords; all optional)
 ----------------------------------
@@ -30,15 +31,16 @@ Arguments (keywords; all optional)
 ``render_mode``   ``None``, ``"rgb_array"`` or ``"human"`` (positions, trails, the object and
                   keep-out spheres, waypoints and each body's pointing axis).
 any field of :class:`satenv.scenarios.servicing.ServicingScenario` overrides the preset, e.g.
-``waypoints``, ``waypoint_times``, ``n_steps``, ``thrust_frame="body"``, ``dynamics="cw"``,
-``randomize=True``, ``terminate_on_collision=False``, ``reward_scale``.
+``waypoints``, ``waypoint_times``, ``max_steps``, ``dt``, ``u_max``, ``thrust_frame="body"``,
+``dynamics="cw"``, ``randomize=True``, ``terminate_on_collision=False``, ``reward_scale``,
+``success_tol`` (0.5 m), ``collision_voids_success``.
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
 ``reset(seed=..., options={"initial_state": array (M, 13)})`` starts from a given state (the
 quaternions are normalised; a zero quaternion is rejected).
 
 Spaces (per agent; float32)
 ---------------------------
-Action ``Box(-1, 1, (6,))``: the six inputs ``u = a * thrust_limit`` (per-input box).
+Action ``Box(-1, 1, (6,))``: the six inputs ``u = a * u_max`` (per-input box).
 
 Observation ``Box(-inf, inf, (16 + 6 (M - 1),))``, with ``L = r_sigma + r_s``:
 
@@ -75,7 +77,7 @@ Terminated (all agents) on a collision — a spacecraft inside the keep-out sphe
 to ``contact_tolerance`` (1e-6 m: the §5.2 initial positions and waypoints lie exactly on the
 keep-out sphere, so a coasting spacecraft there collides within about a second) — when
 ``terminate_on_collision`` (default), or when a spacecraft is farther than ``max_distance``.
-Truncated at ``n_steps``.
+Truncated at ``max_steps``.
 
 Infos (per agent, SI units)
 ---------------------------
@@ -92,6 +94,11 @@ line of sight), ``attitude_error`` [rad] (full rotation to q_d), ``quaternion_er
 Version History
 ---------------
 * v0: initial release.
+* v0 (unreleased changes, still v0): one env surface across satenv — ``n_steps`` renamed
+  ``max_steps``, ``thrust_limit`` renamed ``u_max`` (one or six per-input limits); new
+  ``success_tol`` (0.5 m) and ``collision_voids_success``; ``state_space``, ``observation_spaces``
+  / ``action_spaces`` dicts, ``metadata["render_fps"]`` from ``dt``; ``raw_env`` is the raw AEC
+  env; base class ``SatParallelEnv`` (was ``FormationEnv``).
 """
 
 from __future__ import annotations
@@ -99,7 +106,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo import AECEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v, saturate_box
 from satenv.dynamics.attitude import (
@@ -114,7 +123,7 @@ from satenv.dynamics.attitude import (
     quat_to_matrix,
     thruster_matrices,
 )
-from satenv.envs.base import BatchedCore, FormationEnv, SatenvError, StepResult, resolve_preset
+from satenv.envs.base import BatchedCore, SatenvError, SatParallelEnv, StepResult, resolve_preset
 from satenv.scenarios.servicing import (
     PRESETS,
     ServicingScenario,
@@ -183,7 +192,7 @@ class ServicingCore(BatchedCore):
         self.j_l = np.array(sc.object_inertia)
         self.omega_l = np.array([0.0, 0.0, sc.mean_motion])
         self.waypoints = sc.waypoint_array()
-        self.u_max = sc.u_max
+        self.u_max = np.asarray(sc.u_max)
         self.scale_p = sc.keepout_radius
         others = [[j for j in range(m) if j != i] for i in range(m)]
         self.others = np.array(others, dtype=np.int64).reshape(m, max(m - 1, 0))
@@ -322,10 +331,10 @@ class ServicingCore(BatchedCore):
         }
 
 
-class ServicingEnv(FormationEnv):
+class ServicingEnv(SatParallelEnv):
     """The servicing ``ParallelEnv`` (see the module docstring)."""
 
-    metadata = {**FormationEnv.metadata, "name": "servicing_v0"}
+    metadata = {**SatParallelEnv.metadata, "name": "servicing_v0"}
     core_class = ServicingCore
     agent_prefix = "sat"
 
@@ -342,14 +351,16 @@ class ServicingEnv(FormationEnv):
         return x0
 
 
-raw_env = ServicingEnv
-
-
 def parallel_env(**kwargs) -> ServicingEnv:
     """The PettingZoo ``ParallelEnv`` (keyword arguments: module docstring)."""
     return ServicingEnv(**kwargs)
 
 
-def env(**kwargs):
-    """The AEC version of :func:`parallel_env` (``parallel_to_aec``)."""
-    return parallel_to_aec(ServicingEnv(**kwargs))
+def raw_env(**kwargs) -> AECEnv:
+    """The raw AEC env (``parallel_to_aec_wrapper``, no further wrappers)."""
+    return parallel_to_aec_wrapper(ServicingEnv(**kwargs))
+
+
+def env(**kwargs) -> AECEnv:
+    """The AEC env: :func:`raw_env` with PettingZoo's order-enforcing wrapper."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))

@@ -34,9 +34,14 @@ Choices the paper leaves open (documented here, overridable):
 * **Decision period and physics step.** ``dt = 5 s`` is the DMPC sampling period Δt; the physics
   (and an inner-loop controller such as the tube controller κ) runs every ``physics_dt``.
 
-Random initial states (``random_position_spread > 0``): every satellite's preset position plus
-``U(-s, s)`` per axis, at rest, redrawn (up to 1000 times) until all safety distances hold with
-a 10 m margin.
+Random episodes (``randomize=True``), drawn from the env's seed:
+
+* initial states: every satellite's preset position plus ``U(-s, s)`` per axis
+  (``s = random_position_spread``), at rest, redrawn (up to 1000 times) until all safety
+  distances hold with a 10 m margin;
+* target slots: the T targets are drawn one by one uniformly on the sphere of radius
+  ``random_target_radius`` (300 m, as li2022's Table 4 points) around the target spacecraft,
+  each redrawn (up to 1000 times) until it is at least ``2 r_s`` + 10 m from the ones before.
 """
 
 from __future__ import annotations
@@ -50,7 +55,8 @@ import numpy as np
 from satenv.dynamics import MODELS, R_EARTH, Orbit
 from satenv.scenarios import _fields
 
-__all__ = ["ClusterScenario", "PRESETS", "LI2022_TARGETS", "resolve_scenario", "sample_initial_state"]
+__all__ = ["ClusterScenario", "PRESETS", "LI2022_TARGETS", "resolve_scenario", "sample_initial_state",
+           "sample_targets"]
 
 LI2022_TARGETS: tuple[tuple[float, float, float], ...] = (
     (-189.9, -11.8, -433.5), (-118.7, 85.5, -156.7), (-103.4, -470.2, -112.5),
@@ -126,7 +132,9 @@ class ClusterScenario:
         obstacle_radius: r_o [m]; satellites must stay r_s + r_o from the obstacle (eq. 31).
         target_radius: r_t [m]; satellites must stay r_s + r_t from the target spacecraft.
         comm_range: r_c [m]; n_neighbours: N_a (see :mod:`satenv.cluster_graph`).
-        mass: satellite mass [kg]; thrust_max: T_max [N] (a bound on the thrust norm).
+        mass: satellite mass [kg].
+        u_max: acceleration authority [m/s^2], a bound on the norm of the commanded acceleration
+            (li2022: T_max / m = 1 N / 50 kg = 0.02 m/s^2; :attr:`thrust_max` is ``u_max mass``).
         disturbance: ``"sinusoid"`` (li2022 §4), ``"random"`` (uniform in the ball of radius
             ``disturbance_force / mass``, drawn from the env's generator every physics step) or
             ``"none"``; disturbance_force: w_bar [N] (module docstring).
@@ -138,9 +146,13 @@ class ClusterScenario:
         reallocate_every: re-run the allocation every K decisions (0: only at reset).
         terminate_on_collision: a safety-distance violation ends the episode.
         max_distance: the allowed region, a ball around the reference satellite [m].
-        random_position_spread: see the module docstring (0: the preset's positions).
+        randomize: draw initial positions and target slots from the env's seed (module docstring).
+        random_position_spread [m], random_target_radius [m]: see the module docstring.
         reward_distance_scale [m], reward_control_weight, collision_penalty: reward terms
             (``satenv.envs.cluster_v0``).
+        success_tol: an episode succeeds when every satellite ends within this distance of its
+            allocated target [m] (:func:`satenv.metrics.success`).
+        collision_voids_success: a safety-distance violation makes the episode a failure.
     """
 
     name: str
@@ -156,7 +168,7 @@ class ClusterScenario:
     comm_range: float = 1000.0
     n_neighbours: int = 4
     mass: float = 50.0
-    thrust_max: float = 1.0
+    u_max: float = 0.02
     disturbance: str = "sinusoid"
     disturbance_force: float = 0.1
     altitude: float = 500e3
@@ -169,10 +181,14 @@ class ClusterScenario:
     reallocate_every: int = 0
     terminate_on_collision: bool = True
     max_distance: float = 10_000.0
-    random_position_spread: float = 0.0
+    randomize: bool = False
+    random_position_spread: float = 50.0
+    random_target_radius: float = 300.0
     reward_distance_scale: float = 1000.0
     reward_control_weight: float = 0.01
     collision_penalty: float = 10.0
+    success_tol: float = 1.0
+    collision_voids_success: bool = True
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -191,8 +207,8 @@ class ClusterScenario:
                              f"{len(self.targets)} targets")
         for name in ("target_spacecraft", "obstacle_position", "obstacle_velocity"):
             s(self, name, _vec3(getattr(self, name), name))
-        for name in ("sat_radius", "comm_range", "mass", "thrust_max", "dt", "physics_dt",
-                     "max_distance", "reward_distance_scale"):
+        for name in ("sat_radius", "comm_range", "mass", "u_max", "dt", "physics_dt",
+                     "max_distance", "reward_distance_scale", "random_target_radius", "success_tol"):
             s(self, name, _number(getattr(self, name), name))
         for name in ("obstacle_radius", "target_radius", "disturbance_force", "random_position_spread",
                      "reward_control_weight", "collision_penalty", "inclination"):
@@ -214,19 +230,20 @@ class ClusterScenario:
             raise ValueError(f"disturbance must be one of {list(DISTURBANCES)}, got {self.disturbance!r}")
         if self.allocation not in ALLOCATIONS:
             raise ValueError(f"allocation must be one of {list(ALLOCATIONS)}, got {self.allocation!r}")
-        if not isinstance(self.terminate_on_collision, bool | np.bool_):
-            raise ValueError(f"terminate_on_collision must be a bool, got {self.terminate_on_collision!r}")
-        s(self, "terminate_on_collision", bool(self.terminate_on_collision))
+        for name in ("terminate_on_collision", "randomize", "collision_voids_success"):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+            s(self, name, bool(getattr(self, name)))
 
-    # ---- what FormationEnv needs -------------------------------------------------------------
+    # ---- what SatParallelEnv needs -------------------------------------------------------------
     @property
     def n_agents(self) -> int:
         return len(self.initial_positions)
 
     @property
-    def u_max(self) -> float:
-        """Acceleration authority ``T_max / m`` [m/s^2] (a bound on the norm)."""
-        return self.thrust_max / self.mass
+    def thrust_max(self) -> float:
+        """Thrust authority ``T_max = u_max mass`` [N] (a bound on the thrust norm)."""
+        return self.u_max * self.mass
 
     @property
     def thrust_mode(self) -> str:
@@ -328,10 +345,10 @@ def safety_ok(scenario: ClusterScenario, positions: np.ndarray, t: float = 0.0, 
 
 
 def sample_initial_state(scenario: ClusterScenario, rng: np.random.Generator) -> np.ndarray:
-    """Initial states (M, 6): the preset's, or a random draw (module docstring)."""
+    """Initial states (M, 6): the preset's, or with ``randomize`` a random draw (module docstring)."""
     x = scenario.initial_array()
     s = scenario.random_position_spread
-    if s == 0.0:
+    if not scenario.randomize or s == 0.0:
         return x
     for _ in range(1000):
         pos = x[:, :3] + rng.uniform(-s, s, size=(scenario.n_agents, 3))
@@ -341,3 +358,23 @@ def sample_initial_state(scenario: ClusterScenario, rng: np.random.Generator) ->
             return out
     raise RuntimeError("could not draw initial positions satisfying the safety distances in 1000 "
                        f"tries with random_position_spread = {s} m; reduce the spread")
+
+
+def sample_targets(scenario: ClusterScenario, rng: np.random.Generator) -> np.ndarray:
+    """Target slots (T, 3) [m]: the scenario's, or with ``randomize`` a random draw (module docstring)."""
+    targets = scenario.targets_array()
+    if not scenario.randomize:
+        return targets
+    centre, radius = np.asarray(scenario.target_spacecraft), scenario.random_target_radius
+    min_gap = scenario.pair_distance + 10.0
+    for k in range(len(targets)):
+        for _ in range(1000):
+            d = rng.normal(size=3)
+            point = centre + radius * d / np.linalg.norm(d)
+            if np.all(np.linalg.norm(targets[:k] - point, axis=-1) >= min_gap):
+                targets[k] = point
+                break
+        else:
+            raise RuntimeError(f"could not place {len(targets)} target slots {min_gap} m apart on a "
+                               f"{radius} m sphere in 1000 tries; increase random_target_radius")
+    return targets

@@ -79,6 +79,8 @@ class FormationScenario:
         collision_distance: a pair closer than this collides [m]; 0 disables (the paper starts
             all three spacecraft at the same point).
         max_distance: leaving the ball of this radius around the origin terminates [m].
+        terminate_on_collision: end the episode at a collision (a pair closer than
+            ``collision_distance``).
         terminate_on_disconnect: end the episode when the proximity graph disconnects.
         dynamics: truth model of the env: ``"cw"``, ``"nonlinear"``, ``"j2"``, ``"j2_drag"``
             (the chief's circular orbit radius follows from ``mean_motion``).
@@ -88,6 +90,9 @@ class FormationScenario:
         connection_penalty: reward penalty per step for an agent cut off from the network.
         randomize, random_position_spread, random_velocity_spread, random_min_gap: see the
             module docstring.
+        success_tol: an episode succeeds when every spacecraft ends within this distance of its
+            final position [m] (:func:`satenv.metrics.success`).
+        collision_voids_success: a collision flag makes the episode a failure.
     """
 
     name: str
@@ -103,6 +108,7 @@ class FormationScenario:
     connection_range: float = 150.0
     collision_distance: float = 0.0
     max_distance: float = 5000.0
+    terminate_on_collision: bool = True
     terminate_on_disconnect: bool = False
     dynamics: str = "cw"
     length_scale: float = 100.0
@@ -114,6 +120,8 @@ class FormationScenario:
     random_position_spread: float = 20.0
     random_velocity_spread: float = 1.0
     random_min_gap: float = 1.0
+    success_tol: float = 1.0
+    collision_voids_success: bool = True
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -156,7 +164,7 @@ class FormationScenario:
                 raise ValueError(f"offsets must be a finite ({m}, 3) array, got shape {offsets.shape}")
         s(self, "offsets", tuple(tuple(float(v) for v in row) for row in offsets))
         for name in ("mean_motion", "dt", "u_max", "connection_range", "max_distance", "length_scale",
-                     "position_weight", "input_weight"):
+                     "position_weight", "input_weight", "success_tol"):
             s(self, name, number(getattr(self, name), name))
         for name in ("collision_distance", "offset_weight", "connection_penalty",
                      "random_position_spread", "random_velocity_spread", "random_min_gap"):
@@ -169,7 +177,8 @@ class FormationScenario:
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}")
         if self.dynamics not in ("cw", "nonlinear", "j2", "j2_drag"):
             raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
-        for name in ("terminate_on_disconnect", "randomize"):
+        for name in ("terminate_on_collision", "terminate_on_disconnect", "randomize",
+                     "collision_voids_success"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
             s(self, name, bool(getattr(self, name)))

@@ -48,7 +48,7 @@ class PlatoonScenario:
         formation: ``"neighbourhood"`` or ``"chain"`` (module docstring).
         topology: ``"PLF"``, ``"BDL"``, ``"TPLF"`` or an (N, N) 0/1 adjacency (i hears j).
         mu: gravitational parameter [m^3/s^2]; orbit_radius: ||r_l|| [m] (circular leader).
-        dt: sampling time T_s [s]; n_steps: episode length n_k.
+        dt: sampling time T_s [s]; max_steps: episode length n_k (truncation).
         horizon: MPC prediction horizon N.
         terminal_weight, state_weight: diagonals of P, Q (6,); input_weight: diagonal of W (3,).
         alpha: per-follower cost weights (N,).
@@ -73,6 +73,12 @@ class PlatoonScenario:
             ``satenv.envs.platoon_v0``).
         randomize: draw initial states from the distribution below instead of the preset's.
         random_position_spread, random_velocity_spread, random_min_gap: see module docstring.
+        success_tol: an episode succeeds when every follower ends within this distance of its
+            target [m] (:func:`satenv.metrics.success`).
+        collision_voids_success: a collision flag makes the episode a failure. ``None``
+            (default): derived from the geometry — ``True`` unless the target formation itself
+            puts two bodies closer than their contact distance (as pereira2023 Table I does:
+            there success means reaching the formation, collisions are still counted).
     """
 
     name: str
@@ -83,7 +89,7 @@ class PlatoonScenario:
     mu: float = MU_TABLE1
     orbit_radius: float = 6_621_000.0
     dt: float = 0.1
-    n_steps: int = 180
+    max_steps: int = 180
     horizon: int = 30
     terminal_weight: tuple[float, ...] = (25.0,) * 6
     state_weight: tuple[float, ...] = (13.0,) * 6
@@ -114,7 +120,10 @@ class PlatoonScenario:
     random_position_spread: float = 20.0
     random_velocity_spread: float = 0.5
     random_min_gap: float = 2.0
+    success_tol: float = 1.0
+    collision_voids_success: bool | None = None
     _topology: Any = field(init=False, repr=False, compare=False)
+    _voids_derived: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -140,7 +149,7 @@ class PlatoonScenario:
         else:
             s(self, "topology", topo.name)
         for name in ("mu", "orbit_radius", "dt", "u_max", "v_max", "follower_radius",
-                     "leader_radius", "max_distance"):
+                     "leader_radius", "max_distance", "success_tol"):
             s(self, name, number(getattr(self, name), name))
         s(self, "sigma", number(self.sigma, "sigma"))
         for name in ("reward_scale",):
@@ -160,7 +169,7 @@ class PlatoonScenario:
         for name in ("keepout_radius", "random_position_spread", "random_velocity_spread",
                      "random_min_gap"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
-        for name in ("n_steps", "horizon"):
+        for name in ("max_steps", "horizon"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}.")
@@ -204,6 +213,13 @@ class PlatoonScenario:
             raise ValueError(
                 f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}."
             )
+        s(self, "_voids_derived", self.collision_voids_success is None)
+        if self._voids_derived:
+            s(self, "collision_voids_success", self.target_formation_collision_free())
+        elif not isinstance(self.collision_voids_success, bool | np.bool_):
+            raise ValueError(f"collision_voids_success must be True, False or None (derived), got "
+                             f"{self.collision_voids_success!r}.")
+        s(self, "collision_voids_success", bool(self.collision_voids_success))
 
     # ---- derived quantities ---------------------------------------------------------------
     @property
@@ -214,11 +230,6 @@ class PlatoonScenario:
     def n_agents(self) -> int:
         """Number of controlled agents (the followers)."""
         return len(self.initial_state)
-
-    @property
-    def max_steps(self) -> int:
-        """Episode length (truncation), ``n_steps``."""
-        return self.n_steps
 
     @property
     def mean_motion(self) -> float:
@@ -240,6 +251,14 @@ class PlatoonScenario:
             return np.arange(1, self.n_followers + 1)[:, None] * e_d[None, :]
         return self._topology.desired_states(e_d)
 
+    def target_formation_collision_free(self) -> bool:
+        """True when the target formation keeps every pair of bodies (leader included) at least
+        their contact distance ``r_i + r_j`` apart."""
+        p = np.vstack([np.zeros(3), self.desired_states()[:, :3]])
+        radius = np.r_[self.leader_radius, np.full(self.n_followers, self.follower_radius)]
+        i, j = np.triu_indices(len(p), 1)
+        return bool(np.all(np.linalg.norm(p[i] - p[j], axis=-1) >= radius[i] + radius[j]))
+
     def desired_neighbourhood_error(self) -> np.ndarray:
         """Target of the neighbourhood error, ``L_bar x*`` (N, 6); ``(g+d) E_d`` for pereira2023."""
         return self._topology.augmented_laplacian @ self.desired_states()
@@ -256,6 +275,8 @@ class PlatoonScenario:
             raise ValueError(
                 f"unknown scenario parameter(s) {bad}; valid names: {sorted(known)}."
             )
+        if self._voids_derived:  # derive it again for the new geometry
+            overrides.setdefault("collision_voids_success", None)
         n_new = overrides.get("initial_state")
         if n_new is not None and "alpha" not in overrides:
             n = np.asarray(n_new).shape[0] if np.ndim(n_new) == 2 else None
@@ -298,7 +319,7 @@ PRESETS: dict[str, PlatoonScenario] = {
         mu=MU_TABLE1,
         orbit_radius=6_621_000.0,
         dt=0.1,
-        n_steps=300,
+        max_steps=300,
         horizon=40,
         terminal_weight=(25.0, 25.0, 25.0, 0.0, 0.0, 0.0),
         state_weight=(8.0, 8.0, 8.0, 0.0, 0.0, 0.0),

@@ -44,7 +44,9 @@ class ServicingScenario:
         desired_velocity: v_d (3,) [m/s] (eq. 39).
         inertia, object_inertia: J_f, J_l (3, 3) [kg m^2] (symmetric positive definite).
         dimensions: [L_x, L_y, L_z] [m] of the thruster layout (eq. 36).
-        thrust_limit: per-input bound |u_i| <= thrust_limit (eq. 36 inputs; the paper's u_max).
+        u_max: per-input bounds ``|u_i| <= u_max_i`` (eq. 36 inputs; the paper's u_max): six
+            numbers, or one for all six; ``F_t u`` is an acceleration [m/s^2] and ``F_r u`` a torque
+            [N m] (per unit mass, m_f = 1 kg as in eq. 35-36). Stored as a 6-tuple.
         v_max, omega_max: per-axis velocity [m/s] and angular-velocity [rad/s] limits (eq. 42).
         object_radius: r_sigma [m]; spacecraft_radius: r_s = r_i [m] (eq. 40-41).
         pointing_target: t (3,) the LVLH point every spacecraft points at (eq. 43).
@@ -56,7 +58,7 @@ class ServicingScenario:
         orbit_radius: ||r_l|| [m] (circular orbit); mu [m^3/s^2].
         dynamics: translational truth model from ``satenv.dynamics``: ``"nonlinear"`` (eq. 4-5,
             default), ``"cw"``, ``"j2"``.
-        dt: sampling time T_s [s]; n_steps: episode length.
+        dt: sampling time T_s [s]; max_steps: episode length (truncation).
         substeps: integration substeps per dt (attitude RK4 and, for ``"body"``, the translation).
         horizon, position_weight, velocity_weight, quaternion_weight, omega_weight, input_weight:
             N and the diagonals of Q_p, Q_v, Q_q, Q_w, H of eq. 39 (used by the NMPC and the reward).
@@ -69,6 +71,9 @@ class ServicingScenario:
         thrust_mode: ``"box"`` (per-input limit; the only mode of this env).
         randomize, random_min_gap, random_shell, random_velocity_spread, random_angular_spread:
             random initial states (module docstring).
+        success_tol: an episode succeeds when every spacecraft ends within this distance of its
+            final waypoint [m] (:func:`satenv.metrics.success`).
+        collision_voids_success: a collision flag makes the episode a failure.
     """
 
     name: str
@@ -82,7 +87,7 @@ class ServicingScenario:
     inertia: Any = ((10.0, 2.5, 3.5), (2.5, 10.0, 4.5), (3.5, 4.5, 10.0))
     object_inertia: Any = ((10.0, 0.0, 0.0), (0.0, 10.0, 0.0), (0.0, 0.0, 10.0))
     dimensions: Any = (2.0, 2.0, 2.0)
-    thrust_limit: float = 3.0
+    u_max: Any = 3.0
     v_max: float = 5.0
     omega_max: float = 0.7
     object_radius: float = 12.0
@@ -94,7 +99,7 @@ class ServicingScenario:
     mu: float = MU_EARTH
     dynamics: str = "nonlinear"
     dt: float = 0.1
-    n_steps: int = 1200
+    max_steps: int = 1200
     substeps: int = 1
     horizon: int = 30
     position_weight: Any = (10.0, 10.0, 10.0)
@@ -114,6 +119,8 @@ class ServicingScenario:
     random_shell: float = 10.0
     random_velocity_spread: float = 0.5
     random_angular_spread: float = 0.05
+    success_tol: float = 0.5
+    collision_voids_success: bool = True
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -152,7 +159,13 @@ class ServicingScenario:
         if np.any(dims <= 0):
             raise ValueError(f"dimensions [L_x, L_y, L_z] must be > 0, got {dims.tolist()}")
         s(self, "dimensions", nested(dims))
-        for name in ("thrust_limit", "v_max", "omega_max", "object_radius", "spacecraft_radius",
+        u_max = array(self.u_max, "u_max").ravel()
+        if u_max.size == 1:
+            u_max = np.full(6, u_max[0])
+        if u_max.shape != (6,) or np.any(u_max <= 0):
+            raise ValueError(f"u_max must be one or six positive per-input limits, got {self.u_max!r}")
+        s(self, "u_max", nested(u_max))
+        for name in ("v_max", "omega_max", "object_radius", "spacecraft_radius", "success_tol",
                      "orbit_radius", "mu", "dt", "max_distance", "reward_scale", "random_shell"):
             s(self, name, number(getattr(self, name), name))
         for name in ("collision_penalty", "violation_penalty", "random_min_gap", "contact_tolerance",
@@ -169,7 +182,7 @@ class ServicingScenario:
             raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
         if self.thrust_mode != "box":
             raise ValueError(f"thrust_mode must be 'box' (per-input limits, eq. 36), got {self.thrust_mode!r}")
-        for name in ("n_steps", "substeps", "horizon"):
+        for name in ("max_steps", "substeps", "horizon"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}")
@@ -185,7 +198,7 @@ class ServicingScenario:
             s(self, name, nested(w))
         if min(self.input_weight) <= 0:
             raise ValueError(f"input_weight must be > 0 (H positive definite), got {self.input_weight}")
-        for name in ("terminate_on_collision", "randomize"):
+        for name in ("terminate_on_collision", "randomize", "collision_voids_success"):
             if not isinstance(getattr(self, name), bool | np.bool_):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
             s(self, name, bool(getattr(self, name)))
@@ -199,17 +212,6 @@ class ServicingScenario:
     @property
     def n_agents(self) -> int:
         return len(self.initial_position)
-
-    @property
-    def max_steps(self) -> int:
-        return self.n_steps
-
-    @property
-    def u_max(self) -> np.ndarray:
-        """Per-input limits (6,) [m/s^2 per unit mass] (the action scaling of the env)."""
-        u = np.full(6, self.thrust_limit)
-        u.flags.writeable = False
-        return u
 
     @property
     def keepout_radius(self) -> float:

@@ -1,0 +1,89 @@
+"""A single-agent, centralised Gymnasium view of a satenv scenario.
+
+:class:`CentralisedEnv` wraps one PettingZoo env (the dict path, ``B = 1``): the observation is
+the concatenation of every agent's observation (agent order of ``possible_agents``), the action
+the concatenation of every agent's normalised action, the reward the team sum (or mean) of the
+agents' rewards. Terminated/truncated follow the team. It passes
+``gymnasium.utils.env_checker.check_env`` and serves single-agent algorithms.
+
+``import satenv`` registers it with Gymnasium for every env (``satenv.GYM_IDS``)::
+
+    import gymnasium as gym
+    import satenv
+
+    env = gym.make("satenv/Platoon-v0", topology="BDL", max_steps=100)   # env kwargs as in satenv.make
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from satenv.envs.base import SatenvError, SatParallelEnv
+
+__all__ = ["CentralisedEnv"]
+
+
+class CentralisedEnv(gym.Env):
+    """One controller for all agents of a satenv env.
+
+    Args:
+        env: a :class:`~satenv.envs.base.SatParallelEnv` instance, or an env id (``"platoon_v0"``,
+            one of ``satenv.ENV_IDS``) built with ``satenv.make(env, **env_kwargs)``.
+        reward: ``"sum"`` (default) or ``"mean"`` of the agents' rewards.
+        render_mode: passed to the env when ``env`` is an id.
+        env_kwargs: keyword arguments of the env when ``env`` is an id.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, env: SatParallelEnv | str = "platoon_v0", *, reward: str = "sum",
+                 render_mode: str | None = None, **env_kwargs: Any) -> None:
+        if reward not in ("sum", "mean"):
+            raise SatenvError(f"reward must be 'sum' or 'mean', got {reward!r}")
+        if isinstance(env, str):
+            from satenv import make
+
+            env = make(env, render_mode=render_mode, **env_kwargs)
+        elif env_kwargs:
+            raise SatenvError(f"env_kwargs {sorted(env_kwargs)} given with an env instance; pass an env id instead")
+        if not isinstance(env, SatParallelEnv):
+            raise SatenvError(f"CentralisedEnv needs a satenv SatParallelEnv or an env id, got {type(env).__name__}")
+        self.env = env
+        self.render_mode = env.render_mode
+        self.metadata = {**self.metadata, "render_fps": env.metadata["render_fps"]}
+        self.agents = list(env.possible_agents)
+        self._reduce = np.sum if reward == "sum" else np.mean
+        o = env.observation_space(self.agents[0])
+        a = env.action_space(self.agents[0])
+        m = len(self.agents)
+        self.obs_dim, self.act_dim = int(o.shape[0]), int(a.shape[0])
+        self.observation_space = spaces.Box(-np.inf, np.inf, (m * self.obs_dim,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (m * self.act_dim,), np.float32)
+
+    def _flat(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        return np.concatenate([obs[a] for a in self.agents]).astype(np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        obs, infos = self.env.reset(seed=seed, options=options)
+        return self._flat(obs), {"agents": infos}
+
+    def step(self, action: np.ndarray):
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            raise SatenvError(f"action must have shape {self.action_space.shape} "
+                              f"({len(self.agents)} agents x {self.act_dim}), got {a.shape}")
+        split = a.reshape(len(self.agents), self.act_dim)
+        obs, rew, term, trunc, infos = self.env.step({ag: split[i] for i, ag in enumerate(self.agents)})
+        reward = float(self._reduce([rew[ag] for ag in self.agents]))
+        return self._flat(obs), reward, any(term.values()), any(trunc.values()), {"agents": infos}
+
+    def render(self):
+        return self.env.render()
+
+    def close(self) -> None:
+        self.env.close()

@@ -1,0 +1,247 @@
+"""One env surface: the same keywords, spaces and conventions in all four envs; the env registry
+and its Gymnasium ids; the one success rule shared by metrics, the scoreboard and evaluation."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+
+import satenv
+from satenv import metrics
+from satenv.envs.base import SatenvError, SatParallelEnv
+from satenv.rollout import Trajectory, rollout
+
+SURFACE = {"max_steps": 3, "dt": None, "u_max": None, "randomize": False,
+           "terminate_on_collision": False, "success_tol": 2.0, "collision_voids_success": False}
+
+
+def _zero(env):
+    return {a: np.zeros(env.action_space(a).shape) for a in env.agents}
+
+
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
+def test_same_keywords_in_every_env(env_id):
+    default = satenv.make(env_id)
+    kwargs = {k: v for k, v in SURFACE.items() if v is not None}
+    kwargs["dt"] = default.scenario.dt * 2
+    env = satenv.make(env_id, **kwargs)
+    sc = env.scenario
+    assert isinstance(env, SatParallelEnv) and env.metadata["name"] == env_id
+    assert (sc.max_steps, sc.dt, sc.randomize, sc.terminate_on_collision) == (3, kwargs["dt"], False, False)
+    assert (sc.success_tol, sc.collision_voids_success) == (2.0, False)
+    env.reset(seed=0)
+    steps = 0
+    while env.agents:
+        _, _, terms, truncs, _ = env.step(_zero(env))
+        steps += 1
+    assert steps == 3 and all(truncs.values()) and not any(terms.values())
+    with pytest.raises(SatenvError, match="max_steps"):
+        satenv.make(env_id, max_steps=0)
+    with pytest.raises(SatenvError, match="n_steps"):
+        satenv.make(env_id, n_steps=10)   # the old name is an unknown keyword now
+
+
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
+def test_u_max_scales_the_action(env_id):
+    def accel(scale):
+        env = satenv.make(env_id, terminate_on_collision=False, dynamics="cw")
+        u = np.asarray(env.scenario.u_max) * scale
+        env = satenv.make(env_id, terminate_on_collision=False, dynamics="cw", u_max=u.tolist() if u.ndim else float(u))
+        env.reset(seed=0)
+        rng = np.random.default_rng(0)
+        _, _, _, _, infos = env.step({a: rng.uniform(-0.5, 0.5, env.action_space(a).shape) for a in env.agents})
+        return np.array([infos[a]["accel"] for a in env.possible_agents])
+
+    np.testing.assert_allclose(accel(2.0), 2.0 * accel(1.0), rtol=1e-12)
+    assert np.abs(accel(1.0)).max() > 0
+
+
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
+def test_pettingzoo_conventions(env_id):
+    env = satenv.make(env_id)
+    obs, _ = env.reset(seed=1)
+    assert env.state() in env.state_space and env.state_space.dtype == np.float64
+    env.step({a: env.action_space(a).sample() for a in env.agents})
+    assert env.state() in env.state_space
+    assert env.observation_spaces == {a: env.observation_space(a) for a in env.possible_agents}
+    assert env.action_spaces == {a: env.action_space(a) for a in env.possible_agents}
+    assert all(obs[a] in env.observation_spaces[a] for a in obs)
+    assert env.metadata["render_fps"] == pytest.approx(type(env).render_speedup / env.scenario.dt)
+    slow = satenv.make(env_id, dt=env.scenario.dt * 2)
+    assert slow.metadata["render_fps"] == pytest.approx(env.metadata["render_fps"] / 2)
+    assert type(env).metadata["render_fps"] == 10   # the class default is untouched
+    module = sys.modules[type(env).__module__]
+    raw = module.raw_env()
+    assert isinstance(raw, parallel_to_aec_wrapper) and isinstance(module.env(), OrderEnforcingWrapper)
+
+
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
+def test_randomize_draws_from_the_seed(env_id):
+    env = satenv.make(env_id, randomize=True)
+    s0 = env.reset(seed=3) and env.state()
+    s0b = env.reset(seed=3) and env.state()
+    s1 = env.reset(seed=4) and env.state()
+    np.testing.assert_array_equal(s0, s0b)
+    assert not np.allclose(s0, s1)
+    fixed = satenv.make(env_id)
+    assert np.array_equal(fixed.reset(seed=3) and fixed.state(), fixed.reset(seed=4) and fixed.state())
+
+
+def test_cluster_randomizes_target_slots():
+    from satenv.scenarios.cluster import LI2022_TARGETS
+
+    env = satenv.make("cluster_v0", randomize=True)
+    sc = env.scenario
+    env.reset(seed=0)
+    t0 = env.core.all_targets[0].copy()
+    env.reset(seed=0)
+    np.testing.assert_array_equal(env.core.all_targets[0], t0)
+    env.reset(seed=1)
+    assert not np.allclose(env.core.all_targets[0], t0)
+    np.testing.assert_allclose(np.linalg.norm(t0 - np.asarray(sc.target_spacecraft), axis=-1), 300.0)
+    d = np.linalg.norm(t0[:, None] - t0[None], axis=-1)[np.triu_indices(len(t0), 1)]
+    assert d.min() >= 2 * sc.sat_radius + 10.0
+    # the observation and the tracking error follow the drawn slots
+    _, infos = env.reset(seed=1)
+    x = env.state()[:6 * sc.n_agents].reshape(-1, 6)
+    np.testing.assert_allclose([infos[a]["tracking_error"][:3] for a in env.possible_agents],
+                               x[:, :3] - env.targets())
+    plain = satenv.make("cluster_v0", random_position_spread=30.0)   # no randomize: the preset
+    plain.reset(seed=1)
+    np.testing.assert_array_equal(plain.core.all_targets[0], LI2022_TARGETS)
+    np.testing.assert_array_equal(plain.state()[:6 * sc.n_agents].reshape(-1, 6), sc.initial_array())
+
+
+def test_cluster_u_max_is_an_acceleration():
+    sc = satenv.make("cluster_v0").scenario
+    assert sc.u_max == 0.02 and sc.thrust_max == pytest.approx(1.0)   # li2022: 1 N on 50 kg
+    with pytest.raises(SatenvError, match="thrust_max"):
+        satenv.make("cluster_v0", thrust_max=2.0)
+
+
+def test_servicing_u_max_one_or_six_limits():
+    env = satenv.make("servicing_v0", u_max=[1, 2, 3, 4, 5, 6])
+    assert env.scenario.u_max == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
+    assert satenv.make("servicing_v0").scenario.u_max == (3.0,) * 6
+    with pytest.raises(SatenvError, match="u_max"):
+        satenv.make("servicing_v0", u_max=[1, 2])
+
+
+# ------------------------------------------------------------------ registry and Gymnasium ids
+def test_registry_and_gymnasium_ids_are_registered_lazily():
+    code = ("import sys, satenv, gymnasium\n"
+            "assert satenv.ENV_IDS == ('platoon_v0', 'cluster_v0', 'servicing_v0', 'formation_v0')\n"
+            "assert set(satenv.GYM_IDS) <= set(gymnasium.registry)\n"
+            "assert not [m for m in sys.modules if m.startswith(('satenv.envs', 'satenv.gym_env', 'pettingzoo'))]\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    with pytest.raises(ValueError, match="unknown env id"):
+        satenv.make("platoon_v1")
+
+
+@pytest.mark.parametrize("gym_id", sorted(satenv.GYM_IDS))
+def test_gymnasium_view_passes_check_env(gym_id):
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make(gym_id, max_steps=4)
+    inner = env.unwrapped
+    assert inner.env.metadata["name"] == satenv.GYM_IDS[gym_id] and inner.env.scenario.max_steps == 4
+    check_env(inner, skip_render_check=True)
+    obs, _ = env.reset(seed=0)
+    done, steps = False, 0
+    while not done:
+        obs, _, term, trunc, _ = env.step(env.action_space.sample())
+        done, steps = term or trunc, steps + 1
+    assert steps <= 4 and obs in env.observation_space
+
+
+def test_training_gym_view_is_the_same_class():
+    from satenv.gym_env import CentralisedEnv
+    from training.gym_view import CentralisedEnv as Reexported
+
+    assert Reexported is CentralisedEnv
+
+
+# ------------------------------------------------------------------ the one success rule
+def _traj(final_error, collisions, tol=1.0, voids=True):
+    err = np.zeros((3, 2, 6))
+    err[-1, :, 0] = final_error
+    coll = np.zeros((3, 2), bool)
+    coll[1, 0] = collisions
+    info = {"tracking_error": err, "collision": coll, "accel": np.zeros((3, 2, 3)),
+            "delta_v": np.zeros((3, 2)), "min_separation": np.ones((3, 2)),
+            "violations": np.zeros((3, 2), int), "cost": np.zeros((3, 2))}
+    return Trajectory(env_id="x", agents=["a", "b"], dt=1.0, t=np.arange(3.0), states=np.zeros((3, 2, 6)),
+                      actions=np.zeros((2, 2, 3)), rewards=np.zeros((2, 2)), info=info,
+                      success_tol=tol, collision_voids_success=voids)
+
+
+def test_success_rule_reads_the_trajectory():
+    assert metrics.success(_traj(0.9, False))
+    assert not metrics.success(_traj(1.1, False))
+    assert metrics.success(_traj(1.1, False, tol=1.2))
+    assert not metrics.success(_traj(1.1, False, tol=1.2), tol=1.0)
+    assert not metrics.success(_traj(0.5, True))
+    assert metrics.success(_traj(0.5, True, voids=False))
+    assert metrics.summary(_traj(0.5, True, voids=False))["success"]
+
+
+def test_trajectory_keeps_the_rule_when_saved(tmp_path):
+    traj = _traj(0.5, True, tol=0.25, voids=False)
+    traj.save(tmp_path / "t.npz")
+    back = Trajectory.load(tmp_path / "t.npz")
+    assert (back.success_tol, back.collision_voids_success) == (0.25, False)
+
+
+def test_platoon_derives_whether_a_collision_voids_success():
+    from satenv.scenarios.platoon import resolve_scenario
+
+    table1 = resolve_scenario("pereira2023")
+    assert not table1.collision_voids_success        # its target formation overlaps
+    assert resolve_scenario("pereira2023", formation="chain").collision_voids_success
+    assert resolve_scenario("pereira2023", topology="TPLF",
+                            desired_error=(0, -30, 0, 0, 0, 0)).collision_voids_success
+    assert resolve_scenario("pereira2022").collision_voids_success
+    assert resolve_scenario("pereira2023", collision_voids_success=True).collision_voids_success
+    declared = resolve_scenario("pereira2023", collision_voids_success=False)
+    assert not declared.with_overrides(formation="chain").collision_voids_success   # stays declared
+    assert table1.with_overrides(formation="chain").collision_voids_success         # derived again
+    assert {s.success_tol for s in (table1, satenv.make("servicing_v0").scenario)} == {1.0, 0.5}
+
+
+def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
+    """The DMPC reaches the Table I formation (bodies overlap there): success everywhere; a
+    collision in the chain formation voids it everywhere."""
+    baselines = pytest.importorskip("baselines")
+    pytest.importorskip("daqp")
+    from benchmarks.registry import POLICIES, SCENARIOS
+    from benchmarks.scoreboard import Task, run_episode
+    from training.evaluate import evaluate
+
+    spec = SCENARIOS["platoon-PLF-cw"]
+    env = spec.make()
+    traj = rollout(env, baselines.DMPC(env), seed=0)
+    summary = metrics.summary(traj)
+    record = run_episode(Task(spec, POLICIES["dmpc"], 0))
+    env2 = spec.make()
+    evaluated = evaluate(env2, baselines.DMPC(env2), [0])["episodes"][0]
+    assert summary["collisions"] > 0 and summary["final_error_m"] <= 1.0
+    assert summary["success"] is record["success"] is evaluated["success"] is True
+    assert record["collisions"] == summary["collisions"] == evaluated["collisions"]
+
+    from baselines.base import ZeroPolicy
+    from benchmarks.registry import ScenarioSpec
+
+    x0 = [[0.0, -8.0 * (k + 1), 0.0, 0, 0, 0] for k in range(4)]
+    x0[1][1] = -9.0                      # 1 m from follower 1: a collision at reset
+    for voids in (True, False):
+        kwargs = {"formation": "chain", "terminate_on_collision": False, "max_steps": 3,
+                  "initial_state": x0, "success_tol": 100.0, "collision_voids_success": voids}
+        env = satenv.make("platoon_v0", **kwargs)
+        summary = metrics.summary(rollout(env, ZeroPolicy(env), seed=0))
+        record = run_episode(Task(ScenarioSpec("chain", ("satenv:platoon_v0",), kwargs), POLICIES["zero"], 0))
+        assert summary["collisions"] > 0 and record["collisions"] == summary["collisions"]
+        assert summary["success"] is record["success"] is (not voids)
