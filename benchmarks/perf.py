@@ -162,15 +162,11 @@ def api_loops(min_time: float, repeats: int = 3) -> tuple[dict, dict]:
     a machine shared with other jobs affects both alike."""
     loops: dict[str, PettingZooLoop] = {}
     notes: dict[str, dict] = {}
-    try:
-        import satenv
-    except ModuleNotFoundError as exc:
-        if not (exc.name or "").startswith("satenv"):
-            raise
-        notes["api"] = {"skipped": "satenv.envs.platoon_v0 not available"}
-    else:
-        loops["api"] = PettingZooLoop(satenv.make("platoon_v0"), -1.0, 1.0)
-        loops["api_j2"] = PettingZooLoop(satenv.make("platoon_v0", dynamics="j2", inclination=math.radians(51.6)), -1.0, 1.0)
+    import satenv
+
+    loops["api"] = PettingZooLoop(satenv.make("platoon_v0"), -1.0, 1.0)
+    loops["api_j2"] = PettingZooLoop(satenv.make("platoon_v0", dynamics="j2",
+                                                 inclination=math.radians(51.6)), -1.0, 1.0)
     try:
         from mpe2 import simple_spread_v3
     except ModuleNotFoundError as exc:

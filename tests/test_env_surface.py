@@ -217,7 +217,7 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     collision in the chain formation voids it everywhere."""
     baselines = pytest.importorskip("baselines")
     pytest.importorskip("daqp")
-    from benchmarks.registry import POLICIES, SCENARIOS
+    from benchmarks.scoreboard.registry import POLICIES, SCENARIOS
     from benchmarks.scoreboard import Task, run_episode
     from training.evaluate import evaluate
 
@@ -233,7 +233,7 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     assert record["collisions"] == summary["collisions"] == evaluated["collisions"]
 
     from baselines.base import ZeroPolicy
-    from benchmarks.registry import ScenarioSpec
+    from benchmarks.scoreboard import ScenarioSpec
 
     x0 = [[0.0, -8.0 * (k + 1), 0.0, 0, 0, 0] for k in range(4)]
     x0[1][1] = -9.0                      # 1 m from follower 1: a collision at reset
@@ -242,6 +242,6 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
                   "initial_state": x0, "success_tol": 100.0, "collision_voids_success": voids}
         env = satenv.make("platoon_v0", **kwargs)
         summary = metrics.summary(rollout(env, ZeroPolicy(env), seed=0))
-        record = run_episode(Task(ScenarioSpec("chain", ("satenv:platoon_v0",), kwargs), POLICIES["zero"], 0))
+        record = run_episode(Task(ScenarioSpec("chain", "platoon_v0", kwargs), POLICIES["zero"], 0))
         assert summary["collisions"] > 0 and record["collisions"] == summary["collisions"]
         assert summary["success"] is record["success"] is (not voids)
