@@ -18,6 +18,8 @@ _ENVS = {
     "servicing_v0": "satenv.envs.servicing_v0",
     "formation_v0": "satenv.envs.formation_v0",
 }
+ENV_IDS: tuple[str, ...] = tuple(_ENVS)
+"""The satenv env ids (``satenv.make(env_id)``)."""
 
 
 def _make(name: str, **kwargs: Any):
@@ -53,4 +55,4 @@ def make(env_id: str, **kwargs: Any):
     return _make(env_id, **kwargs)
 
 
-__all__ = ["__version__", "cluster_v0", "formation_v0", "make", "platoon_v0", "servicing_v0"]
+__all__ = ["ENV_IDS", "__version__", "cluster_v0", "formation_v0", "make", "platoon_v0", "servicing_v0"]
