@@ -9,11 +9,12 @@ Adding an env or a baseline is one entry here::
 
     SCENARIOS["cluster-case1"] = ScenarioSpec("cluster-case1", ("satenv.envs.cluster_v0:parallel_env",),
                                               {"preset": "li2022-case1"})
-    POLICIES["apf"] = PolicySpec("apf", ("baselines:APF",), scenarios=("cluster-*",))
+    POLICIES["apf"] = PolicySpec("apf", ("baselines:APF",), baseline="apf")  # where: APF.supports(env)
 
 A scenario spec builds a PettingZoo ``ParallelEnv`` with ``factory(**kwargs)``; a policy spec
 builds a policy with ``factory(env, **kwargs)`` (or, for a checkpoint, ``training.load(path)``).
-``scenarios`` are ``fnmatch`` patterns over scenario names saying where a policy applies.
+A scripted policy applies where its ``baselines`` class's ``supports(env)`` says; a trained one
+where the ``fnmatch`` patterns ``scenarios`` over scenario names say.
 """
 
 from __future__ import annotations
@@ -151,6 +152,8 @@ class PolicySpec:
         requires: optional third-party modules (e.g. the QP solver).
         dry_run: act once on a reset env before the run to check compatibility (cheap policies).
         learned: a trained network (its observation space is checked against the env's).
+        baseline: the ``baselines.BASELINES`` name of a scripted policy; then its class's
+            ``supports(env)`` says where it applies (``scenarios`` is not used).
     """
 
     name: str
@@ -162,6 +165,7 @@ class PolicySpec:
     requires: tuple[str, ...] = ()
     dry_run: bool = True
     learned: bool = False
+    baseline: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -173,8 +177,21 @@ class PolicySpec:
             raise ScoreboardError(f"policy {self.name}: scenarios must be a tuple of patterns, "
                                   f"got the string {self.scenarios!r}")
 
-    def applies_to(self, scenario: str) -> bool:
+    def applies_to(self, scenario: str, env: Any = None) -> bool:
+        """Whether the policy runs on ``scenario`` (its env ``env``, asked of the baseline class)."""
+        if self.baseline is not None:
+            import baselines
+
+            return env is not None and baselines.get(self.baseline).supports(env)
         return any(fnmatch.fnmatchcase(scenario, pat) for pat in self.scenarios)
+
+    def where(self) -> str:
+        """Where the policy applies, for listings."""
+        if self.baseline is not None:
+            import baselines
+
+            return baselines.get(self.baseline).supported()
+        return "scenarios " + ",".join(self.scenarios)
 
     def factory(self) -> Callable[..., Any]:
         return resolve(self.targets, self.requires)
@@ -283,18 +300,19 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
 """Every scenario of the scoreboard by name (entries whose env has not landed are skipped)."""
 
 POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
-    PolicySpec("zero", ("baselines.base:ZeroPolicy",), description="no thrust (coasting)"),
-    PolicySpec("random", ("baselines.base:RandomPolicy",), description="uniform random thrust"),
-    PolicySpec("dmpc", ("baselines:DMPC",), scenarios=("platoon-*",),
+    PolicySpec("zero", ("baselines.base:ZeroPolicy",), baseline="zero",
+               description="no thrust (coasting)"),
+    PolicySpec("random", ("baselines.base:RandomPolicy",), baseline="random",
+               description="uniform random thrust"),
+    PolicySpec("dmpc", ("baselines:DMPC",), baseline="dmpc",
                requires=("daqp",), description="1-hop distributed MPC (pereira2023/2022)"),
-    PolicySpec("tube_rdmpc", ("baselines:TubeRDMPC",),
-               scenarios=("cluster-*",), requires=("casadi",), dry_run=False,
-               description="tube-based robust DMPC (li2022)"),
-    PolicySpec("apf", ("baselines:APF",), scenarios=("cluster-*",),
+    PolicySpec("tube_rdmpc", ("baselines:TubeRDMPC",), baseline="tube_rdmpc",
+               requires=("casadi",), dry_run=False, description="tube-based robust DMPC (li2022)"),
+    PolicySpec("apf", ("baselines:APF",), baseline="apf",
                description="artificial potential field (li2022)"),
-    PolicySpec("nmpc", ("baselines:NMPC",), scenarios=("servicing-*",),
+    PolicySpec("nmpc", ("baselines:NMPC",), baseline="nmpc",
                requires=("casadi",), dry_run=False, description="cooperative NMPC (pereira2022 §4)"),
-    PolicySpec("cgmres", ("baselines:CGMRES",), scenarios=("formation-*",),
+    PolicySpec("cgmres", ("baselines:CGMRES",), baseline="cgmres",
                requires=("casadi",), dry_run=False, description="centralised C/GMRES NMPC (kannan2022)"),
 ]}
 """Every scripted policy by name; shipped trained policies are added by

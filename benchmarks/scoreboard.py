@@ -301,7 +301,7 @@ def preflight(scenarios: list[ScenarioSpec], policies: list[PolicySpec], seed: i
                                   f"(**{dict(scen.kwargs)}) failed: {type(exc).__name__}: {exc}") from exc
         env_ids[scen.name] = env.metadata.get("name", type(env).__name__)
         for pol in policies:
-            if not pol.applies_to(scen.name):
+            if not pol.applies_to(scen.name, env):
                 continue
             try:
                 policy = pol.make(env)
@@ -510,7 +510,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
     for name in pol_names:
         if not any(p == name for _, p in pairs) and not any(f"policy {name} on" in n for n in notes):
             notes.append(f"policy {name}: applies to none of the selected scenarios "
-                         f"(its scenarios: {', '.join(pol_reg[name].scenarios)})")
+                         f"(it applies to {pol_reg[name].where()})")
     for kind, names, idx in (("policy", pol_explicit, 1), ("scenario", scen_explicit, 0)):
         for name in sorted(names):
             if not any(pair[idx] == name for pair in pairs):
@@ -633,7 +633,7 @@ def _list_registry() -> str:
             status = "available"
         except Unavailable as why:
             status = f"not available ({why})"
-        lines.append(f"  {name:<32} {status:<12}  scenarios {','.join(spec.scenarios)}  {spec.description}")
+        lines.append(f"  {name:<32} {status:<12}  {spec.where()}  {spec.description}")
     lines.append(f"quick: {QUICK}")
     return "\n".join(lines)
 
