@@ -1,6 +1,6 @@
 """Tube-based robust distributed MPC for satellite-cluster reconfiguration (li2022 §3.1–3.2).
 
-``TubeRDMPC(env, **options)`` controls ``satenv.cluster_v0``. It has two layers:
+``TubeRDMPC(env, config=None, **options)`` (:class:`TubeRDMPCConfig`) controls ``satenv.cluster_v0``. It has two layers:
 
 * **Nominal DMPC** (one NLP per satellite every decision period Δt = 5 s, horizon
   ``T_p = 50 s``, N = 10 steps): cost (27)–(28)
@@ -44,7 +44,10 @@ Choices and deviations (documented; each is an option):
   keep-out constraints are infeasible.
 * ``safety_margin = 5 m`` is added to every keep-out distance: the Jacobi exchange plans against
   the neighbours' *previous* predictions while they re-plan at the same time.
-* Infeasibility: when ipopt fails on the exact NLP, a relaxed NLP is solved (λ unbounded above,
+* Infeasibility: every ipopt solve goes through :func:`baselines.base.guarded_solve` (an
+  exception, a failed status, a wrong-shaped or non-finite point, a variable outside its bounds or
+  a constraint row violated by more than ``NLP_CONSTRAINT_TOL`` is a failure; why:
+  ``info["solver_status"]``). When the exact NLP fails, a relaxed NLP is solved (λ unbounded above,
   collision rows softened by an L1 slack of weight 1e9, terminal / speed rows by one of weight
   1e8); if that fails too, the previous plan shifted with ρ = 0 appended (li2022's candidate (29))
   is applied, or a braking input once that plan is exhausted. Both are counted
