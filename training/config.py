@@ -47,8 +47,8 @@ class TrainConfig:
         eval_every: evaluate every this many agent-steps (0: only at the end) on ``eval_seeds``
             with the PettingZoo env and ``satenv.rollout`` (the scoreboard's path), logged to
             TensorBoard next to the scripted ``eval_baselines`` (names of
-            ``baselines.BASELINES``; ``"auto"``, the default, is every baseline without a
-            per-decision NLP that supports the env — zero, random, dmpc, apf — so the
+            ``baselines.BASELINES``; ``"auto"``, the default, is ``zero`` and the scripted
+            controllers without a per-decision NLP that support the env (dmpc, apf), so the
             evaluation stays cheap: the NLP baselines nmpc, tube_rdmpc, cgmres cost 0.5-16 min
             per episode; name them to include them; unsupported names are skipped with a warning).
         test_seeds: held-out seeds of the final evaluation summary (not used for selection).
