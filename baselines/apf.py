@@ -33,13 +33,22 @@ reports.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-from baselines.base import config_from_options
+from baselines.base import (
+    Baseline,
+    check_env,
+    config_from_options,
+    flag,
+    guarded_solve,
+    new_info,
+    number,
+    validate,
+)
 from satenv.cluster_graph import nearest_neighbour_graph
 from satenv.dynamics import cw_continuous, saturate_norm
 
@@ -78,49 +87,45 @@ class APFConfig:
     cw_compensation: bool = True
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "cw_compensation":
-                if not isinstance(v, bool | np.bool_):
-                    raise ValueError(f"APF option cw_compensation must be a bool, got {v!r}")
-                continue
-            try:
-                fv = float(v)
-            except (TypeError, ValueError):
-                raise ValueError(f"APF option {f.name} must be a number, got {v!r}") from None
-            zero_ok = f.name in ("k_close", "k_swirl", "k_damp", "k_rep")
-            if not math.isfinite(fv) or fv < 0 or (fv == 0 and not zero_ok):
-                raise ValueError(f"APF option {f.name} must be finite and "
-                                 f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
-        for name in ("att_fraction", "brake_fraction"):
-            if getattr(self, name) > 1:
-                raise ValueError(f"APF option {name} must be in (0, 1], got {getattr(self, name)!r}")
+        nonneg = ("k_close", "k_swirl", "k_damp", "k_rep")
+        rules = {f.name: partial(number, zero_ok=f.name in nonneg) for f in fields(self)
+                 if f.name != "cw_compensation"}
+        rules["att_fraction"] = rules["brake_fraction"] = partial(number, high=1.0)
+        rules["cw_compensation"] = flag
+        validate(self, "APF", rules)
 
 
-class APF:
+class APF(Baseline):
     """Artificial potential field controller for ``satenv.cluster_v0`` (module docstring).
 
+    Privileged: it reads the env's true states (``env.state()``), the allocated targets
+    (``env.targets()``), the obstacle state (``env.obstacle_state()``) and the scenario, not the
+    observations.
+
     Args:
-        env: a ``cluster_v0`` env (read: true states, allocated targets, obstacle, graph).
-        **options: fields of :class:`APFConfig`.
+        env: a ``cluster_v0`` env.
+        config: an :class:`APFConfig` (default: the gains above); ``**options`` replace fields.
+
+    Safe action: an APF law that yields a non-finite acceleration commands zero thrust for that
+    step (``info["fallbacks"]``, ``info["solver_status"]``).
     """
 
     name = "apf"
+    env_ids = ("cluster_v0",)
 
-    def __init__(self, env: Any, **options: Any) -> None:
-        self.cfg = config_from_options(APFConfig, options, "APF")
-        sc = getattr(env, "scenario", None)
-        if sc is None or not hasattr(sc, "obstacle_velocity"):
-            raise ValueError(f"APF controls satenv.cluster_v0 envs, got {type(env).__name__}")
+    def __init__(self, env: Any, config: APFConfig | None = None, **options: Any) -> None:
+        check_env(type(self), env)
+        self.cfg = config_from_options(APFConfig, options, "APF", base=config)
+        sc = env.scenario
         self.env = env
         self.sc = sc
         self.agents = list(env.possible_agents)
         self.m = len(self.agents)
         self.f_rows = cw_continuous(sc.orbit.n)[0][3:, :]
-        self.info: dict[str, Any] = {"fallbacks": 0}
+        self.info: dict[str, Any] = new_info()
 
     def reset(self, seed: int | None = None) -> None:
-        self.info = {"fallbacks": 0}
+        self.info = new_info()
 
     def _repulsion(self, q, p, qb, pb, d_safe, rho, e) -> np.ndarray:
         """Repulsive accelerations (M, 3) from bodies at ``qb`` (M, K, 3) (``inf`` = absent)."""
@@ -147,7 +152,13 @@ class APF:
         return np.sum(mag[..., None] * (n + cfg.k_swirl * tang), axis=1)
 
     def accelerations(self) -> np.ndarray:
-        """The APF accelerations (M, 3) [m/s^2] for the env's current state (saturated)."""
+        """The APF accelerations (M, 3) [m/s^2] for the env's current state (saturated; zero
+        thrust when the law is not finite)."""
+        u = guarded_solve(self.info, lambda: (self._law(), True, "ok"), shape=(self.m, 3))
+        return np.zeros((self.m, 3)) if u is None else saturate_norm(u, self.sc.u_max)
+
+    def _law(self) -> np.ndarray:
+        """The unsaturated APF acceleration (M, 3) [m/s^2]."""
         cfg, sc, env = self.cfg, self.sc, self.env
         x = env.state()[: 6 * self.m].reshape(self.m, 6)
         q, p = x[:, :3], x[:, 3:]
@@ -168,10 +179,7 @@ class APF:
         q_r = np.asarray(sc.target_spacecraft, dtype=float)
         u += self._repulsion(q, p, np.broadcast_to(q_r, (self.m, 1, 3)), np.zeros((self.m, 1, 3)),
                              sc.target_distance, cfg.rho_target, e)
-        if not np.all(np.isfinite(u)):
-            self.info["fallbacks"] += 1
-            u = np.where(np.isfinite(u), u, 0.0)
-        return saturate_norm(u, sc.u_max)
+        return u
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         u = self.accelerations() / self.sc.u_max

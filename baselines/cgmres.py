@@ -33,10 +33,11 @@ Arnoldi steps, restarted from the previous ``dU/dt``) with the matrix-free forwa
 ``U <- U + dU/dt * dt``. The first sample starts at ``T = 0``, where ``F = 0`` is solved by
 Newton's method (:meth:`FormationOCP.refine`).
 
-Safety: a non-finite update, a GMRES solve that leaves more than ``fallback_tol`` of the right-hand
+Safety (the shared guard :func:`baselines.base.guarded_solve` around the Newton restart and every
+continuation step): an exception, a wrong-shaped or non-finite update, a GMRES solve that leaves more than ``fallback_tol`` of the right-hand
 side unresolved, or an optimality residual ``|F|`` above ``max_residual`` is a failure: the
 controller commands zero thrust for that step (kannan2022 §3: ``u = 0`` is always admissible),
-counts it in ``info["fallbacks"]`` and restarts the continuation from ``T = 0`` at the next sample.
+counts it in ``info["fallbacks"]`` (why: ``info["solver_status"]``) and restarts the continuation from ``T = 0`` at the next sample.
 The applied input is clipped to ``[-1, 1]``.
 """
 
@@ -46,12 +47,26 @@ import math
 import time
 from typing import Any
 
+from dataclasses import asdict, dataclass
+from functools import partial
+
 import casadi as ca
 import numpy as np
 
+from baselines.base import (
+    MAX_HORIZON,
+    Baseline,
+    check_env,
+    config_from_options,
+    guarded_solve,
+    integer,
+    new_info,
+    number,
+    validate,
+)
 from satenv.dynamics import cw_continuous
 
-__all__ = ["CGMRES", "FormationOCP", "gmres"]
+__all__ = ["CGMRES", "CGMRESConfig", "FormationOCP", "gmres"]
 
 
 class _BufferedFunction:
@@ -299,69 +314,84 @@ class FormationOCP:
         self._ubx = np.full(n * (nu + nc), np.inf)
 
 
-_OPTION_DEFAULTS: dict[str, Any] = {
-    "horizon": 3.0, "horizon_steps": 30, "horizon_rate": 1.0, "zeta": None, "kmax": 20,
-    "fd_step": 1e-6, "dummy_weight": 0.1, "gmres_tol": 1e-2, "fallback_tol": 0.5,
-    "max_residual": 1e3,
-}
+@dataclass(frozen=True)
+class CGMRESConfig:
+    """Settings of :class:`CGMRES` (our choices; kannan2022 gives no solver settings).
 
-
-class CGMRES:
-    """Centralised C/GMRES NMPC for ``satenv.formation_v0`` (module docstring).
-
-    Defaults (our choices; kannan2022 gives no solver settings): ``T_f = 3 s``, ``N = 30``,
-    ``alpha = 1 /s``, ``zeta = 1/dt``, ``kmax = 20``, ``h = 1e-6``, ``r_v = 0.1``: 810 unknowns
-    for three spacecraft (27 per stage).
+    ``T_f = 3 s``, ``N = 30``, ``alpha = 1 /s``, ``zeta = 1/dt``, ``kmax = 20``, ``h = 1e-6``,
+    ``r_v = 0.1``: 810 unknowns for three spacecraft (27 per stage).
 
     Args:
-        env: the formation env (reads ``env.scenario`` and ``env.state()``).
-        horizon: T_f [s] (our choice; the paper gives none).
-        horizon_steps: N, Euler steps over the horizon.
+        horizon: T_f [s]; horizon_steps: N, Euler steps over the horizon (<= 1000).
         horizon_rate: alpha [1/s] of ``T(t) = T_f (1 - exp(-alpha t))``.
-        zeta: continuation stabilisation gain [1/s]; default ``1 / dt``.
-        kmax: GMRES iterations per update.
-        fd_step: h, forward-difference step.
-        dummy_weight: r_v of the dummy inputs.
+        zeta: continuation stabilisation gain [1/s]; ``None``: ``1 / dt`` of the env.
+        kmax: GMRES iterations per update (<= 100000; GMRES also stops at the problem size).
+        fd_step: h, forward-difference step; dummy_weight: r_v of the dummy inputs.
         gmres_tol: relative GMRES residual above which an update counts as inexact
             (``info["gmres_inexact"]``; the update is still applied).
         fallback_tol: relative GMRES residual above which the update is rejected (fallback).
         max_residual: |F| above which the continuation is considered diverged (fallback).
+        newton_iterations: Newton steps of the restart at ``T = 0`` (:meth:`FormationOCP.refine`).
+    """
 
-    ``info``: ``fallbacks`` (count), ``fallback`` (last step), ``gmres_inexact`` (count),
-    ``solve_ms``, ``residual`` (|F| before each update), ``gmres_residual`` (lists per step).
+    horizon: float = 3.0
+    horizon_steps: int = 30
+    horizon_rate: float = 1.0
+    zeta: float | None = None
+    kmax: int = 20
+    fd_step: float = 1e-6
+    dummy_weight: float = 0.1
+    gmres_tol: float = 1e-2
+    fallback_tol: float = 0.5
+    max_residual: float = 1e3
+    newton_iterations: int = 50
+
+    def __post_init__(self) -> None:
+        rules: dict[str, Any] = {name: number for name in (
+            "horizon", "horizon_rate", "fd_step", "dummy_weight", "gmres_tol", "fallback_tol",
+            "max_residual")}
+        rules["horizon_steps"] = partial(integer, high=MAX_HORIZON)
+        rules["kmax"] = rules["newton_iterations"] = integer
+        if self.zeta is not None:
+            rules["zeta"] = number
+        validate(self, "CGMRES", rules)
+
+    def resolved(self, dt: float) -> dict[str, Any]:
+        """The settings as a dict with ``zeta`` resolved for the env's ``dt``."""
+        out = asdict(self)
+        out["zeta"] = 1.0 / dt if self.zeta is None else self.zeta
+        return out
+
+
+class CGMRES(Baseline):
+    """Centralised C/GMRES NMPC for ``satenv.formation_v0`` (module docstring).
+
+    Privileged: it reads the env's true global state (``env.state()``) and the scenario's cost,
+    not the observations.
+
+    Args:
+        env: the formation env.
+        config: a :class:`CGMRESConfig` (default: the settings above); ``**options`` replace
+            its fields.
+
+    ``info``: ``fallbacks`` (count), ``solver_status`` (last update), ``fallback`` (last step),
+    ``gmres_inexact`` (count), ``solve_ms``, ``residual`` (|F| before each update),
+    ``gmres_residual`` (lists per step).
     """
 
     name = "cgmres"
+    env_ids = ("formation_v0",)
+    cheap = False
 
-    def __init__(self, env: Any, **options: Any) -> None:
-        unknown = sorted(set(options) - set(_OPTION_DEFAULTS))
-        if unknown:
-            raise ValueError(f"CGMRES: unknown option(s) {unknown}; accepted: {sorted(_OPTION_DEFAULTS)}")
-        sc = getattr(env, "scenario", None)
-        if sc is None or not all(hasattr(sc, a) for a in ("formation_error", "target_positions", "follows")):
-            raise ValueError(f"CGMRES needs a satenv.formation_v0 env (its scenario defines cost 33/34); "
-                             f"got {type(env).__name__} with scenario {type(sc).__name__}")
-        opts = {**_OPTION_DEFAULTS, **options}
-        for key in ("horizon", "horizon_rate", "fd_step", "dummy_weight", "gmres_tol", "fallback_tol",
-                    "max_residual"):
-            val = opts[key]
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val) or val <= 0:
-                raise ValueError(f"CGMRES: {key} must be a finite number > 0, got {val!r}")
-            opts[key] = float(val)
-        for key in ("horizon_steps", "kmax"):
-            val = opts[key]
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
-                raise ValueError(f"CGMRES: {key} must be a positive int, got {val!r}")
-            opts[key] = int(val)
-        if opts["zeta"] is None:
-            opts["zeta"] = 1.0 / sc.dt
-        elif isinstance(opts["zeta"], bool) or not isinstance(opts["zeta"], (int, float)) or opts["zeta"] <= 0:
-            raise ValueError(f"CGMRES: zeta must be a number > 0 or None (= 1/dt), got {opts['zeta']!r}")
-        self.options = opts
+    def __init__(self, env: Any, config: CGMRESConfig | None = None, **options: Any) -> None:
+        check_env(type(self), env)
+        self.cfg = config_from_options(CGMRESConfig, options, "CGMRES", base=config)
+        sc = env.scenario
+        self.options = self.cfg.resolved(sc.dt)
         self.env = env
         self.scenario = sc
         self.agents = list(env.possible_agents)
-        self.ocp = FormationOCP(sc, opts["horizon_steps"], opts["dummy_weight"])
+        self.ocp = FormationOCP(sc, self.cfg.horizon_steps, self.cfg.dummy_weight)
         self.dt = float(sc.dt)
         self.info: dict[str, Any] = {}
         self.reset()
@@ -372,8 +402,8 @@ class CGMRES:
         self._u_seq: np.ndarray | None = None
         self._u_dot: np.ndarray | None = None
         self._t = 0.0
-        self.info = {"fallbacks": 0, "fallback": False, "gmres_inexact": 0, "solve_ms": [],
-                     "residual": [], "gmres_residual": []}
+        self.info = new_info(fallback=False, gmres_inexact=0, solve_ms=[], residual=[],
+                             gmres_residual=[])
 
     def horizon_at(self, t: float) -> float:
         """Prediction horizon ``T(t)`` [s] at time ``t`` since the (re)start."""
@@ -398,12 +428,47 @@ class CGMRES:
         return {a: w[i].astype(np.float32) for i, a in enumerate(self.agents) if a in observations}
 
     def update(self, x: np.ndarray) -> np.ndarray:
-        """One C/GMRES update at state ``x`` (nx,); returns the normalised input to apply (nu,)."""
-        ocp, o = self.ocp, self.options
+        """One C/GMRES update at state ``x`` (nx,); returns the normalised input to apply (nu,).
+
+        Both solver calls (the Newton restart and the GMRES continuation step) go through
+        :func:`baselines.base.guarded_solve`: an exception, a wrong shape, a non-finite point, a
+        GMRES residual above ``fallback_tol`` or an optimality residual ``|F|`` (which contains
+        the input-constraint equations) above ``max_residual`` is a failure. The safe action is
+        zero thrust (kannan2022 §3: ``u = 0`` is always admissible); the continuation restarts
+        from ``T = 0`` at the next sample.
+        """
+        ocp = self.ocp
         if self._u_seq is None:
             self._t = 0.0
-            self._u_seq, _ = ocp.refine(ocp.initial_guess(), x, self.horizon_at(0.0))
-            self._u_dot = np.zeros(ocp.dim)
+            start = guarded_solve(self.info, lambda: self._restart(x), shape=(ocp.dim,))
+            if start is None:
+                return self._fallback()
+            self._u_seq, self._u_dot = start, np.zeros(ocp.dim)
+        new = guarded_solve(self.info, lambda: self._continuation_step(x), shape=(ocp.dim,))
+        if new is None:
+            return self._fallback()
+        self.info["fallback"] = False
+        if self.info["gmres_residual"][-1] > self.options["gmres_tol"]:
+            self.info["gmres_inexact"] += 1
+        self._u_seq, self._u_dot = new, self._pending_u_dot
+        self._t += self.dt
+        return np.clip(ocp.first_input(new), -1.0, 1.0)
+
+    def _fallback(self) -> np.ndarray:
+        self.info["fallback"] = True
+        self._u_seq = None  # restart from T = 0 at the next sample
+        return np.zeros(self.ocp.nu)
+
+    def _restart(self, x: np.ndarray) -> tuple[np.ndarray, bool, str]:
+        """Newton's method on ``F = 0`` at ``T = 0`` from the exact initial guess."""
+        u_seq, fnorm = self.ocp.refine(self.ocp.initial_guess(), x, self.horizon_at(0.0),
+                                       max_iter=self.cfg.newton_iterations)
+        ok = math.isfinite(fnorm) and fnorm <= self.options["max_residual"]
+        return u_seq, ok, f"newton |F| {fnorm:.3g}"
+
+    def _continuation_step(self, x: np.ndarray) -> tuple[np.ndarray, bool, str]:
+        """``U + dU/dt dt`` with ``dU/dt`` from GMRES on ``F_U dU/dt = -zeta F - F_x x' - F_t``."""
+        ocp, o = self.ocp, self.options
         u_seq, t, h = self._u_seq, self._t, o["fd_step"]
         with np.errstate(all="ignore"):
             xdot = ocp.dynamics(x, ocp.first_input(u_seq))
@@ -421,15 +486,7 @@ class CGMRES:
         fnorm = float(np.linalg.norm(f0))
         self.info["residual"].append(fnorm)
         self.info["gmres_residual"].append(rel)
-        ok = (np.all(np.isfinite(new)) and math.isfinite(rel) and rel <= o["fallback_tol"]
+        self._pending_u_dot = u_dot
+        ok = (math.isfinite(rel) and rel <= o["fallback_tol"]
               and math.isfinite(fnorm) and fnorm <= o["max_residual"])
-        self.info["fallback"] = not ok
-        if not ok:
-            self.info["fallbacks"] += 1
-            self._u_seq = None  # restart from T = 0 at the next sample
-            return np.zeros(ocp.nu)
-        if rel > o["gmres_tol"]:
-            self.info["gmres_inexact"] += 1
-        self._u_seq, self._u_dot = new, u_dot
-        self._t = t + self.dt
-        return np.clip(ocp.first_input(new), -1.0, 1.0)
+        return new, ok, f"gmres rel {rel:.3g}, |F| {fnorm:.3g}"

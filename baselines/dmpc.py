@@ -2,7 +2,8 @@
 
 ``DMPC(env, **options)`` is a scripted policy (``reset(seed=None)``, ``act(observations)``) that
 reads ``env.state()`` and ``env.scenario`` and returns normalised actions ``u / u_max`` in
-``[-1, 1]^3``. Two algorithms, selected by ``variant`` (default: ``env.scenario.controller``):
+``[-1, 1]^3``. Settings: one :class:`DMPCConfig` (the paper's per preset, :data:`PAPER_CONFIGS`).
+Two algorithms, selected by ``DMPCConfig.variant`` (default: the preset's paper):
 
 ``"one_hop"`` — pereira2023 §III (Algorithm 1). Each follower f minimises its local cost
 (14)/(18) over its own input sequence ``U_f`` given its neighbours' latest sequences
@@ -32,8 +33,11 @@ With ``sum w_j = 1`` the joint iterate stays feasible.
 Each agent's QP is built once (Hessian, constraint matrix) and only its linear term and bounds
 (and the linearised rows) are updated per solve; solver ``"daqp"`` (default: dual active set,
 workspace reused, warm-started from the previous active set) or ``"osqp"`` (tight tolerances
-1e-9; polishing off because OSQP prints a notice on every unpolished solve). A failed QP keeps the agent's previous iterate (always input-feasible) and is
-counted in ``info["fallbacks"]``; a non-finite result applies zero thrust. ``info`` also keeps
+1e-9; polishing off because OSQP prints a notice on every unpolished solve). Every QP solve goes
+through :func:`baselines.base.guarded_solve` (an exception, a failed status, a wrong-shaped or
+non-finite point, or a point outside the input box or the rows by more than ``QP_TOL`` is a
+failure): a failed QP keeps the agent's previous iterate (always input-feasible) and is counted
+in ``info["fallbacks"]`` (why: ``info["solver_status"]``); a non-finite plan applies zero thrust. ``info`` also keeps
 ``"solve_ms"`` (wall time of every ``act``), ``"qp_ms"`` (every QP solve), ``"iterations"``
 (Jacobi iterations per decision) and ``"not_converged"``.
 """
@@ -41,15 +45,134 @@ counted in ``info["fallbacks"]``; a non-finite result applies zero thrust. ``inf
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
+from typing import Any
 
 import numpy as np
 
+from baselines.base import (
+    MAX_HORIZON,
+    Baseline,
+    BaselineError,
+    check_env,
+    choice,
+    config_from_options,
+    flag,
+    guarded_solve,
+    integer,
+    new_info,
+    number,
+    record_fallback,
+    row_violation,
+    validate,
+    weights,
+)
 from satenv.dynamics import cw_matrices, prediction_matrices
 
-__all__ = ["DMPC", "OneHopDMPC", "ConvexStepDMPC", "centralised_gain", "QPSolver"]
+__all__ = ["DMPC", "DMPCConfig", "OneHopDMPC", "ConvexStepDMPC", "centralised_gain", "QPSolver"]
 
 _SOLVERS = ("daqp", "osqp")
+QP_TOL = 1e-5
+"""Accepted violation of a QP's bounds / rows by a returned point (relative to max(1, |bound|))."""
+
+
+@dataclass(frozen=True)
+class DMPCConfig:
+    """Settings of the platoon DMPCs (pereira2023 Table I by default; :meth:`paper` for §5.1 of
+    pereira2022). Controller parameters only: the cost weights Q, W and alpha that the env's
+    reward uses, the constraints' limits and ``min_error_constraint`` stay in the scenario.
+
+    Args:
+        variant: ``"one_hop"`` (pereira2023 Algorithm 1) or ``"convex_step"`` (pereira2022).
+        horizon: MPC prediction horizon N (<= 1000).
+        terminal_weight: diagonal of P (6,).
+        sigma: Jacobi stopping tolerance of Algorithm 1 (one_hop).
+        max_iterations: cap on Jacobi iterations per decision (one_hop).
+        iterations: convex-step iterations gamma per decision (convex_step).
+        convex_weights: w_j of pereira2022 eq. 30 (one per follower, in (0, 1), sum 1);
+            ``None``: uniform.
+        constrained: False drops every constraint (closed-form local solutions).
+        min_error_constraint: add (41)-(42) (one_hop); ``None``: the scenario's.
+        velocity_constraint: the (g+d)-scaled velocity box (40) (one_hop).
+        coupled_constraints: convex_step agents impose the constraints of both pairs they move
+            (:class:`ConvexStepDMPC`).
+        solver: ``"daqp"`` or ``"osqp"``.
+        warm_start: ``"shift"`` or ``"previous"`` (one_hop); initial: ``"random"`` or ``"zeros"``.
+        seed: seed of the random initial sequence (``reset(seed)`` overrides).
+    """
+
+    variant: str = "one_hop"
+    horizon: int = 30
+    terminal_weight: tuple[float, ...] = (25.0,) * 6
+    sigma: float = 0.5
+    max_iterations: int = 200
+    iterations: int = 2
+    convex_weights: tuple[float, ...] | None = None
+    constrained: bool = True
+    min_error_constraint: bool | None = None
+    velocity_constraint: bool = True
+    coupled_constraints: bool = False
+    solver: str = "daqp"
+    warm_start: str = "shift"
+    initial: str = "random"
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        rules: dict[str, Any] = {
+            "variant": partial(choice, choices=("one_hop", "convex_step")),
+            "horizon": partial(integer, high=MAX_HORIZON), "sigma": number,
+            "terminal_weight": partial(weights, length=6),
+            "max_iterations": integer, "iterations": integer,
+            "constrained": flag, "velocity_constraint": flag, "coupled_constraints": flag,
+            "solver": partial(choice, choices=_SOLVERS),
+            "warm_start": partial(choice, choices=("shift", "previous")),
+            "initial": partial(choice, choices=("random", "zeros")),
+        }
+        if self.min_error_constraint is not None:
+            rules["min_error_constraint"] = flag
+        if self.seed is not None:
+            rules["seed"] = partial(integer, low=0, high=2**63 - 1)
+        if self.convex_weights is not None:
+            rules["convex_weights"] = partial(weights, zero_ok=False)
+        validate(self, "DMPC", rules)
+        w = self.convex_weights
+        if w is not None and (max(w) >= 1 or abs(sum(w) - 1) > 1e-9):
+            raise BaselineError(f"DMPC option convex_weights must be numbers in (0, 1) that sum to 1 "
+                                f"(pereira2022 eq. 30), got {w}")
+
+    @classmethod
+    def paper(cls, preset: str = "pereira2023") -> DMPCConfig:
+        """The controller of a platoon preset's paper (``"pereira2023"`` or ``"pereira2022"``)."""
+        if preset not in PAPER_CONFIGS:
+            raise BaselineError(f"no DMPC paper configuration for preset {preset!r}; expected one of "
+                                f"{sorted(PAPER_CONFIGS)}")
+        return PAPER_CONFIGS[preset]
+
+    @classmethod
+    def for_scenario(cls, scenario: Any) -> DMPCConfig:
+        """The paper configuration of the scenario's preset (default for other names); paper
+        convex weights that do not match the number of followers become uniform."""
+        cfg = PAPER_CONFIGS.get(scenario.name, cls())
+        if cfg.convex_weights is not None and len(cfg.convex_weights) != scenario.n_followers:
+            cfg = replace(cfg, convex_weights=None)
+        return cfg
+
+    @classmethod
+    def for_env(cls, env: Any) -> DMPCConfig:
+        """:meth:`for_scenario` of ``env.scenario``."""
+        return cls.for_scenario(env.scenario)
+
+
+PAPER_CONFIGS: dict[str, DMPCConfig] = {
+    # pereira2023 Table I: N = 30, P = 25 I, sigma = 0.5 (Algorithm 1)
+    "pereira2023": DMPCConfig(),
+    # pereira2022 §5.1: convex step, N = 40, P on the position output, gamma = 2, w = (0.6, 0.4)
+    "pereira2022": DMPCConfig(variant="convex_step", horizon=40,
+                              terminal_weight=(25.0, 25.0, 25.0, 0.0, 0.0, 0.0), iterations=2,
+                              convex_weights=(0.6, 0.4)),
+}
+"""The DMPC configuration of each platoon preset's paper (was part of the platoon scenario)."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -59,13 +182,13 @@ class QPSolver:
     """``min 0.5 x'Hx + f'x  s.t.  lb <= x <= ub,  bl <= A x <= bu`` with a persistent workspace.
 
     ``H`` is fixed at construction; ``update`` changes ``f``, bounds and (optionally) ``A``.
-    ``solve()`` returns ``(x, ok)``.
+    ``solve(info)`` returns the checked point or ``None`` (:meth:`solve`).
     """
 
     def __init__(self, H: np.ndarray, A: np.ndarray | None, lb: np.ndarray, ub: np.ndarray,
                  solver: str = "daqp", eps: float = 1e-9):
         if solver not in _SOLVERS:
-            raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}.")
+            raise BaselineError(f"solver must be one of {_SOLVERS}, got {solver!r}.")
         self.solver = solver
         self.n = H.shape[0]
         self.A = np.zeros((0, self.n)) if A is None else np.ascontiguousarray(A, dtype=float)
@@ -95,6 +218,7 @@ class QPSolver:
                 polishing=False, verbose=False, max_iter=20000,
             )
         self.status = 0
+        self._bl, self._bu = np.full(self.m, -1e30), np.full(self.m, 1e30)
 
     def update(self, f: np.ndarray, bl: np.ndarray | None = None, bu: np.ndarray | None = None,
                A: np.ndarray | None = None) -> None:
@@ -102,6 +226,7 @@ class QPSolver:
             self.A = np.ascontiguousarray(A, dtype=float)
         bl = np.full(self.m, -1e30) if bl is None else bl
         bu = np.full(self.m, 1e30) if bu is None else bu
+        self._bl, self._bu = np.asarray(bl, dtype=float), np.asarray(bu, dtype=float)
         if self.solver == "daqp":
             kw = {"f": np.ascontiguousarray(f, dtype=float),
                   "bupper": np.concatenate([self.ub, bu]),
@@ -118,42 +243,58 @@ class QPSolver:
                 kw["Ax"] = (big + 1e-300 * (big == 0)).flatten(order="F")
             self._model.update(**kw)
 
-    def solve(self) -> tuple[np.ndarray, bool]:
+    def solve_raw(self) -> tuple[np.ndarray, bool, str]:
+        """One solve: ``(x, ok, status)`` as the solver reports them (unchecked)."""
         if self.solver == "daqp":
-            x, _, flag, _ = self._model.solve()
-            self.status = int(flag)
-            ok = flag == 1 or flag == 2  # 2: soft optimal
+            x, _, flag_, _ = self._model.solve()
+            self.status = int(flag_)
+            ok = flag_ == 1 or flag_ == 2  # 2: soft optimal
         else:
             res = self._model.solve(raise_error=False)
             self.status = int(res.info.status_val)
             x = res.x
             ok = self.status in (1, 2)  # solved / solved inaccurate
-        x = np.asarray(x, dtype=float)
-        return x, bool(ok and x.shape == (self.n,) and np.all(np.isfinite(x)))
+        return x, bool(ok), f"{self.solver} {self.status}"
+
+    def solve(self, info: dict[str, Any], fallback: bool = True) -> np.ndarray | None:
+        """A guarded solve (:func:`baselines.base.guarded_solve`): the point, or ``None`` on an
+        exception, a failed status, a wrong shape, a non-finite point or a point outside the box
+        or the rows by more than ``QP_TOL``."""
+        return guarded_solve(info, self.solve_raw, shape=(self.n,), lower=self.lb, upper=self.ub,
+                             tol=QP_TOL, violation=self.row_violation, violation_tol=QP_TOL,
+                             fallback=fallback)
+
+    def row_violation(self, x: np.ndarray) -> float:
+        """Largest violation of ``bl <= A x <= bu``, relative to ``max(1, |bound|)``."""
+        if not self.m:
+            return 0.0
+        scale = np.maximum(1.0, np.minimum(np.abs(self._bl), np.abs(self._bu)))
+        return row_violation((self.A @ x) / scale, self._bl / scale, self._bu / scale)
 
 
 # ----------------------------------------------------------------------------------------------
 # pereira2023: 1-hop DMPC
 # ----------------------------------------------------------------------------------------------
-def _stack_weights(scenario, horizon: int) -> tuple[np.ndarray, np.ndarray]:
+def _stack_weights(scenario, config: DMPCConfig) -> tuple[np.ndarray, np.ndarray]:
     """Diagonals of calQ = diag(Q, ..., Q, P) (6N,) and calW = diag(W, ..., W) (3N,)."""
-    q = np.tile(np.asarray(scenario.state_weight), horizon)
-    q[-6:] = np.asarray(scenario.terminal_weight)
-    w = np.tile(np.asarray(scenario.input_weight), horizon)
+    q = np.tile(np.asarray(scenario.state_weight), config.horizon)
+    q[-6:] = np.asarray(config.terminal_weight)
+    w = np.tile(np.asarray(scenario.input_weight), config.horizon)
     return q, w
 
 
-def centralised_gain(scenario, topology=None) -> tuple[np.ndarray, np.ndarray]:
+def centralised_gain(scenario, config: DMPCConfig | None = None,
+                     topology=None) -> tuple[np.ndarray, np.ndarray]:
     """Closed form (25)-(27) of the unconstrained problem: ``U* = -K E + K_d (E_d)x lambda``.
 
     Returns ``(K (3N*lam, 6*lam), K_d (3N*lam, 6N*lam))`` built with Kronecker products exactly
     as in the paper (the per-agent weights alpha cancel and are not used).
     """
     topo = scenario.graph if topology is None else topology
-    horizon = scenario.horizon
+    config = DMPCConfig.for_scenario(scenario) if config is None else config
     a, b = cw_matrices(scenario.mean_motion, scenario.dt)
-    ca, cb = prediction_matrices(a, b, horizon)
-    q, w = _stack_weights(scenario, horizon)
+    ca, cb = prediction_matrices(a, b, config.horizon)
+    q, w = _stack_weights(scenario, config)
     btq = cb.T * q[None, :]
     gd = topo.G + topo.D
     s = np.kron(gd @ topo.augmented_laplacian, btq @ cb) + np.kron(np.eye(topo.n_followers), np.diag(w))
@@ -162,68 +303,52 @@ def centralised_gain(scenario, topology=None) -> tuple[np.ndarray, np.ndarray]:
     return k, kd
 
 
-@dataclass
-class _Stats:
-    fallbacks: int = 0
-    not_converged: int = 0
-
-
 class OneHopDMPC:
     """The pereira2023 1-hop DMPC on follower states (no env needed).
 
     Args:
-        scenario: a :class:`satenv.scenarios.platoon.PlatoonScenario`.
+        scenario: a :class:`satenv.scenarios.platoon.PlatoonScenario` (model, weights Q, W,
+            alpha, limits).
+        config: a :class:`DMPCConfig` (default: :meth:`DMPCConfig.for_scenario`); ``**options``
+            replace its fields (``horizon``, ``sigma``, ``max_iterations``, ``constrained``,
+            ``min_error_constraint``, ``velocity_constraint``, ``solver``, ``warm_start``,
+            ``initial``, ``seed``).
         topology: override the scenario's graph (a ``satenv.graph.Topology``).
-        constrained: False drops every constraint (closed-form local solutions).
-        min_error_constraint: add (41)-(42); default: ``scenario.min_error_constraint``.
-        velocity_constraint: the (g+d)-scaled velocity box (40) (default True).
-        solver: ``"daqp"`` or ``"osqp"``.
-        sigma: Jacobi tolerance (default ``scenario.sigma``).
-        max_iterations: cap on Jacobi iterations per decision.
-        warm_start: ``"shift"`` (previous solution shifted one step, last input repeated) or
-            ``"previous"`` (the previous solution as is, Algorithm 1 line 6).
-        initial: ``"random"`` (uniform in ``[-u_max, u_max]``, Algorithm 1 line 4) or ``"zeros"``.
-        seed: seed of the random initial sequence (``reset(seed)`` overrides).
+
+    ``info``: ``fallbacks`` (QP failures: the agent keeps its previous iterate; a non-finite
+    plan: zero thrust), ``solver_status``, ``not_converged`` (decisions that hit
+    ``max_iterations``).
     """
 
-    def __init__(self, scenario, *, topology=None, constrained: bool = True,
-                 min_error_constraint: bool | None = None, velocity_constraint: bool = True,
-                 solver: str = "daqp", sigma: float | None = None, max_iterations: int = 200,
-                 warm_start: str = "shift", initial: str = "random", seed: int | None = None):
-        if solver not in _SOLVERS:
-            raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}.")
-        if warm_start not in ("shift", "previous"):
-            raise ValueError(f"warm_start must be 'shift' or 'previous', got {warm_start!r}.")
-        if initial not in ("random", "zeros"):
-            raise ValueError(f"initial must be 'random' or 'zeros', got {initial!r}.")
-        if not isinstance(max_iterations, int) or max_iterations < 1:
-            raise ValueError(f"max_iterations must be a positive int, got {max_iterations!r}.")
+    def __init__(self, scenario, config: DMPCConfig | None = None, *, topology=None,
+                 **options: Any):
+        base = DMPCConfig.for_scenario(scenario) if config is None else config
+        self.cfg = cfg = config_from_options(DMPCConfig, options, "DMPC", base=base)
         self.scenario = scenario
         self.topology = scenario.graph if topology is None else topology
-        self.constrained = bool(constrained)
-        self.min_error = bool(scenario.min_error_constraint if min_error_constraint is None
-                              else min_error_constraint) and self.constrained
-        self.velocity = bool(velocity_constraint) and self.constrained
-        self.solver = solver
-        self.sigma = float(scenario.sigma if sigma is None else sigma)
-        if not np.isfinite(self.sigma) or self.sigma <= 0:
-            raise ValueError(f"sigma must be > 0, got {sigma!r}.")
-        self.max_iterations = max_iterations
-        self.warm_start = warm_start
-        self.initial = initial
-        self._seed = seed
+        self.horizon = cfg.horizon
+        self.constrained = cfg.constrained
+        self.min_error = bool(scenario.min_error_constraint if cfg.min_error_constraint is None
+                              else cfg.min_error_constraint) and self.constrained
+        self.velocity = cfg.velocity_constraint and self.constrained
+        self.solver = cfg.solver
+        self.sigma = cfg.sigma
+        self.max_iterations = cfg.max_iterations
+        self.warm_start = cfg.warm_start
+        self.initial = cfg.initial
+        self._seed = cfg.seed
         self._build()
-        self.reset(seed)
+        self.reset(cfg.seed)
 
     # -- construction (once) ------------------------------------------------------------------
     def _build(self) -> None:
         sc, topo = self.scenario, self.topology
-        hz = sc.horizon
+        hz = self.horizon
         self.nu = 3 * hz
         a, b = cw_matrices(sc.mean_motion, sc.dt)
         self.A, self.B = a, b
         ca, cb = prediction_matrices(a, b, hz)
-        q, w = _stack_weights(sc, hz)
+        q, w = _stack_weights(sc, self.cfg)
         btq = cb.T * q[None, :]
         btqb, btqa = btq @ cb, btq @ ca
         nf = topo.n_followers
@@ -266,7 +391,7 @@ class OneHopDMPC:
             self._seed = seed
         self.rng = np.random.default_rng(self._seed)
         self.U: np.ndarray | None = None
-        self.stats = _Stats()
+        self.info = new_info(not_converged=0)
         self.iterations: list[int] = []
         self.qp_ms: list[float] = []
 
@@ -305,24 +430,21 @@ class OneHopDMPC:
                 nvec, ok = rows_a[f]
                 off_p = (self.ca_p @ err[f] - self.cb_p @ su[f]).reshape(-1, 3) @ nvec
                 bl.append(self.c[f] * sc.follower_radius - off_p if ok
-                          else np.full(sc.horizon, -1e30))
-                bu.append(np.full(sc.horizon, 1e30))
+                          else np.full(self.horizon, -1e30))
+                bu.append(np.full(self.horizon, 1e30))
             qp = self.qps[f]
             amat = None
             if self.min_error:
                 amat = qp.A.copy()
-                amat[-sc.horizon:] = self.c[f] * np.einsum(
-                    "c,kcj->kj", nvec, self.cb_p.reshape(sc.horizon, 3, self.nu))
+                amat[-self.horizon:] = self.c[f] * np.einsum(
+                    "c,kcj->kj", nvec, self.cb_p.reshape(self.horizon, 3, self.nu))
             t0 = time.perf_counter()
             qp.update(f_lin[f], np.concatenate(bl) if bl else None,
                       np.concatenate(bu) if bu else None, A=amat)
-            x, ok = qp.solve()
+            x = qp.solve(self.info)
             self.qp_ms.append(1e3 * (time.perf_counter() - t0))
-            if ok:
-                out[f] = np.clip(x, -self.u_max, self.u_max)  # solver tolerance ~1e-9
-            else:
-                self.stats.fallbacks += 1
-                out[f] = np.clip(u_prev[f], -self.u_max, self.u_max)
+            # failure: keep the previous iterate (input-feasible)
+            out[f] = np.clip(u_prev[f] if x is None else x, -self.u_max, self.u_max)
         return out
 
     def solve(self, x: np.ndarray) -> np.ndarray:
@@ -353,9 +475,9 @@ class OneHopDMPC:
                 break
         self.iterations.append(it)
         if not converged:
-            self.stats.not_converged += 1
+            self.info["not_converged"] += 1
         if not np.all(np.isfinite(u)):
-            self.stats.fallbacks += 1
+            record_fallback(self.info, "non-finite plan")
             self.U = None
             return np.zeros((self.topology.n_followers, 3))
         self.U = u
@@ -369,46 +491,42 @@ class ConvexStepDMPC:
     """pereira2022 §3 convex-step cooperative DMPC (joint target–chaser pair model).
 
     Args:
-        scenario: a PlatoonScenario (uses ``convex_weights``, ``iterations``, ``keepout_*``,
-            ``los_slopes``, ``port``; Q/P weight the pair states, usually positions only).
-        solver: ``"daqp"`` or ``"osqp"``.
-        iterations: convex-step iterations per decision (default ``scenario.iterations`` or 2).
-        weights: convex weights w_j (default ``scenario.convex_weights`` or uniform).
-        constrained: False drops the state constraints (input box kept).
-        coupled_constraints: True makes agent j impose the constraints of every pair its input
-            moves (pairs j and j+1, the joint problem of eq. 29); False (default) only those of
-            its own pair j (it chases follower j-1). With the shifted warm start the coupled
-            problems became infeasible within ~2 s on the §5.1 scenario (agent j cannot keep
-            both pairs feasible against the other agents' stale plans), hence the default.
+        scenario: a PlatoonScenario (uses ``keepout_*``, ``los_slopes``, ``port``, the weights;
+            Q/P weight the pair states, usually positions only).
+        config: a :class:`DMPCConfig` (default: :meth:`DMPCConfig.for_scenario`); ``**options``
+            replace its fields (``horizon``, ``terminal_weight``, ``iterations``,
+            ``convex_weights``, ``constrained``, ``coupled_constraints``, ``solver``).
 
-    When an agent's state-constrained QP is infeasible it falls back to its input-box-only QP
-    (counted in ``stats.fallbacks``); if that fails too it keeps its previous iterate.
+    ``coupled_constraints=True`` makes agent j impose the constraints of every pair its input
+    moves (pairs j and j+1, the joint problem of eq. 29); False (default) only those of its own
+    pair j (it chases follower j-1). With the shifted warm start the coupled problems became
+    infeasible within ~2 s on the §5.1 scenario (agent j cannot keep both pairs feasible against
+    the other agents' stale plans), hence the default.
+
+    When an agent's state-constrained QP fails it falls back to its input-box-only QP (counted in
+    ``info["fallbacks"]``); if that fails too it keeps its previous iterate (counted again).
     """
 
-    def __init__(self, scenario, *, solver: str = "daqp", iterations: int | None = None,
-                 weights=None, constrained: bool = True, coupled_constraints: bool = False,
-                 seed: int | None = None):
-        if solver not in _SOLVERS:
-            raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}.")
+    def __init__(self, scenario, config: DMPCConfig | None = None, **options: Any):
+        base = DMPCConfig.for_scenario(scenario) if config is None else config
+        self.cfg = cfg = config_from_options(DMPCConfig, options, "DMPC", base=base)
         self.scenario = scenario
-        self.solver = solver
+        self.solver = cfg.solver
+        self.horizon = cfg.horizon
         m = scenario.n_followers
-        it = iterations if iterations is not None else (scenario.iterations or 2)
-        if not isinstance(it, int) or it < 1:
-            raise ValueError(f"iterations must be a positive int, got {it!r}.")
-        self.n_iter = it
-        w = weights if weights is not None else (scenario.convex_weights or (1.0 / m,) * m)
-        w = np.asarray(w, dtype=float)
-        if w.shape != (m,) or np.any(w <= 0) or abs(w.sum() - 1) > 1e-9:
-            raise ValueError(f"weights must be {m} positive numbers summing to 1, got {w}.")
+        self.n_iter = cfg.iterations
+        w = np.asarray(cfg.convex_weights or (1.0 / m,) * m, dtype=float)
+        if w.shape != (m,):
+            raise BaselineError(f"DMPC option convex_weights must have {m} entries (one per "
+                                f"follower) that sum to 1, got {cfg.convex_weights}")
         self.w = w
-        self.constrained = bool(constrained)
-        self.coupled = bool(coupled_constraints)
+        self.constrained = cfg.constrained
+        self.coupled = cfg.coupled_constraints
         self._build()
-        self.reset(seed)
+        self.reset(cfg.seed)
 
     def _n_rows_pair(self) -> int:
-        sc, hz = self.scenario, self.scenario.horizon
+        sc, hz = self.scenario, self.horizon
         if not self.constrained:
             return 0
         rows = 3 * hz  # velocity box
@@ -420,13 +538,13 @@ class ConvexStepDMPC:
 
     def _build(self) -> None:
         sc = self.scenario
-        hz, m = sc.horizon, sc.n_followers
+        hz, m = self.horizon, sc.n_followers
         self.nu = 3 * hz
         a, b = cw_matrices(sc.mean_motion, sc.dt)
         self.A, self.B = a, b
         ca, cb = prediction_matrices(a, b, hz)
         self.ca, self.cb = ca, cb
-        q, w = _stack_weights(sc, hz)
+        q, w = _stack_weights(sc, self.cfg)
         alpha = np.asarray(sc.alpha, dtype=float)
         atot = alpha.sum()
         btq = cb.T * q[None, :]
@@ -456,14 +574,14 @@ class ConvexStepDMPC:
 
     def reset(self, seed: int | None = None) -> None:
         self.U: np.ndarray | None = None
-        self.stats = _Stats()
+        self.info = new_info(not_converged=0)
         self.iterations: list[int] = []
         self.qp_ms: list[float] = []
 
     def _pair_rows(self, z0: np.ndarray, offset: np.ndarray, sign: float):
         """Rows ``G U_j in [lo, hi]`` of the constraints on one pair whose prediction is
         ``Z = offset + sign * calB U_j`` (offset includes calA z0 and the other agents)."""
-        sc, hz = self.scenario, self.scenario.horizon
+        sc, hz = self.scenario, self.horizon
         g_rows, lo, hi = [], [], []
         gv = sign * self.cb_v
         off_v = offset.reshape(hz, 6)[:, 3:].ravel()
@@ -529,21 +647,17 @@ class ConvexStepDMPC:
                               np.concatenate([r[2] for r in rows]), A=gmat)
                 else:
                     qp.update(f_lin)
-                sol, ok = qp.solve()
-                if not ok and self.box_qps[j] is not None:
-                    self.stats.fallbacks += 1
+                sol = qp.solve(self.info)
+                if sol is None and self.box_qps[j] is not None:
                     self.box_qps[j].update(f_lin)
-                    sol, ok = self.box_qps[j].solve()
+                    sol = self.box_qps[j].solve(self.info)
                 self.qp_ms.append(1e3 * (time.perf_counter() - t0))
-                if ok:
-                    ustar[j] = np.clip(sol, -self.u_max, self.u_max)
-                else:
-                    self.stats.fallbacks += 1
-                    ustar[j] = np.clip(u[j], -self.u_max, self.u_max)
+                # failure: keep the previous iterate (input-feasible)
+                ustar[j] = np.clip(u[j] if sol is None else sol, -self.u_max, self.u_max)
             u = self.w[:, None] * ustar + (1 - self.w[:, None]) * u
         self.iterations.append(self.n_iter)
         if not np.all(np.isfinite(u)):
-            self.stats.fallbacks += 1
+            record_fallback(self.info, "non-finite plan")
             self.U = None
             return np.zeros((m, 3))
         self.U = u
@@ -553,50 +667,38 @@ class ConvexStepDMPC:
 # ----------------------------------------------------------------------------------------------
 # Policy wrapper
 # ----------------------------------------------------------------------------------------------
-class DMPC:
+class DMPC(Baseline):
     """Distributed MPC policy for ``satenv.platoon_v0`` (see the module docstring).
 
+    Privileged: it reads the env's true follower states (``env.state()``), its scenario and
+    topology, not the observations.
+
     Args:
-        env: the platoon env; ``env.scenario`` gives the model, ``env.state()`` the states.
-        variant: ``"one_hop"`` (pereira2023) or ``"convex_step"`` (pereira2022); default
-            ``env.scenario.controller``.
-        **options: passed to :class:`OneHopDMPC` or :class:`ConvexStepDMPC` (e.g.
-            ``constrained``, ``solver``, ``sigma``, ``min_error_constraint``, ``warm_start``,
-            ``seed``, ``iterations``, ``weights``). Unknown options raise ``ValueError``.
+        env: the platoon env.
+        config: a :class:`DMPCConfig` (default: :meth:`DMPCConfig.for_env`, the paper's
+            controller of the env's preset); ``**options`` replace its fields, e.g.
+            ``DMPC(env, variant="convex_step", solver="osqp")``. Unknown options raise
+            :class:`baselines.BaselineError`.
+
+    Safe actions: a failed QP keeps the agent's previous iterate (the shifted previous plan,
+    always input-feasible); a non-finite plan or an exception in the decision applies zero
+    thrust. Both count in ``info["fallbacks"]``; ``info["solver_status"]`` says why.
     """
 
-    _ONE_HOP_OPTS = ("constrained", "min_error_constraint", "velocity_constraint", "solver",
-                     "sigma", "max_iterations", "warm_start", "initial", "seed")
-    _CONVEX_OPTS = ("solver", "iterations", "weights", "constrained", "coupled_constraints",
-                    "seed")
+    name = "dmpc"
+    env_ids = ("platoon_v0",)
 
-    def __init__(self, env, variant: str | None = None, **options):
-        scenario = getattr(env, "scenario", None)
-        if scenario is None:
-            raise ValueError(
-                f"DMPC needs a platoon env exposing .scenario (satenv.platoon_v0), got {env!r}."
-            )
+    def __init__(self, env, config: DMPCConfig | None = None, **options: Any):
+        check_env(type(self), env)
+        scenario = env.scenario
+        base = DMPCConfig.for_env(env) if config is None else config
+        self.cfg = config_from_options(DMPCConfig, options, "DMPC", base=base)
         self.env = env
-        self.variant = scenario.controller if variant is None else variant
+        self.variant = self.cfg.variant
         if self.variant == "one_hop":
-            allowed = self._ONE_HOP_OPTS
-        elif self.variant == "convex_step":
-            allowed = self._CONVEX_OPTS
+            self.core = OneHopDMPC(scenario, self.cfg, topology=getattr(env, "topology", None))
         else:
-            raise ValueError(
-                f"variant must be 'one_hop' or 'convex_step', got {variant!r}."
-            )
-        bad = sorted(set(options) - set(allowed))
-        if bad:
-            raise ValueError(
-                f"unknown DMPC option(s) {bad} for variant {self.variant!r}; "
-                f"valid options: {list(allowed)}."
-            )
-        topo = getattr(env, "topology", None)
-        if self.variant == "one_hop":
-            self.core = OneHopDMPC(scenario, topology=topo, **options)
-        else:
-            self.core = ConvexStepDMPC(scenario, **options)
+            self.core = ConvexStepDMPC(scenario, self.cfg)
         self.agents = [f"follower_{i + 1}" for i in range(scenario.n_followers)]
         self.u_max = float(scenario.u_max)
         self.info: dict = {}
@@ -608,19 +710,14 @@ class DMPC:
         self._refresh_info()
 
     def _refresh_info(self) -> None:
-        self.info = {
-            "fallbacks": self.core.stats.fallbacks,
-            "not_converged": self.core.stats.not_converged,
-            "solve_ms": self._solve_ms,
-            "qp_ms": self.core.qp_ms,
-            "iterations": self.core.iterations,
-        }
+        self.info = {**self.core.info, "solve_ms": self._solve_ms, "qp_ms": self.core.qp_ms,
+                     "iterations": self.core.iterations}
 
     def _states(self) -> np.ndarray:
         n = len(self.agents)
         s = np.asarray(self.env.state(), dtype=float).ravel()
         if s.size < 6 * n:
-            raise ValueError(f"env.state() has {s.size} entries, expected at least {6 * n}.")
+            raise BaselineError(f"env.state() has {s.size} entries, expected at least {6 * n}.")
         return s[: 6 * n].reshape(n, 6)
 
     def act(self, observations: dict) -> dict:
@@ -628,8 +725,8 @@ class DMPC:
         x = self._states()
         try:
             u = self.core.solve(x)
-        except (np.linalg.LinAlgError, ValueError, RuntimeError, ArithmeticError):
-            self.core.stats.fallbacks += 1
+        except (np.linalg.LinAlgError, ValueError, RuntimeError, ArithmeticError) as exc:
+            record_fallback(self.core.info, f"error: {type(exc).__name__}: {exc}")
             self.core.U = None
             u = np.zeros((len(self.agents), 3))
         a = np.clip(u / self.u_max, -1.0, 1.0).astype(np.float32)

@@ -1,11 +1,11 @@
 """Cooperative nonlinear MPC for on-orbit servicing (pereira2022 §4.2-4.4; ``satenv.servicing_v0``).
 
-``NMPC(env, **options)`` is a scripted policy (``reset(seed=None)``, ``act(observations)``) that
+``NMPC(env, config=None, **options)`` (:class:`NMPCConfig`) is a scripted policy (``reset(seed=None)``, ``act(observations)``) that
 reads ``env.state()`` and ``env.scenario`` and returns normalised inputs ``u / u_max`` in
 ``[-1, 1]^6`` per spacecraft.
 
-Per spacecraft i and decision step, one NLP (eq. 38) over ``N`` steps (default ``horizon`` of the
-scenario, 30), multiple shooting with stage-wise variables ``(x_0, u_0, x_1, …, x_N)``:
+Per spacecraft i and decision step, one NLP (eq. 38) over ``N`` steps (``NMPCConfig.horizon``,
+30 as in §5.2), multiple shooting with stage-wise variables ``(x_0, u_0, x_1, …, x_N)``:
 
 * model — eq. 35: translation with the exact zero-order-hold Clohessy-Wiltshire matrices of
   ``satenv.dynamics.cw_matrices`` (at the 15-30 m ranges of §5.2 the linearisation of eq. 4-5
@@ -38,7 +38,10 @@ initial guess is an arc on the sphere of the current radius from ``p`` towards t
 point of the keep-out problem), or the current state held (``"hold"``).
 
 Solvers: ``"ipopt"`` (default, MUMPS) or ``"fatrop"`` (structure-exploiting; the NLP is already
-in its stage-wise form). A failed solve (status other than success / acceptable) applies the
+in its stage-wise form). Every solve goes through :func:`baselines.base.guarded_solve`: an
+exception, a status other than success / acceptable, a wrong-shaped or non-finite point, a variable
+outside its bounds (input box, velocity bounds) or a constraint row violated by more than
+``NLP_CONSTRAINT_TOL`` is a failure (``info["solver_status"]`` says which). A failed solve applies the
 next input of the spacecraft's last successful plan while one remains, else the brake-and-hold
 action :meth:`NMPC.safe_action` (zero thrust is not safe here: the §5.2 spacecraft start on the
 keep-out sphere and drift into it), and is counted in ``info["fallbacks"]``. ``info`` also keeps ``"solve_ms"`` (wall time of every
@@ -49,15 +52,33 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
+from baselines.base import (
+    MAX_HORIZON,
+    Baseline,
+    BaselineError,
+    check_env,
+    choice,
+    config_from_options,
+    flag,
+    guarded_solve,
+    integer,
+    new_info,
+    number,
+    record_fallback,
+    row_violation,
+    validate,
+)
 from satenv.dynamics import cw_continuous, cw_matrices
 from satenv.dynamics.attitude import thruster_matrices
 from satenv.envs.servicing_v0 import attitude_reference, unpack_global_state
 
-__all__ = ["NMPC", "build_model"]
+__all__ = ["NMPC", "NMPCConfig", "build_model"]
 
 _SOLVERS = ("ipopt", "fatrop")
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level", "success"}
@@ -131,63 +152,105 @@ def build_model(scenario, rk4_steps: int = 1):
     return f, big_f
 
 
-class NMPC:
-    """Cooperative NMPC of pereira2022 §4 (see the module docstring)."""
+NLP_CONSTRAINT_TOL = 1e-2
+"""Largest accepted violation of an NLP constraint row by a returned point (ipopt's
+``acceptable_constr_viol_tol``); bounds on the variables are checked to 1e-6 (relative)."""
+
+
+@dataclass(frozen=True)
+class NMPCConfig:
+    """Settings of :class:`NMPC` (pereira2022 §5.2: N = 30; the rest are our choices).
+
+    Args:
+        horizon: N, prediction steps (<= 1000; was the servicing scenario's ``horizon``).
+        solver: ``"ipopt"`` or ``"fatrop"``; max_iter, tol: its iteration limit and tolerance.
+        order: ``"sequential"`` (Gauss-Seidel) or ``"jacobi"``.
+        initial_guess: ``"arc"`` or ``"hold"`` (module docstring); preview: the waypoint schedule
+            over the horizon instead of the current waypoint.
+        keepout_margin, separation_margin [m]: added to the keep-out / separation radii.
+        bound_margin: relative tightening of the velocity / angular-velocity bounds (< 1).
+        rk4_steps: attitude RK4 steps per T_s (<= 100); formulation: ``"sx"`` or ``"mx"``.
+        solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
+        seed: unused (the NMPC is deterministic); accepted for the common policy signature.
+    """
+
+    horizon: int = 30
+    solver: str = "ipopt"
+    order: str = "sequential"
+    initial_guess: str = "arc"
+    preview: bool = False
+    keepout_margin: float = 1e-3
+    separation_margin: float = 1e-3
+    bound_margin: float = 1e-4
+    rk4_steps: int = 1
+    max_iter: int = 200
+    tol: float = 1e-6
+    formulation: str = "sx"
+    solver_options: dict | None = None
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        rules: dict[str, Any] = {
+            "horizon": partial(integer, high=MAX_HORIZON), "max_iter": integer,
+            "rk4_steps": partial(integer, high=100),
+            "solver": partial(choice, choices=_SOLVERS),
+            "order": partial(choice, choices=("sequential", "jacobi")),
+            "initial_guess": partial(choice, choices=("arc", "hold")),
+            "formulation": partial(choice, choices=("sx", "mx")), "preview": flag,
+            "keepout_margin": partial(number, zero_ok=True),
+            "separation_margin": partial(number, zero_ok=True),
+            "bound_margin": partial(number, zero_ok=True, high=0.999999), "tol": number,
+        }
+        if self.seed is not None:
+            rules["seed"] = partial(integer, low=0, high=2**63 - 1)
+        validate(self, "NMPC", rules)
+        opts = self.solver_options
+        if opts is not None and (not isinstance(opts, dict) or not all(isinstance(k, str) for k in opts)):
+            raise BaselineError(f"NMPC option solver_options must be a dict with string keys, got {opts!r}")
+
+
+class NMPC(Baseline):
+    """Cooperative NMPC of pereira2022 §4 (see the module docstring).
+
+    Privileged: it reads the env's true global state (``env.state()``: every spacecraft's state,
+    the current waypoints and the time) and the scenario, not the observations.
+
+    Args:
+        env: a ``servicing_v0`` env.
+        config: an :class:`NMPCConfig` (default: N = 30, ipopt); ``**options`` replace fields.
+    """
 
     name = "nmpc"
+    env_ids = ("servicing_v0",)
+    cheap = False
 
-    def __init__(self, env: Any, *, horizon: int | None = None, solver: str = "ipopt",
-                 order: str = "sequential", initial_guess: str = "arc", preview: bool = False,
-                 keepout_margin: float = 1e-3, separation_margin: float = 1e-3,
-                 bound_margin: float = 1e-4, rk4_steps: int = 1, max_iter: int = 200,
-                 tol: float = 1e-6, formulation: str = "sx", solver_options: dict | None = None,
-                 seed: int | None = None) -> None:
+    def __init__(self, env: Any, config: NMPCConfig | None = None, **options: Any) -> None:
+        check_env(type(self), env)
+        cfg = self.cfg = config_from_options(NMPCConfig, options, "NMPC", base=config)
         sc = env.scenario
-        if not hasattr(sc, "inertia") or not hasattr(sc, "waypoints"):
-            raise ValueError(f"NMPC controls satenv.servicing_v0 envs; got an env with scenario "
-                             f"{type(sc).__name__}")
-        if solver not in _SOLVERS:
-            raise ValueError(f"solver must be one of {_SOLVERS}, got {solver!r}")
-        if order not in ("sequential", "jacobi"):
-            raise ValueError(f"order must be 'sequential' or 'jacobi', got {order!r}")
-        if initial_guess not in ("arc", "hold"):
-            raise ValueError(f"initial_guess must be 'arc' or 'hold', got {initial_guess!r}")
-        n_h = sc.horizon if horizon is None else horizon
-        if isinstance(n_h, bool) or not isinstance(n_h, int | np.integer) or n_h < 1:
-            raise ValueError(f"horizon must be a positive int, got {horizon!r}")
-        for name, val in (("keepout_margin", keepout_margin), ("separation_margin", separation_margin),
-                          ("bound_margin", bound_margin)):
-            if not np.isfinite(val) or val < 0:
-                raise ValueError(f"{name} must be a finite number >= 0, got {val!r}")
-        if bound_margin >= 1:
-            raise ValueError(f"bound_margin is relative and must be < 1, got {bound_margin!r}")
-        if isinstance(rk4_steps, bool) or not isinstance(rk4_steps, int | np.integer) or rk4_steps < 1:
-            raise ValueError(f"rk4_steps must be a positive int, got {rk4_steps!r}")
         self.env = env
         self.scenario = sc
         self.agents = list(env.possible_agents)
         self.m = len(self.agents)
-        self.N = int(n_h)
-        self.solver = solver
-        self.order = order
-        self.initial_guess = initial_guess
-        self.preview = bool(preview)
-        self.keepout = sc.keepout_radius + keepout_margin
-        self.separation = sc.separation_radius + separation_margin
+        self.N = cfg.horizon
+        self.solver = cfg.solver
+        self.order = cfg.order
+        self.initial_guess = cfg.initial_guess
+        self.preview = cfg.preview
+        self.keepout = sc.keepout_radius + cfg.keepout_margin
+        self.separation = sc.separation_radius + cfg.separation_margin
         self.u_max = np.asarray(sc.u_max, dtype=float)
-        self.v_lim = sc.v_max * (1.0 - bound_margin)
-        self.w_lim = sc.omega_max * (1.0 - bound_margin)
-        self.rk4_steps = int(rk4_steps)
-        if formulation not in ("sx", "mx"):
-            raise ValueError(f"formulation must be 'sx' or 'mx', got {formulation!r}")
-        self.formulation = formulation
+        self.v_lim = sc.v_max * (1.0 - cfg.bound_margin)
+        self.w_lim = sc.omega_max * (1.0 - cfg.bound_margin)
+        self.rk4_steps = cfg.rk4_steps
+        self.formulation = cfg.formulation
         self._f, self._F = build_model(sc, self.rk4_steps)
         self._a_cw = cw_continuous(sc.mean_motion)[0]
         self._j_f = np.array(sc.inertia)
         self._alloc = np.linalg.inv(np.vstack(thruster_matrices(sc.dimensions)))
-        self._build(max_iter, tol, solver_options or {})
+        self._build(cfg.max_iter, cfg.tol, dict(cfg.solver_options or {}))
         self.info: dict[str, Any] = {}
-        self.reset(seed)
+        self.reset()
 
     # ------------------------------------------------------------------ NLP
     def _build(self, max_iter: int, tol: float, extra: dict) -> None:
@@ -299,8 +362,8 @@ class NMPC:
 
     # ------------------------------------------------------------------ policy API
     def reset(self, seed: int | None = None) -> None:
-        self.info = {"fallbacks": 0, "solve_ms": [], "agent_solve_ms": [], "iterations": [],
-                     "statuses": Counter(), "fallback_steps": []}
+        self.info = new_info(solve_ms=[], agent_solve_ms=[], iterations=[], statuses=Counter(),
+                             fallback_steps=[])
         self._plans: list[dict[str, Any] | None] = [None] * self.m
         self._last_goal: list[np.ndarray | None] = [None] * self.m
         self._step = 0
@@ -423,33 +486,39 @@ class NMPC:
         if duals:
             args["lam_x0"], args["lam_g0"] = duals["lam_x"], duals["lam_g"]
         t0 = time.perf_counter()
-        try:
-            sol = self._nlp(**args)
-            stats = self._nlp.stats()
-            status = str(stats.get("return_status", "unknown"))
-            ok = bool(stats.get("success", False)) or status in _OK
-            w = np.asarray(sol["x"]).ravel()
-            ok = ok and bool(np.all(np.isfinite(w)))
-        except RuntimeError as exc:     # CasADi raises on evaluation errors (NaN in the model)
-            status, ok, w, stats, sol = f"error: {exc}", False, None, {}, None
+        out: dict[str, Any] = {}
+        w = guarded_solve(self.info, lambda: self._run_nlp(args, out), shape=(self._nw,),
+                          lower=self._lbx, upper=self._ubx, fallback=False,
+                          violation=lambda _: row_violation(out["g"], self._lbg, self._ubg),
+                          violation_tol=NLP_CONSTRAINT_TOL)
+        stats = out.get("stats", {})
         self.info["agent_solve_ms"].append((time.perf_counter() - t0) * 1e3)
         self.info["iterations"].append(int(stats.get("iter_count", -1)) if stats else -1)
-        self.info["statuses"][status] += 1
+        self.info["statuses"][out.get("status", self.info["solver_status"])] += 1
         self._last_goal[i] = goal_path[0].copy()
-        if ok:
+        if w is not None:
+            sol = out["sol"]
             xs, us = w[self._x_idx], w[self._u_idx]
             self._plans[i] = {"x": xs, "u": us, "t0": self._step,
                               "duals": {"lam_x": np.asarray(sol["lam_x"]).ravel(),
                                         "lam_g": np.asarray(sol["lam_g"]).ravel()}}
             return us[0], xs[:, :3]
         # fallback: the next input of the last successful plan, else brake and hold
-        self.info["fallbacks"] += 1
-        self.info["fallback_steps"].append((i, status))
+        record_fallback(self.info, self.info["solver_status"])
+        self.info["fallback_steps"].append((i, self.info["solver_status"]))
         plan = self._plans[i]
         if plan is not None and self._step - plan["t0"] < self.N:
             return plan["u"][self._step - plan["t0"]].copy(), None
         self._plans[i] = None
         return self.safe_action(x0), None
+
+    def _run_nlp(self, args: dict[str, Any], out: dict[str, Any]) -> tuple[np.ndarray, bool, str]:
+        """One CasADi solve; keeps the solution, its stats and constraint values in ``out``."""
+        sol = self._nlp(**args)
+        stats = self._nlp.stats()
+        status = str(stats.get("return_status", "unknown"))
+        out.update(sol=sol, stats=stats, status=status, g=np.asarray(sol["g"]).ravel())
+        return np.asarray(sol["x"]).ravel(), bool(stats.get("success", False)) or status in _OK, status
 
     def safe_action(self, x: np.ndarray) -> np.ndarray:
         """Brake and hold: cancel the CW drift, damp v and omega, push out of the keep-out.

@@ -1,6 +1,6 @@
 """Tube-based robust distributed MPC for satellite-cluster reconfiguration (li2022 §3.1–3.2).
 
-``TubeRDMPC(env, **options)`` controls ``satenv.cluster_v0``. It has two layers:
+``TubeRDMPC(env, config=None, **options)`` (:class:`TubeRDMPCConfig`) controls ``satenv.cluster_v0``. It has two layers:
 
 * **Nominal DMPC** (one NLP per satellite every decision period Δt = 5 s, horizon
   ``T_p = 50 s``, N = 10 steps): cost (27)–(28)
@@ -44,7 +44,10 @@ Choices and deviations (documented; each is an option):
   keep-out constraints are infeasible.
 * ``safety_margin = 5 m`` is added to every keep-out distance: the Jacobi exchange plans against
   the neighbours' *previous* predictions while they re-plan at the same time.
-* Infeasibility: when ipopt fails on the exact NLP, a relaxed NLP is solved (λ unbounded above,
+* Infeasibility: every ipopt solve goes through :func:`baselines.base.guarded_solve` (an
+  exception, a failed status, a wrong-shaped or non-finite point, a variable outside its bounds or
+  a constraint row violated by more than ``NLP_CONSTRAINT_TOL`` is a failure; why:
+  ``info["solver_status"]``). When the exact NLP fails, a relaxed NLP is solved (λ unbounded above,
   collision rows softened by an L1 slack of weight 1e9, terminal / speed rows by one of weight
   1e8); if that fails too, the previous plan shifted with ρ = 0 appended (li2022's candidate (29))
   is applied, or a braking input once that plan is exhausted. Both are counted
@@ -70,11 +73,26 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, fields
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-from baselines.base import config_from_options
+from baselines.base import (
+    MAX_HORIZON,
+    Baseline,
+    BaselineError,
+    check_env,
+    config_from_options,
+    flag,
+    guarded_solve,
+    integer,
+    new_info,
+    number,
+    record_fallback,
+    row_violation,
+    validate,
+)
 from satenv.cluster_graph import nearest_neighbour_graph
 from satenv.dynamics import cw_continuous, cw_matrices, prediction_matrices
 
@@ -83,6 +101,7 @@ __all__ = ["TubeController", "TubeRDMPC", "TubeRDMPCConfig"]
 _FAR = 1.0e5  # [m] position of an unused neighbour slot (its constraints are inactive)
 _SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed problem only)
 _TERMINAL_SLACK_WEIGHT = 1.0e8  # L1 weight of the terminal / speed slack (relaxed problem only)
+NLP_CONSTRAINT_TOL = 1e-2       # largest accepted row violation (ipopt's acceptable_constr_viol_tol)
 
 
 @dataclass(frozen=True)
@@ -125,33 +144,20 @@ class TubeRDMPCConfig:
     tol: float = 1e-6
 
     def __post_init__(self) -> None:
+        zero_ok = ("beta", "gamma", "model_error_bound", "lyapunov_tolerance", "safety_margin")
+        rules: dict[str, Any] = {}
         for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "v_max" and v is None:
-                continue
-            if f.type in ("bool",):
-                if not isinstance(v, bool | np.bool_):
-                    raise ValueError(f"TubeRDMPC option {f.name} must be a bool, got {v!r}")
-                continue
-            if f.name == "max_iter":
-                if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-                    raise ValueError(f"TubeRDMPC option max_iter must be a positive int, got {v!r}")
-                continue
-            try:
-                fv = float(v)
-            except (TypeError, ValueError):
-                raise ValueError(f"TubeRDMPC option {f.name} must be a number, got {v!r}") from None
-            zero_ok = f.name in ("beta", "gamma", "model_error_bound", "lyapunov_tolerance",
-                                 "safety_margin")
-            if not math.isfinite(fv) or fv < 0 or (fv == 0 and not zero_ok):
-                raise ValueError(f"TubeRDMPC option {f.name} must be finite and "
-                                 f"{'>= 0' if zero_ok else '> 0'}, got {v!r}")
-        if self.sigma >= 1:
-            raise ValueError(f"sigma must be in (0, 1) (V_(m+1) <= (1 - sigma + lambda) V_m), got {self.sigma!r}")
+            if f.name in ("terminal_braking", "relax_on_failure", "tube"):
+                rules[f.name] = flag
+            elif f.name != "v_max" or self.v_max is not None:
+                rules[f.name] = partial(number, zero_ok=f.name in zero_ok)
+        rules["max_iter"] = integer
+        rules["sigma"] = partial(number, high=0.999999)
+        rules["braking_fraction"] = partial(number, high=1.0)
+        validate(self, "TubeRDMPC", rules)
         if self.k2 < 1.0 / (4.0 * self.eta):
-            raise ValueError(f"Theorem 1 needs k2 >= 1 / (4 eta): k2 = {self.k2}, eta = {self.eta}")
-        if not 0 < self.braking_fraction <= 1:
-            raise ValueError(f"braking_fraction must be in (0, 1], got {self.braking_fraction!r}")
+            raise BaselineError(f"TubeRDMPC: Theorem 1 needs k2 >= 1 / (4 eta): k2 = {self.k2}, "
+                                f"eta = {self.eta}")
 
 
 class TubeController:
@@ -334,20 +340,26 @@ class _NominalNLP:
                              np.full(N + 1, np.inf if relaxed else 0.0)])
         return lb, ub
 
-    def solve(self, params: np.ndarray, w0: np.ndarray, relaxed: bool) -> tuple[np.ndarray, bool, str]:
+    def solve(self, info: dict[str, Any], params: np.ndarray, w0: np.ndarray,
+              relaxed: bool) -> np.ndarray | None:
+        """One guarded ipopt solve (:func:`baselines.base.guarded_solve`): the point, or ``None``
+        on an exception, a failed status, a wrong-shaped or non-finite point, a variable outside
+        its bounds or a constraint row violated by more than ``NLP_CONSTRAINT_TOL``."""
         lbx, ubx = self.bounds(relaxed)
         w0 = np.clip(w0, lbx, np.where(np.isfinite(ubx), ubx, w0))
-        try:
+        g: dict[str, np.ndarray] = {}
+
+        def run() -> tuple[np.ndarray, bool, str]:
             sol = self.solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=self.lbg, ubg=self.ubg)
-        except RuntimeError as exc:  # CasADi raises on evaluation errors (NaN etc.)
-            return w0, False, f"error: {exc}"
-        stats = self.solver.stats()
-        status = str(stats.get("return_status", ""))
-        ok = bool(stats.get("success", False)) or status == "Solved_To_Acceptable_Level"
-        w = np.asarray(sol["x"], dtype=float).ravel()
-        if not np.all(np.isfinite(w)):
-            return w0, False, status
-        return w, ok, status
+            stats = self.solver.stats()
+            status = str(stats.get("return_status", ""))
+            g["g"] = np.asarray(sol["g"], dtype=float).ravel()
+            ok = bool(stats.get("success", False)) or status == "Solved_To_Acceptable_Level"
+            return np.asarray(sol["x"], dtype=float).ravel(), ok, status
+
+        return guarded_solve(info, run, shape=(self.n_w,), lower=lbx, upper=ubx, fallback=False,
+                             violation=lambda _: row_violation(g["g"], self.lbg, self.ubg),
+                             violation_tol=NLP_CONSTRAINT_TOL)
 
     def states(self, x0: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Predicted nominal states (N + 1, 6) for scaled inputs ``v`` (3N,)."""
@@ -355,13 +367,16 @@ class _NominalNLP:
         return np.vstack([x0, xs.reshape(self.N, 6)])
 
 
-class TubeRDMPC:
+class TubeRDMPC(Baseline):
     """Tube-based robust DMPC (li2022) for ``satenv.cluster_v0`` (see the module docstring).
 
+    Privileged: it reads the env's true states, allocated targets, obstacle state, time and
+    scenario, and registers its tube controller with ``env.set_inner_loop`` (it acts inside the
+    env's physics sub-steps).
+
     Args:
-        env: a ``cluster_v0`` env (the controller reads its scenario, targets, obstacle and graph,
-            and registers its tube controller with ``env.set_inner_loop``).
-        **options: fields of :class:`TubeRDMPCConfig`.
+        env: a ``cluster_v0`` env.
+        config: a :class:`TubeRDMPCConfig` (default: li2022 §4); ``**options`` replace fields.
 
     ``info``: ``fallbacks`` (decisions that used the shifted previous plan), ``relaxed`` (relaxed
     NLP solves), ``solve_ms`` (every NLP solve), ``tube_error_max_m`` (largest ``||q - q~||``),
@@ -369,21 +384,29 @@ class TubeRDMPC:
     """
 
     name = "tube_rdmpc"
+    env_ids = ("cluster_v0",)
+    cheap = False
 
-    def __init__(self, env: Any, **options: Any) -> None:
-        self.cfg = config_from_options(TubeRDMPCConfig, options, "TubeRDMPC")
-        sc = getattr(env, "scenario", None)
-        if sc is None or not hasattr(sc, "obstacle_velocity") or not hasattr(env, "set_inner_loop"):
-            raise ValueError(f"TubeRDMPC controls satenv.cluster_v0 envs, got {type(env).__name__}")
+    @classmethod
+    def supports(cls, env: Any) -> bool:
+        return super().supports(env) and callable(getattr(env, "set_inner_loop", None))
+
+    def __init__(self, env: Any, config: TubeRDMPCConfig | None = None, **options: Any) -> None:
+        check_env(type(self), env)
+        self.cfg = config_from_options(TubeRDMPCConfig, options, "TubeRDMPC", base=config)
+        sc = env.scenario
         self.env = env
         self.sc = sc
         self.agents = list(env.possible_agents)
         self.m = len(self.agents)
         cfg = self.cfg
         steps = cfg.horizon / sc.dt
+        if steps > MAX_HORIZON + 0.5:
+            raise BaselineError(f"TubeRDMPC option horizon must be at most {MAX_HORIZON} decision periods "
+                                f"({MAX_HORIZON * sc.dt:g} s at dt = {sc.dt} s; bounded work), got {cfg.horizon} s")
         if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
-            raise ValueError(f"horizon must be a positive multiple of the decision period dt = {sc.dt} s, "
-                             f"got {cfg.horizon} s")
+            raise BaselineError(f"TubeRDMPC option horizon must be a positive multiple of the decision "
+                                f"period dt = {sc.dt} s, got {cfg.horizon} s")
         self.N = int(round(steps))
         self.n = sc.orbit.n
         self.w_bar = sc.disturbance_bound + cfg.model_error_bound
@@ -391,7 +414,7 @@ class TubeRDMPC:
         self.kappa_bar = cfg.kappa_margin * self.w_bar if cfg.tube else 0.0
         self.u_nom = sc.u_max - self.kappa_bar
         if self.u_nom <= 0:
-            raise ValueError(f"the disturbance bound {self.w_bar:.3g} m/s^2 leaves no thrust for the "
+            raise BaselineError(f"the disturbance bound {self.w_bar:.3g} m/s^2 leaves no thrust for the "
                              f"nominal DMPC (u_max = {sc.u_max:.3g} m/s^2)")
         self.k_slots = max(self.m - 1, 1)
         self.a, self.b = cw_matrices(self.n, sc.dt)
@@ -413,8 +436,8 @@ class TubeRDMPC:
                                          "status": []}
         self.tube.nominal = None
         self.tube.eps, self.tube.kappa, self.tube.u_total = [], [], []
-        self.info = {"fallbacks": 0, "relaxed": 0, "solve_ms": [], "tube_error_max_m": 0.0,
-                     "tube_bound_m": self.eps_bar, "resyncs": 0, "solves": 0}
+        self.info = new_info(relaxed=0, solve_ms=[], tube_error_max_m=0.0,
+                             tube_bound_m=self.eps_bar, resyncs=0, solves=0)
         self.tube.stats = self.info
 
     def reset(self, seed: int | None = None) -> None:
@@ -481,25 +504,25 @@ class TubeRDMPC:
                                      qo.ravel(), p_o, q_r])
             w0 = self.warm[i]
             start = time.perf_counter()
-            w, ok, status = self.nlp.solve(params, w0, relaxed=False)
+            w = self.nlp.solve(self.info, params, w0, relaxed=False)
             self.info["solve_ms"].append((time.perf_counter() - start) * 1e3)
             self.info["solves"] += 1
             kind = "ok"
-            if not ok and self.cfg.relax_on_failure:
+            if w is None and self.cfg.relax_on_failure:
                 start = time.perf_counter()
-                w, ok, status = self.nlp.solve(params, w0, relaxed=True)
+                w = self.nlp.solve(self.info, params, w0, relaxed=True)
                 self.info["solve_ms"].append((time.perf_counter() - start) * 1e3)
                 self.info["relaxed"] += 1
                 kind = "relaxed"
-            v = w[: 3 * N]
-            if not ok:
-                self.info["fallbacks"] += 1
+            if w is None:
+                record_fallback(self.info, self.info["solver_status"])
                 kind = "fallback"
                 v = self.warm[i][: 3 * N].copy()     # the shifted previous plan, ρ = 0 appended (29)
                 speed = np.linalg.norm(nominal[i, 3:])
                 if not np.any(v[:3]) and speed > 1e-3:  # plan exhausted: brake instead of coasting
                     v[:3] = -self.cfg.braking_fraction * nominal[i, 3:] / speed
                 w = np.concatenate([v, np.zeros(2 * N + 1)])
+            v = w[: 3 * N]
             v = v.reshape(N, 3)
             norms = np.linalg.norm(v, axis=1, keepdims=True)
             v = (v / np.maximum(norms, 1.0)).ravel()                 # exact unit-ball feasibility

@@ -42,7 +42,7 @@ def test_options_are_validated():
         APF(env, att_fraction=1.5)
     with pytest.raises(ValueError, match="k_att"):
         APF(env, k_att=-1.0)
-    with pytest.raises(ValueError, match="cluster_v0"):
+    with pytest.raises(TypeError, match="cluster_v0"):
         APF(object())
 
 

@@ -3,19 +3,21 @@
 import numpy as np
 import pytest
 
-from baselines.dmpc import DMPC, ConvexStepDMPC, OneHopDMPC, QPSolver, centralised_gain
+from baselines import BaselineError, BaselineTypeError
+from baselines.dmpc import DMPC, ConvexStepDMPC, DMPCConfig, OneHopDMPC, QPSolver, centralised_gain
 from satenv.dynamics import cw_matrices, prediction_matrices
 from satenv.envs.platoon_v0 import parallel_env
 from satenv.graph import make_topology
 from satenv.scenarios.platoon import PRESETS, los_keepout_ok, pair_states
 
 P23 = PRESETS["pereira2023"]
+C23 = DMPCConfig.paper("pereira2023")
 
 
 def _closed_form(scenario, x):
     k, kd = centralised_gain(scenario)
     e = scenario.graph.neighbourhood_error(x).ravel()
-    e_d = np.tile(np.asarray(scenario.desired_error), scenario.horizon * scenario.n_followers)
+    e_d = np.tile(np.asarray(scenario.desired_error), C23.horizon * scenario.n_followers)
     return (-k @ e + kd @ e_d).reshape(scenario.n_followers, -1)
 
 
@@ -28,7 +30,7 @@ def test_proposition3_jacobi_converges_to_centralised_closed_form(topology):
     ctl = OneHopDMPC(sc, constrained=False, sigma=1e-9, max_iterations=5000, seed=7)
     x = sc.initial_array() + rng.normal(scale=[5, 5, 5, 0.5, 0.5, 0.5], size=(4, 6))
     u = ctl.solve(x)
-    assert ctl.stats.not_converged == 0
+    assert ctl.info["not_converged"] == 0
     ustar = _closed_form(sc, x)
     scale = np.abs(ustar).max()
     np.testing.assert_allclose(ctl.U, ustar, atol=1e-7 * scale)
@@ -41,13 +43,13 @@ def test_closed_form_is_the_minimiser_of_the_summed_local_costs():
     x = sc.initial_array()
     ustar = _closed_form(sc, x)
     a, b = cw_matrices(sc.mean_motion, sc.dt)
-    ca, cb = prediction_matrices(a, b, sc.horizon)
-    q = np.tile(np.asarray(sc.state_weight), sc.horizon)
-    q[-6:] = sc.terminal_weight
-    w = np.tile(np.asarray(sc.input_weight), sc.horizon)
+    ca, cb = prediction_matrices(a, b, C23.horizon)
+    q = np.tile(np.asarray(sc.state_weight), C23.horizon)
+    q[-6:] = C23.terminal_weight
+    w = np.tile(np.asarray(sc.input_weight), C23.horizon)
     topo = sc.graph
     e = topo.neighbourhood_error(x)
-    ebar = np.tile(np.asarray(sc.desired_error), sc.horizon)
+    ebar = np.tile(np.asarray(sc.desired_error), C23.horizon)
     for f in range(4):
         c = topo.gains[f]
         su = sum(ustar[i] for i in topo.neighbours(f))
@@ -61,11 +63,11 @@ def test_constrained_solution_respects_input_and_velocity_bounds():
     ctl = OneHopDMPC(sc, seed=0)
     x = sc.initial_array()
     ctl.solve(x)
-    assert ctl.stats.fallbacks == 0
+    assert ctl.info["fallbacks"] == 0
     assert np.all(np.abs(ctl.U) <= sc.u_max + 1e-6)
     # velocity rows of the predicted neighbourhood error, with the neighbours' final iterates
     a, b = cw_matrices(sc.mean_motion, sc.dt)
-    ca, cb = prediction_matrices(a, b, sc.horizon)
+    ca, cb = prediction_matrices(a, b, C23.horizon)
     topo = sc.graph
     e = topo.neighbourhood_error(x)
     su = topo.adjacency @ ctl.U
@@ -125,7 +127,7 @@ def test_infeasible_min_error_constraint_falls_back_without_crashing():
     sc = P23.with_overrides(initial_state=x0, min_error_constraint=True)
     ctl = OneHopDMPC(sc, seed=0)
     u = ctl.solve(x0)
-    assert ctl.stats.fallbacks > 0
+    assert ctl.info["fallbacks"] > 0
     assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= sc.u_max)
     assert np.all(np.abs(ctl.U) <= sc.u_max)
 
@@ -139,7 +141,7 @@ def test_min_error_constraint_keeps_the_error_outside_the_sphere_when_feasible()
         x = x @ a.T + ctl.solve(x) @ b.T
         e = sc.graph.neighbourhood_error(x)
         assert np.all(np.linalg.norm(e[:, :3], axis=1) >= sc.graph.gains * sc.follower_radius - 1e-6)
-    assert ctl.stats.fallbacks == 0
+    assert ctl.info["fallbacks"] == 0
 
 
 def test_policy_interface_and_info():
@@ -168,7 +170,7 @@ def test_policy_falls_back_when_the_solver_fails(monkeypatch):
     env = parallel_env(topology="BDL")
     pol = DMPC(env, seed=0)
     obs, _ = env.reset(seed=0)
-    monkeypatch.setattr(QPSolver, "solve", lambda self: (np.full(self.n, np.nan), False))
+    monkeypatch.setattr(QPSolver, "solve_raw", lambda self: (np.full(self.n, np.nan), False, "x"))
     act = pol.act(obs)
     assert pol.info["fallbacks"] > 0
     assert all(np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1) for a in act.values())
@@ -177,11 +179,11 @@ def test_policy_falls_back_when_the_solver_fails(monkeypatch):
 
 def test_policy_rejects_bad_options():
     env = parallel_env()
-    with pytest.raises(ValueError, match="unknown DMPC option"):
-        DMPC(env, horizon=3)
+    with pytest.raises(BaselineError, match=r"DMPC: unknown option\(s\) \['horizont'\]"):
+        DMPC(env, horizont=3)
     with pytest.raises(ValueError, match="variant"):
         DMPC(env, variant="central")
-    with pytest.raises(ValueError, match="scenario"):
+    with pytest.raises(BaselineTypeError, match="satenv env"):
         DMPC(object())
     with pytest.raises(ValueError, match="solver"):
         DMPC(env, solver="cplex")
@@ -197,6 +199,7 @@ def test_the_dmpc_follows_the_env_topology_override():
 
 # ---------------------------------------------------------------- pereira2022 convex step
 P22 = PRESETS["pereira2022"]
+C22 = DMPCConfig.paper("pereira2022")
 
 
 def test_convex_step_unconstrained_converges_to_the_cooperative_optimum():
@@ -207,17 +210,17 @@ def test_convex_step_unconstrained_converges_to_the_cooperative_optimum():
     ctl.solve(x)
     # independent joint least squares: V = atot sum_i a_i |Z_i - Yd|_Q^2 + sum_j a_j^2 |U_j|_W^2
     a, b = cw_matrices(sc.mean_motion, sc.dt)
-    ca, cb = prediction_matrices(a, b, sc.horizon)
-    q = np.tile(np.asarray(sc.state_weight), sc.horizon)
-    q[-6:] = sc.terminal_weight
-    w = np.tile(np.asarray(sc.input_weight), sc.horizon)
+    ca, cb = prediction_matrices(a, b, C22.horizon)
+    q = np.tile(np.asarray(sc.state_weight), C22.horizon)
+    q[-6:] = C22.terminal_weight
+    w = np.tile(np.asarray(sc.input_weight), C22.horizon)
     alpha = np.asarray(sc.alpha)
-    m, nu = sc.n_followers, 3 * sc.horizon
+    m, nu = sc.n_followers, 3 * C22.horizon
     z = pair_states(sc, x)
-    yd = np.tile(np.asarray(sc.desired_error), sc.horizon)
+    yd = np.tile(np.asarray(sc.desired_error), C22.horizon)
     rows, rhs, wts = [], [], []
     for i in range(m):  # Z_i = ca z_i + cb U_i - cb U_{i-1}
-        g = np.zeros((6 * sc.horizon, m * nu))
+        g = np.zeros((6 * C22.horizon, m * nu))
         g[:, i * nu:(i + 1) * nu] = cb
         if i >= 1:
             g[:, (i - 1) * nu:i * nu] = -cb
@@ -243,7 +246,7 @@ def test_convex_step_keeps_los_and_keepout_on_the_2022_scenario():
     for _ in range(120):
         x = x @ a.T + ctl.solve(x) @ b.T
         assert np.all(los_keepout_ok(sc, x))
-    assert ctl.stats.fallbacks == 0
+    assert ctl.info["fallbacks"] == 0
     # close to the chain spacing y_d after 12 s
     assert np.abs(pair_states(sc, x)[:, :3] - [0, -10, 0]).max() < 0.5
 
@@ -257,13 +260,12 @@ def test_convex_step_policy_in_env():
     while env.agents:
         obs, *_ = env.step(pol.act(obs))
     assert pol.info["fallbacks"] == 0 and len(pol.info["solve_ms"]) == 20
-    with pytest.raises(ValueError, match="unknown DMPC option"):
-        DMPC(env, sigma=0.1)
+    assert pol.cfg == DMPCConfig.paper("pereira2022")
 
 
 def test_convex_step_rejects_bad_weights():
     with pytest.raises(ValueError, match="sum"):
-        ConvexStepDMPC(P22, weights=[0.5, 0.6])
+        ConvexStepDMPC(P22, convex_weights=[0.5, 0.6])
     with pytest.raises(ValueError, match="iterations"):
         ConvexStepDMPC(P22, iterations=0)
 

@@ -18,7 +18,7 @@ TOY = "test_env_base:ToyEnv"
 def _cfg(tmp_path, **kw):
     base = dict(env_id=TOY, env_kwargs={"max_steps": 10}, n_copies=2, total_timesteps=192, n_steps=16,
                 batch_size=48, n_epochs=1, net_arch=(16, 16), eval_every=96, checkpoint_every=96,
-                eval_seeds=(1, 2), test_seeds=(3, 4, 5), eval_baselines=("ZeroPolicy",),
+                eval_seeds=(1, 2), test_seeds=(3, 4, 5), eval_baselines=("zero",),
                 out_dir=str(tmp_path / "run"), progress=False)
     base.update(kw)
     return TrainConfig(**base)
@@ -57,7 +57,7 @@ def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     assert meta["env_id"] == TOY and meta["env_kwargs"] == {"max_steps": 10} and meta["observation_shape"] == [6]
     assert json.loads((final / "config.json").read_text()) == cfg.to_json()
     summary = json.loads((final / "eval.json").read_text())
-    assert summary["test_seeds"] == [3, 4, 5] and set(summary["aggregate"]) == {"learned", "ZeroPolicy"}
+    assert summary["test_seeds"] == [3, 4, 5] and set(summary["aggregate"]) == {"learned", "zero"}
     assert summary["aggregate"]["learned"]["episodes"] == 3
     run = tmp_path / "run"
     assert list((run / "tb").rglob("events.out.tfevents.*")), "no TensorBoard log"

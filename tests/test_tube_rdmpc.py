@@ -100,7 +100,10 @@ def test_solver_failure_degrades_to_flagged_fallback(monkeypatch):
     env = parallel_env(max_steps=4)
     pol = TubeRDMPC(env)
     rollout(env, pol, seed=0, max_steps=2)                       # a valid plan exists
-    monkeypatch.setattr(pol.nlp, "solve", lambda params, w0, relaxed: (w0, False, "forced failure"))
+    def fail(**_):
+        raise RuntimeError("forced failure")
+
+    monkeypatch.setattr(pol.nlp, "solver", fail)
     obs, _ = env.reset(seed=0)
     pol.reset()
     for _ in range(2):
@@ -108,6 +111,7 @@ def test_solver_failure_degrades_to_flagged_fallback(monkeypatch):
         assert all(np.all(np.isfinite(a)) and np.linalg.norm(a) <= 1.0 for a in actions.values())
         obs, *_ = env.step(actions)
     assert pol.info["fallbacks"] == 2 * 10 and pol.info["relaxed"] == 2 * 10
+    assert pol.info["solver_status"] == "error: RuntimeError: forced failure"
 
 
 def test_options_are_validated():
@@ -120,8 +124,10 @@ def test_options_are_validated():
         TubeRDMPC(env, k2=0.1, eta=0.5)
     with pytest.raises(ValueError, match="multiple of the decision period"):
         TubeRDMPC(env, horizon=52.0)
-    with pytest.raises(ValueError, match="cluster_v0"):
+    with pytest.raises(TypeError, match="cluster_v0"):
         TubeRDMPC(object())
+    with pytest.raises(ValueError, match=r"at most 1000 decision periods"):
+        TubeRDMPC(env, horizon=1e300)
 
 
 @pytest.mark.slow

@@ -46,8 +46,11 @@ class TrainConfig:
     Evaluation and artefacts:
         eval_every: evaluate every this many agent-steps (0: only at the end) on ``eval_seeds``
             with the PettingZoo env and ``satenv.rollout`` (the scoreboard's path), logged to
-            TensorBoard next to the scripted ``eval_baselines`` (names in ``baselines``;
-            missing ones are skipped with a warning).
+            TensorBoard next to the scripted ``eval_baselines`` (names of
+            ``baselines.BASELINES``; ``"auto"``, the default, is ``zero`` and the scripted
+            controllers without a per-decision NLP that support the env (dmpc, apf), so the
+            evaluation stays cheap: the NLP baselines nmpc, tube_rdmpc, cgmres cost 0.5-16 min
+            per episode; name them to include them; unsupported names are skipped with a warning).
         test_seeds: held-out seeds of the final evaluation summary (not used for selection).
         checkpoint_every: save model + normalisation every this many agent-steps (0: never).
         out_dir: run directory (``tb/``, ``checkpoints/``, ``best/``, ``final/``).
@@ -90,7 +93,7 @@ class TrainConfig:
     eval_every: int = 100_000
     eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_010))
     test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
-    eval_baselines: tuple[str, ...] = ("DMPC", "APF", "ZeroPolicy")
+    eval_baselines: tuple[str, ...] = ("auto",)
     checkpoint_every: int = 100_000
     out_dir: str = "runs/train"
     torch_threads: int = 1

@@ -7,32 +7,39 @@ targets (tracking RMSE and total delta-v relative to the DMPC on the same seeds)
 
 from __future__ import annotations
 
-import importlib
 import warnings
 from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
+import baselines
 from satenv import metrics
 from satenv.rollout import rollout
 
-__all__ = ["evaluate", "make_baseline", "compare", "format_table"]
+__all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table"]
 
-_BASELINE_MODULES = ("baselines", "baselines.base", "baselines.dmpc", "baselines.apf")
+AUTO = "auto"
+"""``eval_baselines`` entry meaning: ``zero`` plus the cheap scripted controllers that support
+the env (no per-decision NLP: ``dmpc`` on platoon, ``apf`` on cluster)."""
 
 
 def make_baseline(name: str, env: Any):
-    """``baselines.<name>(env)`` (also looked up in baselines.base/.dmpc/.apf); ``None`` if absent."""
-    for module_name in _BASELINE_MODULES:
-        try:
-            module = importlib.import_module(module_name)
-            cls = getattr(module, name, None)
-        except ImportError:  # the package lists it lazily but its module is not there (yet)
-            continue
-        if cls is not None:
-            return cls(env)
-    return None
+    """``baselines.make(name, env)`` (a name of ``baselines.BASELINES``)."""
+    return baselines.make(name, env)
+
+
+def baseline_names(env: Any, names: Iterable[str]) -> list[str]:
+    """``names`` with ``"auto"`` expanded to ``zero`` and the other baselines of
+    ``baselines.supporting(env, cheap=True)`` except ``random`` (:data:`AUTO`), duplicates dropped.
+
+    The NLP baselines (nmpc, tube_rdmpc, cgmres: 0.5-16 min per episode) run only when named.
+    """
+    out: list[str] = []
+    for name in names:
+        auto = [n for n in baselines.supporting(env, cheap=True) if n != "random"]
+        out += auto if name == AUTO else [name]
+    return list(dict.fromkeys(out))
 
 
 def evaluate(env: Any, policy: Any, seeds: Iterable[int]) -> dict[str, Any]:
@@ -75,7 +82,7 @@ def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def compare(results: dict[str, dict[str, Any]], learned: str = "learned",
-            reference: str = "DMPC") -> dict[str, Any]:
+            reference: str = "dmpc") -> dict[str, Any]:
     """Ratios learned/reference of mean RMSE and mean delta-v on the same seeds.
 
     ``all``: over every seed; ``reference_ok``: over the seeds where the reference episode ran
@@ -116,17 +123,18 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
 
 
 def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int]) -> dict[str, Any]:
-    """Evaluate the named scripted baselines that exist (missing ones: a warning)."""
+    """Evaluate the named registered baselines (``"auto"``: :func:`baseline_names`).
+
+    A named baseline that cannot control ``env`` (``supports(env)`` False) is skipped with a
+    warning; an unknown name raises :class:`baselines.BaselineError`.
+    """
     seeds = list(seeds)
     out = {}
-    for name in names:
-        try:
-            policy = make_baseline(name, env)
-        except (ValueError, TypeError, NotImplementedError) as err:  # the baseline does not fit this env
-            warnings.warn(f"baseline {name!r} cannot control this env ({err}); skipped", stacklevel=2)
+    for name in baseline_names(env, names):
+        cls = baselines.get(name)
+        if not cls.supports(env):
+            warnings.warn(f"baseline {name!r} cannot control this env (it supports "
+                          f"{cls.supported()}); skipped", stacklevel=2)
             continue
-        if policy is None:
-            warnings.warn(f"baseline {name!r} not found in the baselines package; skipped", stacklevel=2)
-            continue
-        out[name] = evaluate(env, policy, seeds)
+        out[name] = evaluate(env, baselines.make(name, env), seeds)
     return out

@@ -26,6 +26,15 @@ def _status(spec) -> str:
         return f"not available ({why})"
 
 
+def _fits(spec) -> str:
+    """Where a policy applies, for the listing."""
+    if spec.baseline is not None:
+        import baselines
+
+        return baselines.get(spec.baseline).supported()
+    return ",".join(spec.env_ids or ("any env",))
+
+
 def list_registry() -> str:
     """The ``--list`` text: every scenario and policy, whether it can run here, where it fits."""
     lines = ["scenarios:"]
@@ -33,7 +42,7 @@ def list_registry() -> str:
         lines.append(f"  {name:<32} {_status(spec):<12}  {spec.env_id:<13} {spec.description}")
     lines.append("policies:")
     for name, spec in {**POLICIES, **discover_trained_policies()}.items():
-        fits = ",".join(spec.env_ids or ("any env",))
+        fits = _fits(spec)
         ranked = f" (ranked on {','.join(spec.scenarios)})" if spec.scenarios else ""
         lines.append(f"  {name:<32} {_status(spec):<12}  fits {fits}{ranked}  {spec.description}")
     lines.append(f"quick: {QUICK}")

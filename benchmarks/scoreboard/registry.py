@@ -4,7 +4,7 @@ boards, shipped trained policies (``training/policies/*``) and user checkpoints 
 Adding an env configuration or a baseline is one entry here::
 
     SCENARIOS["cluster-case1"] = ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"})
-    POLICIES["apf"] = PolicySpec("apf", "baselines:APF", env_ids=("cluster_v0",))
+    POLICIES["apf"] = PolicySpec("apf", "baselines:APF", baseline="apf")  # where: APF.supports(env)
 """
 
 from __future__ import annotations
@@ -70,17 +70,18 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
 """Every scenario of the scoreboard by name."""
 
 POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
-    PolicySpec("zero", "baselines.base:ZeroPolicy", description="no thrust (coasting)"),
-    PolicySpec("random", "baselines.base:RandomPolicy", description="uniform random thrust"),
-    PolicySpec("dmpc", "baselines:DMPC", env_ids=("platoon_v0",), requires=("daqp",),
+    PolicySpec("zero", "baselines.base:ZeroPolicy", baseline="zero", description="no thrust (coasting)"),
+    PolicySpec("random", "baselines.base:RandomPolicy", baseline="random",
+               description="uniform random thrust"),
+    PolicySpec("dmpc", "baselines:DMPC", baseline="dmpc", requires=("daqp",),
                description="1-hop distributed MPC (pereira2023/2022)"),
-    PolicySpec("tube_rdmpc", "baselines:TubeRDMPC", env_ids=("cluster_v0",), requires=("casadi",),
+    PolicySpec("tube_rdmpc", "baselines:TubeRDMPC", baseline="tube_rdmpc", requires=("casadi",),
                dry_run=False, description="tube-based robust DMPC (li2022)"),
-    PolicySpec("apf", "baselines:APF", env_ids=("cluster_v0",),
+    PolicySpec("apf", "baselines:APF", baseline="apf",
                description="artificial potential field (li2022)"),
-    PolicySpec("nmpc", "baselines:NMPC", env_ids=("servicing_v0",), requires=("casadi",),
+    PolicySpec("nmpc", "baselines:NMPC", baseline="nmpc", requires=("casadi",),
                dry_run=False, description="cooperative NMPC (pereira2022 §4)"),
-    PolicySpec("cgmres", "baselines:CGMRES", env_ids=("formation_v0",), requires=("casadi",),
+    PolicySpec("cgmres", "baselines:CGMRES", baseline="cgmres", requires=("casadi",),
                dry_run=False, description="centralised C/GMRES NMPC (kannan2022)"),
 ]}
 """Every scripted policy by name; shipped trained policies are added by

@@ -134,6 +134,8 @@ class PolicySpec:
         requires: optional third-party modules (e.g. the QP solver).
         dry_run: act once on a reset env before the run to check compatibility (cheap policies).
         learned: a trained network (its observation space is checked against the env's).
+        baseline: the ``baselines.BASELINES`` name of a scripted policy: where it applies is its
+            class's ``supports(env)`` (then ``env_ids`` is not used).
     """
 
     name: str
@@ -146,6 +148,7 @@ class PolicySpec:
     requires: tuple[str, ...] = ()
     dry_run: bool = True
     learned: bool = False
+    baseline: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -187,9 +190,14 @@ class PolicySpec:
 def policy_fits(spec: PolicySpec, env) -> bool:
     """Whether the policy ``spec`` can control ``env`` (THE applicability rule of the board).
 
-    Today: by the env's id (``env.metadata["name"]``) against the spec's ``env_ids``, which for a
-    learned policy come from its folder's ``env.json``.
+    A scripted policy: its baseline class's ``supports(env)`` (the policy registry of
+    ``baselines``); a learned one: the env's id (``env.metadata["name"]``) against the env ids of
+    its folder's ``env.json``.
     """
+    if spec.baseline is not None:
+        import baselines
+
+        return bool(baselines.get(spec.baseline).supports(env))
     return spec.env_ids is None or env.metadata.get("name") in spec.env_ids
 
 

@@ -17,7 +17,7 @@ Arguments (keywords; all optional)
 ``preset``        ``"pereira2023"`` (default: Table I exactly — 4 followers, ||r_l|| = 6621 km,
                   T_s = 0.1 s, n_k = 180, u_max = 6 m/s^2, v_max = 20 m/s, r_f = 3 m) or
                   ``"pereira2022"`` (§5.1: 2 followers + leader, y_d = [0, -10, 0] per pair,
-                  keep-out r_delta = 6 m, LOS cone c_x = c_z = 1, port [2, 2, 4] m, N = 40).
+                  keep-out r_delta = 6 m, LOS cone c_x = c_z = 1, port [2, 2, 4] m).
 ``render_mode``   ``None``, ``"rgb_array"`` or ``"human"`` (matplotlib 3-D positions + trails).
 any field of ``PlatoonScenario`` overrides the preset, e.g. ``topology="BDL"``,
 ``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"`` (truth model from ``satenv.dynamics``),

@@ -49,15 +49,15 @@ class PlatoonScenario:
         topology: ``"PLF"``, ``"BDL"``, ``"TPLF"`` or an (N, N) 0/1 adjacency (i hears j).
         mu: gravitational parameter [m^3/s^2]; orbit_radius: ||r_l|| [m] (circular leader).
         dt: sampling time T_s [s]; max_steps: episode length n_k (truncation).
-        horizon: MPC prediction horizon N.
-        terminal_weight, state_weight: diagonals of P, Q (6,); input_weight: diagonal of W (3,).
-        alpha: per-follower cost weights (N,).
-        sigma: Jacobi stopping tolerance of Algorithm 1.
+        state_weight: diagonal of Q (6,); input_weight: diagonal of W (3,); alpha: per-follower
+            cost weights (N,) — the stage cost of eq. 14 (the env's reward; the DMPC minimises
+            it too). The controller's own settings (horizon N, terminal weight P, Jacobi
+            tolerance sigma, variant, convex weights, iterations) are
+            ``baselines.dmpc.DMPCConfig``.
         u_max: per-axis acceleration limit [m/s^2]; v_max: velocity limit [m/s].
         follower_radius: r_f [m]; leader_radius [m] (collision when distance < r_i + r_j).
-        min_error_constraint: add the linearised constraint (41)-(42) in the DMPC.
-        controller: ``"one_hop"`` (pereira2023 Algorithm 1) or ``"convex_step"`` (pereira2022).
-        convex_weights: w_j of pereira2022 eq. 30 (sum to 1); iterations: gamma (pereira2022).
+        min_error_constraint: the minimum-tracking-error constraint (41) is part of the task
+            (counted in ``violations``; the DMPC adds its linearisation (42)).
         keepout_radius: r_delta [m] of the keep-out sphere centred at keepout_center in each
             target-chaser frame (pereira2022 eq. 31); 0 disables.
         los_slopes: (c_x, c_z) of the LOS cone (eq. 34), port: (x_rho, y_rho, z_rho) [m];
@@ -90,20 +90,14 @@ class PlatoonScenario:
     orbit_radius: float = 6_621_000.0
     dt: float = 0.1
     max_steps: int = 180
-    horizon: int = 30
-    terminal_weight: tuple[float, ...] = (25.0,) * 6
     state_weight: tuple[float, ...] = (13.0,) * 6
     input_weight: tuple[float, ...] = (0.1,) * 3
     alpha: tuple[float, ...] = (2.0, 1.5, 1.0, 1.0)
-    sigma: float = 0.5
     u_max: float = 6.0
     v_max: float = 20.0
     follower_radius: float = 3.0
     leader_radius: float = 3.0
     min_error_constraint: bool = False
-    controller: str = "one_hop"
-    convex_weights: tuple[float, ...] | None = None
-    iterations: int | None = None
     keepout_center: tuple[float, ...] = (0.0, 0.0, 0.0)
     keepout_radius: float = 0.0
     los_slopes: tuple[float, ...] | None = None
@@ -151,7 +145,6 @@ class PlatoonScenario:
         for name in ("mu", "orbit_radius", "dt", "u_max", "v_max", "follower_radius",
                      "leader_radius", "max_distance", "success_tol"):
             s(self, name, number(getattr(self, name), name))
-        s(self, "sigma", number(self.sigma, "sigma"))
         for name in ("reward_scale",):
             s(self, name, number(getattr(self, name), name))
         for name in ("collision_penalty", "violation_penalty"):
@@ -169,12 +162,12 @@ class PlatoonScenario:
         for name in ("keepout_radius", "random_position_spread", "random_velocity_spread",
                      "random_min_gap"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
-        for name in ("max_steps", "horizon"):
+        for name in ("max_steps",):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}.")
             s(self, name, int(v))
-        for name, length in (("terminal_weight", 6), ("state_weight", 6), ("input_weight", 3)):
+        for name, length in (("state_weight", 6), ("input_weight", 3)):
             w = vector(getattr(self, name), name, length)
             if min(w) < 0:
                 raise ValueError(f"{name} must be >= 0 (diagonal of a PSD weight), got {w}.")
@@ -185,23 +178,6 @@ class PlatoonScenario:
         if len(alpha) != n or min(alpha) <= 0:
             raise ValueError(f"alpha must have {n} positive entries (one per follower), got {alpha}.")
         s(self, "alpha", alpha)
-        if self.controller not in ("one_hop", "convex_step"):
-            raise ValueError(
-                f"controller must be 'one_hop' or 'convex_step', got {self.controller!r}."
-            )
-        if self.convex_weights is not None:
-            w = vector(self.convex_weights, "convex_weights")
-            if len(w) != n or min(w) <= 0 or max(w) >= 1 or abs(sum(w) - 1) > 1e-9:
-                raise ValueError(
-                    f"convex_weights must be {n} numbers in (0, 1) summing to 1 (pereira2022 "
-                    f"eq. 30), got {w}."
-                )
-            s(self, "convex_weights", w)
-        if self.iterations is not None:
-            v = self.iterations
-            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-                raise ValueError(f"iterations must be a positive int or None, got {v!r}.")
-            s(self, "iterations", int(v))
         s(self, "keepout_center", vector(self.keepout_center, "keepout_center", 3))
         s(self, "port", vector(self.port, "port", 3))
         if self.los_slopes is not None:
@@ -266,8 +242,8 @@ class PlatoonScenario:
     def with_overrides(self, **overrides) -> PlatoonScenario:
         """A copy with fields replaced; unknown names raise ValueError.
 
-        If ``initial_state`` changes the number of followers and ``alpha`` (resp.
-        ``convex_weights``) is not given, it becomes all ones (resp. uniform).
+        If ``initial_state`` changes the number of followers and ``alpha`` is not given, it
+        becomes all ones.
         """
         known = {f.name for f in fields(self) if f.init}
         bad = sorted(set(overrides) - known)
@@ -282,8 +258,6 @@ class PlatoonScenario:
             n = np.asarray(n_new).shape[0] if np.ndim(n_new) == 2 else None
             if n is not None and n != self.n_followers:
                 overrides["alpha"] = (1.0,) * n
-                if self.convex_weights is not None and "convex_weights" not in overrides:
-                    overrides["convex_weights"] = (1.0 / n,) * n
         return replace(self, **overrides)
 
 
@@ -305,8 +279,10 @@ PRESETS: dict[str, PlatoonScenario] = {
     ),
     # pereira2022 §5.1: leader + 2 followers; p12(0) = [30,-50,40], p23(0) = [15,-46,-30] are
     # pair states, so follower 2 starts at p12 + p23 relative to the leader. y_d = [0,-10,0]
-    # per pair (chain formation); P, Q weight the position output only. n_k is not given in
+    # per pair (chain formation); Q weights the position output only. n_k is not given in
     # the paper: 300 steps (30 s) is our choice. The env's observations use the PLF graph.
+    # Its controller (convex step, N = 40, P, gamma = 2, w = (0.6, 0.4)) is
+    # ``baselines.dmpc.PAPER_CONFIGS["pereira2022"]``.
     "pereira2022": PlatoonScenario(
         name="pereira2022",
         initial_state=(
@@ -320,14 +296,9 @@ PRESETS: dict[str, PlatoonScenario] = {
         orbit_radius=6_621_000.0,
         dt=0.1,
         max_steps=300,
-        horizon=40,
-        terminal_weight=(25.0, 25.0, 25.0, 0.0, 0.0, 0.0),
         state_weight=(8.0, 8.0, 8.0, 0.0, 0.0, 0.0),
         input_weight=(0.1, 0.1, 0.1),
         alpha=(2.0, 1.5),
-        controller="convex_step",
-        convex_weights=(0.6, 0.4),
-        iterations=2,
         keepout_center=(0.0, 0.0, 0.0),
         keepout_radius=6.0,
         los_slopes=(1.0, 1.0),

@@ -60,8 +60,9 @@ class ServicingScenario:
             default), ``"cw"``, ``"j2"``.
         dt: sampling time T_s [s]; max_steps: episode length (truncation).
         substeps: integration substeps per dt (attitude RK4 and, for ``"body"``, the translation).
-        horizon, position_weight, velocity_weight, quaternion_weight, omega_weight, input_weight:
-            N and the diagonals of Q_p, Q_v, Q_q, Q_w, H of eq. 39 (used by the NMPC and the reward).
+        position_weight, velocity_weight, quaternion_weight, omega_weight, input_weight: the
+            diagonals of Q_p, Q_v, Q_q, Q_w, H of eq. 39 (the env's reward; the NMPC minimises the
+            same cost, its horizon N is ``baselines.nmpc.NMPCConfig.horizon``).
         max_distance: an episode terminates when a spacecraft is farther than this [m].
         contact_tolerance: distances within this of a limit still count as satisfying eq. 40 /
             41 [m] (float round-off: the §5.2 initial positions and waypoints lie exactly on the
@@ -101,7 +102,6 @@ class ServicingScenario:
     dt: float = 0.1
     max_steps: int = 1200
     substeps: int = 1
-    horizon: int = 30
     position_weight: Any = (10.0, 10.0, 10.0)
     velocity_weight: Any = (0.5, 0.5, 0.5)
     quaternion_weight: Any = (15.0, 15.0, 15.0, 15.0)
@@ -182,7 +182,7 @@ class ServicingScenario:
             raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
         if self.thrust_mode != "box":
             raise ValueError(f"thrust_mode must be 'box' (per-input limits, eq. 36), got {self.thrust_mode!r}")
-        for name in ("max_steps", "substeps", "horizon"):
+        for name in ("max_steps", "substeps"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}")
