@@ -271,7 +271,7 @@ def test_tube_rdmpc_faults(monkeypatch, tube, kind):
 @pytest.fixture(scope="module")
 def nmpc():
     pytest.importorskip("casadi")
-    env = satenv.servicing_v0(n_steps=4)
+    env = satenv.servicing_v0(max_steps=4)
     return env, baselines.NMPC(env, horizon=5)
 
 
