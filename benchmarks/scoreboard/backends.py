@@ -87,19 +87,29 @@ class _Pool:
         self.inflight: dict[Future, tuple[Task, bool]] = {}
         self.pool = _new_pool(workers)
 
-    def _submit(self, task: Task, alone: bool) -> None:
-        self.inflight[self.pool.submit(run_episode, task)] = (task, alone)
+    def _submit(self, queue: deque[Task], alone: bool) -> bool:
+        """Start the next task of ``queue``; False (task kept) if the pool broke meanwhile."""
+        try:
+            fut = self.pool.submit(run_episode, queue[0])
+        except BrokenProcessPool:   # a worker died after the last collect: rebuild first
+            return False
+        self.inflight[fut] = (queue.popleft(), alone)
+        return True
 
     def fill(self) -> None:
         if self.suspects:
             if not self.inflight:
-                self._submit(self.suspects.popleft(), alone=True)
+                self._submit(self.suspects, alone=True)
             return
         while self.pending and len(self.inflight) < self.workers:
-            self._submit(self.pending.popleft(), alone=False)
+            if not self._submit(self.pending, alone=False):
+                return
 
     def collect(self) -> Iterator[Record]:
         """Wait for at least one episode; yield the finished records, handle a broken pool."""
+        if not self.inflight:       # nothing could be submitted: the pool is broken
+            yield from self._rebuild()
+            return
         done, _ = wait(self.inflight, return_when=FIRST_COMPLETED)
         broken = False
         for fut in done:
