@@ -65,6 +65,13 @@ def formation_v0(**kwargs: Any):
     return make("formation_v0", **kwargs)
 
 
+def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, **kwargs: Any):
+    """``num_envs`` batched copies of ``make(env_id, **kwargs)`` (numpy); see ``satenv.vector``."""
+    from satenv.vector import make_vec as _make_vec
+
+    return _make_vec(env_id, num_envs, seed=seed, **kwargs)
+
+
 def _register_gymnasium() -> None:
     """Register ``GYM_IDS`` (entry points as strings: nothing of satenv is imported here)."""
     from gymnasium.envs.registration import register, registry
@@ -76,5 +83,5 @@ def _register_gymnasium() -> None:
 
 _register_gymnasium()
 
-__all__ = ["ENV_IDS", "GYM_IDS", "__version__", "cluster_v0", "formation_v0", "make", "platoon_v0",
-           "servicing_v0"]
+__all__ = ["ENV_IDS", "GYM_IDS", "__version__", "cluster_v0", "formation_v0", "make", "make_vec",
+           "platoon_v0", "servicing_v0"]

@@ -1,0 +1,188 @@
+"""The batched, framework-neutral (numpy) multi-agent vector env over a satenv core.
+
+:func:`make_vec` runs ``num_envs`` copies ``B`` of one scenario in ONE batched core
+(``env.core_class(env.scenario, batch=B)``): one ``step`` is one numpy call for every agent of
+every copy. Arrays are ``(B, M, ...)`` with ``M`` agents (order of ``env.possible_agents``)::
+
+    vec = satenv.make_vec("platoon_v0", 64, seed=0)
+    obs, infos = vec.reset()                                   # obs (B, M, obs_dim) float32
+    obs, rew, term, trunc, infos = vec.step(actions)           # actions (B, M, act_dim) in [-1, 1]
+    vec.state()                                                # (B, state_dim) for central critics
+
+Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelEnv`):
+
+* actions in ``[-1, 1]`` are scaled with :func:`satenv.dynamics.unit_box_to_accel`
+  (``scenario.u_max``, ``scenario.thrust_mode``); values outside are clipped, NaN/inf rejected;
+* ``rewards`` (float64, the PettingZoo env's values), ``terminations``, ``truncations`` (bool)
+  are ``(B, M)``; termination is team-wide (a
+  collision or leaving the allowed region ends the copy for every agent), truncation is the step
+  limit ``scenario.max_steps`` (never both);
+* **auto-reset, same step**: a copy that ends is reset inside the same ``step``. The returned
+  ``obs`` row is then the first observation of its next episode; ``infos["_final"]`` ``(B,)``
+  marks those copies, ``infos["final_observation"]`` ``(B, M, obs_dim)`` holds the last
+  observation of the finished episode and ``infos["final_info"]`` the info arrays of that last
+  step (both are full-batch arrays, meaningful where ``_final`` is true; the keys are present
+  only in a step where some copy ended). The other ``infos`` entries are the per-agent physical
+  quantities (``satenv.envs.base.INFO_KEYS`` and the env's own) as ``(B, M, ...)`` arrays, of
+  the new episode's reset for the reset copies;
+* **seeding**: ``reset(seed=s)`` (or ``make_vec(..., seed=s)``, applied at the first reset) gives
+  copy ``b`` its own generator ``np.random.default_rng(s + b)``, used for its initial states and
+  for any randomness inside its steps, exactly as the PettingZoo env's ``reset(seed=s + b)``:
+  copy ``b`` reproduces that env's episodes bit for bit under the same actions, including the
+  episodes after an auto-reset (the PettingZoo env's ``reset()`` without a seed).
+  ``reset()`` without a seed keeps the generators (fresh entropy if never seeded).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from satenv.dynamics import unit_box_to_accel
+from satenv.envs.base import SatParallelEnv, SatenvError
+
+__all__ = ["SatVectorEnv", "make_vec"]
+
+
+def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, **env_kwargs: Any) -> SatVectorEnv:
+    """``num_envs`` batched copies of ``satenv.make(env_id, **env_kwargs)`` (module docstring)."""
+    import satenv
+
+    return SatVectorEnv(satenv.make(env_id, **env_kwargs), num_envs, seed=seed)
+
+
+class CopyGenerators:
+    """One ``np.random.Generator`` per copy behind the ``Generator`` methods a core calls.
+
+    A draw of ``size=(B, ...)`` stacks ``B`` draws of ``size=(...)``, copy ``b`` from its own
+    generator, so copy ``b`` sees the same stream as the PettingZoo env with ``B = 1``.
+    """
+
+    def __init__(self, generators: list[np.random.Generator]) -> None:
+        self.generators = generators
+
+    def subset(self, idx: np.ndarray) -> CopyGenerators:
+        return CopyGenerators([self.generators[b] for b in idx])
+
+    def _stack(self, method: str, size: Any, **kwargs: Any) -> np.ndarray:
+        size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+        if not size or size[0] != len(self.generators):
+            raise SatenvError(f"a batched draw must have size (B={len(self.generators)}, ...), got {size}")
+        return np.stack([getattr(g, method)(size=size[1:], **kwargs) for g in self.generators])
+
+    def normal(self, loc: Any = 0.0, scale: Any = 1.0, size: Any = None) -> np.ndarray:
+        return self._stack("normal", size, loc=loc, scale=scale)
+
+    def random(self, size: Any = None) -> np.ndarray:
+        return self._stack("random", size)
+
+    def uniform(self, low: Any = 0.0, high: Any = 1.0, size: Any = None) -> np.ndarray:
+        return self._stack("uniform", size, low=low, high=high)
+
+
+class SatVectorEnv:
+    """``num_envs`` copies of a satenv env's scenario stepped as one batch (module docstring).
+
+    Args:
+        env: the :class:`SatParallelEnv` whose ``core_class`` and ``scenario`` are batched (it is
+            not stepped).
+        num_envs: number of copies ``B`` (>= 1).
+        seed: applied at the first :meth:`reset` that has no seed of its own.
+    """
+
+    def __init__(self, env: SatParallelEnv, num_envs: int, *, seed: int | None = None) -> None:
+        if not isinstance(env, SatParallelEnv):
+            raise SatenvError(f"SatVectorEnv needs a satenv env (satenv.make(...)), got {type(env).__name__}")
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise SatenvError(f"num_envs must be a positive int, got {num_envs!r}")
+        self.env = env
+        self.scenario = env.scenario
+        self.num_envs = int(num_envs)
+        self.core = env.core_class(self.scenario, batch=self.num_envs)
+        self.agents = list(env.possible_agents)
+        self.n_agents = len(self.agents)
+        self.metadata = dict(env.metadata)
+        self.single_observation_space: spaces.Box = env.observation_space(self.agents[0])
+        self.single_action_space: spaces.Box = env.action_space(self.agents[0])
+        self.action_shape = (self.num_envs, self.n_agents, *self.single_action_space.shape)
+        self.max_steps = int(self.scenario.max_steps)
+        self._pending_seed = _check_seed(seed)
+        self._rngs: CopyGenerators | None = None
+
+    def __repr__(self) -> str:
+        return f"SatVectorEnv({self.metadata.get('name')}, num_envs={self.num_envs}, n_agents={self.n_agents})"
+
+    # ----------------------------------------------------------------- episode
+    def reset(self, seed: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every copy; returns ``obs (B, M, obs_dim)`` and the reset info arrays."""
+        seed = _check_seed(seed)
+        if seed is None:
+            seed, self._pending_seed = self._pending_seed, None
+        if seed is not None:
+            self._rngs = CopyGenerators([np.random.default_rng(seed + b) for b in range(self.num_envs)])
+        elif self._rngs is None:
+            self._rngs = CopyGenerators([np.random.default_rng(s) for s in
+                                         np.random.SeedSequence().spawn(self.num_envs)])
+        idx = np.arange(self.num_envs)
+        info = self.core.reset(self._sample(idx), None, self._rngs)
+        return self.core.observe(), dict(info)
+
+    def _sample(self, idx: np.ndarray) -> np.ndarray:
+        gens = self._rngs.generators
+        return np.concatenate([self.core.sample_initial_state(gens[b], 1) for b in idx])
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Apply ``actions (B, M, act_dim)`` in ``[-1, 1]``; returns obs, rewards, terminations,
+        truncations ``(B, M)`` and infos (auto-reset: module docstring)."""
+        if self._rngs is None:
+            raise SatenvError("step() called before reset(): call reset() first")
+        a = self._check_actions(actions)
+        accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
+        res = self.core.step(accel, self._rngs)
+        terminated = np.asarray(res.terminated, dtype=bool)
+        truncated = (self.core.t >= self.max_steps) & ~terminated
+        obs = self.core.observe()
+        rewards = np.asarray(res.rewards, dtype=np.float64)
+        infos: dict[str, Any] = dict(res.info)
+        done = terminated | truncated
+        if done.any():
+            idx = np.flatnonzero(done)
+            reset_info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx))
+            infos = {k: v.copy() for k, v in res.info.items()}
+            for k, v in reset_info.items():
+                infos[k][idx] = v
+            infos.update(final_observation=obs, final_info=res.info, _final=done)
+            obs = self.core.observe()
+        m = self.n_agents
+        return (obs, rewards, np.repeat(terminated[:, None], m, axis=1),
+                np.repeat(truncated[:, None], m, axis=1), infos)
+
+    def _check_actions(self, actions: Any) -> np.ndarray:
+        try:
+            a = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SatenvError(f"actions must be a numeric array of shape {self.action_shape}, "
+                              f"got {type(actions).__name__}") from None
+        if a.shape != self.action_shape:
+            raise SatenvError(f"actions must have shape {self.action_shape} (copies, agents, action_dim), "
+                              f"got {a.shape}")
+        if not np.isfinite(a).all():
+            raise SatenvError("actions must be finite (normalised inputs in [-1, 1]), got NaN/inf entries")
+        return a
+
+    def state(self) -> np.ndarray:
+        """The global state of every copy ``(B, ...)`` (the PettingZoo env's ``state()``), float64."""
+        return np.asarray(self.core.global_state(), dtype=np.float64)
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def _check_seed(seed: Any) -> int | None:
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise SatenvError(f"seed must be a non-negative int or None, got {seed!r}")
+    return int(seed)

@@ -1,0 +1,126 @@
+"""satenv.make_vec: the batched numpy vector env reproduces the PettingZoo env copy by copy."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import satenv
+from satenv.envs.base import SatenvError
+from satenv.vector import SatVectorEnv
+
+B = 3
+
+
+def _short(env_id: str, steps: int, **kwargs):
+    """Env kwargs truncating after ``steps`` (the step-limit field's name differs per env)."""
+    names = {f.name for f in dataclasses.fields(satenv.make(env_id).scenario)}
+    return {**kwargs, ("max_steps" if "max_steps" in names else "n_steps"): steps}
+
+
+def _stack(d, agents):
+    return np.stack([d[a] for a in agents])
+
+
+CASES = [
+    ("platoon_v0", {"randomize": True}),
+    ("cluster_v0", {"disturbance": "random"}),  # in-step randomness: per-copy streams
+    ("servicing_v0", {"randomize": True}),
+    ("formation_v0", {"randomize": True}),
+]
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), CASES, ids=[c[0] for c in CASES])
+def test_copy_b_reproduces_the_pettingzoo_env_across_an_auto_reset(env_id, kwargs):
+    steps, seed = 3, 11
+    kw = _short(env_id, steps, **kwargs)
+    vec = satenv.make_vec(env_id, B, seed=seed, **kw)
+    envs = [satenv.make(env_id, **kw) for _ in range(B)]
+    agents = envs[0].possible_agents
+    obs, infos = vec.reset()
+    assert obs.shape == (B, len(agents), *vec.single_observation_space.shape) and obs.dtype == np.float32
+    assert vec.state().shape == (B, *envs[0].state().shape)
+    pz_obs = [env.reset(seed=seed + b)[0] for b, env in enumerate(envs)]
+    rng = np.random.default_rng(0)
+    for k in range(2 * steps):  # crosses one auto-reset
+        for b, env in enumerate(envs):
+            np.testing.assert_array_equal(obs[b], _stack(pz_obs[b], agents))
+            np.testing.assert_array_equal(vec.state()[b], env.state())
+        act = rng.uniform(-1.2, 1.2, size=vec.action_shape)
+        obs, rew, term, trunc, infos = vec.step(act)
+        assert rew.shape == term.shape == trunc.shape == (B, len(agents))
+        for b, env in enumerate(envs):
+            o, r, te, tr, inf = env.step({a: act[b, i] for i, a in enumerate(agents)})
+            np.testing.assert_array_equal(rew[b], [r[a] for a in agents])
+            assert term[b].tolist() == [te[a] for a in agents] and trunc[b].tolist() == [tr[a] for a in agents]
+            step_info = infos["final_info"] if "_final" in infos else infos
+            np.testing.assert_array_equal(step_info["state"][b], _stack({a: inf[a]["state"] for a in agents}, agents))
+            if te[agents[0]] or tr[agents[0]]:
+                assert infos["_final"][b]
+                np.testing.assert_array_equal(infos["final_observation"][b], _stack(o, agents))
+                o, _ = env.reset()  # the PettingZoo env continues its own stream
+            pz_obs[b] = o
+        assert ((k + 1) % steps == 0) == ("_final" in infos)
+
+
+def test_auto_reset_infos_and_partial_termination():
+    from test_env_base import ToyEnv
+
+    vec = SatVectorEnv(ToyEnv(), 4, seed=5)
+    vec.reset()
+    vec.core.x[1] = 0.0  # copy 1: agents at rest almost on top of each other -> collision
+    vec.core.x[1, :, 0] = [0.0, 0.05, 3.0]
+    obs, _, term, trunc, infos = vec.step(np.zeros(vec.action_shape))
+    assert term.tolist() == [[False] * 3, [True] * 3, [False] * 3, [False] * 3] and not trunc.any()
+    assert infos["_final"].tolist() == [False, True, False, False]
+    assert infos["final_info"]["collision"][1].any()
+    assert not infos["collision"][1].any()  # the reset info of copy 1's new episode
+    assert vec.core.t.tolist() == [1, 0, 1, 1]
+    np.testing.assert_array_equal(obs, vec.core.observe())
+    assert not np.allclose(obs[1], infos["final_observation"][1])
+
+
+def test_seeding_reset_without_seed_continues_and_fresh_entropy():
+    vec = satenv.make_vec("formation_v0", 2, seed=3, randomize=True)
+    first, _ = vec.reset()
+    again, _ = vec.reset()
+    assert not np.array_equal(first, again)  # the per-copy streams continue
+    np.testing.assert_array_equal(vec.reset(seed=3)[0], first)
+    a, _ = satenv.make_vec("formation_v0", 2, randomize=True).reset()
+    b, _ = satenv.make_vec("formation_v0", 2, randomize=True).reset()
+    assert not np.array_equal(a, b)
+
+
+def test_bad_input_errors():
+    with pytest.raises(SatenvError, match="num_envs"):
+        satenv.make_vec("platoon_v0", 0)
+    with pytest.raises(ValueError, match="unknown env id"):
+        satenv.make_vec("nope_v0", 2)
+    with pytest.raises(SatenvError, match="satenv env"):
+        SatVectorEnv(object(), 2)
+    with pytest.raises(SatenvError, match="seed"):
+        satenv.make_vec("platoon_v0", 2, seed=-1)
+    with pytest.raises(SatenvError, match="unknown keyword"):
+        satenv.make_vec("platoon_v0", 2, bogus=1)
+    vec = satenv.make_vec("platoon_v0", 2, seed=0)
+    with pytest.raises(SatenvError, match="before reset"):
+        vec.step(np.zeros(vec.action_shape))
+    vec.reset()
+    before = vec.state()
+    with pytest.raises(SatenvError, match=r"shape \(2, 4, 3\)"):
+        vec.step(np.zeros((8, 3)))
+    bad = np.zeros(vec.action_shape)
+    bad[1, 2, 0] = np.nan
+    with pytest.raises(SatenvError, match="finite"):
+        vec.step(bad)
+    np.testing.assert_array_equal(vec.state(), before)
+
+
+def test_one_batched_core_step_per_step(monkeypatch):
+    vec = satenv.make_vec("platoon_v0", 8, seed=0)
+    vec.reset()
+    calls = []
+    original = vec.core.step
+    monkeypatch.setattr(vec.core, "step", lambda accel, rng=None: calls.append(accel.shape) or original(accel, rng))
+    vec.step(np.zeros(vec.action_shape))
+    assert calls == [(8, 4, 3)]

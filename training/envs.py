@@ -1,0 +1,47 @@
+"""Building satenv envs for training by id (no learning library imported here).
+
+``env_id`` is a satenv env id (``"platoon_v0"``, built with :func:`satenv.make`) or
+``"package.module:callable"`` for an env defined elsewhere (e.g. a test fixture).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from satenv.envs.base import SatParallelEnv, SatenvError
+
+__all__ = ["make_env", "env_version"]
+
+
+def make_env(env_id: str, **kwargs: Any) -> SatParallelEnv:
+    """Build the PettingZoo env ``env_id`` with ``kwargs`` (module docstring)."""
+    if not isinstance(env_id, str) or not env_id:
+        raise SatenvError(f"env_id must be a non-empty string such as 'platoon_v0', got {env_id!r}")
+    if ":" not in env_id:
+        import satenv
+
+        if env_id not in satenv.ENV_IDS:
+            raise SatenvError(f"unknown env id {env_id!r}: use one of {list(satenv.ENV_IDS)} or "
+                              "'package.module:callable'")
+        return satenv.make(env_id, **kwargs)
+    module_name, _, attr = env_id.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as err:
+        raise SatenvError(f"unknown env id {env_id!r}: cannot import {module_name!r} ({err}); use a "
+                          "satenv env id such as 'platoon_v0' or 'package.module:callable'") from None
+    factory = getattr(module, attr, None)
+    if factory is None:
+        raise SatenvError(f"unknown env id {env_id!r}: {module_name!r} has no attribute {attr!r}")
+    env = factory(**kwargs)
+    if not isinstance(env, SatParallelEnv):
+        raise SatenvError(f"env id {env_id!r} built a {type(env).__name__}; expected a "
+                          "satenv.envs.base.SatParallelEnv subclass (it needs a batched core)")
+    return env
+
+
+def env_version(env_id: str) -> str:
+    """The version suffix of an env id (``"platoon_v0"`` -> ``"v0"``), or ``""``."""
+    tail = env_id.rsplit(":", 1)[-1].rsplit("_", 1)
+    return tail[-1] if len(tail) == 2 and tail[-1].startswith("v") else ""
