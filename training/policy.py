@@ -1,32 +1,46 @@
-"""Learned policies with the baseline interface, and loading them from a run's artefact folder.
+"""Learned policies with the baseline interface, and their artefact folders (no pickle).
 
-An artefact folder (written by ``python -m training.train``, e.g. ``runs/x/final/`` or
-``training/policies/<name>/``) holds:
+An artefact folder (written by ``python -m training.train``, e.g. ``runs/x/final/``, by the
+BenchMARL/RLlib exports, or shipped in ``training/policies/<name>/``) holds only data:
 
-* ``model.zip``      the SB3 model (PPO or SAC);
-* ``obs_norm.npz``   the observation normalisation (``mean``, ``var``, ``clip_obs``, ``epsilon``;
-                     identity when normalisation was off);
+* ``policy.json``    format tag and the actor architecture (:mod:`training.actor`);
+* ``weights.pt``     the actor's torch state dict, read with ``torch.load(weights_only=True)``;
+* ``obs_norm.json``  the observation normalisation (``mean``, ``var``, ``clip_obs``,
+                     ``epsilon``, or ``{"identity": true}``);
 * ``env.json``       env id, version, satenv version, train and eval env kwargs, spaces;
-* ``config.json``    the :class:`training.config.TrainConfig` used;
-* ``eval.json``      the evaluation summary (optional for loading).
+* ``config.json``    the training config (replayable: ``python -m training.train --config``);
+* ``manifest.json``  sha256 of the files above; checked on load (required in shipped folders);
+* ``eval.json``      the evaluation summary (optional, not read by :func:`load`).
+
+**What is safe to load.** :func:`load` never unpickles and never imports code named by the
+folder: JSON, and tensors through torch's restricted ``weights_only`` loader. A folder with only
+an SB3 ``model.zip`` (older runs) is refused unless ``trusted=True``: unpickling it runs any code
+the file contains, so only do that for files you made or trust. :func:`convert_sb3` turns such a
+folder into the safe format once.
 
 ``load(path)`` returns a :class:`LearnedPolicy` with ``reset(seed=None)`` and
-``act(observations) -> actions`` (dicts keyed by agent, actions in ``[-1, 1]^3``), usable
-anywhere a scripted baseline is (``satenv.rollout.rollout``, the scoreboard).
+``act(observations) -> actions`` (dicts keyed by agent, actions in ``[-1, 1]``), usable anywhere
+a scripted baseline is (``satenv.rollout.rollout``, the scoreboard).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["LearnedPolicy", "PolicyLoadError", "load", "save_artifacts", "ObsNormalizer"]
+__all__ = ["LearnedPolicy", "PolicyLoadError", "load", "save_artifacts", "ObsNormalizer", "from_sb3",
+           "convert_sb3"]
 
-ALGO_CLASSES = ("ppo", "sac")
+FORMAT = "satenv-policy/1"
+POLICY_FILES = ("policy.json", "weights.pt", "obs_norm.json", "env.json", "config.json")
+"""The files :func:`load` reads (and the manifest covers)."""
+MANIFEST = "manifest.json"
 
 
 class PolicyLoadError(ValueError):
@@ -34,14 +48,31 @@ class PolicyLoadError(ValueError):
 
 
 class ObsNormalizer:
-    """``clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs)`` (SB3 ``VecNormalize``)."""
+    """``clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs)`` (SB3 ``VecNormalize``).
 
-    def __init__(self, mean: np.ndarray | None = None, var: np.ndarray | None = None,
-                 clip_obs: float = np.inf, epsilon: float = 1e-8) -> None:
-        self.mean = None if mean is None else np.asarray(mean, dtype=np.float64)
-        self.var = None if var is None else np.asarray(var, dtype=np.float64)
-        self.clip_obs = float(clip_obs)
-        self.epsilon = float(epsilon)
+    Validated: ``mean`` and ``var`` finite arrays of one shape with ``var >= 0``, ``epsilon >= 0``
+    and ``var + epsilon > 0``, ``clip_obs > 0``.
+    """
+
+    def __init__(self, mean: Any = None, var: Any = None, clip_obs: float = math.inf,
+                 epsilon: float = 1e-8) -> None:
+        if (mean is None) != (var is None):
+            raise ValueError("obs normaliser: give both mean and var, or neither (identity)")
+        self.clip_obs, self.epsilon = float(clip_obs), float(epsilon)
+        if not self.clip_obs > 0 or not (math.isfinite(self.epsilon) and self.epsilon >= 0):
+            raise ValueError(f"obs normaliser: clip_obs must be > 0 and epsilon finite >= 0, got "
+                             f"clip_obs={clip_obs!r}, epsilon={epsilon!r}")
+        self.mean = self.var = None
+        if mean is not None:
+            self.mean, self.var = np.asarray(mean, dtype=np.float64), np.asarray(var, dtype=np.float64)
+            if self.mean.ndim != 1 or self.mean.shape != self.var.shape:
+                raise ValueError(f"obs normaliser: mean and var must be 1-D of one shape, got "
+                                 f"{self.mean.shape} and {self.var.shape}")
+            if not (np.isfinite(self.mean).all() and np.isfinite(self.var).all()):
+                raise ValueError("obs normaliser: mean and var must be finite, got NaN/inf entries")
+            if (self.var < 0).any() or not (self.var + self.epsilon > 0).all():
+                raise ValueError(f"obs normaliser: variance must be >= 0 with var + epsilon > 0, got "
+                                 f"min var {self.var.min()!r}, epsilon {self.epsilon!r}")
 
     @classmethod
     def from_vecnormalize(cls, venv: Any) -> ObsNormalizer:
@@ -56,46 +87,61 @@ class ObsNormalizer:
         out = (obs - self.mean) / np.sqrt(self.var + self.epsilon)
         return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
 
-    def save(self, path: Path) -> None:
+    def to_json(self) -> dict[str, Any]:
         if self.mean is None:
-            np.savez(path, identity=np.array(True))
-        else:
-            np.savez(path, identity=np.array(False), mean=self.mean, var=self.var,
-                     clip_obs=np.array(self.clip_obs), epsilon=np.array(self.epsilon))
+            return {"identity": True}
+        return {"identity": False, "mean": self.mean.tolist(), "var": self.var.tolist(),
+                "clip_obs": self.clip_obs if math.isfinite(self.clip_obs) else "inf", "epsilon": self.epsilon}
 
     @classmethod
-    def load(cls, path: Path) -> ObsNormalizer:
-        with np.load(path) as d:
-            if bool(d["identity"]):
-                return cls()
-            return cls(d["mean"], d["var"], float(d["clip_obs"]), float(d["epsilon"]))
+    def from_json(cls, data: Any) -> ObsNormalizer:
+        if not isinstance(data, dict) or not isinstance(data.get("identity"), bool):
+            raise ValueError(f"obs_norm.json must be an object with a bool 'identity', got {str(data)[:80]!r}")
+        if data["identity"]:
+            return cls()
+        unknown = set(data) - {"identity", "mean", "var", "clip_obs", "epsilon"}
+        if unknown:
+            raise ValueError(f"obs_norm.json: unknown field(s) {sorted(unknown)}")
+        clip = data.get("clip_obs", "inf")
+        return cls(data["mean"], data["var"], math.inf if clip == "inf" else clip, data.get("epsilon", 1e-8))
 
 
 class LearnedPolicy:
-    """A trained SB3 model behind the baseline interface (one shared policy for every agent).
+    """A trained actor (:class:`training.actor.MLPActor`) behind the baseline interface.
 
-    ``act`` stacks the agents' observations (in the dict's order) into one batch, normalises it
-    with the saved statistics and returns the deterministic actions.
+    One shared actor for every agent: ``act`` stacks the agents' observations (in the dict's
+    order), applies the feature map and the saved normalisation, and returns the deterministic
+    actions clipped to ``[-1, 1]`` (then the action map).
     """
 
     name = "learned"
 
-    def __init__(self, model: Any, normalizer: ObsNormalizer | None = None, *,
-                 features: Any = None, action_map: Any = None, meta: dict[str, Any] | None = None,
-                 deterministic: bool = True) -> None:
-        self.model = model
+    def __init__(self, actor: Any, normalizer: ObsNormalizer | None = None, *, obs_shape: tuple[int, ...],
+                 features: Any = None, action_map: Any = None, meta: dict[str, Any] | None = None) -> None:
+        self.actor = actor.eval()
         self.normalizer = normalizer or ObsNormalizer()
         self.features = features
         self.action_map = action_map
         self.meta = dict(meta or {})
-        self.deterministic = deterministic
-        # the env's per-agent observation shape (before the optional feature map)
-        self.obs_shape = tuple(self.meta.get("observation_shape", model.observation_space.shape))
-        self.action_shape = tuple(model.action_space.shape)
+        self.obs_shape = tuple(obs_shape)  # the env's per-agent observation (before the features)
+        self.action_shape = (int(actor.spec["act_dim"]),)
         self.info: dict[str, Any] = {"fallbacks": 0}
 
     def reset(self, seed: int | None = None) -> None:
         self.info = {"fallbacks": 0}
+
+    def predict(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, act_dim)`` in ``[-1, 1]`` for raw per-agent observations ``(n, *obs_shape)``."""
+        import torch
+
+        if self.features is not None:
+            obs = self.features(obs)
+        with torch.no_grad():
+            y = self.actor(torch.as_tensor(self.normalizer(obs))).numpy()
+        actions = np.clip(y.astype(np.float64), -1.0, 1.0)
+        if self.action_map is not None:
+            actions = self.action_map(actions)
+        return actions.astype(np.float32)
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         if not isinstance(observations, dict) or not observations:
@@ -110,13 +156,7 @@ class LearnedPolicy:
                                       f"on shape {self.obs_shape} ({self.meta.get('env_id', '?')}, "
                                       f"kwargs {self.meta.get('env_kwargs', {})}); use the env it was trained on")
             obs[i] = o
-        if self.features is not None:
-            obs = self.features(obs)
-        actions, _ = self.model.predict(self.normalizer(obs), deterministic=self.deterministic)
-        actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
-        if self.action_map is not None:
-            actions = self.action_map(actions)
-        actions = actions.astype(np.float32)
+        actions = self.predict(obs)
         return {a: actions[i] for i, a in enumerate(agents)}
 
     def check_env(self, env: Any) -> None:
@@ -170,63 +210,191 @@ def action_map_from_config(config: dict[str, Any]):
     return amap if amap.active else None
 
 
-def _algo_class(algo: str):
-    from stable_baselines3 import PPO, SAC
-
-    return {"ppo": PPO, "sac": SAC}[algo]
 
 
-def load(path: str | Path, env: Any = None, *, device: str = "cpu") -> LearnedPolicy:
+# ----------------------------------------------------------------------------- SB3 export
+def _sb3_actor(model: Any):
+    """The deterministic actor of an SB3 PPO/SAC ``MlpPolicy`` as an :class:`MLPActor`."""
+    from torch import nn
+
+    from training.actor import MLPActor
+
+    policy = model.policy
+    if hasattr(policy, "action_net"):  # PPO / A2C: mlp_extractor.policy_net -> action_net
+        body, head, squash = policy.mlp_extractor.policy_net, policy.action_net, False
+    elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):  # SAC: latent_pi -> mu -> tanh
+        body, head, squash = policy.actor.latent_pi, policy.actor.mu, True
+    else:
+        raise PolicyLoadError(f"cannot export a {type(policy).__name__}: expected an SB3 PPO/SAC MlpPolicy")
+    linears = [m for m in body if isinstance(m, nn.Linear)]
+    acts = {type(m).__name__.lower() for m in body if not isinstance(m, nn.Linear)}
+    if len(acts) > 1:
+        raise PolicyLoadError(f"cannot export an actor mixing activations {sorted(acts)}")
+    activation = acts.pop() if acts else "tanh"
+    obs_dim = int(np.prod(model.observation_space.shape))
+    actor = MLPActor(obs_dim, int(head.out_features), [m.out_features for m in linears], activation, squash)
+    return actor.copy_linear_weights([*linears, head])
+
+
+def from_sb3(model: Any, normalizer: ObsNormalizer, *, obs_shape: tuple[int, ...], features: Any = None,
+             action_map: Any = None, meta: dict[str, Any] | None = None) -> LearnedPolicy:
+    """The :class:`LearnedPolicy` of an in-memory SB3 model (a copy of its actor's weights)."""
+    return LearnedPolicy(_sb3_actor(model), normalizer, obs_shape=obs_shape, features=features,
+                         action_map=action_map, meta=meta)
+
+
+# ----------------------------------------------------------------------------- load / save
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _check_manifest(root: Path, required: bool) -> None:
+    path = root / MANIFEST
+    if not path.is_file():
+        if required:
+            raise PolicyLoadError(f"{str(root)!r} is a shipped policy folder but has no {MANIFEST}")
+        return
+    listed = json.loads(path.read_text()).get("sha256")
+    if not isinstance(listed, dict) or set(POLICY_FILES) - set(listed):
+        raise PolicyLoadError(f"{path}: expected {{\"sha256\": {{file: hex}}}} covering {list(POLICY_FILES)}")
+    bad = [name for name in POLICY_FILES if _sha256(root / name) != listed[name]]
+    if bad:
+        raise PolicyLoadError(f"{str(root)!r}: {bad} do not match {MANIFEST} (changed after saving?); "
+                              "re-save the folder or restore the files")
+
+
+def _is_shipped(root: Path) -> bool:
+    from training import POLICIES_DIR
+
+    return root.resolve().parent == POLICIES_DIR.resolve()
+
+
+def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> LearnedPolicy:
     """Load the policy in artefact folder ``path``; if ``env`` is given, check its spaces fit.
 
-    Raises :class:`PolicyLoadError` (a ``ValueError``) for a missing/unreadable folder or a
-    space mismatch.
+    Never unpickles (module docstring), except an SB3 ``model.zip``-only folder with
+    ``trusted=True`` (a ``UserWarning`` says so). Every failure — missing or corrupt files, a
+    manifest mismatch, an invalid normaliser, a space mismatch — raises
+    :class:`PolicyLoadError` (a ``ValueError``).
     """
     root = Path(path)
     if not root.is_dir():
         raise PolicyLoadError(f"learned policy path {str(path)!r} is not a directory; expected an artefact "
-                              "folder with model.zip, obs_norm.npz, env.json, config.json (e.g. "
-                              "runs/<run>/final or training/policies/<name>)")
-    missing = [f for f in ("model.zip", "obs_norm.npz", "env.json", "config.json") if not (root / f).is_file()]
-    if missing:
-        raise PolicyLoadError(f"{str(root)!r} is not a complete policy folder: missing {missing}; "
-                              "point to the 'final' or 'best' folder written by python -m training.train")
-    try:
-        meta = json.loads((root / "env.json").read_text())
-        config = json.loads((root / "config.json").read_text())
-        algo = config["algo"]
-        if algo not in ALGO_CLASSES:
-            raise KeyError(algo)
-        normalizer = ObsNormalizer.load(root / "obs_norm.npz")
-        features = features_from_config(config)
-        action_map = action_map_from_config(config)
-        model = _algo_class(algo).load(root / "model.zip", device=device)
-    except (OSError, ValueError, KeyError, EOFError) as err:
-        raise PolicyLoadError(f"cannot read the learned policy in {str(root)!r}: {type(err).__name__}: {err}") from None
-    policy = LearnedPolicy(model, normalizer, features=features, action_map=action_map, meta=meta)
-    if normalizer.mean is not None and normalizer.mean.shape != tuple(model.observation_space.shape):
-        raise PolicyLoadError(f"{str(root)!r}: obs_norm.npz has shape {normalizer.mean.shape} but the model "
-                              f"expects {policy.obs_shape}; the folder mixes files of different runs")
+                              f"folder with {list(POLICY_FILES)} (e.g. runs/<run>/final or "
+                              "training/policies/<name>)")
+    if not (root / "weights.pt").is_file() and (root / "model.zip").is_file():
+        policy = _load_sb3_zip(root, trusted)
+    else:
+        missing = [f for f in POLICY_FILES if not (root / f).is_file()]
+        if missing:
+            raise PolicyLoadError(f"{str(root)!r} is not a complete policy folder: missing {missing}; "
+                                  "point to the 'final' or 'best' folder written by python -m training.train")
+        try:
+            policy = _load_safe(root)
+        except PolicyLoadError:
+            raise
+        except Exception as err:  # noqa: BLE001 - every failure of reading data is a load error
+            raise PolicyLoadError(f"cannot read the learned policy in {str(root)!r}: "
+                                  f"{type(err).__name__}: {err}") from None
     if env is not None:
         policy.check_env(env)
     return policy
 
 
-def save_artifacts(folder: str | Path, model: Any, normalizer: ObsNormalizer, *, env_meta: dict[str, Any],
+def _load_safe(root: Path) -> LearnedPolicy:
+    import torch
+
+    from training.actor import actor_from_spec
+
+    _check_manifest(root, required=_is_shipped(root))
+    spec = json.loads((root / "policy.json").read_text())
+    if not isinstance(spec, dict) or spec.get("format") != FORMAT:
+        raise PolicyLoadError(f"{root / 'policy.json'}: expected format {FORMAT!r}, got "
+                              f"{spec.get('format') if isinstance(spec, dict) else spec!r}")
+    meta = json.loads((root / "env.json").read_text())
+    config = json.loads((root / "config.json").read_text())
+    if not isinstance(meta, dict) or not isinstance(config, dict):
+        raise PolicyLoadError(f"{str(root)!r}: env.json and config.json must be JSON objects")
+    normalizer = ObsNormalizer.from_json(json.loads((root / "obs_norm.json").read_text()))
+    actor = actor_from_spec(spec.get("actor"))
+    state = torch.load(root / "weights.pt", map_location="cpu", weights_only=True)
+    actor.load_state_dict(state)
+    if not all(torch.isfinite(t).all() for t in actor.state_dict().values()):
+        raise PolicyLoadError(f"{root / 'weights.pt'}: the weights contain NaN/inf")
+    if normalizer.mean is not None and normalizer.mean.shape != (actor.spec["obs_dim"],):
+        raise PolicyLoadError(f"{str(root)!r}: obs_norm.json has shape {normalizer.mean.shape} but the actor "
+                              f"expects ({actor.spec['obs_dim']},); the folder mixes files of different runs")
+    obs_shape = tuple(meta.get("observation_shape", (actor.spec["obs_dim"],)))
+    return LearnedPolicy(actor, normalizer, obs_shape=obs_shape, features=features_from_config(config),
+                         action_map=action_map_from_config(config), meta=meta)
+
+
+def _load_sb3_zip(root: Path, trusted: bool) -> LearnedPolicy:
+    """An old-format folder (SB3 ``model.zip`` + ``obs_norm.npz``): unpickles, so ``trusted`` only."""
+    if not trusted:
+        raise PolicyLoadError(
+            f"{str(root)!r} holds an SB3 model.zip and no weights.pt: loading it would unpickle the file, "
+            "which runs any code it contains. Load it with training.load(path, trusted=True) only if you "
+            "made it or trust its source, or convert it once with training.policy.convert_sb3(path)")
+    warnings.warn(f"unpickling the SB3 model in {root} (trusted=True): only do this for files you trust",
+                  UserWarning, stacklevel=3)
+    try:
+        from stable_baselines3 import PPO, SAC
+
+        meta = json.loads((root / "env.json").read_text())
+        config = json.loads((root / "config.json").read_text())
+        with np.load(root / "obs_norm.npz", allow_pickle=False) as d:
+            normalizer = ObsNormalizer() if bool(d["identity"]) else ObsNormalizer(
+                d["mean"], d["var"], float(d["clip_obs"]), float(d["epsilon"]))
+        model = {"ppo": PPO, "sac": SAC}[config["algo"]].load(root / "model.zip", device="cpu")
+        return from_sb3(model, normalizer, obs_shape=tuple(meta["observation_shape"]),
+                        features=features_from_config(config), action_map=action_map_from_config(config),
+                        meta=meta)
+    except PolicyLoadError:
+        raise
+    except Exception as err:  # noqa: BLE001
+        raise PolicyLoadError(f"cannot read the SB3 policy in {str(root)!r}: {type(err).__name__}: {err}") from None
+
+
+def save_artifacts(folder: str | Path, policy: LearnedPolicy, *, env_meta: dict[str, Any],
                    config: dict[str, Any], evaluation: dict[str, Any] | None = None,
-                   vecnormalize: Any = None) -> Path:
-    """Write an artefact folder (module docstring); returns its path."""
+                   source: str = "") -> Path:
+    """Write an artefact folder in the safe format (module docstring); returns its path."""
+    import torch
+
     root = Path(folder)
     root.mkdir(parents=True, exist_ok=True)
-    model.save(root / "model.zip")
-    normalizer.save(root / "obs_norm.npz")
-    if vecnormalize is not None:
-        vecnormalize.save(str(root / "vecnormalize.pkl"))
+    spec = {"format": FORMAT, "actor": policy.actor.spec, "source": source}
+    (root / "policy.json").write_text(json.dumps(spec, indent=2) + "\n")
+    torch.save({k: v.detach().cpu().clone() for k, v in policy.actor.state_dict().items()}, root / "weights.pt")
+    (root / "obs_norm.json").write_text(json.dumps(policy.normalizer.to_json()) + "\n")
     (root / "env.json").write_text(json.dumps(env_meta, indent=2) + "\n")
     (root / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    write_manifest(root)
     if evaluation is not None:
         (root / "eval.json").write_text(json.dumps(evaluation, indent=2, default=_jsonable) + "\n")
     return root
+
+
+def write_manifest(root: Path) -> None:
+    """(Re)write ``manifest.json`` with the sha256 of :data:`POLICY_FILES`."""
+    digests = {name: _sha256(root / name) for name in POLICY_FILES}
+    (root / MANIFEST).write_text(json.dumps({"sha256": digests}, indent=2) + "\n")
+
+
+def convert_sb3(folder: str | Path) -> Path:
+    """Convert an old SB3 folder in place (unpickles ``model.zip`` once: trusted files only).
+
+    Writes the safe files beside ``model.zip``/``obs_norm.npz``, which :func:`load` then ignores
+    (delete them). Returns the folder.
+    """
+    root = Path(folder)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        policy = _load_sb3_zip(root, trusted=True)
+    config = json.loads((root / "config.json").read_text())
+    source = f"stable-baselines3 {str(config.get('algo', '')).upper()} (converted from model.zip)"
+    return save_artifacts(root, policy, env_meta=policy.meta, config=config, source=source)
 
 
 def _jsonable(v: Any) -> Any:

@@ -38,26 +38,26 @@ import numpy as np
 
 from training.config import TrainConfig, build_parser, config_from_json, parse_args
 from training.evaluate import compare, evaluate, evaluate_baselines, format_table
+from training.envs import env_version, make_env
 from training.policy import (
-    LearnedPolicy,
     ObsNormalizer,
     action_map_from_config,
     features_from_config,
+    from_sb3,
     save_artifacts,
 )
 from training.shaping import RewardShaping
-from training.vec_env import SatVecEnv, env_version, make_env
 
 __all__ = ["main", "train", "latest_checkpoint"]
 
 
 # --------------------------------------------------------------------------- helpers
 def latest_checkpoint(out_dir: Path) -> tuple[int, Path] | None:
-    """``(steps, folder)`` of the newest ``checkpoints/step_<N>`` with a model, or ``None``."""
+    """``(steps, folder)`` of the newest complete ``checkpoints/step_<N>``, or ``None``."""
     found = []
     for p in (out_dir / "checkpoints").glob("step_*"):
         m = re.fullmatch(r"step_(\d+)", p.name)
-        if m and (p / "model.zip").is_file():
+        if m and (p / CHECKPOINT_STATE).is_file():
             found.append((int(m.group(1)), p))
     return max(found) if found else None
 
@@ -106,12 +106,6 @@ def build_model(cfg: TrainConfig, venv):
                **common)
 
 
-def _algo_class(algo: str):
-    from stable_baselines3 import PPO, SAC
-
-    return {"ppo": PPO, "sac": SAC}[algo]
-
-
 def _score(agg: dict[str, Any]) -> tuple[float, float]:
     return (agg["success_rate"], -agg["rmse"])
 
@@ -150,7 +144,7 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
 
         def evaluate_now(self) -> None:
             n = self.model.num_timesteps
-            policy = LearnedPolicy(self.model, ObsNormalizer.from_vecnormalize(venv), meta=meta, **(maps or {}))
+            policy = export_policy(self.model, venv, meta, maps)
             res = evaluate(eval_env, policy, cfg.eval_seeds)
             agg = res["aggregate"]
             for key in ("success_rate", "rmse", "delta_v", "final_error_m", "collision_episodes",
@@ -167,9 +161,9 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
                                  dv=f"{agg['delta_v']:.3g}", refresh=False)
             if self.best is None or _score(agg) > self.best:
                 self.best = _score(agg)
-                save_artifacts(out / "best", self.model, ObsNormalizer.from_vecnormalize(venv),
-                               env_meta={**meta, "step": n}, config=cfg.to_json(),
-                               evaluation={"eval_seeds": list(cfg.eval_seeds), "learned": agg})
+                save_artifacts(out / "best", policy, env_meta={**meta, "step": n}, config=cfg.to_json(),
+                               evaluation={"eval_seeds": list(cfg.eval_seeds), "learned": agg},
+                               source=f"stable-baselines3 {cfg.algo.upper()}")
 
         def _on_training_end(self) -> None:
             self.bar.close()
@@ -177,20 +171,80 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
     return TrainingCallback()
 
 
+def export_policy(model, venv, meta: dict[str, Any], maps: dict[str, Any] | None = None):
+    """The current SB3 model as the :class:`training.policy.LearnedPolicy` that gets saved."""
+    return from_sb3(model, ObsNormalizer.from_vecnormalize(venv), obs_shape=tuple(meta["observation_shape"]),
+                    meta=meta, **(maps or {}))
+
+
+CHECKPOINT_STATE = "sb3_state.pt"
+"""Checkpoint files (no pickle): ``sb3_state.pt`` (the model's state dicts and tensors, read with
+``torch.load(weights_only=True)``), ``vecnormalize.json`` and, for SAC, ``replay_buffer.npz``."""
+_BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
 def save_checkpoint(model, venv, out: Path, steps: int) -> Path:
+    import torch
+    from stable_baselines3.common.save_util import recursive_getattr
+
     folder = out / "checkpoints" / f"step_{steps}"
     tmp = folder.with_name(folder.name + ".tmp")
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
-    model.save(tmp / "model.zip")
-    venv.save(str(tmp / "vecnormalize.pkl"))
-    if hasattr(model, "replay_buffer") and model.replay_buffer is not None:
-        model.save_replay_buffer(tmp / "replay_buffer.pkl")
+    state_dicts, tensors = model._get_torch_save_params()
+    state = {"num_timesteps": int(model.num_timesteps), "n_updates": int(getattr(model, "_n_updates", 0)),
+             "state_dicts": {name: recursive_getattr(model, name).state_dict() for name in state_dicts},
+             "tensors": {name: recursive_getattr(model, name).detach().cpu() for name in tensors}}
+    torch.save(state, tmp / CHECKPOINT_STATE)
+    (tmp / "vecnormalize.json").write_text(json.dumps(vecnormalize_state(venv)) + "\n")
+    buffer = getattr(model, "replay_buffer", None)
+    if buffer is not None:
+        arrays = {k: getattr(buffer, k) for k in _BUFFER_ARRAYS if getattr(buffer, k, None) is not None}
+        np.savez(tmp / "replay_buffer.npz", pos=np.array(buffer.pos), full=np.array(buffer.full), **arrays)
     if folder.exists():
         shutil.rmtree(folder)
     tmp.rename(folder)  # a checkpoint folder is complete or absent
     return folder
+
+
+def load_checkpoint(model, folder: Path) -> None:
+    """Restore :func:`save_checkpoint`'s model state into a freshly built ``model`` (no pickle)."""
+    import torch
+    from stable_baselines3.common.save_util import recursive_getattr
+
+    state = torch.load(folder / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
+    model.set_parameters(state["state_dicts"], exact_match=True, device="cpu")
+    for name, value in state["tensors"].items():
+        recursive_getattr(model, name).data.copy_(value)
+    model.num_timesteps = int(state["num_timesteps"])
+    model._n_updates = int(state["n_updates"])
+    buffer_path = folder / "replay_buffer.npz"
+    if buffer_path.is_file() and getattr(model, "replay_buffer", None) is not None:
+        buffer = model.replay_buffer
+        with np.load(buffer_path, allow_pickle=False) as d:
+            for k in _BUFFER_ARRAYS:
+                if k in d:
+                    getattr(buffer, k)[...] = d[k]
+            buffer.pos, buffer.full = int(d["pos"]), bool(d["full"])
+
+
+def vecnormalize_state(venv) -> dict[str, Any]:
+    """The running statistics of a ``VecNormalize`` as JSON data."""
+    def rms(r):
+        return {"mean": np.asarray(r.mean).tolist(), "var": np.asarray(r.var).tolist(), "count": float(r.count)}
+
+    return {"obs_rms": rms(venv.obs_rms), "ret_rms": rms(venv.ret_rms)}
+
+
+def restore_vecnormalize(venv, data: dict[str, Any]) -> None:
+    """Load :func:`vecnormalize_state` data into ``venv`` (shapes checked)."""
+    for key in ("obs_rms", "ret_rms"):
+        r = getattr(venv, key)
+        mean, var = np.asarray(data[key]["mean"], dtype=np.float64), np.asarray(data[key]["var"], dtype=np.float64)
+        if mean.shape != np.shape(r.mean) or var.shape != np.shape(r.var):
+            raise ValueError(f"vecnormalize.json: {key} has shape {mean.shape}, expected {np.shape(r.mean)}")
+        r.mean, r.var, r.count = mean, var, float(data[key]["count"])
 
 
 # --------------------------------------------------------------------------- training
@@ -199,6 +253,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     import torch
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from training.vec_env import SatVecEnv
 
     out = Path(cfg.out_dir)
     ckpt = latest_checkpoint(out) if resume else None
@@ -224,23 +280,18 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     vec = VecMonitor(SatVecEnv(env, cfg.n_copies, seed=cfg.seed + start_steps,
                                reward_fn=shaping if shaping.active else None, obs_fn=features,
                                action_fn=action_map))
+    venv = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, clip_obs=cfg.clip_obs,
+                        gamma=cfg.gamma)
     if ckpt:
-        venv = VecNormalize.load(str(ckpt[1] / "vecnormalize.pkl"), vec)
-        venv.training = True
-    else:
-        venv = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, clip_obs=cfg.clip_obs,
-                            gamma=cfg.gamma)
+        restore_vecnormalize(venv, json.loads((ckpt[1] / "vecnormalize.json").read_text()))
 
     # 4. scripted baselines on the evaluation seeds (cached)
     baseline_eval = _cached_baselines(out / "baselines_eval.json", eval_env, cfg, cfg.eval_seeds)
 
     # 5. model
+    model = build_model(cfg, venv)
     if ckpt:
-        model = _algo_class(cfg.algo).load(ckpt[1] / "model.zip", env=venv, device="cpu")
-        if (ckpt[1] / "replay_buffer.pkl").is_file():
-            model.load_replay_buffer(ckpt[1] / "replay_buffer.pkl")
-    else:
-        model = build_model(cfg, venv)
+        load_checkpoint(model, ckpt[1])
     model.tensorboard_log = str(out / "tb")
     history_path = out / "eval_history.json"
     history = [h for h in json.loads(history_path.read_text()) if h["step"] <= start_steps] \
@@ -260,15 +311,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
     # 7. artefacts with the held-out evaluation
     test_baselines = _cached_baselines(out / "baselines_test.json", eval_env, cfg, cfg.test_seeds)
-    final_policy = LearnedPolicy(model, ObsNormalizer.from_vecnormalize(venv), features=features,
-                                 action_map=action_map, meta=meta)
+    final_policy = export_policy(model, venv, meta, {"features": features, "action_map": action_map})
     summary = _summary(cfg, eval_env, final_policy, test_baselines, model.num_timesteps, wall)
-    final = save_artifacts(out / "final", model, final_policy.normalizer,
-                           env_meta={**meta, "step": model.num_timesteps}, config=cfg.to_json(),
-                           evaluation=summary, vecnormalize=venv)
+    final = save_artifacts(out / "final", final_policy, env_meta={**meta, "step": model.num_timesteps},
+                           config=cfg.to_json(), evaluation=summary, source=f"stable-baselines3 {cfg.algo.upper()}")
     print(f"final policy ({model.num_timesteps} steps, {wall / 60:.1f} min this session) on "
           f"{len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
-    if (out / "best" / "model.zip").is_file():
+    if (out / "best" / "weights.pt").is_file():
         from training.policy import load
 
         best = load(out / "best")
