@@ -48,6 +48,34 @@ def test_cli_flags_parse_into_the_config():
         parse_args(["--n-copies", "many"])
 
 
+def test_cli_config_replay_and_readable_help(tmp_path, capsys):
+    from training.config import build_parser
+
+    cfg = _cfg(tmp_path, seed=5, env_kwargs={"max_steps": 7})
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(cfg.to_json()))
+    assert parse_args(["--config", str(path)])[0] == cfg
+    assert parse_args(["--config", str(path), "--seed", "7"])[0] == cfg.replace(seed=7)
+    with pytest.raises(ValueError, match="--config"):
+        parse_args(["--config", str(tmp_path / "nope.json")])
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--help"])
+    out = capsys.readouterr().out
+    assert out.count("(default: 32)") == 1 and out.count("platoon_v0") == 1
+    assert "(default: 20000:20050)" in out and "default: None" not in out
+
+
+def test_total_timesteps_round_up_to_whole_rollouts(tmp_path, capsys):
+    from training.config import planned_timesteps
+
+    cfg = _cfg(tmp_path, total_timesteps=100, eval_every=0, checkpoint_every=0, test_seeds=(3,))
+    assert planned_timesteps(cfg, 3) == 192  # rollouts of 16 steps x 2 copies x 3 agents = 96
+    final = train(cfg)
+    assert json.loads((final / "env.json").read_text())["step"] == 192
+    assert "total_timesteps 100 -> 192" in capsys.readouterr().err
+    assert planned_timesteps(cfg.replace(algo="sac"), 3) == 102  # SAC: env steps of 6 rows
+
+
 def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     cfg = _cfg(tmp_path)
     final = train(cfg)

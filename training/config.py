@@ -14,7 +14,7 @@ import typing
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
-__all__ = ["TrainConfig", "parse_args", "config_from_json"]
+__all__ = ["TrainConfig", "parse_args", "config_from_json", "load_config", "planned_timesteps"]
 
 ALGOS = ("ppo", "sac")
 
@@ -30,7 +30,9 @@ class TrainConfig:
             without termination at a collision, evaluate with it).
         n_copies: scenario copies stepped together in one batched core (``SatVecEnv``).
     Algorithm:
-        algo: ``"ppo"`` or ``"sac"``; total_timesteps: agent-steps to train for; seed.
+        algo: ``"ppo"`` or ``"sac"``; seed. total_timesteps: agent-steps to train for, rounded
+            up to whole collection rounds: PPO rollouts of ``n_steps * n_copies * n_agents``
+            agent-steps, SAC env steps of ``n_copies * n_agents`` (:func:`planned_timesteps`).
         net_arch: hidden layer sizes of the policy and value/Q networks.
         learning_rate, gamma: shared; lr_schedule: ``"constant"`` or ``"linear"`` (decays to 5 %
             of ``learning_rate`` at ``total_timesteps``). PPO: n_steps (rollout length per row), batch_size,
@@ -168,6 +170,17 @@ class TrainConfig:
         return config_from_json({**self.to_json(), **changes})
 
 
+def round_timesteps(cfg: TrainConfig, n_agents: int) -> int:
+    """Agent-steps of one collection round: a PPO rollout, or one SAC env step of every row."""
+    return cfg.n_copies * n_agents * (cfg.n_steps if cfg.algo == "ppo" else 1)
+
+
+def planned_timesteps(cfg: TrainConfig, n_agents: int) -> int:
+    """``cfg.total_timesteps`` rounded up to whole collection rounds (what SB3 actually runs)."""
+    per_round = round_timesteps(cfg, n_agents)
+    return -(-cfg.total_timesteps // per_round) * per_round
+
+
 def _check_int(name: str, v: Any, minimum: int) -> None:
     if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
         raise ValueError(f"{name} must be an int >= {minimum}, got {v!r}")
@@ -186,6 +199,18 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
             v = tuple(v)
         kwargs[k] = v
     return TrainConfig(**kwargs)
+
+
+def load_config(path: str) -> TrainConfig:
+    """The :class:`TrainConfig` saved in a ``config.json`` (a clear ``ValueError`` otherwise)."""
+    try:
+        with open(path) as f:
+            data = json.load(f)
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(f"--config {path!r}: cannot read a JSON config ({err})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"--config {path!r}: expected a JSON object of TrainConfig fields")
+    return config_from_json(data)
 
 
 def _is_tuple(tp: Any) -> bool:
@@ -228,17 +253,31 @@ def _parse_value(tp: Any, text: str, name: str) -> Any:
 
 
 def build_parser(description: str = "") -> argparse.ArgumentParser:
-    """An argparse parser with one ``--flag`` per :class:`TrainConfig` field (defaults shown)."""
-    parser = argparse.ArgumentParser(description=description,
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    """An argparse parser with ``--config FILE`` and one ``--flag`` per :class:`TrainConfig` field
+    (each default shown once)."""
+    parser = argparse.ArgumentParser(
+        description=description,
+        epilog="Flags given override --config (or, with --resume, the run's saved config.json). "
+               "The fields are documented in training.config.TrainConfig.")
+    parser.add_argument("--config", metavar="FILE", default=None,
+                        help="replay a run: start from this config.json (e.g. runs/x/config.json or "
+                             "training/policies/<name>/config.json)")
     hints = typing.get_type_hints(TrainConfig)
     for f in fields(TrainConfig):
         default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
         shown = json.dumps(default) if isinstance(default, dict) else (
-            ",".join(map(str, default)) if isinstance(default, tuple) else default)
+            _show_tuple(default) if isinstance(default, tuple) else default)
         parser.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, default=None, metavar=_metavar(hints[f.name]),
                             help=f"(default: {shown})")
     return parser
+
+
+def _show_tuple(values: tuple) -> str:
+    """``a:b`` for a run of consecutive ints (the flag's range syntax), else comma-separated."""
+    if len(values) > 2 and all(isinstance(v, int) for v in values) and \
+            list(values) == list(range(values[0], values[0] + len(values))):
+        return f"{values[0]}:{values[0] + len(values)}"
+    return ",".join(map(str, values))
 
 
 def _metavar(tp: Any) -> str:
@@ -252,9 +291,12 @@ def _metavar(tp: Any) -> str:
 
 def parse_args(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None,
                base: TrainConfig | None = None) -> tuple[TrainConfig, argparse.Namespace]:
-    """Parse ``argv`` into a :class:`TrainConfig` (flags given override ``base``); returns also the namespace."""
+    """Parse ``argv`` into a :class:`TrainConfig` (flags given override ``base``, else ``--config
+    FILE``, else the defaults); returns also the namespace."""
     parser = parser or build_parser()
     ns = parser.parse_args(argv)
+    if base is None and ns.config is not None:
+        base = load_config(ns.config)
     hints = typing.get_type_hints(TrainConfig)
     changes = {}
     for f in fields(TrainConfig):

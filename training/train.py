@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from training.config import TrainConfig, build_parser, config_from_json, parse_args
+from training.config import TrainConfig, build_parser, config_from_json, parse_args, planned_timesteps, round_timesteps
 from training.evaluate import compare, evaluate, evaluate_baselines, format_table
 from training.envs import env_version, make_env
 from training.policy import (
@@ -112,7 +112,8 @@ def _score(agg: dict[str, Any]) -> tuple[float, float]:
 
 # --------------------------------------------------------------------------- callback
 def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: dict[str, Any],
-                  meta: dict[str, Any], history: list[dict[str, Any]], maps: dict[str, Any] | None = None):
+                  meta: dict[str, Any], history: list[dict[str, Any]], maps: dict[str, Any] | None = None,
+                  total: int | None = None):
     """One SB3 callback doing the progress bar, periodic evaluation and checkpoints."""
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm.auto import tqdm
@@ -123,7 +124,7 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
             self.next_eval = (n // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
             self.next_ckpt = (n // cfg.checkpoint_every + 1) * cfg.checkpoint_every if cfg.checkpoint_every else None
             self.best = max((_score(h["aggregate"]) for h in history), default=None)
-            self.bar = tqdm(total=cfg.total_timesteps, initial=n, unit="step", unit_scale=True,
+            self.bar = tqdm(total=total or cfg.total_timesteps, initial=n, unit="step", unit_scale=True,
                             disable=not cfg.progress, dynamic_ncols=True, file=sys.stderr)
             self.last_n = n
             for name, res in baseline_eval.items():
@@ -298,11 +299,15 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         if (resume and history_path.is_file()) else []
 
     # 6. learn
-    remaining = cfg.total_timesteps - model.num_timesteps
+    target = planned_timesteps(cfg, len(env.possible_agents))
+    if target != cfg.total_timesteps:
+        print(f"total_timesteps {cfg.total_timesteps} -> {target}: whole collection rounds of "
+              f"{round_timesteps(cfg, len(env.possible_agents))} agent-steps", file=sys.stderr)
+    remaining = target - model.num_timesteps
     t0 = time.perf_counter()
     if remaining > 0:
         callback = make_callback(cfg, out, venv, eval_env, baseline_eval, meta, history,
-                                 {"features": features, "action_map": action_map})
+                                 {"features": features, "action_map": action_map}, total=target)
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=not ckpt,
                     tb_log_name="run", log_interval=1)
         if cfg.checkpoint_every:
@@ -365,7 +370,10 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--resume", action="store_true",
                         help="continue from the last checkpoint in --out-dir (its config.json; flags given override it)")
     argv = sys.argv[1:] if argv is None else list(argv)
-    cfg, ns = parse_args(argv, parser)
+    try:
+        cfg, ns = parse_args(argv, parser)
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
     if ns.resume:
         saved = Path(cfg.out_dir) / "config.json"
         if not saved.is_file():

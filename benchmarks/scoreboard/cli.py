@@ -62,7 +62,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    f"{sorted(FULL['scenario_seeds'])}; quick: {QUICK['seeds']})")
     p.add_argument("--policy", action="append", default=[], metavar="PATH",
                    help="also run a trained policy folder (training.load(PATH)), named after its run "
-                        "folder (runs/a/final -> user:a); repeatable")
+                        "folder (runs/a/final -> user:a); repeatable. Safe for folders from anyone: "
+                        "only JSON and torch weights are read, nothing is unpickled; old SB3 "
+                        "model.zip folders are refused (training.policy.convert_sb3 converts one "
+                        "you trust)")
     p.add_argument("--out", help="output directory (default: results/scoreboard, "
                                  "results/scoreboard/quick with --quick)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")

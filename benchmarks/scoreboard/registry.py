@@ -129,7 +129,7 @@ def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
 
 def _learned(name: str, path: Path, description: str, scenarios: tuple[str, ...] | None) -> PolicySpec:
     return PolicySpec(name, "training:load", env_ids=_folder_env_ids(path), scenarios=scenarios,
-                      checkpoint=str(path), learned=True, requires=("stable_baselines3",),
+                      checkpoint=str(path), learned=True, requires=("torch",),
                       description=description)
 
 
