@@ -25,6 +25,8 @@ Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelE
   only in a step where some copy ended). The other ``infos`` entries are the per-agent physical
   quantities (``satenv.envs.base.INFO_KEYS`` and the env's own) as ``(B, M, ...)`` arrays, of
   the new episode's reset for the reset copies;
+* ``SatVectorEnv(env, B, autoreset=False)`` (what the TorchRL env uses) leaves finished copies
+  alone: the caller resets them with ``reset(indices=...)`` before the next ``step``;
 * **seeding**: ``reset(seed=s)`` (or ``make_vec(..., seed=s)``, applied at the first reset) gives
   copy ``b`` its own generator ``np.random.default_rng(s + b)``, used for its initial states and
   for any randomness inside its steps, exactly as the PettingZoo env's ``reset(seed=s + b)``:
@@ -90,9 +92,13 @@ class SatVectorEnv:
             not stepped).
         num_envs: number of copies ``B`` (>= 1).
         seed: applied at the first :meth:`reset` that has no seed of its own.
+        autoreset: reset finished copies inside :meth:`step` (default). With ``False`` the caller
+            resets them with ``reset(indices=...)`` (TorchRL's convention); stepping a finished
+            copy before that raises.
     """
 
-    def __init__(self, env: SatParallelEnv, num_envs: int, *, seed: int | None = None) -> None:
+    def __init__(self, env: SatParallelEnv, num_envs: int, *, seed: int | None = None,
+                 autoreset: bool = True) -> None:
         if not isinstance(env, SatParallelEnv):
             raise SatenvError(f"SatVectorEnv needs a satenv env (satenv.make(...)), got {type(env).__name__}")
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -110,13 +116,26 @@ class SatVectorEnv:
         self.max_steps = int(self.scenario.max_steps)
         self._pending_seed = _check_seed(seed)
         self._rngs: CopyGenerators | None = None
+        self.autoreset = bool(autoreset)
+        self._ended = np.zeros(self.num_envs, dtype=bool)
 
     def __repr__(self) -> str:
         return f"SatVectorEnv({self.metadata.get('name')}, num_envs={self.num_envs}, n_agents={self.n_agents})"
 
     # ----------------------------------------------------------------- episode
-    def reset(self, seed: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        """Reset every copy; returns ``obs (B, M, obs_dim)`` and the reset info arrays."""
+    def seed(self, seed: int | None) -> None:
+        """Seed the next full :meth:`reset` without a seed of its own (copy ``b``: ``seed + b``)."""
+        self._pending_seed = _check_seed(seed)
+
+    def reset(self, seed: int | None = None, *, indices: Any = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every copy, or only ``indices`` (ints or a ``(B,)`` bool mask; they keep their
+        generators); returns ``obs (B, M, obs_dim)`` of every copy and the info arrays of the
+        reset copies."""
+        if indices is not None:
+            if seed is not None:
+                raise SatenvError("reset(seed=..., indices=...): a seed applies to all copies; "
+                                  "reset all copies to reseed")
+            return self._reset_some(indices)
         seed = _check_seed(seed)
         if seed is None:
             seed, self._pending_seed = self._pending_seed, None
@@ -127,6 +146,22 @@ class SatVectorEnv:
                                          np.random.SeedSequence().spawn(self.num_envs)])
         idx = np.arange(self.num_envs)
         info = self.core.reset(self._sample(idx), None, self._rngs)
+        self._ended[:] = False
+        return self.core.observe(), dict(info)
+
+    def _reset_some(self, indices: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        if self._rngs is None:
+            return self.reset()
+        idx = np.asarray(indices)
+        if idx.dtype == bool:
+            if idx.shape != (self.num_envs,):
+                raise SatenvError(f"reset(indices=mask): the mask must have shape ({self.num_envs},), got {idx.shape}")
+            idx = np.flatnonzero(idx)
+        idx = idx.astype(np.int64, copy=False).reshape(-1)
+        if idx.size and (idx.min() < 0 or idx.max() >= self.num_envs):
+            raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), got {idx.tolist()}")
+        info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)) if idx.size else {}
+        self._ended[idx] = False
         return self.core.observe(), dict(info)
 
     def _sample(self, idx: np.ndarray) -> np.ndarray:
@@ -138,6 +173,9 @@ class SatVectorEnv:
         truncations ``(B, M)`` and infos (auto-reset: module docstring)."""
         if self._rngs is None:
             raise SatenvError("step() called before reset(): call reset() first")
+        if self._ended.any():
+            raise SatenvError(f"copies {np.flatnonzero(self._ended).tolist()} have ended: call "
+                              "reset(indices=...) first (autoreset=False)")
         a = self._check_actions(actions)
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
         res = self.core.step(accel, self._rngs)
@@ -147,7 +185,9 @@ class SatVectorEnv:
         rewards = np.asarray(res.rewards, dtype=np.float64)
         infos: dict[str, Any] = dict(res.info)
         done = terminated | truncated
-        if done.any():
+        if not self.autoreset:
+            self._ended |= done
+        elif done.any():
             idx = np.flatnonzero(done)
             reset_info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx))
             infos = {k: v.copy() for k, v in res.info.items()}
