@@ -11,7 +11,7 @@ from typing import Any
 
 from satenv.envs.base import SatParallelEnv, SatenvError
 
-__all__ = ["make_env", "env_version"]
+__all__ = ["make_env", "env_version", "policy_env_meta"]
 
 
 def make_env(env_id: str, **kwargs: Any) -> SatParallelEnv:
@@ -45,3 +45,23 @@ def env_version(env_id: str) -> str:
     """The version suffix of an env id (``"platoon_v0"`` -> ``"v0"``), or ``""``."""
     tail = env_id.rsplit(":", 1)[-1].rsplit("_", 1)
     return tail[-1] if len(tail) == 2 and tail[-1].startswith("v") else ""
+
+
+def policy_env_meta(env_id: str, env: FormationEnv, env_kwargs: dict[str, Any],
+                    eval_env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The ``env.json`` of a policy folder: what it was trained on and is evaluated with."""
+    import satenv
+
+    agent = env.possible_agents[0]
+    return {
+        "env_id": env_id,
+        "env_version": env_version(env_id),
+        "env_name": env.metadata.get("name", type(env).__name__),
+        "satenv_version": satenv.__version__,
+        "env_kwargs": env_kwargs,
+        "eval_env_kwargs": eval_env_kwargs,
+        "agents": list(env.possible_agents),
+        "observation_shape": list(env.observation_space(agent).shape),
+        "action_shape": list(env.action_space(agent).shape),
+        "parameter_sharing": True,
+    }

@@ -38,7 +38,7 @@ import numpy as np
 
 from training.config import TrainConfig, build_parser, config_from_json, parse_args, planned_timesteps, round_timesteps
 from training.evaluate import compare, evaluate, evaluate_baselines, format_table
-from training.envs import env_version, make_env
+from training.envs import make_env, policy_env_meta
 from training.policy import (
     ObsNormalizer,
     action_map_from_config,
@@ -63,21 +63,7 @@ def latest_checkpoint(out_dir: Path) -> tuple[int, Path] | None:
 
 
 def env_meta(cfg: TrainConfig, env: Any) -> dict[str, Any]:
-    import satenv
-
-    agent = env.possible_agents[0]
-    return {
-        "env_id": cfg.env_id,
-        "env_version": env_version(cfg.env_id),
-        "env_name": env.metadata.get("name", type(env).__name__),
-        "satenv_version": satenv.__version__,
-        "env_kwargs": cfg.env_kwargs,
-        "eval_env_kwargs": cfg.resolved_eval_env_kwargs,
-        "agents": list(env.possible_agents),
-        "observation_shape": list(env.observation_space(agent).shape),
-        "action_shape": list(env.action_space(agent).shape),
-        "parameter_sharing": True,
-    }
+    return policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs)
 
 
 def learning_rate(cfg: TrainConfig):

@@ -1,0 +1,43 @@
+"""training.benchmarl_train: a tiny BenchMARL MAPPO run exports a policy the scoreboard ranks."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("benchmarl", reason="benchmarl not installed (pip install -c constraints.txt -e '.[marl]')")
+
+import training  # noqa: E402
+from training.benchmarl_train import BenchMARLConfig, main  # noqa: E402
+
+
+def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
+    out = tmp_path / "mappo"
+    main(["--algorithm", "mappo", "--env-id", "platoon_v0", "--env-kwargs", '{"n_steps": 20}',
+          "--max-frames", "400", "--frames-per-batch", "200", "--num-envs", "4", "--minibatch-size", "100",
+          "--minibatch-iters", "1", "--net-arch", "16", "--eval-seeds", "1", "--out-dir", str(out)])
+    assert list((out / "benchmarl").rglob("*.csv")), "no BenchMARL logs"
+    assert list((out / "benchmarl").rglob("checkpoint_*.pt")), "no BenchMARL checkpoint"
+    policy = training.load(out)
+    assert policy.actor.spec["hidden"] == [16] and json.loads((out / "env.json").read_text())["step"] == 400
+    import satenv
+
+    env = satenv.make("platoon_v0", n_steps=20)
+    obs, _ = env.reset(seed=0)
+    assert all(np.all(np.abs(a) <= 1) for a in policy.act(obs).values())
+    from benchmarks.scoreboard import main as scoreboard
+
+    board = tmp_path / "board"
+    scoreboard(["--scenarios", "platoon-PLF-cw", "--policies", "zero", "--policy", str(out), "--seeds", "0",
+                "--out", str(board), "--no-plots", "--no-progress", "--workers", "1"])
+    assert "user:mappo" in (board / "scoreboard.md").read_text()
+
+
+def test_config_errors(tmp_path):
+    with pytest.raises(ValueError, match="algorithm"):
+        BenchMARLConfig(algorithm="qmix")
+    with pytest.raises(ValueError, match="max_frames"):
+        BenchMARLConfig(max_frames=0)
+    with pytest.raises(SystemExit, match="unknown satenv env id|unknown env id"):
+        main(["--env-id", "nope_v0", "--max-frames", "10", "--out-dir", str(tmp_path / "x")])
+    assert not (tmp_path / "x").exists()
