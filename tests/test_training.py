@@ -255,6 +255,20 @@ def test_rllib_one_iteration(tmp_path):
     progress = run(cfg, verbose=False)
     assert len(progress) == 1 and progress[0]["env_steps"] >= 200
     assert (tmp_path / "rl" / "checkpoint").is_dir()
+    assert list((tmp_path / "rl" / "tb").rglob("events.out.tfevents.*")), "no TensorBoard log"
+    policy = training.load(tmp_path / "rl", env=ToyEnv(max_steps=10))  # the exported actor
+    assert policy.actor.spec["hidden"] == [16]
+    assert rollout(ToyEnv(max_steps=10), policy, seed=0).steps == 10
+
+
+def test_rllib_path_imports_no_stable_baselines3():
+    import subprocess
+    import sys
+
+    code = ("import sys, training.rllib_train as r; r._env_creator('platoon_v0', {})\n"
+            "from training.envs import make_env; make_env('platoon_v0')\n"
+            "assert not [m for m in sys.modules if m.startswith('stable_baselines3')], 'SB3 imported'")
+    subprocess.run([sys.executable, "-c", code], check=True)
 
 
 def test_rllib_missing_ray_message(monkeypatch):

@@ -11,11 +11,17 @@ the policy ``"shared"``. Without ``--address`` Ray starts locally (``num_cpus`` 
 RLlib runs are only reproducible with a fixed ``PYTHONHASHSEED`` (set it before starting
 Python, e.g. ``PYTHONHASHSEED=0 python -m training.rllib_train ...``).
 
-Needs the optional extra ``ray[rllib]`` (``pip install "satenv[rllib]"``; it pins
-``gymnasium==1.2.2``). Without it, :func:`main` exits with a clear message.
+Needs the optional extra (``pip install -c constraints.txt -e ".[rllib]"``: ray[rllib], torch,
+tensorboard; stable-baselines3 is not imported on this path). Without it, :func:`main` exits
+with a clear message.
 
-Output (``--out-dir``): ``checkpoint/`` (``Algorithm.save_to_path``), ``progress.json`` (per
-iteration: env steps, mean episode return, wall time) and ``config.json`` (these arguments).
+Output (``--out-dir``): ``checkpoint/`` (``Algorithm.save_to_path``; RLlib's own pickled files,
+for resuming with RLlib), ``tb/`` (TensorBoard: episode return and length, env steps, learner
+losses per iteration), ``progress.json`` (per iteration: env steps, mean episode return, wall
+time), ``config.json`` (these arguments) and the trained actor exported to the safe policy format
+of :mod:`training.policy` (``policy.json``, ``weights.pt``, ``obs_norm.json`` (identity),
+``env.json``, ``manifest.json``), so ``training.load(out_dir)`` and
+``benchmarks.scoreboard --policy out_dir`` take the run folder itself.
 """
 
 from __future__ import annotations
@@ -93,7 +99,7 @@ def _env_creator(env_id: str, env_kwargs: dict[str, Any]):
     def create(_config=None):
         from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 
-        from training.vec_env import make_env
+        from training.envs import make_env
 
         return ParallelPettingZooEnv(make_env(env_id, **env_kwargs))
 
@@ -134,6 +140,9 @@ def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
             ray.init(num_cpus=cfg.num_cpus, include_dashboard=False, log_to_driver=False)
         started = True
     progress: list[dict[str, Any]] = []
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(out / "tb"))
     try:
         algo = build_algo_config(cfg).build_algo()
         t0 = time.perf_counter()
@@ -146,15 +155,65 @@ def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
                    "episode_return_mean": _float(runners.get("episode_return_mean")),
                    "wall_s": round(time.perf_counter() - t0, 2)}
             progress.append(row)
+            _log_tensorboard(writer, result, row["env_steps"])
             (out / "progress.json").write_text(json.dumps(progress, indent=1) + "\n")
             if verbose:
                 print(f"iter {it}: {row}", flush=True)
         algo.save_to_path(str((out / "checkpoint").resolve()))
+        export_policy(algo.get_module("shared"), cfg, steps=progress[-1]["env_steps"] if progress else 0)
         algo.stop()
     finally:
+        writer.close()
         if started:
             ray.shutdown()
     return progress
+
+
+def _log_tensorboard(writer, result: dict[str, Any], step: int) -> None:
+    runners = result.get("env_runners", {})
+    for key in ("episode_return_mean", "episode_len_mean", "num_episodes"):
+        value = _float(runners.get(key))
+        if value is not None:
+            writer.add_scalar(f"env_runners/{key}", value, step)
+    for key, value in (result.get("learners", {}).get("shared", {}) or {}).items():
+        if _float(value) is not None and key.endswith(("loss", "entropy", "mean_kl_loss")):
+            writer.add_scalar(f"learners/shared/{key}", _float(value), step)
+    writer.flush()
+
+
+def export_policy(module: Any, cfg: RLlibConfig, steps: int = 0) -> Path:
+    """Write the RLModule's deterministic actor (the action mean) into ``cfg.out_dir`` in the
+    safe policy format; checks it reproduces the module on random observations."""
+    import torch
+    from torch import nn
+
+    from training.actor import MLPActor
+    from training.envs import make_env, policy_env_meta
+    from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
+
+    env = make_env(cfg.env_id, **cfg.env_kwargs)
+    agent = env.possible_agents[0]
+    obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
+    encoder = getattr(module.encoder, "actor_encoder", None) or module.encoder.encoder
+    layers = [m for m in encoder.modules() if isinstance(m, nn.Linear)] + \
+             [m for m in module.pi.modules() if isinstance(m, nn.Linear)]
+    acts = {type(m).__name__.lower() for m in encoder.modules()
+            if type(m).__name__.lower() in ("tanh", "relu", "elu", "silu")}
+    if len(acts) > 1:
+        raise ValueError(f"cannot export an RLlib actor mixing activations {sorted(acts)}")
+    w, b = layers[-1].weight.detach(), layers[-1].bias.detach()
+    pairs = [(m.weight.detach(), m.bias.detach()) for m in layers[:-1]] + [(w[:act_dim], b[:act_dim])]
+    actor = MLPActor(obs_dim, act_dim, [int(m.out_features) for m in layers[:-1]], acts.pop() if acts else "tanh")
+    actor.copy_linear_weights(pairs)
+    obs = torch.randn(64, obs_dim) * 3
+    with torch.no_grad():
+        expected = module.forward_inference({"obs": obs})["action_dist_inputs"][:, :act_dim]
+        if not torch.allclose(actor(obs), expected, atol=1e-5):
+            raise ValueError("the exported actor does not reproduce the RLlib module's action means")
+    meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.env_kwargs), "step": int(steps)}
+    policy = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(obs_dim,), meta=meta)
+    config = {**asdict(cfg), "net_arch": list(cfg.net_arch)}
+    return save_artifacts(cfg.out_dir, policy, env_meta=meta, config=config, source="RLlib PPO")
 
 
 def _float(v: Any) -> float | None:
