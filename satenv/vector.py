@@ -114,7 +114,7 @@ class SatVectorEnv:
         self.single_action_space: spaces.Box = env.action_space(self.agents[0])
         self.action_shape = (self.num_envs, self.n_agents, *self.single_action_space.shape)
         self.max_steps = int(self.scenario.max_steps)
-        self._pending_seed = _check_seed(seed)
+        self._pending_seed = check_seed(seed)
         self._rngs: CopyGenerators | None = None
         self.autoreset = bool(autoreset)
         self._ended = np.zeros(self.num_envs, dtype=bool)
@@ -125,7 +125,7 @@ class SatVectorEnv:
     # ----------------------------------------------------------------- episode
     def seed(self, seed: int | None) -> None:
         """Seed the next full :meth:`reset` without a seed of its own (copy ``b``: ``seed + b``)."""
-        self._pending_seed = _check_seed(seed)
+        self._pending_seed = check_seed(seed)
 
     def reset(self, seed: int | None = None, *, indices: Any = None) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every copy, or only ``indices`` (ints or a ``(B,)`` bool mask; they keep their
@@ -136,7 +136,7 @@ class SatVectorEnv:
                 raise SatenvError("reset(seed=..., indices=...): a seed applies to all copies; "
                                   "reset all copies to reseed")
             return self._reset_some(indices)
-        seed = _check_seed(seed)
+        seed = check_seed(seed)
         if seed is None:
             seed, self._pending_seed = self._pending_seed, None
         if seed is not None:
@@ -220,7 +220,8 @@ class SatVectorEnv:
         self.env.close()
 
 
-def _check_seed(seed: Any) -> int | None:
+def check_seed(seed: Any) -> int | None:
+    """``None`` or a non-negative int seed (``SatenvError`` otherwise)."""
     if seed is None:
         return None
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

@@ -102,6 +102,11 @@ def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     assert set(act) == set(env.possible_agents)
     assert all(a.shape == (3,) and a.dtype == np.float32 and np.all(np.abs(a) <= 1) for a in act.values())
     stacked = np.stack([obs[a] for a in env.possible_agents])
+    import torch
+
+    with torch.no_grad():
+        y = policy.actor(torch.as_tensor(policy.normalizer(stacked))).numpy()
+    np.testing.assert_allclose(np.stack([act[a] for a in env.possible_agents]), np.clip(y, -1, 1))
     assert policy.actor.spec == {"type": "mlp", "obs_dim": 6, "act_dim": 3, "hidden": [16, 16],
                                  "activation": "tanh", "squash": False}
     assert policy.normalizer.mean is not None and not np.allclose(policy.normalizer.mean, 0)

@@ -27,6 +27,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from training.config import check_int, check_net_arch
+
 __all__ = ["BenchMARLConfig", "run", "main", "export_actor", "ALGORITHMS"]
 
 ALGORITHMS = ("mappo", "ippo", "masac", "isac", "maddpg", "iddpg")
@@ -59,17 +61,10 @@ class BenchMARLConfig:
         if not isinstance(self.env_kwargs, dict):
             raise ValueError(f"env_kwargs must be a dict (JSON object), got {self.env_kwargs!r}")
         for name in ("max_frames", "frames_per_batch", "num_envs", "minibatch_size", "minibatch_iters"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive int, got {v!r}")
+            check_int(name, getattr(self, name), minimum=1)
         for name in ("seed", "checkpoint_every"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"{name} must be an int >= 0, got {v!r}")
-        arch = tuple(self.net_arch)
-        if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
-            raise ValueError(f"net_arch must be positive ints, e.g. 64,64; got {self.net_arch!r}")
-        object.__setattr__(self, "net_arch", arch)
+            check_int(name, getattr(self, name), minimum=0)
+        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
         object.__setattr__(self, "eval_seeds", tuple(int(s) for s in self.eval_seeds))
         if not (self.lr > 0 and 0 < self.gamma <= 1):
             raise ValueError(f"lr must be > 0 and gamma in (0, 1], got lr={self.lr!r}, gamma={self.gamma!r}")

@@ -120,17 +120,14 @@ class TrainConfig:
             raise ValueError(f"algo must be one of {ALGOS}, got {self.algo!r}")
         for name in ("n_copies", "total_timesteps", "n_steps", "batch_size", "n_epochs",
                      "buffer_size", "sac_batch_size", "train_freq", "gradient_steps", "torch_threads"):
-            _check_int(name, getattr(self, name), minimum=1)
+            check_int(name, getattr(self, name), minimum=1)
         for name in ("seed", "learning_starts", "eval_every", "checkpoint_every"):
-            _check_int(name, getattr(self, name), minimum=0)
-        arch = tuple(self.net_arch)
-        if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
-            raise ValueError(f"net_arch must be a non-empty tuple of positive ints (e.g. 64,64), got {self.net_arch!r}")
-        s(self, "net_arch", arch)
+            check_int(name, getattr(self, name), minimum=0)
+        s(self, "net_arch", check_net_arch(self.net_arch))
         for name in ("eval_seeds", "test_seeds"):
             seeds = tuple(getattr(self, name))
             for v in seeds:
-                _check_int(name, v, minimum=0)
+                check_int(name, v, minimum=0)
             s(self, name, seeds)
         s(self, "eval_baselines", tuple(str(b) for b in self.eval_baselines))
         for name, lo, hi in (("learning_rate", 0.0, math.inf), ("gamma", 0.0, 1.0),
@@ -181,9 +178,18 @@ def planned_timesteps(cfg: TrainConfig, n_agents: int) -> int:
     return -(-cfg.total_timesteps // per_round) * per_round
 
 
-def _check_int(name: str, v: Any, minimum: int) -> None:
+def check_int(name: str, v: Any, minimum: int) -> None:
+    """Raise ``ValueError`` unless ``v`` is an int (not a bool) >= ``minimum``."""
     if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
         raise ValueError(f"{name} must be an int >= {minimum}, got {v!r}")
+
+
+def check_net_arch(value: Any) -> tuple[int, ...]:
+    """Hidden layer sizes as a non-empty tuple of positive ints (``ValueError`` otherwise)."""
+    arch = tuple(value)
+    if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
+        raise ValueError(f"net_arch must be a non-empty tuple of positive ints (e.g. 64,64), got {value!r}")
+    return arch
 
 
 def config_from_json(data: dict[str, Any]) -> TrainConfig:

@@ -34,6 +34,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from training.config import check_int, check_net_arch
+
 __all__ = ["RLlibConfig", "run", "main", "require_ray"]
 
 
@@ -77,19 +79,12 @@ class RLlibConfig:
     def __post_init__(self) -> None:
         for name in ("iterations", "train_batch_size", "minibatch_size", "num_epochs",
                      "num_envs_per_env_runner", "num_cpus"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive int, got {v!r}")
+            check_int(name, getattr(self, name), minimum=1)
         for name in ("seed", "num_env_runners"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"{name} must be an int >= 0, got {v!r}")
+            check_int(name, getattr(self, name), minimum=0)
         if not isinstance(self.env_kwargs, dict):
             raise ValueError(f"env_kwargs must be a dict (JSON object), got {self.env_kwargs!r}")
-        arch = tuple(self.net_arch)
-        if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
-            raise ValueError(f"net_arch must be positive ints, e.g. 64,64; got {self.net_arch!r}")
-        object.__setattr__(self, "net_arch", arch)
+        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
         if self.minibatch_size > self.train_batch_size:
             raise ValueError(f"minibatch_size ({self.minibatch_size}) must be <= train_batch_size "
                              f"({self.train_batch_size})")

@@ -36,9 +36,16 @@ from typing import Any
 
 import numpy as np
 
-from training.config import TrainConfig, build_parser, config_from_json, parse_args, planned_timesteps, round_timesteps
-from training.evaluate import compare, evaluate, evaluate_baselines, format_table
+from training.config import (
+    TrainConfig,
+    build_parser,
+    config_from_json,
+    parse_args,
+    planned_timesteps,
+    round_timesteps,
+)
 from training.envs import make_env, policy_env_meta
+from training.evaluate import compare, evaluate, evaluate_baselines, format_table
 from training.policy import (
     ObsNormalizer,
     action_map_from_config,

@@ -23,8 +23,8 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
-from satenv.envs.base import SatParallelEnv, SatenvError
-from satenv.vector import SatVectorEnv
+from satenv.envs.base import SatenvError, SatParallelEnv
+from satenv.vector import SatVectorEnv, check_seed
 from training.envs import env_version, make_env
 
 __all__ = ["SatVecEnv", "make_env", "env_version"]
@@ -80,9 +80,7 @@ class SatVecEnv(VecEnv):
         """Seed the next ``reset()``: copy ``b`` uses ``seed + b``; returns the seed of every row."""
         if seed is None:
             seed = int(np.random.SeedSequence().generate_state(1)[0])
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise SatenvError(f"seed must be a non-negative int or None, got {seed!r}")
-        self._pending_seed = int(seed)
+        self._pending_seed = check_seed(seed)
         return [int(seed) + r // self.n_agents for r in range(self.num_envs)]
 
     # ----------------------------------------------------------------- VecEnv API
