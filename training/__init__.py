@@ -1,9 +1,11 @@
-"""Training learned policies for satenv scenarios (stable-baselines3; Ray RLlib optional).
+"""Training learned policies for satenv scenarios (stable-baselines3, BenchMARL, Ray RLlib).
 
 * :func:`load` — a trained policy folder -> a policy with the baseline interface
-  (``reset(seed=None)``, ``act(observations) -> actions``).
-* :class:`training.vec_env.SatVecEnv` — parameter-shared SB3 ``VecEnv`` over a batched core.
-* ``python -m training.train`` — PPO/SAC training (:class:`training.config.TrainConfig`).
+  (``reset(seed=None)``, ``act(observations) -> actions``); never unpickles
+  (:mod:`training.policy`: what is safe to load).
+* :class:`training.vec_env.SatVecEnv` — parameter-shared SB3 ``VecEnv`` over ``satenv.make_vec``.
+* ``python -m training.train`` — SB3 PPO/SAC training (:class:`training.config.TrainConfig`).
+* ``python -m training.benchmarl_train`` — BenchMARL (MAPPO, ...) on the native TorchRL env.
 * ``python -m training.rllib_train`` — the same scenarios with Ray RLlib (optional extra).
 * ``training/policies/<name>/`` — shipped trained policies (:data:`SHIPPED`).
 """
