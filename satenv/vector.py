@@ -43,7 +43,7 @@ import numpy as np
 from gymnasium import spaces
 
 from satenv.dynamics import unit_box_to_accel
-from satenv.envs.base import SatParallelEnv, SatenvError
+from satenv.envs.base import SatenvError, SatParallelEnv
 
 __all__ = ["SatVectorEnv", "make_vec"]
 

@@ -13,7 +13,7 @@ from training.benchmarl_train import BenchMARLConfig, main  # noqa: E402
 
 def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
     out = tmp_path / "mappo"
-    main(["--algorithm", "mappo", "--env-id", "platoon_v0", "--env-kwargs", '{"n_steps": 20}',
+    main(["--algorithm", "mappo", "--env-id", "platoon_v0", "--env-kwargs", '{"max_steps": 20}',
           "--max-frames", "400", "--frames-per-batch", "200", "--num-envs", "4", "--minibatch-size", "100",
           "--minibatch-iters", "1", "--net-arch", "16", "--eval-seeds", "1", "--out-dir", str(out)])
     assert list((out / "benchmarl").rglob("*.csv")), "no BenchMARL logs"
@@ -22,7 +22,7 @@ def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
     assert policy.actor.spec["hidden"] == [16] and json.loads((out / "env.json").read_text())["step"] == 400
     import satenv
 
-    env = satenv.make("platoon_v0", n_steps=20)
+    env = satenv.make("platoon_v0", max_steps=20)
     obs, _ = env.reset(seed=0)
     assert all(np.all(np.abs(a) <= 1) for a in policy.act(obs).values())
     from benchmarks.scoreboard import main as scoreboard

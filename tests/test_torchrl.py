@@ -5,23 +5,22 @@ import pytest
 
 torchrl = pytest.importorskip("torchrl", reason="torchrl not installed (pip install -c constraints.txt -e '.[marl]')")
 import torch  # noqa: E402
-from test_vector import _short  # noqa: E402
 from torchrl.envs.utils import check_env_specs  # noqa: E402
 
 import satenv  # noqa: E402
 from satenv.torchrl import make_env  # noqa: E402
 
 
-@pytest.mark.parametrize("env_id", satenv._ENVS if not hasattr(satenv, "ENV_IDS") else satenv.ENV_IDS)
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
 def test_check_env_specs(env_id):
-    env = make_env(env_id, 2, seed=0, **_short(env_id, 2))
+    env = make_env(env_id, 2, seed=0, max_steps=2)
     check_env_specs(env)
     assert env.batch_size == (2,) and env.group_map == {"agents": env.vec.agents}
 
 
 def test_copies_reproduce_the_pettingzoo_env_and_reset_through_torchrl():
     steps, seed, b = 3, 4, 3
-    kw = _short("platoon_v0", steps, randomize=True)
+    kw = {"max_steps": steps, "randomize": True}
     env = make_env("platoon_v0", b, seed=seed, **kw)
     pz = [satenv.make("platoon_v0", **kw) for _ in range(b)]
     agents = pz[0].possible_agents
@@ -46,7 +45,7 @@ def test_vector_without_autoreset_needs_an_explicit_reset():
     from satenv.envs.base import SatenvError
     from satenv.vector import SatVectorEnv
 
-    vec = SatVectorEnv(satenv.make("platoon_v0", **_short("platoon_v0", 1)), 3, seed=0, autoreset=False)
+    vec = SatVectorEnv(satenv.make("platoon_v0", max_steps=1), 3, seed=0, autoreset=False)
     vec.reset()
     *_, infos = vec.step(np.zeros(vec.action_shape))
     assert "_final" not in infos

@@ -1,7 +1,5 @@
 """satenv.make_vec: the batched numpy vector env reproduces the PettingZoo env copy by copy."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -10,12 +8,6 @@ from satenv.envs.base import SatenvError
 from satenv.vector import SatVectorEnv
 
 B = 3
-
-
-def _short(env_id: str, steps: int, **kwargs):
-    """Env kwargs truncating after ``steps`` (the step-limit field's name differs per env)."""
-    names = {f.name for f in dataclasses.fields(satenv.make(env_id).scenario)}
-    return {**kwargs, ("max_steps" if "max_steps" in names else "n_steps"): steps}
 
 
 def _stack(d, agents):
@@ -33,7 +25,7 @@ CASES = [
 @pytest.mark.parametrize(("env_id", "kwargs"), CASES, ids=[c[0] for c in CASES])
 def test_copy_b_reproduces_the_pettingzoo_env_across_an_auto_reset(env_id, kwargs):
     steps, seed = 3, 11
-    kw = _short(env_id, steps, **kwargs)
+    kw = {**kwargs, "max_steps": steps}
     vec = satenv.make_vec(env_id, B, seed=seed, **kw)
     envs = [satenv.make(env_id, **kw) for _ in range(B)]
     agents = envs[0].possible_agents

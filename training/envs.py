@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from satenv.envs.base import SatParallelEnv, SatenvError
+from satenv.envs.base import SatenvError, SatParallelEnv
 
 __all__ = ["make_env", "env_version", "policy_env_meta"]
 
@@ -47,7 +47,7 @@ def env_version(env_id: str) -> str:
     return tail[-1] if len(tail) == 2 and tail[-1].startswith("v") else ""
 
 
-def policy_env_meta(env_id: str, env: FormationEnv, env_kwargs: dict[str, Any],
+def policy_env_meta(env_id: str, env: SatParallelEnv, env_kwargs: dict[str, Any],
                     eval_env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """The ``env.json`` of a policy folder: what it was trained on and is evaluated with."""
     import satenv
