@@ -17,6 +17,7 @@ and ``M`` agents:
 Finished copies are reset by TorchRL through ``"_reset"`` (``SatVectorEnv(autoreset=False)``).
 Seeding: ``make_env(..., seed=s)`` or ``env.set_seed(s)`` gives copy ``b`` the PettingZoo env's
 ``reset(seed=s + b)`` episodes. Stepping is the batched numpy core: no Python loop over copies.
+Note: importing torchrl sets the process's ``multiprocessing`` start method to ``"spawn"``.
 """
 
 from __future__ import annotations

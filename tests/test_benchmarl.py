@@ -1,14 +1,16 @@
 """training.benchmarl_train: a tiny BenchMARL MAPPO run exports a policy the scoreboard ranks."""
 
 import json
+from importlib.util import find_spec
 
 import numpy as np
 import pytest
 
-pytest.importorskip("benchmarl", reason="benchmarl not installed (pip install -c constraints.txt -e '.[marl]')")
+import training
+from training.benchmarl_train import BenchMARLConfig, main
 
-import training  # noqa: E402
-from training.benchmarl_train import BenchMARLConfig, main  # noqa: E402
+pytestmark = pytest.mark.skipif(find_spec("benchmarl") is None,
+                                reason="benchmarl not installed (pip install -c constraints.txt -e '.[marl]')")
 
 
 def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):

@@ -1,12 +1,14 @@
 """benchmarks.perf's learning section (tiny sizes; no timing assertions)."""
 
+from importlib.util import find_spec
+
 import pytest
 
 from benchmarks import perf
 
 
+@pytest.mark.skipif(find_spec("torchrl") is None, reason="torchrl not installed (marl extra)")
 def test_learning_section_smoke(monkeypatch):
-    pytest.importorskip("torchrl", reason="torchrl not installed (marl extra)")
     ran = []
     real = perf._train_rate
     monkeypatch.setattr(perf, "_train_rate", lambda name, frames: ran.append(name) or (

@@ -1,24 +1,32 @@
 """satenv.torchrl.make_env: the native TorchRL env over make_vec (needs the marl extra)."""
 
+from importlib.util import find_spec
+
 import numpy as np
 import pytest
 
-torchrl = pytest.importorskip("torchrl", reason="torchrl not installed (pip install -c constraints.txt -e '.[marl]')")
-import torch  # noqa: E402
-from torchrl.envs.utils import check_env_specs  # noqa: E402
+import satenv
 
-import satenv  # noqa: E402
-from satenv.torchrl import make_env  # noqa: E402
+pytestmark = pytest.mark.skipif(find_spec("torchrl") is None,
+                                reason="torchrl not installed (pip install -c constraints.txt -e '.[marl]')")
 
 
 @pytest.mark.parametrize("env_id", satenv.ENV_IDS)
 def test_check_env_specs(env_id):
+    from torchrl.envs.utils import check_env_specs
+
+    from satenv.torchrl import make_env
+
     env = make_env(env_id, 2, seed=0, max_steps=2)
     check_env_specs(env)
     assert env.batch_size == (2,) and env.group_map == {"agents": env.vec.agents}
 
 
 def test_copies_reproduce_the_pettingzoo_env_and_reset_through_torchrl():
+    import torch
+
+    from satenv.torchrl import make_env
+
     steps, seed, b = 3, 4, 3
     kw = {"max_steps": steps, "randomize": True}
     env = make_env("platoon_v0", b, seed=seed, **kw)
