@@ -80,7 +80,7 @@ def test_integrators_order():
     (dict(u=np.zeros((3, 1, 2))), r"u must have shape"),
     (dict(u=np.full((3, 1, 3), np.inf)), "u must be finite"),
     (dict(dt=-1.0), "dt"),
-    (dict(steps=2.5), "steps must be a non-negative integer"),
+    (dict(steps=2.5), "steps must be an int >= 0"),
 ])
 def test_simulate_rejects_bad_input(bad, match):
     kwargs = dict(model="cw", x0=np.zeros((1, 6)), orbit=ORBIT, dt=1.0, steps=3)
@@ -111,3 +111,19 @@ def test_orbit_is_frozen_and_elements_round_trip():
     for name in ("a", "e", "i", "raan", "argp", "nu"):
         assert getattr(back, name) == pytest.approx(getattr(orbit, name), rel=1e-10, abs=1e-10)
     assert orbit.period == pytest.approx(2 * math.pi * math.sqrt(7000e3**3 / d.MU_EARTH))
+
+
+def test_acceleration_kernel_has_one_home_and_no_import_circle():
+    """forces.py holds the acceleration kernel and imports no other satenv.dynamics module but
+    constants; _soa.py imports it from there (no circle)."""
+    import ast
+    import pathlib
+
+    import satenv.dynamics as dyn
+
+    root = pathlib.Path(dyn.__file__).parent
+    tree = ast.parse((root / "forces.py").read_text())
+    relative = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.level == 1}
+    assert relative == {"constants"}
+    from satenv.dynamics import _soa, forces
+    assert _soa.acceleration_soa is forces.acceleration_soa

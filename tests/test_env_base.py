@@ -21,6 +21,7 @@ class ToyScenario:
     thrust_mode: str = "box"
     success_tol: float = 1.0
     collision_voids_success: bool = True
+    max_distance: float = 100.0
 
 
 class ToyCore(BatchedCore):

@@ -182,7 +182,7 @@ def test_bad_arguments_are_rejected_with_clear_errors():
         FormationScenario(name="x", initial_state=np.zeros((2, 6)), goals=(None, (1, 2, 3)))
     with pytest.raises(ValueError, match="leader .* needs an absolute goal"):
         FormationScenario(name="x", initial_state=np.zeros((2, 6)), goals=(None, (1, 2, 3)), leader=0)
-    with pytest.raises(ValueError, match="offsets must be a finite"):
+    with pytest.raises(ValueError, match="offsets must have shape"):
         resolve_scenario("kannan2022-collision", offsets=((0, 1, 0),))
     with pytest.raises(ValueError, match="thrust_mode"):
         resolve_scenario(thrust_mode="ball")

@@ -1,4 +1,4 @@
-"""Pure, batch-first relative-orbit dynamics (imports nothing else from satenv).
+"""Pure, batch-first relative-orbit dynamics (imports nothing else from satenv but :mod:`satenv.errors`).
 
 States are LVLH ``[x, y, z, vx, vy, vz]`` arrays ``(..., M, 6)`` (x radial, y along-track,
 z orbit normal), inputs LVLH accelerations ``(..., M, 3)``, SI units throughout.

@@ -1,7 +1,8 @@
 """Structure-of-arrays kernels of the truth-model step (the hot path of ``RelativeModel.step``).
 
-The one implementation of the fused gravity/drag acceleration, the LVLH frame rate and the
-LVLH <-> ECI conversions, evaluated on component-major arrays so that every numpy operation
+The LVLH frame rate, the LVLH <-> ECI conversions and the right-hand side of the packed state
+(the acceleration kernel itself is :func:`satenv.dynamics.forces.acceleration_soa`), evaluated on
+component-major arrays so that every numpy operation
 runs over one contiguous block (the batch-first public functions of :mod:`.forces` and
 :mod:`.orbit` move the component axis and call these): the packed state is ``Y`` of shape ``(6, 1 + M, B)`` —
 component, body (0 = chief, absolute ECI; 1.. = deputies relative to the chief, ECI), batch.
@@ -10,43 +11,9 @@ Chief quantities ``(3, B)`` broadcast over the deputies as ``(3, 1, B)``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-if TYPE_CHECKING:  # forces.py calls into this module
-    from .forces import ForceModel
-
-
-def acceleration_soa(r: np.ndarray, v: np.ndarray, model: ForceModel, ballistic: float) -> np.ndarray:
-    """Two-body (+ J2) (+ drag) acceleration for component-major ``r, v`` of shape ``(3, ...)``."""
-    x, y, z = r[0], r[1], r[2]
-    rn2 = x * x + y * y + z * z
-    inv_r3 = 1.0 / (rn2 * np.sqrt(rn2))
-    out = np.empty_like(r)
-    if model.j2:
-        k = -1.5 * model.j2_coef * model.r_earth**2 / rn2
-        z2 = 5.0 * z * z / rn2
-        kxy = -model.mu * inv_r3 * (1.0 + k * (z2 - 1.0))
-        kz = -model.mu * inv_r3 * (1.0 + k * (z2 - 3.0))
-        out[0] = kxy * x
-        out[1] = kxy * y
-        out[2] = kz * z
-    else:
-        kk = -model.mu * inv_r3
-        out[0] = kk * x
-        out[1] = kk * y
-        out[2] = kk * z
-    if model.drag:
-        w = model.omega_earth
-        vr0, vr1, vr2 = v[0] + w * y, v[1] - w * x, v[2]       # v - omega_E x r
-        h = np.sqrt(rn2) - model.r_earth
-        rho = model.rho0 * np.exp(-(h - model.h0) / model.scale_height)
-        kd = -0.5 * (rho * ballistic * np.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2))
-        out[0] += kd * vr0
-        out[1] += kd * vr1
-        out[2] += kd * vr2
-    return out
+from .forces import ForceModel, acceleration_soa
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -1,6 +1,8 @@
 """Accelerations acting on a spacecraft in ECI: two-body gravity, J2, atmospheric drag.
 
-All functions are batched over leading axes: positions/velocities ``(..., 3)``.
+The public functions are batched over leading axes: positions/velocities ``(..., 3)``;
+:func:`acceleration_soa` is the fused kernel on component-major arrays ``(3, ...)`` that
+:func:`acceleration` and the truth-model step (:mod:`._soa`, :mod:`.propagate`) evaluate.
 """
 
 from __future__ import annotations
@@ -83,9 +85,38 @@ def drag(r: np.ndarray, v: np.ndarray, ballistic: float | np.ndarray, model: For
     return -0.5 * (rho * np.asarray(ballistic) * speed)[..., None] * v_rel
 
 
+def acceleration_soa(r: np.ndarray, v: np.ndarray, model: ForceModel, ballistic: float) -> np.ndarray:
+    """Two-body (+ J2) (+ drag) acceleration for component-major ``r, v`` of shape ``(3, ...)``."""
+    x, y, z = r[0], r[1], r[2]
+    rn2 = x * x + y * y + z * z
+    inv_r3 = 1.0 / (rn2 * np.sqrt(rn2))
+    out = np.empty_like(r)
+    if model.j2:
+        k = -1.5 * model.j2_coef * model.r_earth**2 / rn2
+        z2 = 5.0 * z * z / rn2
+        kxy = -model.mu * inv_r3 * (1.0 + k * (z2 - 1.0))
+        kz = -model.mu * inv_r3 * (1.0 + k * (z2 - 3.0))
+        out[0] = kxy * x
+        out[1] = kxy * y
+        out[2] = kz * z
+    else:
+        kk = -model.mu * inv_r3
+        out[0] = kk * x
+        out[1] = kk * y
+        out[2] = kk * z
+    if model.drag:
+        w = model.omega_earth
+        vr0, vr1, vr2 = v[0] + w * y, v[1] - w * x, v[2]       # v - omega_E x r
+        h = np.sqrt(rn2) - model.r_earth
+        rho = model.rho0 * np.exp(-(h - model.h0) / model.scale_height)
+        kd = -0.5 * (rho * ballistic * np.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2))
+        out[0] += kd * vr0
+        out[1] += kd * vr1
+        out[2] += kd * vr2
+    return out
+
+
 def acceleration(r: np.ndarray, v: np.ndarray, model: ForceModel, ballistic: float) -> np.ndarray:
     """Total natural (uncontrolled) acceleration of a spacecraft under ``model`` (``(..., 3)``)."""
-    from ._soa import acceleration_soa
-
     v_c = None if v is None else np.moveaxis(v, -1, 0)
     return np.moveaxis(acceleration_soa(np.moveaxis(r, -1, 0), v_c, model, ballistic), 0, -1)

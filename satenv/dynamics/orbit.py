@@ -15,7 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import as_array
+from satenv.errors import SatenvError
+
+from ._checks import as_array, derived, real
 from ._soa import eci_rel_to_lvlh_soa, frame_rate_soa, lvlh_axes, lvlh_to_eci_rel_soa
 from .constants import MU_EARTH, R_EARTH
 
@@ -44,26 +46,22 @@ class Orbit:
 
     def __post_init__(self) -> None:
         for name in ("a", "e", "i", "raan", "argp", "nu", "mu"):
-            value = getattr(self, name)
-            try:
-                fv = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"Orbit.{name} must be a real number, got {value!r}") from None
-            if not math.isfinite(fv):
-                raise ValueError(f"Orbit.{name} must be finite, got {value!r}")
-            object.__setattr__(self, name, fv)
+            object.__setattr__(self, name, real(getattr(self, name), f"Orbit.{name}"))
         if self.mu <= 0:
-            raise ValueError(f"Orbit.mu must be > 0, got {self.mu!r}")
+            raise SatenvError(f"Orbit.mu must be > 0, got {self.mu!r}")
         if not 0.0 <= self.e < 1.0:
-            raise ValueError(f"Orbit.e must satisfy 0 <= e < 1 (closed orbit), got {self.e!r}")
+            raise SatenvError(f"Orbit.e must satisfy 0 <= e < 1 (closed orbit), got {self.e!r}")
         if not 0.0 <= self.i <= math.pi:
-            raise ValueError(f"Orbit.i must be in [0, pi] rad, got {self.i!r} "
-                             "(angles are in radians: use math.radians)")
+            raise SatenvError(f"Orbit.i must be in [0, pi] rad, got {self.i!r} "
+                              "(angles are in radians: use math.radians)")
         perigee = self.a * (1.0 - self.e)
         if perigee <= R_EARTH:
-            raise ValueError(f"Orbit perigee radius a(1-e) = {perigee:.1f} m is inside the Earth "
-                             f"(R = {R_EARTH:.0f} m); got a={self.a!r}, e={self.e!r}. "
-                             "Give a in metres, e.g. Orbit(a=6878e3)")
+            raise SatenvError(f"Orbit perigee radius a(1-e) = {perigee:.1f} m is inside the Earth "
+                              f"(R = {R_EARTH:.0f} m); got a={self.a!r}, e={self.e!r}. "
+                              "Give a in metres, e.g. Orbit(a=6878e3)")
+        inputs = f"a = {self.a!r} m, mu = {self.mu!r}"
+        derived(lambda: self.n, "Orbit: the mean motion sqrt(mu / a^3)", inputs)
+        derived(lambda: self.period, "Orbit: the period 2 pi / n", inputs)
 
     @classmethod
     def circular(cls, radius: float, i: float = 0.0, raan: float = 0.0, u: float = 0.0,

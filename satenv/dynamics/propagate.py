@@ -15,12 +15,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._checks import as_array, positive
-from ._soa import acceleration_soa, derivative_soa, eci_rel_to_lvlh_soa, lvlh_to_eci_rel_soa
+from satenv.errors import SatenvError, SatenvTypeError
+
+from ._checks import (
+    MAX_STEPS,
+    MAX_SUBSTEPS,
+    MAX_WORK,
+    all_finite,
+    as_array,
+    first_nonfinite,
+    integer,
+    positive,
+)
+from ._soa import derivative_soa, eci_rel_to_lvlh_soa, lvlh_to_eci_rel_soa
+from .constants import R_EARTH
 from .cw import cw_matrices
-from .forces import FORCE_MODELS, ForceModel
+from .forces import FORCE_MODELS, ForceModel, acceleration_soa
 from .integrators import INTEGRATORS
-from .orbit import Orbit
+from .orbit import Orbit, _lvlh_to_eci_rel
 
 MODELS: tuple[str, ...] = ("cw", "nonlinear", "j2", "j2_drag")
 """Names accepted by :func:`simulate` and :class:`RelativeModel`."""
@@ -31,8 +43,8 @@ MAX_SUBSTEP: float = 5.0
 
 def check_model(model: str) -> str:
     """Return ``model`` if it is a known dynamics model name, else raise ``ValueError``."""
-    if model not in MODELS:
-        raise ValueError(f"unknown dynamics model {model!r}; expected one of {list(MODELS)}")
+    if not isinstance(model, str) or model not in MODELS:
+        raise SatenvError(f"unknown dynamics model {model!r}; expected one of {list(MODELS)}")
     return model
 
 
@@ -73,16 +85,24 @@ class RelativeModel:
     def __post_init__(self) -> None:
         check_model(self.model)
         if not isinstance(self.orbit, Orbit):
-            raise ValueError(f"orbit must be a satenv.dynamics.Orbit, got {type(self.orbit).__name__}")
+            raise SatenvTypeError(f"orbit must be a satenv.dynamics.Orbit, got {type(self.orbit).__name__}")
+        if self.force is not None and not isinstance(self.force, ForceModel):
+            raise SatenvTypeError(f"force must be a satenv.dynamics.ForceModel or None, "
+                                  f"got {type(self.force).__name__}")
         object.__setattr__(self, "dt", positive(self.dt, "dt (s)"))
-        if self.integrator not in INTEGRATORS:
-            raise ValueError(f"unknown integrator {self.integrator!r}; expected one of {sorted(INTEGRATORS)}")
-        sub = self.substeps
-        if sub is None:
+        if not isinstance(self.integrator, str) or self.integrator not in INTEGRATORS:
+            raise SatenvError(f"unknown integrator {self.integrator!r}; expected one of {sorted(INTEGRATORS)}")
+        if self.substeps is None:
             sub = max(1, math.ceil(self.dt / MAX_SUBSTEP - 1e-9))
-        if int(sub) != sub or sub < 1:
-            raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")
-        object.__setattr__(self, "substeps", int(sub))
+            if sub > MAX_SUBSTEPS:
+                raise SatenvError(
+                    f"dt = {self.dt!r} s needs {sub} internal steps of <= {MAX_SUBSTEP} s, above the "
+                    f"cap MAX_SUBSTEPS = {MAX_SUBSTEPS} per step (one step would take too long); "
+                    "use a smaller dt, or pass substeps <= MAX_SUBSTEPS (coarser integration)")
+        else:
+            sub = integer(self.substeps, "substeps", maximum=MAX_SUBSTEPS, allow_float=True,
+                          why="the cap on internal steps per step, MAX_SUBSTEPS")
+        object.__setattr__(self, "substeps", sub)
         if self.force is None and self.model != "cw":
             object.__setattr__(self, "force", FORCE_MODELS[self.model])
         if self.model == "cw":
@@ -168,19 +188,46 @@ def simulate(model: str, x0, *, orbit: Orbit, dt: float, steps: int, u=None,
     check_model(model)
     x0 = as_array(x0, "x0", (6,))
     if x0.ndim != 2:
-        raise ValueError(f"x0 must have shape (M, 6), got {x0.shape}; for one deputy use x0[None]")
-    if isinstance(steps, bool) or int(steps) != steps or steps < 0:
-        raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
-    steps = int(steps)
+        raise SatenvError(f"x0 must have shape (M, 6), got {x0.shape}; for one deputy use x0[None]")
+    steps = integer(steps, "steps", minimum=0, maximum=MAX_STEPS, allow_float=True,
+                    why="the cap on step counts, MAX_STEPS")
     if u is not None:
         u = as_array(u, "u", (3,))
         if u.shape != (steps, x0.shape[0], 3):
-            raise ValueError(f"u must have shape (steps, M, 3) = {(steps, x0.shape[0], 3)}, "
-                             f"got {u.shape}")
+            raise SatenvError(f"u must have shape (steps, M, 3) = {(steps, x0.shape[0], 3)}, "
+                              f"got {u.shape}")
     prop = RelativeModel(model, orbit, dt, substeps=substeps, force=force)
+    if model != "cw":
+        if steps * prop.substeps > MAX_WORK:
+            raise SatenvError(
+                f"steps * substeps = {steps} * {prop.substeps} internal steps exceeds the cap "
+                f"MAX_WORK = {MAX_WORK} of one simulate call (it would run for minutes); "
+                "split the propagation into several calls or use a larger dt")
+        _check_outside_earth(prop, x0)
     out = np.empty((steps + 1, *x0.shape))
     out[0] = x0
     chief = prop.initial_chief()
-    for k in range(steps):
-        out[k + 1], chief = prop.step(out[k], None if u is None else u[k], chief)
+    with np.errstate(all="ignore"):  # non-finite results are reported below, with where
+        for k in range(steps):
+            out[k + 1], chief = prop.step(out[k], None if u is None else u[k], chief)
+    if not all_finite(out):
+        k = int(np.flatnonzero(~np.isfinite(out).reshape(steps + 1, -1).all(axis=1))[0])
+        labels = [f"deputy {i}" for i in range(x0.shape[0])]
+        raise SatenvError(f"simulate({model!r}): non-finite {first_nonfinite({'state': out[k]}, labels)} "
+                          f"at step {k}; the inputs "
+                          "(x0, u, orbit, dt) drive the propagation out of the float range")
     return out
+
+
+def _check_outside_earth(prop: RelativeModel, x0: np.ndarray) -> None:
+    """Truth models: every deputy must start above the Earth's surface (the gravity model is
+    singular at its centre)."""
+    chief = prop.initial_chief()
+    rel = _lvlh_to_eci_rel(chief, x0, None)
+    radius = np.sqrt(((chief[:3] + rel[:, :3]) ** 2).sum(axis=1))
+    inside = np.flatnonzero(~(radius > R_EARTH))
+    if inside.size:
+        i = int(inside[0])
+        raise SatenvError(f"x0 row {i} puts deputy {i} at {radius[i]:.6g} m from the Earth's "
+                          f"centre, inside the Earth (R = {R_EARTH:.0f} m); x0 is relative to the "
+                          "chief in LVLH [m, m/s]")

@@ -41,6 +41,12 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from satenv.dynamics import unit_box_to_accel
+from satenv.dynamics._checks import StepGuard, all_finite, first_nonfinite, numeric
+from satenv.errors import SatenvError, SatenvTypeError
+from satenv.scenarios._fields import states_in_region
+
+__all__ = ["INFO_KEYS", "BatchedCore", "SatParallelEnv", "SatenvError", "SatenvTypeError", "StepResult",
+           "reject_unknown_kwargs", "resolve_preset"]
 
 INFO_KEYS: tuple[str, ...] = (
     "state", "accel", "delta_v", "tracking_error", "min_separation", "collision", "violations", "cost",
@@ -51,10 +57,6 @@ INFO_KEYS: tuple[str, ...] = (
 ``delta_v`` spent in the last step [m/s]; ``tracking_error`` the quantity the paper's RMSE
 measures (vector); ``min_separation`` distance to the nearest other body [m]; ``collision``
 (bool); ``violations`` constraint violations this step (int); ``cost`` safety cost (float)."""
-
-
-class SatenvError(ValueError):
-    """Bad input to a satenv environment (a ``ValueError``)."""
 
 
 @dataclass
@@ -124,8 +126,9 @@ class SatParallelEnv(ParallelEnv):
 
     Subclasses set ``core_class``, ``agent_prefix``, ``metadata["name"]`` (and optionally
     ``render_speedup``) and call ``super().__init__(scenario, render_mode=...)`` with the resolved
-    frozen scenario (which must provide ``n_agents``, ``dt``, ``max_steps``, ``u_max`` and
-    ``thrust_mode``).
+    frozen scenario (which must provide ``n_agents``, ``dt``, ``max_steps``, ``u_max``,
+    ``thrust_mode`` and ``max_distance``, the radius of the allowed region that bounds
+    ``initial_state`` positions).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10,
@@ -137,17 +140,19 @@ class SatParallelEnv(ParallelEnv):
     reset_option_keys: ClassVar[frozenset[str]] = frozenset({"initial_state"})
 
     def __init__(self, scenario: Any, *, render_mode: str | None = None) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+        if render_mode is not None and (not isinstance(render_mode, str)
+                                        or render_mode not in self.metadata["render_modes"]):
             raise SatenvError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
                               f"got {render_mode!r}")
         self.scenario = scenario
         self.render_mode = render_mode
         self.metadata = {**type(self).metadata, "render_fps": self.render_speedup / scenario.dt}
-        self.core = self.core_class(scenario, batch=1)
+        self.core = self._build_core(scenario)
         m = self.core.n_agents
         self.possible_agents = [f"{self.agent_prefix}_{i + 1}" for i in range(m)]
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
+        self._finite_step = StepGuard(m * self.core.obs_dim, m * self.core.state_dim)
         self._obs_space = spaces.Box(-np.inf, np.inf, (self.core.obs_dim,), np.float32)
         self._act_space = spaces.Box(-1.0, 1.0, (self.core.action_dim,), np.float32)
         self.observation_spaces = dict.fromkeys(self.possible_agents, self._obs_space)
@@ -156,6 +161,49 @@ class SatParallelEnv(ParallelEnv):
         self._last_info: dict[str, np.ndarray] | None = None
         self._trails: list[np.ndarray] = []
         self._fig = None
+
+    def _build_core(self, scenario: Any) -> BatchedCore:
+        """The core, after a probe episode step (from the first initial state, at full thrust)
+        whose observations, rewards and states must be finite: a scenario whose derived
+        quantities overflow (e.g. ``u_max=1e300``) is rejected here, not at the first step."""
+        name = self.metadata["name"]
+        try:
+            with np.errstate(all="ignore"):
+                core = self.core_class(scenario, batch=1)
+                rng = np.random.default_rng(0)
+                info = core.reset(core.sample_initial_state(rng, 1), None, rng)
+                quantities = {"observation": core.observe()[0], "state": info["state"][0]}
+                if all_finite(*quantities.values()):
+                    full = np.ones((1, core.n_agents, core.action_dim))
+                    res = core.step(unit_box_to_accel(full, scenario.u_max, scenario.thrust_mode), rng)
+                    quantities = {"observation": core.observe()[0], "reward": res.rewards[0],
+                                  "state": res.info["state"][0]}
+        except SatenvError as exc:
+            raise type(exc)(f"{name}: {exc}") from None
+        except (ArithmeticError, ValueError) as exc:
+            raise SatenvError(f"{name}: the scenario's derived quantities are out of range "
+                              f"({type(exc).__name__}: {exc}); use physically sized values (SI)") from None
+        if not all_finite(*quantities.values()):
+            agents = [f"{self.agent_prefix}_{i + 1}" for i in range(core.n_agents)]
+            raise SatenvError(f"{name}: the scenario gives a non-finite "
+                              f"{first_nonfinite(quantities, agents)} in its first step at full thrust; "
+                              "its parameters (u_max, dt, scales, initial state) are out of range")
+        return core
+
+    def _nonfinite(self, obs: np.ndarray, rewards: np.ndarray | None, state: np.ndarray) -> None:
+        """Raise :class:`SatenvError` naming the agents, the step and the quantities that are not
+        finite after a step (or reset); the episode ends (``reset`` starts a new one)."""
+        quantities = {"observation": obs[0], "state": state[0]}
+        if rewards is not None:
+            quantities["reward"] = rewards[0]
+        if all_finite(*quantities.values()):
+            return  # a false alarm of the fast check (a reward sum overflowed)
+        t = int(self.core.t[0])
+        where = f"at step {t}" if t else "at reset (step 0)"
+        self.agents = []
+        raise SatenvError(f"{self.metadata['name']}: non-finite "
+                          f"{first_nonfinite(quantities, self.possible_agents)} {where}; the episode "
+                          "is over, call reset()")
 
     # ----------------------------------------------------------------- spaces
     def observation_space(self, agent: str) -> spaces.Box:
@@ -187,39 +235,37 @@ class SatParallelEnv(ParallelEnv):
         """Start an episode; ``options={"initial_state": array (M, state_dim)}`` overrides x0."""
         options = {} if options is None else options
         if not isinstance(options, dict):
-            raise SatenvError(f"options must be a dict or None, got {type(options).__name__}")
+            raise SatenvTypeError(f"options must be a dict or None, got {type(options).__name__}")
         unknown = set(options) - self.reset_option_keys
         if unknown:  # a warning, not an error: PettingZoo's own API test passes a dummy option
             warnings.warn(f"ignoring unknown reset option(s) {sorted(unknown)}; "
                           f"known keys: {sorted(self.reset_option_keys)}", stacklevel=2)
+        x0 = None  # every check before any change: a rejected reset leaves the env as it was
+        if options.get("initial_state") is not None:
+            x0 = self._check_initial_state(options["initial_state"])
         if seed is not None:
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+                raise SatenvTypeError(f"seed must be a non-negative int or None, got {type(seed).__name__}")
+            if seed < 0:
                 raise SatenvError(f"seed must be a non-negative int or None, got {seed!r}")
             self._rng = np.random.default_rng(int(seed))
         rng = self.np_random
-        if options.get("initial_state") is not None:
-            x0 = self._check_initial_state(options["initial_state"])
-        else:
+        if x0 is None:
             x0 = self.core.sample_initial_state(rng, 1)[0]
         info = self.core.reset(x0[None], None, rng)
-        self.agents = list(self.possible_agents)
         self._last_info = info
         self._trails = []
-        return self._obs_dict(), self._info_dicts(info)
+        obs = self.core.observe()
+        if not all_finite(obs, info["state"]):
+            self._nonfinite(obs, None, info["state"])
+        self.agents = list(self.possible_agents)
+        return dict(zip(self.possible_agents, obs[0], strict=True)), self._info_dicts(info)
 
     def _check_initial_state(self, value: Any) -> np.ndarray:
-        shape = (self.core.n_agents, self.core.state_dim)
-        try:
-            x0 = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SatenvError(f"options['initial_state'] must be a numeric array of shape {shape}, "
-                              f"got {type(value).__name__}") from None
-        if x0.shape != shape:
-            raise SatenvError(f"options['initial_state'] must have shape {shape} (one row per agent, "
-                              f"{self.possible_agents}), got {x0.shape}")
-        if not np.all(np.isfinite(x0)):
-            raise SatenvError("options['initial_state'] must be finite, got NaN/inf entries")
-        return x0
+        """A ``(M, state_dim)`` array inside the scenario's allowed region (``max_distance``)."""
+        return states_in_region(value, f"options['initial_state'] (rows {self.possible_agents})",
+                                self.scenario.max_distance, n_agents=self.core.n_agents,
+                                width=self.core.state_dim)
 
     def step(self, actions: dict[str, Any]):
         """Apply normalised actions ``{agent: (action_dim,) in [-1, 1]}``; returns the 5 PettingZoo dicts."""
@@ -230,10 +276,14 @@ class SatParallelEnv(ParallelEnv):
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
         res = self.core.step(accel[None], self.np_random)
         self._last_info = res.info
+        obs_arr = self.core.observe()
+        reward_list = res.rewards[0].tolist()
+        if not self._finite_step(obs_arr, res.info["state"], sum(reward_list)):
+            self._nonfinite(obs_arr, res.rewards, res.info["state"])
         truncated = bool(self.core.t[0] >= self.scenario.max_steps)
         terminated = bool(res.terminated[0])
-        obs = self._obs_dict()
-        rewards = dict(zip(self.possible_agents, res.rewards[0].tolist(), strict=True))
+        obs = dict(zip(self.possible_agents, obs_arr[0], strict=True))
+        rewards = dict(zip(self.possible_agents, reward_list, strict=True))
         terms = dict.fromkeys(self.agents, terminated)
         truncs = dict.fromkeys(self.agents, truncated and not terminated)
         infos = self._info_dicts(res.info)
@@ -245,17 +295,21 @@ class SatParallelEnv(ParallelEnv):
 
     def _action_array(self, actions: Any) -> np.ndarray:
         if not isinstance(actions, dict):
-            raise SatenvError(f"actions must be a dict {{agent: array of shape ({self.core.action_dim},)}}, "
+            raise SatenvTypeError(f"actions must be a dict {{agent: array of shape ({self.core.action_dim},)}}, "
                               f"got {type(actions).__name__}")
         dim = self.core.action_dim
         if len(actions) == len(self.agents) == self.core.n_agents:
-            # fast path: one conversion and one finiteness check for the whole team
+            # fast path: one conversion and one finiteness check for the whole team (real,
+            # unmasked values only: anything else takes the checked path below)
             try:
-                out = np.array([actions[a] for a in self.possible_agents], dtype=np.float64)
-            except (KeyError, TypeError, ValueError):
+                values = [actions[a] for a in self.possible_agents]
+                out = np.array(values)
+            except (KeyError, TypeError, ValueError, OverflowError):
                 out = None
-            if out is not None and out.shape == (self.core.n_agents, dim) and np.isfinite(out).all():
-                return out
+            if (out is not None and out.dtype.kind in "fiu" and out.shape == (self.core.n_agents, dim)
+                    and not any(isinstance(v, np.ma.MaskedArray) for v in values)
+                    and all_finite(out)):
+                return out.astype(np.float64, copy=False)
         missing = [a for a in self.agents if a not in actions]
         extra = [a for a in actions if a not in self._index]
         if missing or extra:
@@ -263,20 +317,11 @@ class SatParallelEnv(ParallelEnv):
                               f"missing {missing}, unknown {extra}")
         out = np.zeros((self.core.n_agents, dim))
         for agent, value in actions.items():
-            try:
-                arr = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise SatenvError(f"action for {agent} must be numeric, got {value!r}") from None
+            arr = numeric(value, f"action for {agent} (normalised inputs in [-1, 1])")
             if arr.shape != (dim,):
                 raise SatenvError(f"action for {agent} must have shape ({dim},), got {arr.shape}")
-            if not np.all(np.isfinite(arr)):
-                raise SatenvError(f"action for {agent} must be finite, got {arr.tolist()}; "
-                                  "actions are normalised inputs in [-1, 1]")
             out[self._index[agent]] = arr
         return out
-
-    def _obs_dict(self) -> dict[str, np.ndarray]:
-        return dict(zip(self.possible_agents, self.core.observe()[0], strict=True))
 
     def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
         # one conversion per key: python scalars for per-agent scalars, rows for per-agent vectors
@@ -316,7 +361,7 @@ def resolve_preset(env_name: str, preset: str, presets: dict[str, Any], resolve:
     Unknown presets, unknown keywords and invalid values raise :class:`SatenvError` naming the
     env; ``resolve(preset, **overrides)`` is the scenario module's resolver.
     """
-    if preset not in presets:
+    if not isinstance(preset, str) or preset not in presets:
         raise SatenvError(f"{env_name}: unknown preset {preset!r}; expected one of {sorted(presets)}")
     allowed = {f.name for f in dataclasses.fields(presets[preset]) if f.init and not f.name.startswith("_")} - {"name"}
     reject_unknown_kwargs(kwargs, allowed, env_name)
@@ -325,7 +370,7 @@ def resolve_preset(env_name: str, preset: str, presets: dict[str, Any], resolve:
     except SatenvError:
         raise
     except ValueError as exc:
-        raise SatenvError(f"{env_name}: {exc}") from None
+        raise (SatenvTypeError if isinstance(exc, TypeError) else SatenvError)(f"{env_name}: {exc}") from None
 
 
 def reject_unknown_kwargs(kwargs: dict[str, Any], allowed: set[str], env_name: str) -> None:

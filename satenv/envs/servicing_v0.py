@@ -344,8 +344,9 @@ class ServicingEnv(SatParallelEnv):
 
     def _check_initial_state(self, value: Any) -> np.ndarray:
         x0 = super()._check_initial_state(value)
-        norms = np.linalg.norm(x0[:, 6:10], axis=1)
-        if np.any(norms < 1e-6):
+        with np.errstate(over="ignore"):
+            norms = np.linalg.norm(x0[:, 6:10], axis=1)
+        if not np.all((norms >= 1e-6) & np.isfinite(norms)):
             raise SatenvError("options['initial_state'][:, 6:10] are the attitude quaternions "
                               f"[eta, ex, ey, ez] and must be non-zero, got norms {norms.tolist()}")
         return x0

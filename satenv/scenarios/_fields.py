@@ -1,55 +1,125 @@
 """Validation of scenario fields (shared by every scenario dataclass's ``__post_init__``).
 
-Each function returns the cleaned value or raises ``ValueError`` naming the field, what was
-received and what is expected.
+Each function returns the cleaned value or raises :class:`satenv.errors.SatenvError` (a
+``ValueError``; :class:`satenv.errors.SatenvTypeError` for a value of the wrong kind) naming the
+field, what was received and what is expected. The number/array rules and the work caps are
+those of :mod:`satenv.dynamics._checks`.
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
 from typing import Any
 
 import numpy as np
 
+from satenv.dynamics._checks import (
+    MAX_STEPS,
+    MAX_SUBSTEPS,
+    derived,
+    integer,
+    numeric,
+    positive,
+    real,
+    show,
+)
+from satenv.errors import SatenvError, SatenvTypeError
+
+__all__ = ["MAX_AGENTS", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "SatenvError", "array",
+           "at_most", "derived", "flag", "from_preset", "integer", "nested", "number", "real",
+           "orbit_step", "spreads_in_region", "states_in_region", "steps", "vector"]
+
+MAX_AGENTS: int = 64
+"""Cap on the number of agents of a scenario (the platoon observation map grows as N^3: 64
+followers already take 90 MB)."""
+
+MAX_RELATIVE_SPEED: float = 2 * 11.2e3
+"""Largest relative speed [m/s] of an initial state: two bound Earth orbits never move faster
+than twice the escape speed at the surface (11.2 km/s) relative to each other."""
+
 
 def number(value: Any, name: str, *, allow_zero: bool = False) -> float:
     """A finite float ``> 0`` (``>= 0`` with ``allow_zero``); booleans are rejected."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        need = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be a finite number {need}, got {value!r}")
-    return v
+    return positive(value, name, allow_zero=allow_zero)
+
+
+def flag(value: Any, name: str) -> bool:
+    """A bool (``True``/``False``, or a numpy bool)."""
+    if not isinstance(value, bool | np.bool_):
+        raise SatenvError(f"{name} must be True or False, got {show(value)}")
+    return bool(value)
+
+
+def steps(value: Any, name: str) -> int:
+    """An episode length: an int in ``[1, MAX_STEPS]``."""
+    return integer(value, name, maximum=MAX_STEPS,
+                   why="the cap on step counts, satenv.dynamics._checks.MAX_STEPS")
 
 
 def array(value: Any, name: str, shape: tuple[int, ...] | None = None, ndim: int | None = None) -> np.ndarray:
     """A finite float array, optionally of an exact ``shape`` or number of dimensions."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numeric, got {value!r}") from None
+    arr = numeric(value, name)
     if shape is not None and arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}: {value!r}")
+        raise SatenvError(f"{name} must have shape {shape}, got {arr.shape}: {show(value)}")
     if ndim is not None and arr.ndim != ndim:
-        raise ValueError(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
+        raise SatenvError(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
     return arr
 
 
 def vector(value: Any, name: str, length: int | None = None) -> tuple[float, ...]:
     """A flat tuple of finite floats (of ``length`` entries when given)."""
-    try:
-        arr = np.asarray(value, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric sequence, got {value!r}") from None
+    arr = numeric(value, name).ravel()
     if length is not None and arr.shape != (length,):
-        raise ValueError(f"{name} must have {length} entries, got {arr.size}: {value!r}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
+        raise SatenvError(f"{name} must have {length} entries, got {arr.size}: {show(value)}")
     return tuple(float(v) for v in arr)
+
+
+def states_in_region(x: Any, name: str, max_distance: float, *, n_agents: int | None = None,
+                     width: int = 6) -> np.ndarray:
+    """Initial states ``(M, width)`` (columns 0-2 position, 3-5 velocity) inside the scenario's
+    allowed region: ``|p| <= max_distance`` and ``|v| <= MAX_RELATIVE_SPEED``; at most
+    ``MAX_AGENTS`` rows (exactly ``n_agents`` when given)."""
+    arr = numeric(x, name)
+    rows = "M" if n_agents is None else n_agents
+    if arr.ndim != 2 or arr.shape[1] != width or not 1 <= arr.shape[0] <= MAX_AGENTS or (
+            n_agents is not None and arr.shape[0] != n_agents):
+        raise SatenvError(f"{name} must have shape ({rows}, {width}) with 1 <= M <= {MAX_AGENTS} "
+                          f"(one row per agent), got shape {arr.shape}")
+    dist = np.sqrt((arr[:, :3] ** 2).sum(axis=1))
+    speed = np.sqrt((arr[:, 3:6] ** 2).sum(axis=1))
+    for what, values, bound in (("position", dist, max_distance), ("speed", speed, MAX_RELATIVE_SPEED)):
+        far = np.flatnonzero(~(values <= bound))
+        if far.size:
+            i = int(far[0])
+            raise SatenvError(f"{name}: row {i} has {what} norm {values[i]:.6g}, outside the allowed "
+                              f"region (<= {bound:.6g}; max_distance for positions [m], "
+                              f"MAX_RELATIVE_SPEED for velocities [m/s])")
+    return arr
+
+
+def at_most(value: float, name: str, bound: float, bound_name: str) -> float:
+    """``value`` if it is ``<= bound`` (``bound_name`` says which limit), else a clear error."""
+    if not value <= bound:
+        raise SatenvError(f"{name} = {value!r} must be <= {bound_name} = {bound!r}")
+    return value
+
+
+def spreads_in_region(position_spread: float, velocity_spread: float, max_distance: float,
+                      position_name: str = "random_position_spread",
+                      velocity_name: str = "random_velocity_spread") -> None:
+    """Random initial states stay in the allowed region: spreads at most ``max_distance`` [m]
+    and ``MAX_RELATIVE_SPEED`` [m/s]."""
+    at_most(position_spread, position_name, max_distance, "max_distance")
+    at_most(velocity_spread, velocity_name, MAX_RELATIVE_SPEED, "MAX_RELATIVE_SPEED [m/s]")
+
+
+def orbit_step(mean_motion: float, dt: float, inputs: str) -> None:
+    """One decision step is shorter than an orbital period (``n dt <= 2 pi``) and the orbit
+    radius implied by ``inputs`` is above the Earth's surface."""
+    if not mean_motion * dt <= 2 * np.pi:
+        raise SatenvError(f"dt = {dt!r} s is longer than the orbital period 2 pi / n = "
+                          f"{2 * np.pi / mean_motion:.6g} s of {inputs}; a decision step must be "
+                          "shorter than one orbit")
 
 
 def nested(arr: np.ndarray):
@@ -59,7 +129,11 @@ def nested(arr: np.ndarray):
 
 def from_preset(presets: dict[str, Any], preset: str, kind: str, overrides: dict[str, Any]) -> Any:
     """``presets[preset]`` with ``overrides`` applied through its ``with_overrides`` (validated)."""
-    if preset not in presets:
-        raise ValueError(f"unknown {kind} preset {preset!r}; expected one of {sorted(presets)}")
+    if not isinstance(preset, str) or preset not in presets:
+        raise SatenvError(f"unknown {kind} preset {show(preset)}; expected one of {sorted(presets)}")
     base = presets[preset]
+    for f in dataclasses.fields(base):  # text fields take text (a numpy array would compare elementwise)
+        if f.name in overrides and f.type in ("str", str) and not isinstance(overrides[f.name], str):
+            raise SatenvTypeError(f"{f.name} must be a string, got {type(overrides[f.name]).__name__}: "
+                                  f"{show(overrides[f.name])}")
     return base.with_overrides(**overrides) if overrides else base

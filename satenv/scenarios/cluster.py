@@ -102,9 +102,7 @@ _number = _fields.number
 
 
 def _integer(value: Any, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
-    return int(value)
+    return _fields.integer(value, name, minimum=minimum)
 
 
 def _sinusoid_norm_max() -> float:
@@ -218,9 +216,15 @@ class ClusterScenario:
                              "(use math.radians for degrees)")
         s(self, "altitude", _number(self.altitude, "altitude (m above R_EARTH)"))
         s(self, "n_neighbours", _integer(self.n_neighbours, "n_neighbours", 0))
-        s(self, "max_steps", _integer(self.max_steps, "max_steps", 1))
+        s(self, "max_steps", _fields.steps(self.max_steps, "max_steps"))
         s(self, "reallocate_every", _integer(self.reallocate_every, "reallocate_every", 0))
-        ratio = self.dt / self.physics_dt
+        ratio = _fields.derived(lambda: self.dt / self.physics_dt, "the physics steps per decision "
+                                "dt / physics_dt", f"dt = {self.dt!r}, physics_dt = {self.physics_dt!r}")
+        if ratio > _fields.MAX_SUBSTEPS + 0.5:
+            raise _fields.SatenvError(
+                f"dt / physics_dt = {ratio:.6g} physics steps per decision exceeds the cap "
+                f"MAX_SUBSTEPS = {_fields.MAX_SUBSTEPS} (one env step would take too long); "
+                f"raise physics_dt or lower dt (dt = {self.dt!r} s, physics_dt = {self.physics_dt!r} s)")
         if abs(ratio - round(ratio)) > 1e-9 * ratio:
             raise ValueError(f"physics_dt must divide dt: dt = {self.dt} s, physics_dt = "
                              f"{self.physics_dt} s gives {ratio:.6g} physics steps per decision")
@@ -231,9 +235,23 @@ class ClusterScenario:
         if self.allocation not in ALLOCATIONS:
             raise ValueError(f"allocation must be one of {list(ALLOCATIONS)}, got {self.allocation!r}")
         for name in ("terminate_on_collision", "randomize", "collision_voids_success"):
-            if not isinstance(getattr(self, name), bool | np.bool_):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-            s(self, name, bool(getattr(self, name)))
+            s(self, name, _fields.flag(getattr(self, name), name))
+        _fields.states_in_region(self.initial_array(), "initial_positions / initial_velocities",
+                                 self.max_distance)
+        _fields.at_most(self.random_position_spread, "random_position_spread", self.max_distance,
+                        "max_distance")
+        for name in ("target_spacecraft", "obstacle_position"):
+            _fields.at_most(float(np.linalg.norm(getattr(self, name))), f"|{name}| [m]",
+                            self.max_distance, "max_distance")
+        _fields.at_most(float(np.abs(self.targets_array()).max()), "the largest targets coordinate [m]",
+                        self.max_distance, "max_distance")
+        _fields.at_most(float(np.linalg.norm(self.obstacle_velocity)), "|obstacle_velocity| [m/s]",
+                        _fields.MAX_RELATIVE_SPEED, "MAX_RELATIVE_SPEED")
+        _fields.derived(lambda: self.thrust_max, "the thrust authority u_max * mass",
+                        f"u_max = {self.u_max!r}, mass = {self.mass!r}")
+        _fields.orbit_step(_fields.derived(lambda: self.orbit.n, "the mean motion of the reference orbit",
+                                           f"altitude = {self.altitude!r}"), self.dt,
+                           f"altitude = {self.altitude!r}")
 
     # ---- what SatParallelEnv needs -------------------------------------------------------------
     @property
@@ -356,7 +374,7 @@ def sample_initial_state(scenario: ClusterScenario, rng: np.random.Generator) ->
             out = x.copy()
             out[:, :3] = pos
             return out
-    raise RuntimeError("could not draw initial positions satisfying the safety distances in 1000 "
+    raise _fields.SatenvError("could not draw initial positions satisfying the safety distances in 1000 "
                        f"tries with random_position_spread = {s} m; reduce the spread")
 
 
@@ -375,6 +393,6 @@ def sample_targets(scenario: ClusterScenario, rng: np.random.Generator) -> np.nd
                 targets[k] = point
                 break
         else:
-            raise RuntimeError(f"could not place {len(targets)} target slots {min_gap} m apart on a "
+            raise _fields.SatenvError(f"could not place {len(targets)} target slots {min_gap} m apart on a "
                                f"{radius} m sphere in 1000 tries; increase random_target_radius")
     return targets

@@ -54,7 +54,21 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from satenv.scenarios._fields import from_preset, number, vector
+from satenv.dynamics.constants import MU_EARTH, R_EARTH
+from satenv.scenarios._fields import (
+    SatenvError,
+    array,
+    at_most,
+    derived,
+    flag,
+    from_preset,
+    number,
+    orbit_step,
+    spreads_in_region,
+    states_in_region,
+    steps,
+    vector,
+)
 
 __all__ = ["FormationScenario", "PRESETS", "resolve_scenario", "sample_initial_state",
            "proximity_components"]
@@ -127,13 +141,9 @@ class FormationScenario:
         s = object.__setattr__
         if not isinstance(self.name, str):
             raise ValueError(f"name must be a string, got {self.name!r}")
-        try:
-            x0 = np.asarray(self.initial_state, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"initial_state must be a numeric (M, 6) array, got {self.initial_state!r}") from None
-        if x0.ndim != 2 or x0.shape[1] != 6 or x0.shape[0] < 1 or not np.all(np.isfinite(x0)):
-            raise ValueError(f"initial_state must be a finite (M, 6) array (one LVLH state per "
-                             f"spacecraft), got shape {x0.shape}")
+        s(self, "max_distance", number(self.max_distance, "max_distance"))
+        x0 = states_in_region(self.initial_state, "initial_state (M, 6) LVLH states",
+                              self.max_distance)
         m = x0.shape[0]
         s(self, "initial_state", tuple(tuple(float(v) for v in row) for row in x0))
         if not isinstance(self.goals, (tuple, list)) or len(self.goals) != m:
@@ -156,12 +166,7 @@ class FormationScenario:
         if self.offsets is None:
             offsets = np.zeros((m, 3))
         else:
-            try:
-                offsets = np.asarray(self.offsets, dtype=float)
-            except (TypeError, ValueError):
-                raise ValueError(f"offsets must be a numeric (M, 3) array, got {self.offsets!r}") from None
-            if offsets.shape != (m, 3) or not np.all(np.isfinite(offsets)):
-                raise ValueError(f"offsets must be a finite ({m}, 3) array, got shape {offsets.shape}")
+            offsets = array(self.offsets, "offsets", (m, 3))
         s(self, "offsets", tuple(tuple(float(v) for v in row) for row in offsets))
         for name in ("mean_motion", "dt", "u_max", "connection_range", "max_distance", "length_scale",
                      "position_weight", "input_weight", "success_tol"):
@@ -169,19 +174,23 @@ class FormationScenario:
         for name in ("collision_distance", "offset_weight", "connection_penalty",
                      "random_position_spread", "random_velocity_spread", "random_min_gap"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
-        v = self.max_steps
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"max_steps must be a positive int, got {v!r}")
-        s(self, "max_steps", int(v))
+        s(self, "max_steps", steps(self.max_steps, "max_steps"))
         if self.thrust_mode not in ("box", "norm"):
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}")
         if self.dynamics not in ("cw", "nonlinear", "j2", "j2_drag"):
             raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
         for name in ("terminate_on_collision", "terminate_on_disconnect", "randomize",
                      "collision_voids_success"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-            s(self, name, bool(getattr(self, name)))
+            s(self, name, flag(getattr(self, name), name))
+        spreads_in_region(self.random_position_spread, self.random_velocity_spread, self.max_distance)
+        inputs = f"mean_motion = {self.mean_motion!r}"
+        radius = derived(lambda: (MU_EARTH / self.mean_motion**2) ** (1.0 / 3.0),
+                         "the reference orbit radius (mu / mean_motion^2)^(1/3)", inputs)
+        at_most(R_EARTH, "the Earth's radius [m]", radius,
+                f"the reference orbit radius (mu / mean_motion^2)^(1/3) of {inputs}")
+        orbit_step(self.mean_motion, self.dt, inputs)
+        derived(lambda: self.velocity_scale, "the velocity scale sqrt(length_scale u_max)",
+                f"length_scale = {self.length_scale!r}, u_max = {self.u_max!r}")
 
     # ---- derived quantities ------------------------------------------------------------------
     @property
@@ -292,5 +301,5 @@ def sample_initial_state(scenario: FormationScenario, rng: np.random.Generator) 
         if not proximity_components(pos, scenario.connection_range).all():
             continue
         return x
-    raise RuntimeError("could not draw a connected, well-separated initial state in 1000 tries; "
+    raise SatenvError("could not draw a connected, well-separated initial state in 1000 tries; "
                        "reduce random_position_spread or random_min_gap, or increase connection_range")

@@ -28,8 +28,21 @@ from typing import Any
 
 import numpy as np
 
+from satenv.dynamics.constants import R_EARTH
 from satenv.graph import make_topology
-from satenv.scenarios._fields import from_preset, number, vector
+from satenv.scenarios._fields import (
+    SatenvError,
+    at_most,
+    derived,
+    flag,
+    from_preset,
+    number,
+    orbit_step,
+    spreads_in_region,
+    states_in_region,
+    steps,
+    vector,
+)
 
 __all__ = ["PlatoonScenario", "PRESETS", "resolve_scenario", "sample_initial_state"]
 
@@ -123,12 +136,9 @@ class PlatoonScenario:
         s = object.__setattr__
         if not isinstance(self.name, str):
             raise ValueError(f"name must be a string, got {self.name!r}.")
-        x0 = np.asarray(self.initial_state, dtype=float)
-        if x0.ndim != 2 or x0.shape[1] != 6 or x0.shape[0] < 1 or not np.all(np.isfinite(x0)):
-            raise ValueError(
-                f"initial_state must be a finite (N, 6) array of follower states, got shape "
-                f"{x0.shape}; pass [[x, y, z, vx, vy, vz], ...] relative to the leader."
-            )
+        s(self, "max_distance", number(self.max_distance, "max_distance"))
+        x0 = states_in_region(self.initial_state, "initial_state (N, 6) follower states relative "
+                              "to the leader", self.max_distance)
         n = x0.shape[0]
         s(self, "initial_state", tuple(tuple(float(v) for v in row) for row in x0))
         s(self, "desired_error", vector(self.desired_error, "desired_error", 6))
@@ -136,7 +146,10 @@ class PlatoonScenario:
             raise ValueError(
                 f"formation must be 'neighbourhood' or 'chain', got {self.formation!r}."
             )
-        topo = make_topology(self.topology, n)
+        try:
+            topo = make_topology(self.topology, n)
+        except (TypeError, ValueError) as exc:
+            raise SatenvError(f"topology: {exc}") from None
         s(self, "_topology", topo)
         if not isinstance(self.topology, str):
             s(self, "topology", tuple(tuple(int(v) for v in row) for row in topo.adjacency))
@@ -150,9 +163,7 @@ class PlatoonScenario:
         for name in ("collision_penalty", "violation_penalty"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
         for name in ("terminate_on_collision", "randomize", "min_error_constraint"):
-            if not isinstance(getattr(self, name), bool | np.bool_):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}.")
-            s(self, name, bool(getattr(self, name)))
+            s(self, name, flag(getattr(self, name), name))
         if self.thrust_mode not in ("box", "norm"):
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}.")
         inc = vector([self.inclination], "inclination", 1)[0]
@@ -162,11 +173,7 @@ class PlatoonScenario:
         for name in ("keepout_radius", "random_position_spread", "random_velocity_spread",
                      "random_min_gap"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
-        for name in ("max_steps",):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-                raise ValueError(f"{name} must be a positive int, got {v!r}.")
-            s(self, name, int(v))
+        s(self, "max_steps", steps(self.max_steps, "max_steps"))
         for name, length in (("state_weight", 6), ("input_weight", 3)):
             w = vector(getattr(self, name), name, length)
             if min(w) < 0:
@@ -196,6 +203,11 @@ class PlatoonScenario:
             raise ValueError(f"collision_voids_success must be True, False or None (derived), got "
                              f"{self.collision_voids_success!r}.")
         s(self, "collision_voids_success", bool(self.collision_voids_success))
+        spreads_in_region(self.random_position_spread, self.random_velocity_spread, self.max_distance)
+        at_most(R_EARTH, "the Earth's radius [m]", self.orbit_radius, "orbit_radius")
+        inputs = f"mu = {self.mu!r}, orbit_radius = {self.orbit_radius!r}"
+        orbit_step(derived(lambda: self.mean_motion, "the mean motion sqrt(mu / orbit_radius^3)",
+                           inputs), self.dt, inputs)
 
     # ---- derived quantities ---------------------------------------------------------------
     @property
@@ -362,7 +374,7 @@ def sample_initial_state(scenario: PlatoonScenario, rng: np.random.Generator) ->
         if not np.all(los_keepout_ok(scenario, x, margin=0.5)):
             continue
         return x
-    raise RuntimeError(
+    raise SatenvError(
         "could not draw a collision-free initial state in 1000 tries; reduce "
         "random_position_spread or random_min_gap."
     )

@@ -25,7 +25,21 @@ from typing import Any
 import numpy as np
 
 from satenv.dynamics import MU_EARTH
-from satenv.scenarios._fields import array, from_preset, nested, number
+from satenv.dynamics.constants import R_EARTH
+from satenv.scenarios import _fields
+from satenv.scenarios._fields import (
+    MAX_SUBSTEPS,
+    SatenvError,
+    array,
+    derived,
+    flag,
+    from_preset,
+    integer,
+    nested,
+    number,
+    states_in_region,
+    steps,
+)
 
 __all__ = ["PRESETS", "ServicingScenario", "resolve_scenario", "sample_initial_state"]
 
@@ -182,11 +196,9 @@ class ServicingScenario:
             raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
         if self.thrust_mode != "box":
             raise ValueError(f"thrust_mode must be 'box' (per-input limits, eq. 36), got {self.thrust_mode!r}")
-        for name in ("max_steps", "substeps"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-                raise ValueError(f"{name} must be a positive int, got {v!r}")
-            s(self, name, int(v))
+        s(self, "max_steps", steps(self.max_steps, "max_steps"))
+        s(self, "substeps", integer(self.substeps, "substeps", maximum=MAX_SUBSTEPS,
+                                    why="the cap on integration substeps per env step, MAX_SUBSTEPS"))
         for name, n in (("position_weight", 3), ("velocity_weight", 3), ("quaternion_weight", 4),
                         ("omega_weight", 3), ("input_weight", 6)):
             w = array(getattr(self, name), name).ravel()
@@ -199,13 +211,20 @@ class ServicingScenario:
         if min(self.input_weight) <= 0:
             raise ValueError(f"input_weight must be > 0 (H positive definite), got {self.input_weight}")
         for name in ("terminate_on_collision", "randomize", "collision_voids_success"):
-            if not isinstance(getattr(self, name), bool | np.bool_):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-            s(self, name, bool(getattr(self, name)))
+            s(self, name, flag(getattr(self, name), name))
+        states_in_region(self.initial_array()[:, :6], "initial_position / initial_velocity",
+                         self.max_distance)
+        _fields.spreads_in_region(self.random_shell, self.random_velocity_spread, self.max_distance,
+                                  position_name="random_shell")
+        _fields.at_most(R_EARTH, "the Earth's radius [m]", self.orbit_radius, "orbit_radius")
+        inputs = f"mu = {self.mu!r}, orbit_radius = {self.orbit_radius!r}"
+        _fields.orbit_step(derived(lambda: self.mean_motion, "the mean motion sqrt(mu / orbit_radius^3)",
+                                   inputs), self.dt, inputs)
         keep = self.keepout_radius
         d0 = np.linalg.norm(p0, axis=1)
         if np.any(d0 < keep):
-            raise ValueError(f"initial positions must satisfy |p| >= r_sigma + r_s = {keep} m (eq. 40), "
+            raise ValueError(f"initial positions must satisfy |p| >= r_sigma + r_s = object_radius + "
+                             f"spacecraft_radius = {keep} m (eq. 40), "
                              f"got distances {d0.tolist()}")
 
     # ---- derived quantities ---------------------------------------------------------------
@@ -300,5 +319,5 @@ def sample_initial_state(scenario: ServicingScenario, rng: np.random.Generator) 
         q *= np.where(q[:, :1] < 0, -1.0, 1.0)
         w = rng.uniform(-1, 1, size=(m, 3)) * scenario.random_angular_spread
         return np.concatenate([p, v, q, w], axis=1)
-    raise RuntimeError("could not draw a collision-free initial state in 1000 tries; "
+    raise SatenvError("could not draw a collision-free initial state in 1000 tries; "
                        "increase random_shell or reduce random_min_gap")
