@@ -30,6 +30,7 @@ from benchmarks.claims import passed
 
 PAPERS: dict[str, str] = {
     "pereira2023": "benchmarks.repro_pereira2023",
+    "pereira2022-platoon": "benchmarks.repro_pereira2022_platoon",
     "pereira2022-servicing": "benchmarks.repro_servicing",
     "kannan2022": "benchmarks.repro_kannan2022",
     "li2022": "benchmarks.repro_li2022",
