@@ -92,7 +92,8 @@ def format_claims(claims: Iterable[dict[str, Any]]) -> str:
         lines.append(f"{c['claim']:<{width}} | {_fmt(c['paper']):>12} | {_fmt(c['measured']):>12} "
                      f"| {c.get('target', '-')} | {'met' if c['met'] else 'NOT MET'}")
     n_met = sum(c["met"] for c in claims)
-    lines.append(f"claims met: {n_met}/{len(claims)}")
+    verdict = "PASS" if all_met(claims) else "FAIL"
+    lines.append(f"claims met: {n_met}/{len(claims)} -> {verdict}")
     return "\n".join(lines)
 
 

@@ -139,8 +139,7 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"{name:<9} | {err:>22} | {d['min_keepout_margin_m']:10.2f} m | "
                      f"{d['min_los_margin_m']:6.2f} m | {d['env_violations']:>8} | "
                      f"{d['fallbacks']:>9} | {d['wall_time_s']:6.1f}")
-    lines.append(format_claims(result["claims"]))
-    lines.append(f"-> {'PASS' if result['pass'] else 'FAIL'} (wall time {result['wall_time_s']:.1f} s)")
+    lines.append(format_claims(result["claims"]) + f" (wall time {result['wall_time_s']:.1f} s)")
     return "\n".join(lines)
 
 

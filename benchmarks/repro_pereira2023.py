@@ -179,8 +179,8 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"{topo}: min separation {d['min_separation_m']:.2f} m, collision flags "
                      f"{d['collision_steps']}, violations {d['violations']}, fallbacks "
                      f"{d['fallbacks']}, mean Jacobi iterations {d['mean_jacobi_iterations']:.2f}")
+    lines.append(f"FOE: {result['notes']['foe']}")
     lines.append(format_claims(result["claims"]))
-    lines.append(f"-> {'PASS' if result['pass'] else 'FAIL'} (FOE: {result['notes']['foe']})")
     return "\n".join(lines)
 
 

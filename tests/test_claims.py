@@ -34,7 +34,7 @@ def test_format_and_markdown(tmp_path, capsys):
     result = {"paper": "x2020", "claims": [claims.claim("a", 1.0, 1.25, True, target="+-30%"),
                                            claims.claim("b", "stated", None, False)]}
     text = claims.format_claims(result["claims"])
-    assert "NOT MET" in text and "claims met: 1/2" in text
+    assert "NOT MET" in text and "claims met: 1/2 -> FAIL" in text
     rows = claims.markdown_rows(result)
     assert rows[0] == "| x2020 | a | 1 | 1.25 | +-30% | met |"
     assert "**not met**" in rows[1]
