@@ -16,8 +16,9 @@ Two algorithms, selected by ``DMPCConfig.variant`` (default: the preset's paper)
 Constraints (39)-(41): ``|u| <= u_max`` per axis; the velocity rows of the predicted
 neighbourhood error within ``+-c_f v_max``; optionally the minimum-tracking-error constraint
 ``||E_f,pos|| >= c_f r_f`` linearised (42) as the half-space ``n^T E_f,pos(k) >= c_f r_f`` with
-``n`` the unit direction of the current ``E_f,pos``. Jacobi iterations until
-``max_f ||U_f(g+1) - U_f(g)|| <= sigma``; at the first step the iterates start from a seeded
+``n`` the unit direction of the current ``E_f,pos``. Jacobi iterations; agent f stops once
+``||U_f(g+1) - U_f(g)|| <= sigma`` (Algorithm 1; ``stopping="all"``: all stop when
+``max_f ||U_f(g+1) - U_f(g)|| <= sigma``); at the first step the iterates start from a seeded
 uniform random sequence in ``[-u_max, u_max]``, afterwards from the previous solution (shifted by
 one step by default). ``constrained=False`` drops all constraints; the iteration then converges
 to the centralised closed form (25) (:func:`centralised_gain`, Proposition 3).
@@ -89,13 +90,19 @@ class DMPCConfig:
         terminal_weight: diagonal of P (6,).
         sigma: Jacobi stopping tolerance of Algorithm 1 (one_hop).
         max_iterations: cap on Jacobi iterations per decision (one_hop).
+        stopping: ``"per_agent"`` (Algorithm 1, line 15: agent f stops iterating, and keeps
+            broadcasting its last iterate, once ``||U_f(g+1) - U_f(g)|| <= sigma``) or ``"all"``
+            (every agent iterates until ``max_f ||U_f(g+1) - U_f(g)|| <= sigma``) (one_hop).
         iterations: convex-step iterations gamma per decision (convex_step).
         convex_weights: w_j of pereira2022 eq. 30 (one per follower, in (0, 1), sum 1);
             ``None``: uniform.
         constrained: False drops every constraint (closed-form local solutions).
         min_error_constraint: add (41)-(42) (one_hop); ``None``: the scenario's.
         velocity_constraint: the (g+d)-scaled velocity box (40) (one_hop).
-        coupled_constraints: convex_step agents impose the constraints of both pairs they move
+        velocity_margin: the box (40) is imposed as ``(g+d) v_max - velocity_margin`` [m/s]
+            (one_hop): the applied error velocity also depends on the neighbours' final
+            iterates, which differ from the ones agent f planned against by up to the Jacobi
+            tolerance; without the margin the bound was exceeded by 1e-8 m/s on 2-3 steps.        coupled_constraints: convex_step agents impose the constraints of both pairs they move
             (:class:`ConvexStepDMPC`).
         solver: ``"daqp"`` or ``"osqp"``.
         warm_start: ``"shift"`` or ``"previous"`` (one_hop); initial: ``"random"`` or ``"zeros"``.
@@ -107,11 +114,13 @@ class DMPCConfig:
     terminal_weight: tuple[float, ...] = (25.0,) * 6
     sigma: float = 0.5
     max_iterations: int = 200
+    stopping: str = "per_agent"
     iterations: int = 2
     convex_weights: tuple[float, ...] | None = None
     constrained: bool = True
     min_error_constraint: bool | None = None
     velocity_constraint: bool = True
+    velocity_margin: float = 1e-4
     coupled_constraints: bool = False
     solver: str = "daqp"
     warm_start: str = "shift"
@@ -122,11 +131,13 @@ class DMPCConfig:
         rules: dict[str, Any] = {
             "variant": partial(choice, choices=("one_hop", "convex_step")),
             "horizon": partial(integer, high=MAX_HORIZON), "sigma": number,
+            "velocity_margin": partial(number, zero_ok=True),
             "terminal_weight": partial(weights, length=6),
             "max_iterations": integer, "iterations": integer,
             "constrained": flag, "velocity_constraint": flag, "coupled_constraints": flag,
             "solver": partial(choice, choices=_SOLVERS),
             "warm_start": partial(choice, choices=("shift", "previous")),
+            "stopping": partial(choice, choices=("per_agent", "all")),
             "initial": partial(choice, choices=("random", "zeros")),
         }
         if self.min_error_constraint is not None:
@@ -334,6 +345,7 @@ class OneHopDMPC:
         self.solver = cfg.solver
         self.sigma = cfg.sigma
         self.max_iterations = cfg.max_iterations
+        self.per_agent = cfg.stopping == "per_agent"
         self.warm_start = cfg.warm_start
         self.initial = cfg.initial
         self._seed = cfg.seed
@@ -413,17 +425,16 @@ class OneHopDMPC:
         return (-np.einsum("fij,fj->fi", self.K1, err) + np.einsum("fij,fj->fi", self.K2, su)
                 + self.k3)
 
-    def _local_constrained(self, err, su, u_prev, rows_a) -> np.ndarray:
+    def _local_constrained(self, err, su, u_prev, rows_a, active) -> np.ndarray:
         sc = self.scenario
-        nf = self.topology.n_followers
         f_lin = (np.einsum("fij,fj->fi", self.M1, err) - np.einsum("fij,fj->fi", self.M2, su)
                  - self.m3)
-        out = np.empty_like(u_prev)
-        for f in range(nf):
+        out = u_prev.copy()
+        for f in np.flatnonzero(active):
             bl, bu = [], []
             if self.velocity:
                 off = self.ca_v @ err[f] - self.cb_v @ su[f]
-                lim = self.c[f] * sc.v_max
+                lim = self.c[f] * sc.v_max - self.cfg.velocity_margin
                 bl.append(-lim - off)
                 bu.append(lim - off)
             if self.min_error:
@@ -459,22 +470,23 @@ class OneHopDMPC:
                 p = err[f, :3]
                 nrm = np.linalg.norm(p)
                 rows_a.append((p / nrm, True) if nrm > 1e-9 else (np.array([1.0, 0, 0]), False))
-        converged = False
+        active = np.ones(self.topology.n_followers, dtype=bool)
         it = 0
-        while it < self.max_iterations:
+        while it < self.max_iterations and active.any():
             it += 1
             su = self.adj @ u
             if self.constrained:
-                new = self._local_constrained(err, su, u, rows_a)
+                new = self._local_constrained(err, su, u, rows_a, active)
             else:
                 new = self._local_unconstrained(err, su)
-            delta = np.linalg.norm(new - u, axis=1).max()
-            u = new
-            if delta <= self.sigma:
-                converged = True
-                break
+            delta = np.linalg.norm(new - u, axis=1)
+            u = np.where(active[:, None], new, u)
+            if self.per_agent:   # Algorithm 1: each agent stops on its own (line 15)
+                active &= delta > self.sigma
+            elif delta.max() <= self.sigma:
+                active[:] = False
         self.iterations.append(it)
-        if not converged:
+        if active.any():
             self.info["not_converged"] += 1
         if not np.all(np.isfinite(u)):
             record_fallback(self.info, "non-finite plan")

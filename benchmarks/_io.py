@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -13,3 +14,8 @@ def write_json(path: str | Path, result: Any) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, indent=2))
     return path
+
+
+def progress(message: str) -> None:
+    """One progress line of a long run on stderr (the table and JSON stay on stdout / --out)."""
+    print(message, file=sys.stderr, flush=True)

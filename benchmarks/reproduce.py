@@ -3,15 +3,18 @@
 Each paper lives in its own module ``benchmarks/repro_<paper>.py`` (``-`` in the paper name
 becomes ``_``) exposing::
 
-    reproduce(plots: str | Path | None = None, seed: int = 0) -> dict   # {"paper", "rows", "pass", ...}
+    reproduce(plots: str | Path | None = None, seed: int = 0) -> dict   # {"paper", "claims", "pass", ...}
     format_table(result: dict) -> str                                  # printed beside the paper
 
 A module may also define ``add_arguments(parser)`` to add its own options (e.g. li2022's
-``--case``); their values are passed to ``reproduce`` as keyword arguments.
+``--case``); their values are passed to ``reproduce`` as keyword arguments, and ``RUN_TIME`` (str,
+e.g. ``"about 1 s"``), the expected wall time that ``--help`` lists. Progress goes to stderr
+(:func:`benchmarks._io.progress`).
 
 Register it in :data:`PAPERS` (or rely on the naming convention). The command prints the table,
-writes the JSON to ``--out`` and the figures to ``--plots DIR``; it exits with status 1 when the
-reproduction misses its targets (``result["pass"]`` is False).
+writes the JSON to ``--out`` and the figures to ``--plots DIR``; it exits with status 0 only when
+every claim it checks is met (:func:`benchmarks.claims.passed`: ``result["pass"]`` and every
+record of ``result["claims"]``, see :mod:`benchmarks.claims`), else 1.
 """
 
 from __future__ import annotations
@@ -23,9 +26,11 @@ from pathlib import Path
 from types import ModuleType
 
 from benchmarks._io import write_json
+from benchmarks.claims import passed
 
 PAPERS: dict[str, str] = {
     "pereira2023": "benchmarks.repro_pereira2023",
+    "pereira2022-platoon": "benchmarks.repro_pereira2022_platoon",
     "pereira2022-servicing": "benchmarks.repro_servicing",
     "kannan2022": "benchmarks.repro_kannan2022",
     "li2022": "benchmarks.repro_li2022",
@@ -45,8 +50,17 @@ def load(paper: str) -> ModuleType:
                          f"(or add a module {name})") from None
 
 
+def run_times() -> str:
+    """``--help`` epilog: each registered paper with its module's ``RUN_TIME``."""
+    lines = ["papers (expected wall time on one core):"]
+    for paper in sorted(PAPERS):
+        lines.append(f"  {paper:<24} {getattr(load(paper), 'RUN_TIME', '?')}")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.reproduce", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.reproduce", description=__doc__.splitlines()[0],
+                                     epilog=run_times(), formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("paper", help=f"paper to reproduce, e.g. {', '.join(sorted(PAPERS))}")
     parser.add_argument("--out", type=Path, default=None, help="write the result JSON here")
     parser.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) in this directory")
@@ -71,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None:
         write_json(args.out, result)
         print(f"wrote {args.out}")
-    return 0 if result.get("pass", True) else 1
+    return 0 if passed(result) else 1
 
 
 if __name__ == "__main__":

@@ -288,3 +288,25 @@ def test_dmpc_reaches_the_chain_formation_without_collision():
     traj = rollout(env, DMPC(env), seed=0)
     assert traj.steps == env.scenario.max_steps and metrics.collisions(traj) == 0
     np.testing.assert_allclose(traj.states[-1, :, 1], [-8.0, -16.0, -24.0, -32.0], atol=1e-3)
+
+
+def test_per_agent_stopping_is_algorithm_1():
+    """Algorithm 1 line 15: each agent stops on its own. In PLF follower 1 hears only the leader,
+    so from a random start it stops after 2 iterations however long the others iterate; with
+    stopping="all" it keeps solving (the same QP) until the worst agent converges."""
+    sc = P23.with_overrides(topology="PLF")
+    x = sc.initial_array()
+    solved = {}
+    for stopping in ("per_agent", "all"):
+        ctl = OneHopDMPC(sc, stopping=stopping, sigma=1e-6, seed=3)
+        calls = []
+        orig = ctl._local_constrained
+        ctl._local_constrained = lambda *a: (calls.append(a[-1].copy()), orig(*a))[1]
+        ctl.solve(x)
+        solved[stopping] = np.sum(calls, axis=0)
+    assert solved["per_agent"][0] == 2 and solved["all"][0] == solved["all"].max() > 2
+    assert solved["per_agent"].max() == solved["all"].max()
+    with pytest.raises(BaselineError, match="stopping"):
+        DMPCConfig(stopping="worst")
+    with pytest.raises(BaselineError, match="velocity_margin"):
+        DMPCConfig(velocity_margin=-1.0)

@@ -1,0 +1,199 @@
+"""Reproduce pereira2022 §5.1: cooperative DMPC platooning with keep-out sphere and LOS cone.
+
+``python -m benchmarks.reproduce pereira2022-platoon [--plots DIR] [--steps N]`` runs
+``satenv.platoon_v0(preset="pereira2022")`` (leader passive, two followers, T_s = 0.1 s, 300
+steps) with ``baselines.dmpc.DMPC`` (convex step, N = 40, gamma = 2, w = (0.6, 0.4)) in both
+variants of eq. (29):
+
+* ``own_pair`` (our default, ``coupled_constraints=False``): agent j imposes only the
+  constraints of its own target–chaser pair j;
+* ``coupled`` (``coupled_constraints=True``, eq. 29 as written): agent j imposes the constraints
+  of every pair its input moves (j and j+1), so with ``sum w = 1`` every convex-step iterate
+  stays jointly feasible (eq. 30) — when every QP is feasible. A QP that is not falls back to
+  the input-box-only QP and counts in ``fallbacks``.
+
+The paper gives Fig. 3 and one sentence: "each spacecraft is able to perform the approximation
+and maintain a constant V-Bar position between each other while satisfying all the constraints
+considered for this scenario at all times". Claims checked per variant (``result["claims"]``,
+:mod:`benchmarks.claims`): spacing reached (every pair's final position error <= the scenario's
+``success_tol`` = 1 m from ``y_d = (0, -10, 0)``), keep-out sphere (r = 6 m) respected at every
+step, LOS cone (c = (1, 1), port (2, 2, 4) m) respected at every step, no violation of the input
+and velocity boxes counted by the env; for ``coupled`` also every QP feasible (0 fallbacks), the
+premise of eq. 30. ``--plots DIR``: the Fig. 3 analogue (one PNG per spacecraft).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks._io import progress
+from benchmarks.claims import all_met, claim, format_claims
+
+PAPER = "pereira2022-platoon"
+PRESET = "pereira2022"
+RUN_TIME = "about 20 s (both variants; --steps shortens the episode)"
+VARIANTS = {"own_pair": False, "coupled": True}
+"""Variant name -> ``DMPCConfig.coupled_constraints``."""
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--steps", type=int, default=None,
+                        help="episode length (default: the preset's 300 steps = 30 s)")
+
+
+def run_variant(coupled: bool, seed: int = 0, steps: int | None = None):
+    """One §5.1 episode; returns ``(trajectory, env, policy)``."""
+    import satenv
+    from baselines.dmpc import DMPC
+    from satenv.rollout import rollout
+
+    kwargs = {} if steps is None else {"max_steps": steps}
+    env = satenv.make("platoon_v0", preset=PRESET, **kwargs)
+    policy = DMPC(env, coupled_constraints=coupled, seed=seed)
+    return rollout(env, policy, seed=seed), env, policy
+
+
+def constraint_margins(scenario, states: np.ndarray) -> dict[str, np.ndarray]:
+    """Per step and pair (T+1, M): distance outside the keep-out sphere and the smallest slack of
+    the LOS cone's inequalities (eq. 34) [m]; negative = violated."""
+    from satenv.scenarios.platoon import pair_states
+
+    p = pair_states(scenario, states)[..., :3]
+    keepout = np.linalg.norm(p - np.asarray(scenario.keepout_center), axis=-1) - scenario.keepout_radius
+    cx, cz = scenario.los_slopes
+    xr, yr, zr = scenario.port
+    slack = np.stack([-yr - p[..., 1], cx * xr - cx * np.abs(p[..., 0]) - p[..., 1],
+                      cz * zr - cz * np.abs(p[..., 2]) - p[..., 1]])
+    return {"keepout": keepout, "los": slack.min(axis=0)}
+
+
+def reproduce(plots: str | Path | None = None, seed: int = 0, steps: int | None = None) -> dict[str, Any]:
+    """Run both variants and check the §5.1 claims; optionally save the Fig. 3 analogue."""
+    from satenv import metrics
+
+    start = time.perf_counter()
+    variants, runs, checks = {}, {}, []
+    for name, coupled in VARIANTS.items():
+        progress(f"pereira2022 §5.1: {name} constraints ...")
+        t0 = time.perf_counter()
+        traj, env, policy = run_variant(coupled, seed=seed, steps=steps)
+        sc = env.scenario
+        runs[name] = (traj, env)
+        margins = constraint_margins(sc, traj.states)
+        final = metrics.final_position_error(traj)
+        d = {
+            "coupled_constraints": coupled, "steps": traj.steps,
+            "final_position_error_m": final.tolist(),
+            "min_keepout_margin_m": float(margins["keepout"].min()),
+            "keepout_violation_steps": int(np.sum(margins["keepout"] < 0)),
+            "min_los_margin_m": float(margins["los"].min()),
+            "los_violation_steps": int(np.sum(margins["los"] < 0)),
+            "env_violations": metrics.violations(traj),
+            "collision_steps": metrics.collisions(traj),
+            "min_separation_m": metrics.min_separation(traj),
+            "fallbacks": int(policy.info["fallbacks"]),
+            "solver_status": policy.info["solver_status"],
+            "median_decision_ms": float(np.median(policy.info["solve_ms"])),
+            "wall_time_s": time.perf_counter() - t0,
+        }
+        variants[name] = d
+        tag = {"variant": name}
+        checks += [
+            claim(f"{name}: spacing reached (max final pair error, m)", "constant V-bar spacing",
+                  float(final.max()), bool(final.max() <= sc.success_tol),
+                  target=f"<= {sc.success_tol} m", **tag),
+            claim(f"{name}: keep-out respected (violation steps)", "at all times",
+                  d["keepout_violation_steps"], d["keepout_violation_steps"] == 0,
+                  target="0 steps", **tag),
+            claim(f"{name}: LOS cone respected (violation steps)", "at all times",
+                  d["los_violation_steps"], d["los_violation_steps"] == 0, target="0 steps", **tag),
+            claim(f"{name}: input/velocity boxes and collisions (env counts)", "at all times",
+                  d["env_violations"] + d["collision_steps"],
+                  d["env_violations"] + d["collision_steps"] == 0, target="0", **tag),
+        ]
+        if coupled:
+            checks.append(claim(f"{name}: every QP feasible, iterates jointly feasible (fallbacks)",
+                                "feasible (eq. 29-30)", d["fallbacks"], d["fallbacks"] == 0,
+                                target="0 fallbacks", **tag))
+    result = {
+        "paper": PAPER, "claims": checks, "pass": all_met(checks), "variants": variants,
+        "seed": seed, "wall_time_s": time.perf_counter() - start,
+        "settings": {"env": f"platoon_v0(preset={PRESET!r})",
+                     "policy": "baselines.dmpc.DMPC (convex_step, N=40, gamma=2, w=(0.6, 0.4), daqp)"},
+    }
+    if plots is not None:
+        result["figures"] = [str(p) for p in save_figures(runs, Path(plots))]
+    return result
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """Per variant: constraint margins and fallbacks, then the claims."""
+    lines = [f"{'variant':<9} | {'final err [m]':>22} | {'keep-out min':>12} | {'LOS min':>8} | "
+             f"{'env viol':>8} | {'fallbacks':>9} | {'wall s':>6}"]
+    for name, d in result["variants"].items():
+        err = ", ".join(f"{e:.1e}" for e in d["final_position_error_m"])
+        lines.append(f"{name:<9} | {err:>22} | {d['min_keepout_margin_m']:10.2f} m | "
+                     f"{d['min_los_margin_m']:6.2f} m | {d['env_violations']:>8} | "
+                     f"{d['fallbacks']:>9} | {d['wall_time_s']:6.1f}")
+    lines.append(format_claims(result["claims"]) + f" (wall time {result['wall_time_s']:.1f} s)")
+    return "\n".join(lines)
+
+
+def save_figures(runs: dict, out: Path) -> list[Path]:
+    """Fig. 3 analogue, one PNG per spacecraft: its pair position (relative to its target) in the
+    x-y and z-y planes with the LOS cone and the keep-out sphere, the pair position and the input
+    over time; both variants overlaid."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from satenv.scenarios.platoon import pair_states
+
+    out.mkdir(parents=True, exist_ok=True)
+    sc = next(iter(runs.values()))[1].scenario
+    cx, cz = sc.los_slopes
+    xr, yr, zr = sc.port
+    paths = []
+    for f in range(sc.n_followers):
+        fig, axs = plt.subplots(2, 2, figsize=(11, 8))
+        for (a, b, slope, half, plane) in ((0, 1, cx, xr, "x"), (2, 1, cz, zr, "z")):
+            ax = axs[0, 0 if a == 0 else 1]
+            lat = np.linspace(-60, 60, 241)
+            ax.plot(lat, np.minimum(-yr, slope * half - slope * np.abs(lat)), "k--", lw=1,
+                    label="LOS cone")
+            th = np.linspace(0, 2 * np.pi, 100)
+            ax.plot(sc.keepout_radius * np.cos(th), sc.keepout_radius * np.sin(th), "r-", lw=1,
+                    label="keep-out")
+            for name, (traj, _env) in runs.items():
+                p = pair_states(sc, traj.states)[:, f, :3]
+                ax.plot(p[:, a], p[:, b], label=name)
+            ax.plot(0, sc.desired_error[1], "k*", label="y_d")
+            ax.set_xlabel(f"{plane} [m]")
+            ax.set_ylabel("y [m]")
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.grid(alpha=0.3)
+        axs[0, 0].legend(fontsize=8)
+        for name, (traj, _env) in runs.items():
+            p = pair_states(sc, traj.states)[:, f, :3]
+            u = traj.info["accel"][1:, f]
+            for c, lab in enumerate("xyz"):
+                axs[1, 0].plot(traj.t, p[:, c], label=f"{lab} {name}")
+                axs[1, 1].step(traj.t[:-1], u[:, c], where="post", label=f"{lab} {name}")
+        axs[1, 0].set_ylabel("pair position [m]")
+        axs[1, 1].set_ylabel("input u [m/s$^2$]")
+        for ax in axs[1]:
+            ax.set_xlabel("t [s]")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7, ncol=2)
+        fig.suptitle(f"pereira2022 Fig. 3 analogue: spacecraft {f + 1} relative to its target")
+        fig.tight_layout()
+        path = out / f"pereira2022_platoon_spacecraft{f + 1}.png"
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        paths.append(path)
+    return paths
