@@ -84,6 +84,9 @@ class PlatoonScenario:
         terminate_on_collision: end the episode at a collision (distance < r_i + r_j).
         reward_scale, collision_penalty, violation_penalty: reward shaping of the env (see
             ``satenv.envs.platoon_v0``).
+        neighbour_slots: observe one slot per follower heard (padded to the largest in-degree)
+            instead of one per other follower: observations of size ``15 + 7 max_f d_f``
+            instead of ``15 + 7 (N - 1)``, the layout for swarms (``satenv.envs.platoon_v0``).
         randomize: draw initial states from the distribution below instead of the preset's.
         random_position_spread, random_velocity_spread, random_min_gap: see module docstring.
         success_tol: an episode succeeds when every follower ends within this distance of its
@@ -123,6 +126,7 @@ class PlatoonScenario:
     reward_scale: float = 1.0e4
     collision_penalty: float = 100.0
     violation_penalty: float = 1.0
+    neighbour_slots: bool = False
     randomize: bool = False
     random_position_spread: float = 20.0
     random_velocity_spread: float = 0.5
@@ -162,7 +166,7 @@ class PlatoonScenario:
             s(self, name, number(getattr(self, name), name))
         for name in ("collision_penalty", "violation_penalty"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
-        for name in ("terminate_on_collision", "randomize", "min_error_constraint"):
+        for name in ("terminate_on_collision", "randomize", "min_error_constraint", "neighbour_slots"):
             s(self, name, flag(getattr(self, name), name))
         if self.thrust_mode not in ("box", "norm"):
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}.")
