@@ -366,7 +366,8 @@ def swarm(n: int, formation: str = "chain", topology: str = "PLF", *, spacing: f
     target = (np.arange(1, n + 1)[:, None] * np.asarray(e_d) if formation == "chain"
               else ring_states(n, float(spacing)))
     extent = float(np.abs(target[:, :3]).max()) + 2.0 * spread
-    kwargs = {"preset": "pereira2023", "initial_state": target, "formation": formation,
+    start = tuple(tuple(row) for row in target.tolist())
+    kwargs = {"preset": "pereira2023", "initial_state": start, "formation": formation,
               "topology": topology, "desired_error": e_d, "alpha": (1.0,) * n, "neighbour_slots": True,
               "max_distance": max(500.0, 2.0 * extent), "randomize": True,
               "random_position_spread": float(spread), "random_velocity_spread": 0.1,
