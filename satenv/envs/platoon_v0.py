@@ -306,7 +306,9 @@ class PlatoonCore(BatchedCore):
     def _geometry_error(self, x: np.ndarray) -> np.ndarray:
         """Neighbourhood errors ``E`` (eq. 9) from neighbour gathers ``(B, N, 6)``."""
         err = x * self.gains[:, None]
-        err -= np.einsum("fk,bfkc->bfc", self._nbr_mask, x[:, self._nbr])
+        gathered = x[:, self._nbr]
+        gathered *= self._nbr_mask[..., None]
+        err -= gathered.sum(axis=2)
         return err
 
     def global_state(self) -> np.ndarray:
