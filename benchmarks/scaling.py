@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.perf import _rate
+
 SIZES = (4, 16, 64, 256, 1024)
 COPIES = 64
 
@@ -31,18 +33,6 @@ def _swarm_kwargs(n: int) -> dict[str, Any]:
     from satenv.scenarios.platoon import swarm
 
     return swarm(n, "ring", "RING" if n >= 3 else "PLF")
-
-
-def _best_rate(fn: Callable[[], Any], work: int, min_time: float, repeats: int = 3) -> float:
-    fn()
-    best = 0.0
-    for _ in range(repeats):
-        calls, start = 0, time.perf_counter()
-        while (elapsed := time.perf_counter() - start) < min_time or calls < 2:
-            fn()
-            calls += 1
-        best = max(best, calls * work / elapsed)
-    return best
 
 
 def pettingzoo_rate(n: int, min_time: float) -> float:
@@ -57,7 +47,7 @@ def pettingzoo_rate(n: int, min_time: float) -> float:
             env.reset()
         env.step({a: zero for a in env.agents})
 
-    return _best_rate(step, n, min_time)
+    return _rate(step, n, min_time)
 
 
 def core_memory_mib(n: int, copies: int) -> float:
@@ -85,7 +75,7 @@ def core_rate(n: int, copies: int, min_time: float, repeats: int = 3) -> float:
         core.step(accel)
         core.observe()
 
-    return _best_rate(step, copies * n, min_time, repeats)
+    return _rate(step, copies * n, min_time, repeats)
 
 
 def dmpc_ms_per_agent(n: int, decisions: int) -> float | None:
