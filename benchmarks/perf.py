@@ -17,7 +17,11 @@ Agent-steps per second (one agent advanced by one decision step) of
 * ``solvers`` per-decision solve times of the scripted MPC baselines (DMPC on
               ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too.
 
-Three more sections run only when named in ``--sections`` (they take minutes):
+Four more sections run only when named in ``--sections`` (they take minutes):
+
+* ``scaling`` issue 19's swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 followers the
+              PettingZoo step, the 64-copy batched core, its memory and the DMPC decision per
+              agent, with fitted growth exponents and a plot next to ``--out`` (``*_scaling.png``);
 
 * ``cgmres_ipopt`` one C/GMRES update against an ipopt solve (warm and cold) of the same NMPC
               problem along the closed loop on both kannan2022 scenarios, and the first-input gap;
@@ -53,7 +57,7 @@ from satenv.dynamics import R_EARTH, Orbit, RelativeModel
 AGENTS = 4
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers")
 """The default sections."""
-EXTRA_SECTIONS = ("cgmres_ipopt", "training", "learning")
+EXTRA_SECTIONS = ("cgmres_ipopt", "training", "learning", "scaling")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -402,6 +406,11 @@ def _extra_sections(result: dict, sections: tuple[str, ...], scale: float, log: 
                                                  rollouts=1 if scale < 1 else 3, n_epochs=1 if scale < 1 else 10)
         log(f"training: satenv/dummy learn x{result['training']['ratio_learn_env_steps_per_s']:.1f}, "
             f"raw x{result['training']['ratio_raw_env_steps_per_s']:.1f}")
+    if "scaling" in sections:
+        from benchmarks import scaling
+
+        result["scaling"] = scaling.scaling(decisions=max(2, int(5 * scale)), log=log)
+        log(f"scaling: growth exponents {result['scaling']['growth_exponent']}")
     if "learning" in sections:
         result["learning"] = learning_throughput(frames=max(64, int(20_000 * scale)),
                                                  steps=max(3, int(100 * scale)), log=log)
@@ -522,6 +531,12 @@ def _ratios(result: dict) -> tuple[dict, list[dict]]:
                     by_batch = {str(b): rows[b] / vm[b] for b in sorted(rows)}
                     ratios[f"{kind}_{model}_vs_vmas_by_batch"] = by_batch
                     target(f"(d) {kind} {model} / VMAS navigation, worst batch", min(by_batch.values()), 1.0)
+    if "scaling" in result:
+        from benchmarks.scaling import scaling_targets
+
+        for name, value, goal, op in scaling_targets(result["scaling"]):
+            targets.append({"name": name, "value": value, "target": goal, "op": op,
+                            "met": bool(value >= goal if op == ">=" else value <= goal)})
     return ratios, targets
 
 
@@ -628,6 +643,11 @@ def main(argv: list[str] | None = None) -> dict:
     if unknown:
         parser.error(f"unknown --solvers {unknown}; choose from {[p for p, _, _ in SOLVERS]}")
     result = run(batches, sections, args.min_time, args.api_time, args.solver_scale, solvers)
+    if "scaling" in result:
+        from benchmarks.scaling import plot
+
+        result["scaling"]["plot"] = os.path.splitext(args.out)[0] + "_scaling.png"
+        plot(result["scaling"], result["scaling"]["plot"])
     with open(args.out, "w") as fh:
         json.dump(result, fh, indent=2)
     print("ratios: " + json.dumps(result["ratios"], indent=1))

@@ -16,6 +16,8 @@ Named topologies (pereira2023 Fig. 2, after Zheng et al. 2017), every follower p
 * ``"PLF"``  predecessor–leader following: i hears i-1.
 * ``"BDL"``  bidirectional with leader: i hears i-1 and i+1.
 * ``"TPLF"`` two-predecessor–leader following: i hears i-1 and i-2.
+* ``"RING"`` nearest neighbours on a ring: i hears i-1 and i+1 modulo N (the 2-nearest-neighbour
+  graph of the ``"ring"`` formation, :mod:`satenv.scenarios.platoon`).
 
 A user adjacency matrix must be square, 0/1, with a zero diagonal, and every follower must hear
 the leader (all ``g_i = 1``): pereira2023 assumes it (Lemma 1 needs ``G`` positive definite).
@@ -35,7 +37,7 @@ __all__ = [
     "neighbourhood_error",
 ]
 
-TOPOLOGIES: tuple[str, ...] = ("PLF", "BDL", "TPLF")
+TOPOLOGIES: tuple[str, ...] = ("PLF", "BDL", "TPLF", "RING")
 
 
 def named_adjacency(name: str, n_followers: int) -> np.ndarray:
@@ -59,6 +61,8 @@ def named_adjacency(name: str, n_followers: int) -> np.ndarray:
             adj[i, i + 1] = 1
         if key == "TPLF" and i >= 2:
             adj[i, i - 2] = 1
+        if key == "RING" and n > 1:
+            adj[i, (i - 1) % n] = adj[i, (i + 1) % n] = 1
     return adj
 
 

@@ -10,6 +10,7 @@ EXPECTED_4 = {
     "PLF": [[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]],
     "BDL": [[0, 1, 0, 0], [1, 0, 1, 0], [0, 1, 0, 1], [0, 0, 1, 0]],
     "TPLF": [[0, 0, 0, 0], [1, 0, 0, 0], [1, 1, 0, 0], [0, 1, 1, 0]],
+    "RING": [[0, 1, 0, 1], [1, 0, 1, 0], [0, 1, 0, 1], [1, 0, 1, 0]],  # satenv's swarm graph
 }
 
 
@@ -107,7 +108,7 @@ def test_pinning_must_reach_every_follower():
 
 def test_other_bad_inputs():
     with pytest.raises(ValueError, match="unknown topology"):
-        make_topology("RING", 3)
+        make_topology("STAR", 3)
     with pytest.raises(ValueError, match="n_followers"):
         make_topology("PLF")
     with pytest.raises(ValueError, match="positive int"):

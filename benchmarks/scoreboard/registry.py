@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
+from satenv.scenarios.platoon import swarm
 
 __all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "discover_trained_policies", "user_policy",
            "user_policy_name"]
@@ -56,6 +57,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
              terminate_on_collision=True),
     _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, LOS cone "
              "(collision-free success)", preset="pereira2022"),
+    _platoon("platoon-swarm256-ring-cw", "swarm of 256 followers on a ring 20 m apart, each hearing its "
+             "two ring neighbours (RING), randomised starts within 4 m of the targets, cw; a collision "
+             "ends the episode (satenv.scenarios.platoon.swarm)", **swarm(256, "ring", "RING")),
     ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"},
                  "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
     ScenarioSpec("cluster-case2", "cluster_v0", {"preset": "li2022-case2"},
@@ -101,7 +105,9 @@ FULL: dict[str, Any] = {
     # the costliest pairs: tube-RDMPC ~0.6 s x 400 decisions per cluster episode, NMPC ~0.8 s x
     # 1200 decisions per servicing episode (measured on 2 shared cores)
     "scenario_seeds": {"cluster-case1": [0, 1, 2, 3, 4], "cluster-case2": [0, 1, 2, 3, 4],
-                       "servicing-pereira2022": [0, 1, 2]},
+                       "servicing-pereira2022": [0, 1, 2],
+                       # 256 agents: the DMPC takes ~0.5 s per decision of the whole swarm
+                       "platoon-swarm256-ring-cw": [0, 1, 2]},
 }
 """The full (published) board: every scenario x fitting policy x these seeds."""
 

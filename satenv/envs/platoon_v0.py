@@ -95,6 +95,7 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v
+from satenv.neighbours import DENSE_MAX, nearest, norm3
 from satenv.envs.base import BatchedCore, SatParallelEnv, StepResult, resolve_preset
 from satenv.scenarios.platoon import (
     PRESETS,
@@ -117,10 +118,9 @@ class PlatoonCore(BatchedCore):
     state_dim = 6
     action_dim = 3
 
-    def __init__(self, scenario: PlatoonScenario, batch: int = 1) -> None:
+    def __init__(self, scenario: PlatoonScenario, batch: int = 1, method: str = "auto") -> None:
         super().__init__(scenario, batch)
         n = self.n_agents
-        self.obs_dim = 15 + 7 * (n - 1)
         self.topology = scenario.graph
         self.lbar = np.asarray(self.topology.augmented_laplacian)
         self.adj = np.asarray(self.topology.adjacency, dtype=float)
@@ -131,50 +131,69 @@ class PlatoonCore(BatchedCore):
         self.q = np.asarray(scenario.state_weight)
         self.w = np.asarray(scenario.input_weight)
         self.alpha = np.asarray(scenario.alpha)
-        # body pairs (f, other body): the leader first, then the other followers in ascending order
-        others = [[j for j in range(n) if j != i] for i in range(n)]
-        self.others = np.array(others, dtype=np.int64).reshape(n, max(n - 1, 0))
-        pair_op = np.zeros((n, n, n))  # position of f minus that of its k-th other body
-        pair_op[:, 0] = np.eye(n)
-        for f in range(n):
-            pair_op[f, np.arange(1, n), f] = 1.0
-            pair_op[f, np.arange(1, n), self.others[f]] = -1.0
-        # one product gives E (first N rows, eq. 9) and the N*N relative positions (the rest)
-        self._linear_op = np.vstack([self.lbar, pair_op.reshape(n * n, n)])
+        # neighbour lists (ascending index, padded with the follower itself and mask 0)
+        heard = [np.flatnonzero(self.adj[f]) for f in range(n)]
+        k = max(len(h) for h in heard)
+        self._nbr = np.array([np.r_[h, np.full(k - len(h), f)] for f, h in enumerate(heard)],
+                             dtype=np.int64).reshape(n, k)
+        self._nbr_mask = (np.arange(k) < np.array([len(h) for h in heard])[:, None]).astype(float)
+        # observation slots: source follower and mask of slot s of follower f
+        if scenario.neighbour_slots:
+            self._slot_src, self._slot_mask = self._nbr, self._nbr_mask
+        else:  # one slot per other follower j (ascending, self skipped), mask a_fj
+            others = np.array([[j for j in range(n) if j != f] for f in range(n)],
+                              dtype=np.int64).reshape(n, n - 1)
+            self._slot_src, self._slot_mask = others, np.take_along_axis(self.adj, others, 1)
+        self.obs_dim = 15 + 7 * self._slot_src.shape[1]
+        if method not in ("auto", "dense", "sparse"):
+            raise ValueError(f"method must be 'auto', 'dense' or 'sparse', got {method!r}")
+        self.dense = method == "dense" or (method == "auto" and n <= DENSE_MAX)
         r_f = scenario.follower_radius
-        self._pair_contact = np.column_stack([np.full(n, scenario.leader_radius + r_f),
-                                              np.full((n, n - 1), 2 * r_f)])
+        self._contact = (scenario.leader_radius + r_f, 2 * r_f)
         self.x = np.zeros((self.batch, n, 6))
         self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
         self.accel = np.zeros((self.batch, n, 3))
         self._scale = np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
-        self._ones3 = np.ones(3)
         self._vbound = self.gains * scenario.v_max
         self._neg_reward_gain = -self.alpha / scenario.reward_scale
-        self._obs_map, self._obs_offset = self._observation_map()
+        self._obs_offset = self._observation_offset()
+        if self.dense:
+            # one product gives E (first N rows, eq. 9) and the position of f minus that of each
+            # other body (the leader first, then the other followers in ascending order)
+            pair_op = np.zeros((n, n, n))
+            pair_op[:, 0] = np.eye(n)
+            for f in range(n):
+                pair_op[f, np.arange(1, n), f] = 1.0
+                pair_op[f, np.arange(1, n), np.delete(np.arange(n), f)] = -1.0
+            self._linear_op = np.vstack([self.lbar, pair_op.reshape(n * n, n)])
+            self._pair_contact = np.r_[self._contact[0], np.full(n - 1, self._contact[1])]
+            self._obs_map = self._observation_map()
 
-    def _observation_map(self) -> tuple[np.ndarray, np.ndarray]:
-        """The observation is affine in the state: ``obs = x.ravel() @ map + offset - t / n_k``
-        (entry 14). Returns ``map`` ``(6 N, N obs_dim)`` and ``offset`` ``(N, obs_dim)`` built from
-        the layout in the module docstring."""
-        n, d = self.n_agents, self.obs_dim
-        inv = np.diag(1.0 / self._scale)                          # (6, 6)
-        a = np.zeros((n, d, n, 6))                                 # obs[f, k] = a[f, k, j, c] x[j, c]
-        offset = np.zeros((n, d))
-        for f in range(n):
-            a[f, 0:6] = np.einsum("j,kc->kjc", self.lbar[f], inv)  # (E_f - E_f*) / scale
-            a[f, 6:12, f] = inv                                    # x_f / scale
-            for k, j in enumerate(self.others[f]):
-                slot = 15 + 7 * k
-                if self.adj[f, j]:                                 # masked slot: (x_j - x_f) / scale
-                    offset[f, slot] = 1.0
-                    a[f, slot + 1:slot + 7, j] += inv
-                    a[f, slot + 1:slot + 7, f] -= inv
+    def _observation_offset(self) -> np.ndarray:
+        """The state-independent part ``(N, obs_dim)`` of the observation (module docstring)."""
+        n = self.n_agents
+        offset = np.zeros((n, self.obs_dim))
         offset[:, 0:6] = -self.target / self._scale
         offset[:, 12] = self.topology.pinning
         offset[:, 13] = self.gains / n
         offset[:, 14] = 1.0
-        return a.reshape(n * d, n * 6).T.copy(), offset
+        offset[:, 15::7] = self._slot_mask
+        return offset
+
+    def _observation_map(self) -> np.ndarray:
+        """The dense path's observation is affine in the state: ``obs = x.ravel() @ map + offset
+        - t / n_k`` (entry 14); ``map`` is ``(6 N, N obs_dim)``."""
+        n, d = self.n_agents, self.obs_dim
+        inv = np.diag(1.0 / self._scale)                          # (6, 6)
+        a = np.zeros((n, d, n, 6))                                 # obs[f, k] = a[f, k, j, c] x[j, c]
+        for f in range(n):
+            a[f, 0:6] = np.einsum("j,kc->kjc", self.lbar[f], inv)  # (E_f - E_f*) / scale
+            a[f, 6:12, f] = inv                                    # x_f / scale
+            for s, (j, on) in enumerate(zip(self._slot_src[f], self._slot_mask[f], strict=True)):
+                if on:                                             # masked slot: (x_j - x_f) / scale
+                    a[f, 16 + 7 * s:22 + 7 * s, j] += inv
+                    a[f, 16 + 7 * s:22 + 7 * s, f] -= inv
+        return a.reshape(n * d, n * 6).T.copy()
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -211,13 +230,9 @@ class PlatoonCore(BatchedCore):
         """The info arrays of states ``x`` under ``accel``, the stage cost ``e^T Q e + u^T W u``
         ``(B, N)`` and which followers are beyond ``max_distance`` ``(B, N)``."""
         sc = self.scenario
-        n = self.n_agents
-        y = self._linear_op @ x
-        err_raw = y[:, :n]
+        err_raw, sep, lead = self._geometry(x)
         err = err_raw - self.target
-        diff = y[:, n:, :3]                                      # (B, N*N, 3) to every other body
-        dist = np.sqrt((diff * diff) @ self._ones3).reshape(x.shape[0], n, n)
-        collision = (dist < self._pair_contact).any(axis=-1)
+        collision = (lead < self._contact[0]) | (sep < self._contact[1])
         viol = np.abs(err_raw[..., 3:]).max(axis=-1) > self._vbound  # velocity bound (40)
         if sc.min_error_constraint or sc.keepout_radius > 0 or sc.los_slopes is not None:
             viol = viol + self._extra_violations(x, err_raw)
@@ -228,12 +243,27 @@ class PlatoonCore(BatchedCore):
             "delta_v": delta_v(accel, sc.dt),
             "tracking_error": err,
             "neighbourhood_error": err_raw,
-            "min_separation": dist.min(axis=-1),
+            "min_separation": np.minimum(lead, sep),
             "collision": collision,
             "violations": viol.astype(np.int64),
             "cost": np.add(collision, viol, dtype=float),
         }
-        return info, stage, dist[..., 0] > sc.max_distance
+        return info, stage, lead > sc.max_distance
+
+    def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Neighbourhood errors ``E`` (eq. 9) ``(B, N, 6)``, each follower's distance to the nearest
+        other follower ``(B, N)`` (``inf`` alone) and to the leader ``(B, N)``."""
+        n = self.n_agents
+        if self.dense:
+            y = self._linear_op @ x
+            diff = y[:, n:, :3]                                  # (B, N*N, 3) to every other body
+            dist = norm3(diff).reshape(x.shape[0], n, n)
+            sep = dist[..., 1:].min(axis=-1) if n > 1 else np.full(dist.shape[:2], np.inf)
+            return y[:, :n], sep, dist[..., 0]
+        err = self._geometry_error(x)
+        pos = x[..., :3]
+        sep = nearest(pos, 1)[0][..., 0]
+        return err, sep, norm3(pos)
 
     def _extra_violations(self, x: np.ndarray, err_raw: np.ndarray) -> np.ndarray:
         """Violations of the optional constraints: minimum tracking error (41), keep-out sphere
@@ -255,11 +285,31 @@ class PlatoonCore(BatchedCore):
         return viol
 
     def observe(self) -> np.ndarray:
-        b = self.batch
-        obs = (self.x.reshape(b, -1) @ self._obs_map).reshape(b, self.n_agents, self.obs_dim)
-        obs += self._obs_offset
+        b, n = self.batch, self.n_agents
+        if self.dense:
+            obs = (self.x.reshape(b, -1) @ self._obs_map).reshape(b, n, self.obs_dim)
+            obs += self._obs_offset
+        else:  # neighbour gathers: cost proportional to the slots
+            x = self.x / self._scale
+            obs = np.empty((b, n, self.obs_dim))
+            obs[...] = self._obs_offset
+            err = self._geometry_error(self.x) / self._scale
+            obs[..., 0:6] += err
+            obs[..., 6:12] = x
+            slots = obs[..., 15:].reshape(b, n, -1, 7)
+            rel = x[:, self._slot_src] - x[:, :, None]
+            rel *= self._slot_mask[..., None]
+            slots[..., 1:] = rel
         obs[..., 14] -= (self.t / self.scenario.max_steps)[:, None]
         return obs.astype(np.float32)
+
+    def _geometry_error(self, x: np.ndarray) -> np.ndarray:
+        """Neighbourhood errors ``E`` (eq. 9) from neighbour gathers ``(B, N, 6)``."""
+        err = x * self.gains[:, None]
+        gathered = x[:, self._nbr]
+        gathered *= self._nbr_mask[..., None]
+        err -= gathered.sum(axis=2)
+        return err
 
     def global_state(self) -> np.ndarray:
         return self.x.reshape(self.batch, -1).copy()

@@ -29,9 +29,10 @@ __all__ = ["MAX_AGENTS", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "Sat
            "at_most", "derived", "flag", "from_preset", "integer", "nested", "number", "real",
            "orbit_step", "spreads_in_region", "states_in_region", "steps", "vector"]
 
-MAX_AGENTS: int = 64
-"""Cap on the number of agents of a scenario (the platoon observation map grows as N^3: 64
-followers already take 90 MB)."""
+MAX_AGENTS: int = 1024
+"""Cap on the number of agents of a scenario: the swarm sizes the envs are built and measured for
+(per-agent cost flat in N, ``benchmarks.perf --sections scaling``); the dense per-scenario
+matrices (graph adjacency, Laplacian, allocation cost) stay below 10 MB at this size."""
 
 MAX_RELATIVE_SPEED: float = 2 * 11.2e3
 """Largest relative speed [m/s] of an initial state: two bound Earth orbits never move faster

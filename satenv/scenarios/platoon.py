@@ -10,6 +10,12 @@ Formation targets (``formation``):
   formation depends on the topology (``Topology.desired_states``).
 * ``"chain"`` (pereira2022 §3): follower f holds ``x_f - x_{f-1} = E_d`` (leader = follower 0),
   i.e. ``x_f* = f E_d``.
+* ``"ring"`` (swarms): the followers equally spaced on a circle around the leader in the
+  along-track / cross-track plane, ``|E_d|`` (position part) apart: radius
+  ``R = |E_d| / (2 sin(pi / N))``, follower f at angle ``2 pi (f - 1) / N`` from the -y axis, at rest.
+  Its graph is usually ``topology="RING"``.
+
+Swarms of any size up to ``satenv.scenarios._fields.MAX_AGENTS`` come from :func:`swarm`.
 
 Random initial states (``randomize=True`` in the env, :func:`sample_initial_state`): each
 follower's position is the preset's nominal position plus ``U(-s, s)`` per axis with
@@ -30,6 +36,7 @@ import numpy as np
 
 from satenv.dynamics.constants import R_EARTH
 from satenv.graph import make_topology
+from satenv.neighbours import nearest
 from satenv.scenarios._fields import (
     SatenvError,
     at_most,
@@ -44,7 +51,7 @@ from satenv.scenarios._fields import (
     vector,
 )
 
-__all__ = ["PlatoonScenario", "PRESETS", "resolve_scenario", "sample_initial_state"]
+__all__ = ["PlatoonScenario", "PRESETS", "resolve_scenario", "ring_states", "sample_initial_state", "swarm"]
 
 MU_TABLE1 = 3.98600441e14  # pereira2023 Table I value of mu [m^3/s^2]
 
@@ -84,6 +91,9 @@ class PlatoonScenario:
         terminate_on_collision: end the episode at a collision (distance < r_i + r_j).
         reward_scale, collision_penalty, violation_penalty: reward shaping of the env (see
             ``satenv.envs.platoon_v0``).
+        neighbour_slots: observe one slot per follower heard (padded to the largest in-degree)
+            instead of one per other follower: observations of size ``15 + 7 max_f d_f``
+            instead of ``15 + 7 (N - 1)``, the layout for swarms (``satenv.envs.platoon_v0``).
         randomize: draw initial states from the distribution below instead of the preset's.
         random_position_spread, random_velocity_spread, random_min_gap: see module docstring.
         success_tol: an episode succeeds when every follower ends within this distance of its
@@ -123,6 +133,7 @@ class PlatoonScenario:
     reward_scale: float = 1.0e4
     collision_penalty: float = 100.0
     violation_penalty: float = 1.0
+    neighbour_slots: bool = False
     randomize: bool = False
     random_position_spread: float = 20.0
     random_velocity_spread: float = 0.5
@@ -142,9 +153,9 @@ class PlatoonScenario:
         n = x0.shape[0]
         s(self, "initial_state", tuple(tuple(float(v) for v in row) for row in x0))
         s(self, "desired_error", vector(self.desired_error, "desired_error", 6))
-        if self.formation not in ("neighbourhood", "chain"):
+        if self.formation not in ("neighbourhood", "chain", "ring"):
             raise ValueError(
-                f"formation must be 'neighbourhood' or 'chain', got {self.formation!r}."
+                f"formation must be 'neighbourhood', 'chain' or 'ring', got {self.formation!r}."
             )
         try:
             topo = make_topology(self.topology, n)
@@ -162,7 +173,7 @@ class PlatoonScenario:
             s(self, name, number(getattr(self, name), name))
         for name in ("collision_penalty", "violation_penalty"):
             s(self, name, number(getattr(self, name), name, allow_zero=True))
-        for name in ("terminate_on_collision", "randomize", "min_error_constraint"):
+        for name in ("terminate_on_collision", "randomize", "min_error_constraint", "neighbour_slots"):
             s(self, name, flag(getattr(self, name), name))
         if self.thrust_mode not in ("box", "norm"):
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}.")
@@ -237,6 +248,8 @@ class PlatoonScenario:
         e_d = np.asarray(self.desired_error)
         if self.formation == "chain":
             return np.arange(1, self.n_followers + 1)[:, None] * e_d[None, :]
+        if self.formation == "ring":
+            return ring_states(self.n_followers, float(np.linalg.norm(e_d[:3])))
         return self._topology.desired_states(e_d)
 
     def target_formation_collision_free(self) -> bool:
@@ -321,6 +334,47 @@ PRESETS: dict[str, PlatoonScenario] = {
 }
 
 
+def ring_states(n: int, spacing: float) -> np.ndarray:
+    """States ``(n, 6)`` of the ``"ring"`` formation: ``n`` bodies at rest, ``spacing`` apart on a
+    circle around the origin in the y-z plane (module docstring)."""
+    radius = spacing / (2.0 * math.sin(math.pi / n)) if n > 1 else spacing
+    angle = 2.0 * np.pi * np.arange(n) / n
+    x = np.zeros((n, 6))
+    x[:, 1], x[:, 2] = -radius * np.cos(angle), radius * np.sin(angle)
+    return x
+
+
+def swarm(n: int, formation: str = "chain", topology: str = "PLF", *, spacing: float = 20.0,
+          spread: float = 4.0, **overrides: Any) -> dict[str, Any]:
+    """Keyword arguments of ``platoon_v0`` for a swarm of ``n`` followers (``1 <= n <= 1024``).
+
+    The ``"pereira2023"`` preset's physics and weights with: the ``formation`` (``"chain"`` along
+    -y or ``"ring"``) ``spacing`` metres apart over ``topology`` (``"PLF"``, ``"BDL"``, ``"TPLF"``
+    or ``"RING"``), ``alpha`` all ones, observations of the neighbours only
+    (``neighbour_slots=True``), ``max_distance`` twice the formation's extent (at least 500 m), a
+    collision ending the episode, and randomised starts (``randomize=True``): each follower
+    within ``U(-spread, spread)`` per axis of its target, velocities ``U(-0.1, 0.1)`` m/s; with
+    ``spacing > 4 spread + 2 r_f`` every draw is collision-free. ``overrides`` replace any of
+    these (any scenario field, e.g. ``randomize=False`` to start on the targets).
+
+    >>> env = satenv.make("platoon_v0", **swarm(256, "ring", "RING"))
+    """
+    if formation not in ("chain", "ring"):
+        raise SatenvError(f"swarm formation must be 'chain' or 'ring', got {formation!r}")
+    n = int(n)
+    e_d = (0.0, -float(spacing), 0.0, 0.0, 0.0, 0.0)
+    target = (np.arange(1, n + 1)[:, None] * np.asarray(e_d) if formation == "chain"
+              else ring_states(n, float(spacing)))
+    extent = float(np.abs(target[:, :3]).max()) + 2.0 * spread
+    start = tuple(tuple(row) for row in target.tolist())
+    kwargs = {"preset": "pereira2023", "initial_state": start, "formation": formation,
+              "topology": topology, "desired_error": e_d, "alpha": (1.0,) * n, "neighbour_slots": True,
+              "max_distance": max(500.0, 2.0 * extent), "randomize": True,
+              "random_position_spread": float(spread), "random_velocity_spread": 0.1,
+              "random_min_gap": 0.5, "terminate_on_collision": True}
+    return {**kwargs, **overrides}
+
+
 def resolve_scenario(preset: str = "pereira2023", **overrides) -> PlatoonScenario:
     """``PRESETS[preset]`` with ``overrides`` applied (validated)."""
     return from_preset(PRESETS, preset, "platoon", overrides)
@@ -367,10 +421,8 @@ def sample_initial_state(scenario: PlatoonScenario, rng: np.random.Generator) ->
         pos = x[:, :3]
         if np.any(np.linalg.norm(pos, axis=1) < min_leader):
             continue
-        if n > 1:
-            dist = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
-            if np.any(dist[np.triu_indices(n, 1)] < min_sep):
-                continue
+        if n > 1 and nearest(pos[None])[0].min() < min_sep:
+            continue
         if not np.all(los_keepout_ok(scenario, x, margin=0.5)):
             continue
         return x
