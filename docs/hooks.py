@@ -195,14 +195,28 @@ def _slug(heading: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", heading.lower()).strip("-")
 
 
+def _outside_fences(text: str) -> list[bool]:
+    """Per line: True where the line is Markdown text, False inside a fenced code block."""
+    flags, fenced = [], False
+    for line in text.splitlines():
+        if line.lstrip().startswith("```"):
+            fenced = not fenced
+            flags.append(False)
+        else:
+            flags.append(not fenced)
+    return flags
+
+
 def _section(text: str, slug: str, where: str) -> str:
     """The section under the heading whose slug is ``slug`` (to the next heading of its level)."""
-    heads = [(m.start(), len(m.group(1)), _slug(m.group(2)))
-             for m in re.finditer(r"^(#+) (.*)$", text, flags=re.M)]
-    for k, (start, level, s) in enumerate(heads):
+    lines = text.splitlines(keepends=True)
+    heads = [(k, len(m.group(1)), _slug(m.group(2))) for k, (line, ok) in
+             enumerate(zip(lines, _outside_fences(text), strict=True))
+             if ok and (m := re.match(r"^(#+) (.*)$", line))]
+    for n, (k, level, s) in enumerate(heads):
         if s == slug:
-            end = next((h[0] for h in heads[k + 1:] if h[1] <= level), len(text))
-            return text[text.index("\n", start) + 1:end]
+            end = next((h[0] for h in heads[n + 1:] if h[1] <= level), len(lines))
+            return "".join(lines[k + 1:end])
     raise PluginError(f"include: no heading {slug!r} in {where}; headings: {[h[2] for h in heads]}")
 
 
@@ -225,8 +239,13 @@ def include(spec: str, page_src: str) -> str:
     text = file.read_text(encoding="utf-8")
     if slug:
         text = _section(text, slug, path)
-    text = re.sub(r"(?<!!)\[([^\]]+)\]\(([^)\s]+)\)", lambda m: _link(m, page_src), text)
-    return re.sub(r"^(#+) ", r"#\1 ", text, flags=re.M)
+    out = []
+    for line, ok in zip(text.splitlines(), _outside_fences(text), strict=True):
+        if ok:
+            line = re.sub(r"(?<!!)\[([^\]]+)\]\(([^)\s]+)\)", lambda m: _link(m, page_src), line)
+            line = re.sub(r"^(#+) ", r"#\1 ", line)
+        out.append(line)
+    return "\n".join(out)
 
 
 _SOURCE_REF = re.compile(r"`(\w+/[\w/]*\.py)(?:::([\w.]+))?`")

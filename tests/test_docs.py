@@ -63,3 +63,37 @@ def test_mkdocs_build_strict(tmp_path):
     html = (tmp_path / "site" / "envs" / "servicing_v0" / "index.html").read_text(encoding="utf-8")
     assert "(M, 13)" in html and "servicing_v0.png" in html  # the docstring and the figure rendered
     print(f"mkdocs build --strict: {time.perf_counter() - start:.1f} s, {len(pages)} pages")
+
+
+def _hooks():
+    pytest.importorskip("mkdocs", reason="mkdocs is not installed (the 'docs' extra)")
+    spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_claims_table_reads_any_claim_shape():
+    hooks = _hooks()
+    listed = hooks.claims_table([
+        {"case": 1, "claim": "converges", "paper": "about 1000 s", "measured": 1101.5, "met": True},
+        {"case": 1, "claim": "accurate", "paper": 0.071, "measured": {"rdmpc": 0.02}, "met": False, "note": "x|y"},
+    ])
+    lines = listed.splitlines()
+    assert lines[0] == "| case | claim | paper | measured | met | note |"
+    assert lines[2] == "| 1 | converges | about 1000 s | 1102 | yes |  |"
+    assert lines[3] == '| 1 | accurate | 0.071 | `{"rdmpc": 0.02}` | **no** | x\\|y |'
+    as_dict = hooks.claims_table({"waypoints_reached": True, "pointing_achieved": False})
+    assert as_dict.splitlines()[3] == "| pointing_achieved | **no** |"
+
+
+def test_docstring_conversion():
+    hooks = _hooks()
+    doc = ("title\n\nSpaces\n------\n``preset``   ``\"a\"`` or\n             ``\"b\"``.\nnext :class:`~x.Y`\n\n"
+           "=======  =======\nentries  meaning\n=======  =======\n0–2      first\n         more\n3        second\n=======  =======\n")
+    md = hooks.rst_to_markdown(doc)
+    assert "## Spaces" in md and '* ``preset``: ``"a"`` or ``"b"``.' in md and "next ``Y``" in md
+    assert "| entries | meaning |" in md and "| 0–2 | first more |" in md and "| 3 | second |" in md
+    with pytest.raises(Exception, match="not defined in baselines/dmpc.py"):
+        hooks.check_source_refs("`baselines/dmpc.py::OneHopDMPC.gone`", "page.md")
+    hooks.check_source_refs("`baselines/dmpc.py::OneHopDMPC.solve` `satenv/allocation.py`", "page.md")
