@@ -302,5 +302,6 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
 
 
 def on_page_content(html: str, page, config, files) -> str:
-    """Drop Sphinx roles left in API docstrings (``:class:`X``` renders as ``:class:<code>X</code>``)."""
-    return re.sub(r":(?:mod|class|func|meth|attr|data|exc):(<code>)~?", r"\1", html)
+    """Tidy reST left in API docstrings: roles (``:class:<code>X</code>``) and ``::`` before code."""
+    html = re.sub(r":(?:mod|class|func|meth|attr|data|exc):(<code>)~?", r"\1", html)
+    return html.replace("::</p>", ":</p>")
