@@ -15,7 +15,10 @@ Agent-steps per second (one agent advanced by one decision step) of
               sizes, ``env.step`` (skipped with a note when ``vmas`` is not installed);
 * ``limit``   the machine's limit: a numpy copy of the same state + action (+ chief) bytes;
 * ``solvers`` per-decision solve times of the scripted MPC baselines (DMPC on
-              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too.
+              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too;
+* ``guard``   the finiteness guard's cost: the check alone on one step's arrays as a share of the
+              ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
+              on and off) and of the ``satenv.make_vec`` step at each batch size.
 
 Four more sections run only when named in ``--sections`` (they take minutes):
 
@@ -55,7 +58,7 @@ from benchmarks._env import single_thread_blas
 from satenv.dynamics import R_EARTH, Orbit, RelativeModel
 
 AGENTS = 4
-SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers")
+SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard")
 """The default sections."""
 EXTRA_SECTIONS = ("cgmres_ipopt", "training", "learning", "scaling")
 """Sections that run only when named in ``--sections``."""
@@ -190,6 +193,65 @@ def api_loops(min_time: float, repeats: int = 3) -> tuple[dict, dict]:
     mpe = notes.get("mpe2") or {"env": "mpe2 simple_spread_v3 (3 agents, continuous, max_cycles=180)",
                                 **loops["mpe2"].result()}
     return api, mpe
+
+
+# ----------------------------------------------------------------------------------------------
+# the finiteness guard (issue 13): its cost in the PettingZoo step and the make_vec step.
+# ----------------------------------------------------------------------------------------------
+GUARD_TARGET = 0.05
+"""The guard must cost under 5 % of the PettingZoo step time."""
+
+
+def _best_call_s(fn: Callable[[], Any], number: int = 2000, repeats: int = 7) -> float:
+    import timeit
+
+    return min(timeit.repeat(fn, number=number, repeat=repeats)) / number
+
+
+def guard_cost(min_time: float = 0.5, batches: list[int] = (1, 64, 1024),
+               log: Callable[[str], None] = print) -> dict:
+    """The finiteness guard's cost (``satenv.dynamics._checks``): the check alone on one step's
+    arrays (best of repeats, so the machine's load barely matters) as a share of the step time,
+    for the ``platoon_v0`` PettingZoo step (also an A/B: the median of paired ratios of blocks of
+    steps with the check on and off, interleaved) and the ``make_vec`` step of each batch size."""
+    import satenv
+    from satenv.dynamics._checks import all_finite
+
+    env = satenv.make("platoon_v0")
+    loop, guard = PettingZooLoop(env, -1.0, 1.0), env._finite_step
+    on, off, start = [], [], time.perf_counter()
+    while time.perf_counter() - start < 4 * min_time or len(on) < 10:
+        for enabled in ((True, False) if len(on) % 2 else (False, True)):
+            env._finite_step = guard if enabled else (lambda *args: True)
+            t0 = time.perf_counter()
+            n = loop._chunk()
+            (on if enabled else off).append((time.perf_counter() - t0) / n * AGENTS)
+    env._finite_step = guard
+    env.reset(seed=0)
+    res, obs = env.core.step(np.zeros((1, AGENTS, 3))), env.core.observe()
+    check = _best_call_s(lambda: guard(obs, res.info["state"], sum(res.rewards[0].tolist())))
+    step = float(np.median(off))
+    pz = {"step_us": 1e6 * step, "step_us_fastest": 1e6 * min(off), "check_us": 1e6 * check,
+          "check_share": check / step, "check_share_of_fastest": check / min(off),
+          "ab_overhead": float(np.median(np.array(on) / np.array(off)) - 1), "ab_pairs": len(on)}
+    rows = []
+    for batch in batches:
+        vec = satenv.make_vec("platoon_v0", batch, seed=0)
+        vec.reset()
+        acts = np.random.default_rng(0).uniform(-1.0, 1.0, vec.action_shape)
+        rate = _rate(lambda vec=vec, acts=acts: vec.step(acts), batch * AGENTS, min_time / 2)
+        o, r, _, _, info = vec.step(acts)
+        check_b = _best_call_s(lambda o=o, s=info["state"], r=r: all_finite(o, s, r), number=200)
+        step_b = batch * AGENTS / rate
+        rows.append({"batch": batch, "step_us": 1e6 * step_b, "check_us": 1e6 * check_b,
+                     "check_share": check_b / step_b})
+        log(f"guard make_vec batch {batch:>5}: check {1e6 * check_b:.2f} us = "
+            f"{100 * rows[-1]['check_share']:.2f} % of the {1e6 * step_b:.0f} us step")
+    log(f"guard PettingZoo: check {pz['check_us']:.2f} us = {100 * pz['check_share']:.2f} % of the median "
+        f"{pz['step_us']:.0f} us step ({100 * pz['check_share_of_fastest']:.2f} % of the fastest); "
+        f"A/B {100 * pz['ab_overhead']:+.2f} % over {pz['ab_pairs']} pairs")
+    return {"pettingzoo": pz, "make_vec": rows, "target_share": GUARD_TARGET,
+            "met": bool(pz["check_share_of_fastest"] < GUARD_TARGET)}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -602,6 +664,8 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
         for k, v in result["solvers"].items():
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
                                    f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
+    if "guard" in sections:
+        result["guard"] = guard_cost(api_time, batches, log)
     _extra_sections(result, sections, solver_scale, log)
     result["ratios"], result["targets"] = _ratios(result)
     result["machine"]["load_average_at_end"] = _loadavg()

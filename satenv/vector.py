@@ -12,7 +12,12 @@ every copy. Arrays are ``(B, M, ...)`` with ``M`` agents (order of ``env.possibl
 Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelEnv`):
 
 * actions in ``[-1, 1]`` are scaled with :func:`satenv.dynamics.unit_box_to_accel`
-  (``scenario.u_max``, ``scenario.thrust_mode``); values outside are clipped, NaN/inf rejected;
+  (``scenario.u_max``, ``scenario.thrust_mode``); values outside are clipped; NaN/inf, complex,
+  bool, text and masked arrays are rejected (``SatenvError``/``SatenvTypeError``);
+* **finiteness guard**: after every ``reset`` and ``step`` one vectorised check of the
+  observations, states and rewards; a non-finite value raises ``SatenvError`` naming the copy,
+  the agent, the step and the quantity, and ends that copy's episode (``reset()`` or
+  ``reset(indices=[b])`` starts a new one);
 * ``rewards`` (float64, the PettingZoo env's values), ``terminations``, ``truncations`` (bool)
   are ``(B, M)``; termination is team-wide (a
   collision or leaving the allowed region ends the copy for every agent), truncation is the step
@@ -43,7 +48,9 @@ import numpy as np
 from gymnasium import spaces
 
 from satenv.dynamics import unit_box_to_accel
-from satenv.envs.base import SatenvError, SatParallelEnv
+from satenv.dynamics._checks import MAX_COPIES, all_finite, first_nonfinite, integer, numeric
+from satenv.envs.base import SatParallelEnv
+from satenv.errors import SatenvError, SatenvTypeError
 
 __all__ = ["SatVectorEnv", "make_vec"]
 
@@ -90,7 +97,7 @@ class SatVectorEnv:
     Args:
         env: the :class:`SatParallelEnv` whose ``core_class`` and ``scenario`` are batched (it is
             not stepped).
-        num_envs: number of copies ``B`` (>= 1).
+        num_envs: number of copies ``B`` (``1 <= B <= MAX_COPIES``).
         seed: applied at the first :meth:`reset` that has no seed of its own.
         autoreset: reset finished copies inside :meth:`step` (default). With ``False`` the caller
             resets them with ``reset(indices=...)`` (TorchRL's convention); stepping a finished
@@ -100,9 +107,9 @@ class SatVectorEnv:
     def __init__(self, env: SatParallelEnv, num_envs: int, *, seed: int | None = None,
                  autoreset: bool = True) -> None:
         if not isinstance(env, SatParallelEnv):
-            raise SatenvError(f"SatVectorEnv needs a satenv env (satenv.make(...)), got {type(env).__name__}")
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise SatenvError(f"num_envs must be a positive int, got {num_envs!r}")
+            raise SatenvTypeError(f"SatVectorEnv needs a satenv env (satenv.make(...)), got {type(env).__name__}")
+        num_envs = integer(num_envs, "num_envs", minimum=1, maximum=MAX_COPIES,
+                           why="MAX_COPIES: the batch is allocated at once")
         self.env = env
         self.scenario = env.scenario
         self.num_envs = int(num_envs)
@@ -147,7 +154,9 @@ class SatVectorEnv:
         idx = np.arange(self.num_envs)
         info = self.core.reset(self._sample(idx), None, self._rngs)
         self._ended[:] = False
-        return self.core.observe(), dict(info)
+        obs = self.core.observe()
+        self._guard(idx, obs[idx], info["state"])
+        return obs, dict(info)
 
     def _reset_some(self, indices: Any) -> tuple[np.ndarray, dict[str, Any]]:
         if self._rngs is None:
@@ -162,7 +171,10 @@ class SatVectorEnv:
             raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), got {idx.tolist()}")
         info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)) if idx.size else {}
         self._ended[idx] = False
-        return self.core.observe(), dict(info)
+        obs = self.core.observe()
+        if idx.size:
+            self._guard(idx, obs[idx], info["state"])
+        return obs, dict(info)
 
     def _sample(self, idx: np.ndarray) -> np.ndarray:
         gens = self._rngs.generators
@@ -175,7 +187,7 @@ class SatVectorEnv:
             raise SatenvError("step() called before reset(): call reset() first")
         if self._ended.any():
             raise SatenvError(f"copies {np.flatnonzero(self._ended).tolist()} have ended: call "
-                              "reset(indices=...) first (autoreset=False)")
+                              "reset(indices=...) (or reset()) first")
         a = self._check_actions(actions)
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
         res = self.core.step(accel, self._rngs)
@@ -183,6 +195,8 @@ class SatVectorEnv:
         truncated = (self.core.t >= self.max_steps) & ~terminated
         obs = self.core.observe()
         rewards = np.asarray(res.rewards, dtype=np.float64)
+        if not all_finite(obs, res.info["state"], rewards):
+            self._nonfinite(np.arange(self.num_envs), obs, res.info["state"], rewards)
         infos: dict[str, Any] = dict(res.info)
         done = terminated | truncated
         if not self.autoreset:
@@ -195,22 +209,44 @@ class SatVectorEnv:
                 infos[k][idx] = v
             infos.update(final_observation=obs, final_info=res.info, _final=done)
             obs = self.core.observe()
+            self._guard(idx, obs[idx], reset_info["state"])
         m = self.n_agents
         return (obs, rewards, np.repeat(terminated[:, None], m, axis=1),
                 np.repeat(truncated[:, None], m, axis=1), infos)
 
     def _check_actions(self, actions: Any) -> np.ndarray:
-        try:
-            a = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SatenvError(f"actions must be a numeric array of shape {self.action_shape}, "
-                              f"got {type(actions).__name__}") from None
+        if (type(actions) is np.ndarray and actions.dtype.kind == "f"
+                and actions.shape == self.action_shape and all_finite(actions)):
+            return actions.astype(np.float64, copy=False)   # the fast path of a training loop
+        a = numeric(actions, f"actions (normalised inputs in [-1, 1], shape {self.action_shape})")
         if a.shape != self.action_shape:
             raise SatenvError(f"actions must have shape {self.action_shape} (copies, agents, action_dim), "
                               f"got {a.shape}")
-        if not np.isfinite(a).all():
-            raise SatenvError("actions must be finite (normalised inputs in [-1, 1]), got NaN/inf entries")
         return a
+
+    def _guard(self, idx: np.ndarray, obs: np.ndarray, state: np.ndarray) -> None:
+        """The finiteness check after a reset of copies ``idx`` (their rows of obs and state)."""
+        if not all_finite(obs, state):
+            self._nonfinite(idx, obs, state, None)
+
+    def _nonfinite(self, idx: np.ndarray, obs: np.ndarray, state: np.ndarray, rewards: np.ndarray | None) -> None:
+        """Raise :class:`SatenvError` naming the copies, agents, steps and quantities that are not
+        finite (rows of ``idx``); those copies' episodes end."""
+        parts = []
+        for row, b in enumerate(idx):
+            quantities = {"observation": obs[row], "state": state[row]}
+            if rewards is not None:
+                quantities["reward"] = rewards[row]
+            if not all_finite(*quantities.values()):
+                t = int(self.core.t[b])
+                parts.append(f"copy {int(b)}: {first_nonfinite(quantities, self.agents)} "
+                             + (f"at step {t}" if t else "at reset (step 0)"))
+                self._ended[b] = True
+        if not parts:
+            return
+        more = f" (and {len(parts) - 3} more copies)" if len(parts) > 3 else ""
+        raise SatenvError(f"{self.metadata.get('name')}: non-finite " + "; ".join(parts[:3]) + more
+                          + "; those episodes are over: call reset() or reset(indices=[...])")
 
     def state(self) -> np.ndarray:
         """The global state of every copy ``(B, ...)`` (the PettingZoo env's ``state()``), float64."""

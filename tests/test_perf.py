@@ -49,3 +49,10 @@ def test_perf_opt_in_sections_smoke(tmp_path):
     assert train["satenv"]["learn_env_steps_per_s"] > 0 and train["dummy"]["raw_env_steps_per_s"] > 0
     assert train["ratio_raw_env_steps_per_s"] == (train["satenv"]["raw_env_steps_per_s"]
                                                   / train["dummy"]["raw_env_steps_per_s"])
+
+
+def test_perf_guard_section_smoke():
+    out = perf.guard_cost(0.01, [1, 2], log=lambda line: None)
+    pz = out["pettingzoo"]
+    assert pz["step_us"] > 0 and pz["check_us"] > 0 and pz["check_share"] == pz["check_us"] / pz["step_us"]
+    assert [r["batch"] for r in out["make_vec"]] == [1, 2] and isinstance(out["met"], bool)

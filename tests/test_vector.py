@@ -105,7 +105,31 @@ def test_bad_input_errors():
     bad[1, 2, 0] = np.nan
     with pytest.raises(SatenvError, match="finite"):
         vec.step(bad)
+    for wrong, kind in ((np.zeros(vec.action_shape) + 1j, TypeError), (np.zeros(vec.action_shape, bool), TypeError),
+                        (np.ma.masked_array(np.zeros(vec.action_shape), mask=True), TypeError),
+                        (np.full(vec.action_shape, 10**400, dtype=object), ValueError), ("0", TypeError)):
+        with pytest.raises(kind, match="actions"):
+            vec.step(wrong)
     np.testing.assert_array_equal(vec.state(), before)
+    with pytest.raises(SatenvError, match="MAX_COPIES"):
+        satenv.make_vec("platoon_v0", 10**9)
+    with pytest.raises(TypeError, match="num_envs"):
+        satenv.make_vec("platoon_v0", 2.0)
+
+
+@pytest.mark.parametrize("autoreset", [True, False])
+def test_finiteness_guard_names_copy_agent_step_and_quantity(autoreset):
+    vec = SatVectorEnv(satenv.platoon_v0(), 3, seed=0, autoreset=autoreset)
+    vec.reset()
+    vec.step(np.zeros(vec.action_shape))
+    vec.core.x[2, 1, 0] = np.nan          # corrupt one copy's state from outside (as a bug would)
+    with pytest.raises(SatenvError, match=r"copy 2: .*state of follower_2.* at step 2; those episodes are over"):
+        vec.step(np.zeros(vec.action_shape))
+    with pytest.raises(SatenvError, match=r"copies \[2\] have ended"):
+        vec.step(np.zeros(vec.action_shape))
+    vec.reset(indices=[2])                # the copy starts over; the others go on
+    obs, rew, *_ = vec.step(np.zeros(vec.action_shape))
+    assert np.isfinite(obs).all() and np.isfinite(rew).all()
 
 
 def test_one_batched_core_step_per_step(monkeypatch):

@@ -25,6 +25,11 @@ MAX_STEPS: int = 1_000_000
 """Cap on step counts (episode length, ``simulate(steps=...)``): at 10^6 a ``simulate`` output is
 48 MB per deputy and a rollout takes about a minute, so a larger count is a typo, not a plan."""
 
+MAX_COPIES: int = 1 << 20
+"""Cap on the number of batched env copies (``satenv.make_vec(env_id, num_envs)``): a million
+copies of a 4-agent platoon already hold ~0.2 GB of state and take seconds per step; beyond it
+the allocation, not the physics, decides whether the call returns."""
+
 MAX_WORK: int = 2_000_000
 """Cap on ``steps * substeps`` of one ``simulate`` call with a truth model (about a minute of
 RK4 steps on one core)."""
