@@ -281,7 +281,9 @@ class _AnyEnvPolicy:
     def supported(cls) -> str:
         return f"every satenv env {list(cls.env_ids)} (any PettingZoo ParallelEnv)"
 
-    def __init__(self, env: Any) -> None:
+    def __init__(self, env: Any, **options: Any) -> None:
+        if options:
+            raise BaselineError(f"{type(self).__name__}: unknown option(s) {sorted(options)}; accepted: []")
         if not self.supports(env):
             raise BaselineTypeError(f"{type(self).__name__} needs a PettingZoo env (possible_agents, "
                                     f"action_space(agent)), got {type(env).__name__}")
@@ -306,8 +308,8 @@ class RandomPolicy(_AnyEnvPolicy):
 
     name = "random"
 
-    def __init__(self, env: Any) -> None:
-        super().__init__(env)
+    def __init__(self, env: Any, **options: Any) -> None:
+        super().__init__(env, **options)
         self._rng = np.random.default_rng()
 
     def reset(self, seed: int | None = None) -> None:

@@ -1,10 +1,13 @@
 """Property-based tests (hypothesis) over satenv's public entry points.
 
 For random inputs of random types and magnitudes, every call of the four env constructors,
-``reset``, ``step``, ``Orbit`` and ``simulate`` either raises a clear error (a
-:class:`satenv.errors.SatenvError`, i.e. a ``ValueError``, or its ``TypeError`` subclass) or
+``reset``, ``step``, ``Orbit``, ``simulate``, ``satenv.make_vec`` (construction and ``step``),
+``baselines.make`` (every baseline, random options, on envs it does and does not support and on
+non-envs) and ``training.load`` (random and corrupted policy folders) either raises a clear error
+(the package's ``ValueError``/``TypeError`` subclass: :class:`satenv.errors.SatenvError`,
+:class:`baselines.BaselineError`/``BaselineTypeError``, :class:`training.PolicyLoadError`) or
 returns finite results; it never hangs (hypothesis ``deadline`` plus a hard SIGALRM timeout), and
-a rejected call leaves the env usable: it still steps and returns what a fresh env returns.
+a rejected call leaves the object usable: it still steps and returns what a fresh one returns.
 
 The default run draws a few examples per property; ``pytest -m fuzz tests/test_properties.py``
 runs the same properties with many more.
@@ -21,7 +24,9 @@ from audit_inputs import time_limit  # tests/ is on sys.path under pytest (as fo
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import baselines
 import satenv
+import training
 from satenv.dynamics import Orbit, simulate
 from satenv.errors import SatenvError
 
@@ -31,13 +36,13 @@ DEFAULT = {"max_examples": 12}
 FUZZ = {"max_examples": 400}
 
 
-def call(fn, *args, **kwargs):
-    """``(result, None)`` or ``(None, error)`` for a clear satenv error; anything else fails
-    (a call still running after ``HARD_TIMEOUT`` raises ``audit_inputs.Hang``)."""
+def call(fn, *args, errors: tuple[type[Exception], ...] = (SatenvError,), **kwargs):
+    """``(result, None)`` or ``(None, error)`` for a clear error (one of ``errors``); anything
+    else fails (a call still running after ``HARD_TIMEOUT`` raises ``audit_inputs.Hang``)."""
     with time_limit(HARD_TIMEOUT):
         try:
             return fn(*args, **kwargs), None
-        except SatenvError as exc:
+        except errors as exc:
             assert isinstance(exc, ValueError | TypeError)
             assert str(exc), "an error message must say what was expected"
             return None, exc
@@ -193,6 +198,228 @@ sim_x0 = st.one_of(
                      [[1e41, 0, 0, 0, 0, 0]], [[0.0, 100.0, 0.0, 0.0, 0.0, 1j]]]),
     values)
 
+# ------------------------------------------------------------------------------- baselines
+def baseline_options(name: str) -> dict:
+    """The option names of baseline ``name`` with their defaults (its config dataclass)."""
+    cls = baselines.get(name)
+    cfg = getattr(baselines, cls.__name__ + "Config", None)
+    return {} if cfg is None else {f.name: f.default for f in dataclasses.fields(cfg) if f.init}
+
+
+OPTIONS = {n: baseline_options(n) for n in baselines.BASELINES}
+NON_ENVS = (None, "platoon_v0", object(), 3, {"name": "platoon_v0"}, satenv.platoon_v0, np.zeros(3))
+BASELINE_ERRORS = (baselines.BaselineError, baselines.BaselineTypeError, SatenvError)
+
+
+@st.composite
+def baseline_case(draw):
+    name = draw(st.sampled_from(sorted(OPTIONS)))
+    target = draw(st.one_of(st.sampled_from(ENV_IDS), st.sampled_from(range(len(NON_ENVS)))))
+    names = sorted(OPTIONS[name]) + ["no_such_option"]
+    picks = draw(st.lists(st.sampled_from(names), max_size=2, unique=True))
+    options = {}
+    for n in picks:
+        default = OPTIONS[name].get(n)
+        numeric = isinstance(default, int | float | tuple) and not isinstance(default, bool)
+        options[n] = draw(st.one_of(values, scaled(default)) if numeric else values)
+    return name, target, options
+
+
+def prop_baseline(case):
+    name, target, options = case
+    env = ENVS[target] if isinstance(target, str) else NON_ENVS[target]
+    pol, err = call(baselines.make, name, env, errors=BASELINE_ERRORS, **options)
+    if err is not None:
+        assert isinstance(err, ValueError | TypeError)
+    elif isinstance(target, str) and baselines.get(name).cheap:
+        obs, _ = env.reset(seed=0)
+        pol.reset(seed=0)
+        act, err = call(pol.act, obs, errors=BASELINE_ERRORS)
+        assert err is None, f"{name}({options}) was built but cannot act: {err}"
+        assert all(np.isfinite(a).all() and np.all(np.abs(a) <= 1.0) for a in act.values())
+    if isinstance(target, str):
+        assert_like_fresh(target, env)
+
+
+# ------------------------------------------------------------------------------- training.load
+def good_policy_folder(root):
+    """A small valid policy folder (identity-free normaliser) written by ``save_artifacts``."""
+    from training.actor import MLPActor
+    from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
+
+    import torch
+
+    torch.manual_seed(0)
+    actor = MLPActor(6, 3, [8], "tanh", False)
+    policy = LearnedPolicy(actor, ObsNormalizer(np.zeros(6), np.ones(6), 10.0), obs_shape=(6,))
+    meta = {"env_id": "platoon_v0", "observation_shape": [6], "action_shape": [3]}
+    return save_artifacts(root, policy, env_meta=meta, config={"algo": "ppo"})
+
+
+POLICY_FILE_NAMES = ("policy.json", "weights.pt", "obs_norm.json", "env.json", "config.json", "manifest.json")
+json_values = st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.integers(-10**30, 10**30),
+                                     st.text(max_size=5)),
+                           lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+                           max_leaves=8)
+
+
+def _norm_edit(data):
+    return st.fixed_dictionaries({"identity": st.just(False),
+                                  "mean": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8),
+                                  "var": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8)},
+                                 optional={"clip_obs": st.one_of(reals, odd), "epsilon": st.one_of(reals, odd)})
+
+
+@st.composite
+def folder_edits(draw):
+    """A list of ``(file, kind, payload)`` corruptions of a good folder and whether to re-hash."""
+    edits = []
+    for _ in range(draw(st.integers(1, 2))):
+        name = draw(st.sampled_from(POLICY_FILE_NAMES + ("model.zip",)))
+        kind = draw(st.sampled_from(["delete", "bytes", "json", "truncate", "field", "tensors"]))
+        if kind == "bytes":
+            payload = draw(st.binary(max_size=64))
+        elif kind == "json":
+            payload = draw(json_values)
+        elif kind == "field":
+            payload = (draw(st.sampled_from(["obs_dim", "act_dim", "hidden", "activation", "squash", "format",
+                                              "observation_shape", "obs_symlog_scale", "action_power", "norm"])),
+                       draw(st.one_of(json_values, st.sampled_from([10**9, [10**5, 10**5], -1, 0, [0], "relu"]))))
+        elif kind == "tensors":
+            payload = draw(st.sampled_from(["nan", "shape", "dtype", "extra", "missing", "list"]))
+        else:
+            payload = None
+        edits.append((name, kind, payload))
+    return edits, draw(st.booleans()), draw(st.one_of(st.none(), _norm_edit(None)))
+
+
+def apply_edit(root, name, kind, payload) -> None:
+    import json
+
+    import torch
+
+    path = root / name
+    if kind == "delete":
+        path.unlink(missing_ok=True)
+    elif kind == "bytes":
+        path.write_bytes(payload)
+    elif kind == "json":
+        path.write_text(json.dumps(payload))
+    elif kind == "truncate" and path.exists():
+        path.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
+    elif kind == "field":
+        key, value = payload
+        spec = json.loads((root / "policy.json").read_text())
+        if key in ("obs_dim", "act_dim", "hidden", "activation", "squash"):
+            spec["actor"][key] = value
+            (root / "policy.json").write_text(json.dumps(spec))
+        elif key == "format":
+            spec["format"] = value
+            (root / "policy.json").write_text(json.dumps(spec))
+        elif key == "observation_shape":
+            (root / "env.json").write_text(json.dumps({"observation_shape": value}))
+        elif key == "norm":
+            (root / "obs_norm.json").write_text(json.dumps(value))
+        else:
+            (root / "config.json").write_text(json.dumps({"algo": "ppo", key: value}))
+    elif kind == "tensors":
+        state = torch.load(root / "weights.pt", weights_only=True)
+        first = next(iter(state))
+        if payload == "nan":
+            state[first] = torch.full_like(state[first], float("nan"))
+        elif payload == "shape":
+            state[first] = torch.zeros(3, 3)
+        elif payload == "dtype":
+            state[first] = state[first].to(torch.int64)
+        elif payload == "extra":
+            state["extra.weight"] = torch.zeros(2)
+        elif payload == "missing":
+            del state[first]
+        else:
+            state = [1, 2, 3]
+        torch.save(state, root / "weights.pt")
+
+
+def prop_load(case):
+    import json
+    import tempfile
+    from pathlib import Path
+
+    from training.policy import PolicyLoadError, write_manifest
+
+    edits, rehash, norm = case
+    with tempfile.TemporaryDirectory() as tmp:
+        root = good_policy_folder(Path(tmp) / "p")
+        for edit in edits:
+            apply_edit(root, *edit)
+        if norm is not None:
+            (root / "obs_norm.json").write_text(json.dumps(norm, default=str))
+        if rehash and all((root / f).is_file() for f in POLICY_FILE_NAMES[:5]):
+            write_manifest(root)
+        policy, err = call(training.load, root, errors=(PolicyLoadError,))
+        if err is None:
+            obs = np.random.default_rng(0).normal(size=(4, 6)) * 10.0 ** np.arange(-2, 2)[:, None]
+            act = policy.act({f"follower_{i}": o for i, o in enumerate(obs)})
+            assert all(np.isfinite(a).all() and np.all(np.abs(a) <= 1.0) for a in act.values())
+        fresh = training.load(good_policy_folder(Path(tmp) / "again"))     # the loader still works
+        assert fresh.predict(np.zeros((1, 6))).shape == (1, 3)
+
+
+def prop_load_path(path, trusted, env):
+    from training.policy import PolicyLoadError
+
+    call(training.load, path, env, trusted=trusted, errors=(PolicyLoadError,))
+
+
+# ------------------------------------------------------------------------------- make_vec
+VEC_REFERENCE = {}
+
+
+def vec_reference(env_id: str):
+    """``make_vec(env_id, 2, seed=0)``: reset then one zero-action step (obs, rewards)."""
+    if env_id not in VEC_REFERENCE:
+        vec = satenv.make_vec(env_id, 2, seed=0)
+        vec.reset()
+        obs, rew, *_ = vec.step(np.zeros(vec.action_shape))
+        VEC_REFERENCE[env_id] = (vec, obs.copy(), rew.copy())
+    return VEC_REFERENCE[env_id]
+
+
+def prop_make_vec(env_id, num_envs, seed):
+    vec, err = call(satenv.make_vec, env_id, num_envs, seed=seed)
+    if err is None:
+        obs, _ = vec.reset()
+        out, err = call(vec.step, np.ones(vec.action_shape))
+        assert err is None, f"make_vec({num_envs}, seed={seed}) was built but cannot step: {err}"
+        assert finite(obs, out[0], out[1])
+
+
+def prop_vec_step(env_id, actions):
+    vec, ref_obs, ref_rew = vec_reference(env_id)
+    vec.reset(seed=0)
+    bad = actions(vec.action_shape) if callable(actions) else actions
+    out, err = call(vec.step, bad)
+    if err is None:
+        assert finite(out[0], out[1])
+    vec.reset(seed=0)                                   # still steps like a fresh one
+    obs, rew, *_ = vec.step(np.zeros(vec.action_shape))
+    np.testing.assert_array_equal(obs, ref_obs)
+    np.testing.assert_array_equal(rew, ref_rew)
+
+
+vec_actions = st.one_of(
+    values,
+    st.sampled_from([
+        lambda s: np.zeros(s, np.float32), lambda s: np.zeros(s) + 1j, lambda s: np.zeros(s, bool),
+        lambda s: np.ma.masked_array(np.zeros(s), mask=True), lambda s: np.zeros(s, np.int8),
+        lambda s: np.full(s, 10**400, dtype=object), lambda s: np.zeros(s[1:]), lambda s: np.zeros((*s, 1)),
+        lambda s: np.zeros(s).tolist(), lambda s: np.full(s, np.nan), lambda s: np.full(s, 1e300),
+        lambda s: np.full(s, -np.inf, np.float16), lambda s: np.zeros(s, np.float16).view(np.uint16),
+    ]),
+    st.floats(min_value=-320, max_value=320).map(lambda e: (lambda s: np.full(s, 10.0 ** e))),
+)
+
+
 BASE = {"deadline": None, "database": None, "derandomize": True,
         "suppress_health_check": [HealthCheck.too_slow, HealthCheck.filter_too_much]}
 CASES = {
@@ -203,6 +430,15 @@ CASES = {
     "simulate": (prop_simulate, (st.sampled_from(["cw", "nonlinear", "j2", "j2_drag", "kepler"]), sim_x0,
                                  st.one_of(reals, odd), st.one_of(st.integers(0, 5), reals, odd),
                                  st.one_of(st.none(), st.integers(1, 3), reals, odd))),
+    "baseline": (prop_baseline, (baseline_case(),)),
+    "load": (prop_load, (folder_edits(),)),
+    "load_path": (prop_load_path, (st.one_of(values, st.sampled_from(["/nonexistent", "", ".", b"/tmp"])),
+                                   st.one_of(st.booleans(), values),
+                                   st.one_of(st.none(), st.sampled_from([object(), 3, "platoon_v0"])))),
+    "make_vec": (prop_make_vec, (st.sampled_from(ENV_IDS),
+                                 st.one_of(st.integers(-2, 4), values, st.sampled_from([2**20 + 1, 10**9, 2.0])),
+                                 st.one_of(st.none(), st.integers(0, 2**70), values))),
+    "vec_step": (prop_vec_step, (st.sampled_from(ENV_IDS), vec_actions)),
 }
 
 

@@ -17,6 +17,13 @@ __all__ = ["ACTIVATIONS", "MLPActor", "actor_from_spec"]
 ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "silu": nn.SiLU}
 
 
+MAX_PARAMETERS = 50_000_000
+"""Cap on an actor's parameter count (200 MB of float32): a ``policy.json`` asking for more would
+allocate before any weight is read."""
+MAX_LAYERS = 64
+"""Cap on the number of hidden layers."""
+
+
 class MLPActor(nn.Module):
     """``obs (..., obs_dim) -> action (..., act_dim)``: hidden ``Linear`` + activation layers, a
     linear head, and ``tanh`` when ``squash``."""
@@ -31,6 +38,12 @@ class MLPActor(nn.Module):
                 raise ValueError(f"{name} must be positive ints, got {v!r}")
         if not isinstance(squash, bool):
             raise ValueError(f"squash must be a bool, got {squash!r}")
+        widths = [obs_dim, *hidden, act_dim]
+        n_params = sum((a + 1) * b for a, b in zip(widths, widths[1:], strict=False))
+        if len(hidden) > MAX_LAYERS or n_params > MAX_PARAMETERS:
+            raise ValueError(f"the actor would have {len(hidden)} hidden layers and {n_params} parameters; "
+                             f"at most {MAX_LAYERS} and {MAX_PARAMETERS} (MAX_LAYERS, MAX_PARAMETERS) are "
+                             "allowed (a bigger one is a corrupt or hostile policy.json)")
         self.spec = {"type": "mlp", "obs_dim": obs_dim, "act_dim": act_dim, "hidden": list(hidden),
                      "activation": activation, "squash": squash}
         layers: list[nn.Module] = []

@@ -29,6 +29,7 @@ import hashlib
 import json
 import math
 import warnings
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +140,11 @@ class LearnedPolicy:
         with torch.no_grad():
             y = self.actor(torch.as_tensor(self.normalizer(obs))).numpy()
         actions = np.clip(y.astype(np.float64), -1.0, 1.0)
+        bad = ~np.isfinite(actions).all(axis=-1)
+        if bad.any():  # e.g. an observation beyond the float range: the safe action, flagged
+            actions[bad] = 0.0
+            self.info["fallbacks"] = self.info.get("fallbacks", 0) + int(bad.sum())
+            self.info["solver_status"] = "non-finite actor output: zero action"
         if self.action_map is not None:
             actions = self.action_map(actions)
         return actions.astype(np.float32)
@@ -277,6 +283,9 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> Learned
     manifest mismatch, an invalid normaliser, a space mismatch — raises
     :class:`PolicyLoadError` (a ``ValueError``).
     """
+    if not isinstance(path, str | PathLike) or not isinstance(trusted, bool):
+        raise PolicyLoadError(f"load(path, env=None, *, trusted=False): path must be a str or os.PathLike "
+                              f"and trusted a bool, got path={path!r:.80}, trusted={trusted!r:.40}")
     root = Path(path)
     if not root.is_dir():
         raise PolicyLoadError(f"learned policy path {str(path)!r} is not a directory; expected an artefact "
@@ -297,6 +306,10 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> Learned
             raise PolicyLoadError(f"cannot read the learned policy in {str(root)!r}: "
                                   f"{type(err).__name__}: {err}") from None
     if env is not None:
+        if not (isinstance(getattr(env, "possible_agents", None), list | tuple)
+                and callable(getattr(env, "observation_space", None))):
+            raise PolicyLoadError(f"env must be a PettingZoo env (possible_agents, observation_space), "
+                                  f"got {type(env).__name__}")
         policy.check_env(env)
     return policy
 
@@ -324,8 +337,15 @@ def _load_safe(root: Path) -> LearnedPolicy:
     if normalizer.mean is not None and normalizer.mean.shape != (actor.spec["obs_dim"],):
         raise PolicyLoadError(f"{str(root)!r}: obs_norm.json has shape {normalizer.mean.shape} but the actor "
                               f"expects ({actor.spec['obs_dim']},); the folder mixes files of different runs")
-    obs_shape = tuple(meta.get("observation_shape", (actor.spec["obs_dim"],)))
-    return LearnedPolicy(actor, normalizer, obs_shape=obs_shape, features=features_from_config(config),
+    features = features_from_config(config)
+    obs_shape = meta.get("observation_shape", [actor.spec["obs_dim"]])
+    fits = (isinstance(obs_shape, list) and len(obs_shape) == 1 and isinstance(obs_shape[0], int)
+            and not isinstance(obs_shape[0], bool) and obs_shape[0] >= 1
+            and (features.out_dim(obs_shape[0]) if features else obs_shape[0]) == actor.spec["obs_dim"])
+    if not fits:
+        raise PolicyLoadError(f"{str(root)!r}: env.json observation_shape {str(obs_shape)[:40]} does not fit "
+                              f"the actor's obs_dim {actor.spec['obs_dim']} (with the config's features)")
+    return LearnedPolicy(actor, normalizer, obs_shape=tuple(obs_shape), features=features,
                          action_map=action_map_from_config(config), meta=meta)
 
 
