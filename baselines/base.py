@@ -22,6 +22,8 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
+from satenv.dynamics._checks import show
+
 __all__ = [
     "Baseline", "BaselineError", "BaselineTypeError", "Policy", "RandomPolicy", "ZeroPolicy", "check_env",
     "config_from_options", "flag", "choice", "guarded_solve", "is_satenv_env", "new_info",
@@ -121,34 +123,38 @@ def number(owner: str, name: str, value: Any, *, low: float = 0.0, zero_ok: bool
            high: float = math.inf) -> float:
     """A finite real ``> low`` (``>= low`` with ``zero_ok``) and ``<= high``; no bools/complex."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
-        raise BaselineError(f"{owner} option {name} must be a real number, got {value!r}")
-    v = float(value)
+        raise BaselineError(f"{owner} option {name} must be a real number, got {show(value)}")
+    try:
+        v = float(value)
+    except OverflowError:
+        raise BaselineError(f"{owner} option {name} must be a finite real number, got {show(value)} "
+                            "(too large for a float)") from None
     ok = math.isfinite(v) and (v >= low if zero_ok else v > low) and v <= high
     if not ok:
         rng = f"{'>=' if zero_ok else '>'} {low:g}" + (f" and <= {high:g}" if high < math.inf else "")
-        raise BaselineError(f"{owner} option {name} must be finite and {rng}, got {value!r}")
+        raise BaselineError(f"{owner} option {name} must be finite and {rng}, got {show(value)}")
     return v
 
 
 def integer(owner: str, name: str, value: Any, *, low: int = 1, high: int = MAX_ITERATIONS) -> int:
     """An int in ``[low, high]`` (the cap keeps the work bounded); no bools/floats."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Integral):
-        raise BaselineError(f"{owner} option {name} must be an int, got {value!r}")
+        raise BaselineError(f"{owner} option {name} must be an int, got {show(value)}")
     if not low <= int(value) <= high:
         raise BaselineError(f"{owner} option {name} must be in [{low}, {high}] (bounded work), "
-                            f"got {value!r}")
+                            f"got {show(value)}")
     return int(value)
 
 
 def flag(owner: str, name: str, value: Any) -> bool:
     if not isinstance(value, bool | np.bool_):
-        raise BaselineError(f"{owner} option {name} must be True or False, got {value!r}")
+        raise BaselineError(f"{owner} option {name} must be True or False, got {show(value)}")
     return bool(value)
 
 
 def choice(owner: str, name: str, value: Any, choices: tuple[str, ...]) -> str:
     if not isinstance(value, str) or value not in choices:
-        raise BaselineError(f"{owner} option {name} must be one of {choices}, got {value!r}")
+        raise BaselineError(f"{owner} option {name} must be one of {choices}, got {show(value)}")
     return value
 
 
@@ -156,14 +162,14 @@ def weights(owner: str, name: str, value: Any, length: int | None = None, *,
             zero_ok: bool = True) -> tuple[float, ...]:
     """A flat tuple of finite real weights ``>= 0`` (``> 0`` unless ``zero_ok``)."""
     if isinstance(value, str | bytes) or np.iscomplexobj(value) or np.ma.isMaskedArray(value):
-        raise BaselineError(f"{owner} option {name} must be a sequence of real numbers, got {value!r}")
+        raise BaselineError(f"{owner} option {name} must be a sequence of real numbers, got {show(value)}")
     try:
         seq = list(np.ravel(np.asarray(value, dtype=object)))
     except (TypeError, ValueError):
-        raise BaselineError(f"{owner} option {name} must be a sequence of numbers, got {value!r}") from None
+        raise BaselineError(f"{owner} option {name} must be a sequence of numbers, got {show(value)}") from None
     out = tuple(number(owner, name, v, zero_ok=zero_ok) for v in seq)
     if length is not None and len(out) != length:
-        raise BaselineError(f"{owner} option {name} must have {length} entries, got {len(out)}: {value!r}")
+        raise BaselineError(f"{owner} option {name} must have {length} entries, got {len(out)}: {show(value)}")
     return out
 
 

@@ -325,7 +325,8 @@ def audit_baseline(envs: dict, rng: np.random.Generator, timeout: float) -> tupl
     r = rng.random()
     env = NON_ENVS[int(rng.integers(len(NON_ENVS)))] if r < 0.15 else envs[str(rng.choice(ENVS))]
     names = sorted(defaults) + ["no_such_option"]
-    picks = [str(n) for n in rng.choice(names, size=int(rng.integers(0, 3)) if r >= 0.15 else 0, replace=False)]
+    size = min(len(names), int(rng.integers(0, 3))) if r >= 0.15 else 0
+    picks = [str(n) for n in rng.choice(names, size=size, replace=False)]
     options = {n: bad_value(rng, defaults.get(n)) for n in picks}
     field = " ".join([cls.__name__, *picks, "env" if r < 0.15 else ""])
     try:
