@@ -20,7 +20,12 @@ import math
 
 import numpy as np
 import pytest
-from audit_inputs import POLICY_FILE_NAMES, apply_edit, good_policy_folder, time_limit  # tests/ on sys.path
+from audit_inputs import (  # tests/ on sys.path
+    POLICY_FILE_NAMES,
+    apply_edit,
+    good_policy_folder,
+    time_limit,
+)
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -248,11 +253,10 @@ json_values = st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.i
                            max_leaves=8)
 
 
-def _norm_edit(data):
-    return st.fixed_dictionaries({"identity": st.just(False),
+norm_edits = st.fixed_dictionaries({"identity": st.just(False),
                                   "mean": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8),
                                   "var": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8)},
-                                 optional={"clip_obs": st.one_of(reals, odd), "epsilon": st.one_of(reals, odd)})
+                                optional={"clip_obs": st.one_of(reals, odd), "epsilon": st.one_of(reals, odd)})
 
 
 @st.composite
@@ -275,7 +279,7 @@ def folder_edits(draw):
         else:
             payload = None
         edits.append((name, kind, payload))
-    return edits, draw(st.booleans()), draw(st.one_of(st.none(), _norm_edit(None)))
+    return edits, draw(st.booleans()), draw(st.one_of(st.none(), norm_edits))
 
 
 try:  # warm the import, so the first training.load example does not pay for it
