@@ -254,9 +254,9 @@ json_values = st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.i
 
 
 norm_edits = st.fixed_dictionaries({"identity": st.just(False),
-                                  "mean": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8),
-                                  "var": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8)},
-                                optional={"clip_obs": st.one_of(reals, odd), "epsilon": st.one_of(reals, odd)})
+                               "mean": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8),
+                               "var": st.lists(st.one_of(st.floats(), reals), min_size=0, max_size=8)},
+                               optional={"clip_obs": st.one_of(reals, odd), "epsilon": st.one_of(reals, odd)})
 
 
 @st.composite
