@@ -452,7 +452,7 @@ def apply_edit(root, name, kind, payload) -> None:
             (root / "obs_norm.json").write_text(json.dumps(value))
         else:
             (root / "config.json").write_text(json.dumps({"algo": "ppo", key: value}))
-    elif kind == "tensors":
+    elif kind == "tensors" and (root / "weights.pt").is_file():
         state = torch.load(root / "weights.pt", weights_only=True)
         first = next(iter(state))
         if payload == "nan":

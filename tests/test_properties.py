@@ -78,10 +78,16 @@ arrays = st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), real
 values = st.one_of(reals, odd, arrays)
 
 
+def pow10(e: float) -> np.float64:
+    """``10 ** e`` as a float64 (``inf`` above the float range, where Python's ``**`` raises)."""
+    with np.errstate(over="ignore"):
+        return np.float64(10.0) ** e
+
+
 def scaled(default):
     """A default value scaled by a random power of ten (keeps the kind, changes the magnitude)."""
     return st.floats(min_value=-320, max_value=320).map(
-        lambda e: (np.asarray(default, dtype=float) * 10.0 ** e).tolist())
+        lambda e: (np.asarray(default, dtype=float) * pow10(e)).tolist())
 
 
 def field_defaults(env_id: str) -> dict:
@@ -193,7 +199,7 @@ state_edits = st.one_of(
     ]),
 )
 action_values = st.one_of(values, st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=3, max_size=6),
-                          st.floats(min_value=-320, max_value=320).map(lambda e: np.full(3, 10.0 ** e)))
+                          st.floats(min_value=-320, max_value=320).map(lambda e: np.full(3, pow10(e))))
 orbit_kwargs = st.fixed_dictionaries({"a": st.one_of(reals, odd, st.floats(6.5e6, 5e7))},
                                      optional={"e": st.one_of(reals, st.floats(0, 0.99)),
                                                "i": st.one_of(reals, st.floats(0, 3.1)),
@@ -366,7 +372,7 @@ vec_actions = st.one_of(
         lambda s: np.zeros(s).tolist(), lambda s: np.full(s, np.nan), lambda s: np.full(s, 1e300),
         lambda s: np.full(s, -np.inf, np.float16), lambda s: np.zeros(s, np.float16).view(np.uint16),
     ]),
-    st.floats(min_value=-320, max_value=320).map(lambda e: (lambda s: np.full(s, 10.0 ** e))),
+    st.floats(min_value=-320, max_value=320).map(lambda e: (lambda s: np.full(s, pow10(e)))),
 )
 
 
