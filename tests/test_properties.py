@@ -240,9 +240,7 @@ def prop_baseline(case):
     name, target, options = case
     env = ENVS[target] if isinstance(target, str) else NON_ENVS[target]
     pol, err = call(baselines.make, name, env, errors=BASELINE_ERRORS, **options)
-    if err is not None:
-        assert isinstance(err, ValueError | TypeError)
-    elif isinstance(target, str) and baselines.get(name).cheap:
+    if err is None and isinstance(target, str) and baselines.get(name).cheap:
         obs, _ = env.reset(seed=0)
         pol.reset(seed=0)
         act, err = call(pol.act, obs, errors=BASELINE_ERRORS)
