@@ -51,8 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0-149")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
-    from benchmarks.scoreboard import EPISODES_FILE, read_episodes
     from test_scoreboard import _board, _strip
+
+    from benchmarks.scoreboard import EPISODES_FILE, read_episodes
 
     rng = np.random.default_rng(args.seed)
     tmp = Path(tempfile.mkdtemp(prefix="kill_resume_"))
