@@ -322,7 +322,7 @@ class CGMRESConfig:
     ``r_v = 0.1``: 810 unknowns for three spacecraft (27 per stage).
 
     Args:
-        horizon: T_f [s]; horizon_steps: N, Euler steps over the horizon (<= 1000).
+        horizon: T_f [s]; horizon_steps: N, Euler steps over the horizon (<= 200).
         horizon_rate: alpha [1/s] of ``T(t) = T_f (1 - exp(-alpha t))``.
         zeta: continuation stabilisation gain [1/s]; ``None``: ``1 / dt`` of the env.
         kmax: GMRES iterations per update (<= 100000; GMRES also stops at the problem size).

@@ -86,7 +86,7 @@ class DMPCConfig:
 
     Args:
         variant: ``"one_hop"`` (pereira2023 Algorithm 1) or ``"convex_step"`` (pereira2022).
-        horizon: MPC prediction horizon N (<= 1000).
+        horizon: MPC prediction horizon N (<= 200).
         terminal_weight: diagonal of P (6,).
         sigma: Jacobi stopping tolerance of Algorithm 1 (one_hop).
         max_iterations: cap on Jacobi iterations per decision (one_hop).

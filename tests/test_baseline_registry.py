@@ -62,7 +62,7 @@ def test_zero_policy_rejects_non_envs():
 
 # ---------------------------------------------------------------------------------- configs
 @pytest.mark.parametrize("name,field,bad,match", [
-    ("dmpc", "horizon", 10**6, r"horizon must be in \[1, 1000\]"),
+    ("dmpc", "horizon", 10**6, r"horizon must be in \[1, 200\]"),
     ("dmpc", "horizon", True, "horizon must be an int"),
     ("dmpc", "sigma", math.nan, "sigma must be finite"),
     ("dmpc", "sigma", 1j, "sigma must be a real number"),
@@ -72,9 +72,9 @@ def test_zero_policy_rejects_non_envs():
     ("apf", "cw_compensation", 1, "cw_compensation must be True or False"),
     ("tube_rdmpc", "max_iter", 10**9, r"max_iter must be in \[1, 100000\]"),
     ("tube_rdmpc", "beta", True, "beta must be a real number"),
-    ("nmpc", "horizon", 1001, r"horizon must be in \[1, 1000\]"),
+    ("nmpc", "horizon", 201, r"horizon must be in \[1, 200\]"),
     ("nmpc", "rk4_steps", 10**6, r"rk4_steps must be in \[1, 100\]"),
-    ("cgmres", "horizon_steps", 10**5, r"horizon_steps must be in \[1, 1000\]"),
+    ("cgmres", "horizon_steps", 10**5, r"horizon_steps must be in \[1, 200\]"),
     ("cgmres", "fd_step", complex(1e-6, 0), "fd_step must be a real number"),
 ])
 def test_config_validation_rejects_bad_values_with_caps(name, field, bad, match):
@@ -85,7 +85,7 @@ def test_config_validation_rejects_bad_values_with_caps(name, field, bad, match)
 
 def test_tube_horizon_is_capped_before_any_work():
     env = satenv.cluster_v0()
-    with pytest.raises(BaselineError, match="at most 1000 decision periods"):
+    with pytest.raises(BaselineError, match="at most 200 decision periods"):
         baselines.TubeRDMPC(env, horizon=1e300)
 
 

@@ -126,7 +126,7 @@ def test_options_are_validated():
         TubeRDMPC(env, horizon=52.0)
     with pytest.raises(TypeError, match="cluster_v0"):
         TubeRDMPC(object())
-    with pytest.raises(ValueError, match=r"at most 1000 decision periods"):
+    with pytest.raises(ValueError, match=r"at most 200 decision periods"):
         TubeRDMPC(env, horizon=1e300)
 
 
