@@ -306,3 +306,37 @@ def test_shipped_platoon_policy_solves_a_held_out_seed():
     assert s["final_error_m"] < 1.0 and s["rmse"] < 100.0
     with pytest.warns(UserWarning, match="topology='PLF'"):  # same spaces, other scenario
         training.load(folder, env=parallel_env(randomize=True))
+
+
+SHIPPED = sorted(p.name for p in training.POLICIES_DIR.iterdir() if (p / "env.json").is_file())
+
+
+def _shipped_env(folder):
+    import satenv
+
+    meta = json.loads((folder / "env.json").read_text())
+    return satenv.make(meta["env_id"], **meta["eval_env_kwargs"])
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_shipped_policy_loads_and_completes_an_episode(name):
+    folder = training.POLICIES_DIR / name
+    env = _shipped_env(folder)
+    policy = training.load(folder, env=env)
+    traj = rollout(env, policy, seed=json.loads((folder / "eval.json").read_text())["test_seeds"][0])
+    assert traj.steps > 0 and np.all(np.isfinite(traj.actions))
+    for key in ("config.json", "README.md", "scoreboard.json", "learning_curve.png"):
+        assert (folder / key).is_file() or name == "platoon_tplf_ppo", f"{name} lacks {key}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_reproduces_its_eval_json(name):
+    from training.evaluate import evaluate
+
+    folder = training.POLICIES_DIR / name
+    env = _shipped_env(folder)
+    saved = json.loads((folder / "eval.json").read_text())
+    res = evaluate(env, training.load(folder, env=env), saved["test_seeds"])["aggregate"]
+    for key in ("success_rate", "collision_episodes", "rmse", "delta_v"):
+        assert res[key] == pytest.approx(saved["aggregate"]["learned"][key], rel=1e-6), key

@@ -12,7 +12,7 @@ Reward shaping (per agent; info arrays ``(B, M, ...)``)::
     r -= tracking * ||e|| / tracking_scale                     (e: the 6-d tracking error)
     r += precision * max(0, 1 - log1p(||e_pos|| / precision_scale) / log1p(100))
     r -= proximity * clip((proximity_distance - min_separation) / proximity_width, 0, 1)^2
-    r -= collision * collision_flag + effort * delta_v
+    r -= collision * collision_flag + effort * delta_v + violation * violations
     r -= anticipation * sum_j clip((anticipation_distance - d_cpa_ij) / anticipation_width, 0, 1)^2
 
 ``e`` = ``info["tracking_error"]``, ``e_pos`` its first 3 entries [m]. Why: the env's quadratic
@@ -20,7 +20,9 @@ stage cost spans orders of magnitude over an episode (hundreds of metres at the 
 the end), so after PPO's advantage normalisation the end of the episode carries almost no signal;
 the linear ``tracking`` term and the logarithmic ``precision`` bonus keep the slope near the
 target. ``proximity`` is a smooth penalty before contact (the env's collision penalty is a step;
-``collision`` re-adds one when ``env_weight = 0``). ``anticipation`` looks ahead: ``d_cpa_ij`` is
+``collision`` re-adds one when ``env_weight = 0``; ``violation`` likewise re-adds a penalty per hard
+constraint violated this step, ``info["violations"]``: keep-out sphere, line-of-sight cone, speed
+bound). ``anticipation`` looks ahead: ``d_cpa_ij`` is
 the closest-approach distance of agents i and j over the next ``anticipation_horizon`` seconds
 if both keep their velocity (positions and velocities from ``info["state"][..., :6]``), so fast
 crossings are penalised before the contact. With ``anticipation_speed > 0`` the pair's penalty is
@@ -63,6 +65,7 @@ class RewardShaping:
     proximity_width: float = 2.0
     collision: float = 0.0
     effort: float = 0.0
+    violation: float = 0.0
     anticipation: float = 0.0
     anticipation_distance: float = 8.0
     anticipation_width: float = 2.0
@@ -89,7 +92,7 @@ class RewardShaping:
     @property
     def active(self) -> bool:
         return (self.env_weight != 1.0 or self.tracking > 0 or self.precision > 0 or self.proximity > 0
-                or self.collision > 0 or self.effort > 0 or self.anticipation > 0)
+                or self.collision > 0 or self.effort > 0 or self.violation > 0 or self.anticipation > 0)
 
     def __call__(self, rewards: np.ndarray, info: dict[str, np.ndarray]) -> np.ndarray:
         out = self.env_weight * np.asarray(rewards, dtype=np.float64)
@@ -106,6 +109,8 @@ class RewardShaping:
             out -= self.collision * info["collision"]
         if self.effort > 0:
             out -= self.effort * info["delta_v"]
+        if self.violation > 0:
+            out -= self.violation * info["violations"]
         if self.anticipation > 0:
             out -= self.anticipation * self.closest_approach_penalty(info["state"])
         return out

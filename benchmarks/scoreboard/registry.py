@@ -60,6 +60,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
     _platoon("platoon-swarm256-ring-cw", "swarm of 256 followers on a ring 20 m apart, each hearing its "
              "two ring neighbours (RING), randomised starts within 4 m of the targets, cw; a collision "
              "ends the episode (satenv.scenarios.platoon.swarm)", **swarm(256, "ring", "RING")),
+    _platoon("platoon-pereira2022-random", "pereira2022 §5.1 with randomised initial states (inside the "
+             "LOS cone, outside the keep-out sphere; the learned policy's scenario)",
+             preset="pereira2022", randomize=True),
     ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"},
                  "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
     ScenarioSpec("cluster-case2", "cluster_v0", {"preset": "li2022-case2"},
@@ -70,6 +73,12 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
                  "kannan2022 §5.1: 3 spacecraft to a connected in-plane network"),
     ScenarioSpec("formation-kannan2022-collision", "formation_v0", {"preset": "kannan2022-collision"},
                  "kannan2022 §5.2: leader-follower y-spacing of 10 m"),
+    ScenarioSpec("formation-kannan2022-position-random", "formation_v0",
+                 {"preset": "kannan2022-position", "randomize": True},
+                 "kannan2022 §5.1 with randomised starts (±20 m, ±1 m/s around the origin)"),
+    ScenarioSpec("formation-kannan2022-collision-random", "formation_v0",
+                 {"preset": "kannan2022-collision", "randomize": True},
+                 "kannan2022 §5.2 with randomised starts (±20 m, ±1 m/s around the origin)"),
 ]}
 """Every scenario of the scoreboard by name."""
 
