@@ -138,6 +138,14 @@ def export_actor(policy: Any, obs_dim: int, act_dim: int, n_agents: int):
     raise ValueError("the exported actor does not reproduce the BenchMARL policy's deterministic actions")
 
 
+def _relative(path: Path, root: Path) -> str:
+    """``path`` relative to the run folder ``root`` where it lies inside it (folders move)."""
+    try:
+        return str(path.resolve().relative_to(root.resolve()))
+    except ValueError:
+        return str(path)
+
+
 def run(cfg: BenchMARLConfig) -> Path:
     """Train, export the actor to ``out_dir`` and evaluate it; returns ``out_dir``."""
     import satenv
@@ -153,7 +161,7 @@ def run(cfg: BenchMARLConfig) -> Path:
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
     actor = export_actor(experiment.policy, obs_dim, act_dim, len(env.possible_agents))
     meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.env_kwargs),
-            "step": int(experiment.total_frames), "benchmarl_folder": str(experiment.folder_name)}
+            "step": int(experiment.total_frames), "benchmarl_folder": _relative(Path(experiment.folder_name), out)}
     policy = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(obs_dim,), meta=meta)
     config = {**asdict(cfg), "net_arch": list(cfg.net_arch), "eval_seeds": list(cfg.eval_seeds)}
     evaluation = evaluate(env, policy, cfg.eval_seeds) if cfg.eval_seeds else None

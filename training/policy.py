@@ -396,8 +396,9 @@ def save_artifacts(folder: str | Path, policy: LearnedPolicy, *, env_meta: dict[
     return root
 
 
-def write_manifest(root: Path) -> None:
+def write_manifest(root: str | Path) -> None:
     """(Re)write ``manifest.json`` with the sha256 of :data:`POLICY_FILES`."""
+    root = Path(root)
     digests = {name: _sha256(root / name) for name in POLICY_FILES}
     (root / MANIFEST).write_text(json.dumps({"sha256": digests}, indent=2) + "\n")
 
