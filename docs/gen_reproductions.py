@@ -26,6 +26,7 @@ OUT = DOCS / "assets" / "reproductions"
 PAPERS: dict[str, bool] = {
     "pereira2023": False,
     "kannan2022": False,
+    "pereira2022-platoon": False,
     "pereira2022-servicing": True,
     "li2022": True,
 }
