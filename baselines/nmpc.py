@@ -15,9 +15,14 @@ Per spacecraft i and decision step, one NLP (eq. 38) over ``N`` steps (``NMPCCon
 * cost — eq. 39, ``sum_{k=0}^{N-1}`` of the stage cost with the scenario's weights
   (§5.2: Q_p = 10 I, Q_v = 0.5 I, Q_q = 15 I_4, Q_w = 0.5 I, H = 2 I_6), ``p_d`` the current
   waypoint held over the horizon (``preview=True``: the eq. 50 schedule over the horizon), ``v_d``;
-  the quaternion error ``q (x) q_d,k_bar`` and ``omega_d,k`` of eq. 43-49 along the horizon are
-  computed from the *previous* predicted trajectory (shifted; the attitude trajectory planning of
-  §4.4), so they enter as parameters;
+  ``q_d,k`` and ``omega_d,k`` of eq. 43-49 are expressions of the stage's own decision variables
+  ``(p_k, v_k, q_k)`` inside the NLP (:func:`attitude_reference_sym`, the env's reference), and
+  the quaternion error enters as ``[1 - |eta~|, eps~]`` of ``q~ = q_k (x) q_d,k_bar``
+  (:func:`quaternion_cost_terms`: the same for ``q_d`` and ``-q_d``). Ours, not in eq. 39:
+  ``terminal_attitude_weight`` times the attitude terms (Q_q, Q_w) at ``x_N``; with the paper's
+  stage cost alone (weight 0) the N = 30 (3 s) horizon sees too little of the attitude
+  manoeuvre and the pointing error swings (a 30 deg step at rest: 1.2 deg after 7.5 s, back to
+  12 deg at 15 s).
 * constraints — ``|u_j| <= u_max`` (eq. 36 inputs), ``|v_j| <= v_max`` and
   ``|omega_j| <= omega_max`` per axis (eq. 42), the keep-out ``|p_k|^2 >= (r_sigma + r_s +
   keepout_margin)^2`` (eq. 40) and the coupled collision constraints
@@ -78,7 +83,7 @@ from satenv.dynamics import cw_continuous, cw_matrices
 from satenv.dynamics.attitude import thruster_matrices
 from satenv.envs.servicing_v0 import unpack_global_state
 
-__all__ = ["NMPC", "NMPCConfig", "build_model"]
+__all__ = ["NMPC", "NMPCConfig", "attitude_reference_sym", "build_model", "quaternion_cost_terms"]
 
 _SOLVERS = ("ipopt", "fatrop")
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level", "success"}
@@ -235,6 +240,8 @@ class NMPCConfig:
         keepout_margin, separation_margin [m]: added to the keep-out / separation radii.
         bound_margin: relative tightening of the velocity / angular-velocity bounds (< 1).
         rk4_steps: attitude RK4 steps per T_s (<= 100); formulation: ``"sx"`` or ``"mx"``.
+        terminal_attitude_weight: multiplier of the attitude weights (Q_q, Q_w) on ``x_N`` (ours;
+            0 is eq. 39 as published).
         solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
     """
@@ -540,7 +547,6 @@ class NMPC(Baseline):
 
     def _solve_agent(self, i: int, x0: np.ndarray, goal_path: np.ndarray,
                      others: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
-        sc = self.scenario
         w0, duals = self._initial_guess(i, x0, goal_path[0])
         oth = np.concatenate(others, axis=0).T if others else np.zeros((3, 0))
         params = np.concatenate([x0, goal_path.T.ravel(order="F"), oth.ravel(order="F")])
