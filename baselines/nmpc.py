@@ -19,10 +19,10 @@ Per spacecraft i and decision step, one NLP (eq. 38) over ``N`` steps (``NMPCCon
   ``(p_k, v_k, q_k)`` inside the NLP (:func:`attitude_reference_sym`, the env's reference), and
   the quaternion error enters as ``[1 - |eta~|, eps~]`` of ``q~ = q_k (x) q_d,k_bar``
   (:func:`quaternion_cost_terms`: the same for ``q_d`` and ``-q_d``). Ours, not in eq. 39:
-  ``terminal_attitude_weight`` times the attitude terms (Q_q, Q_w) at ``x_N``; with the paper's
-  stage cost alone (weight 0) the N = 30 (3 s) horizon sees too little of the attitude
-  manoeuvre and the pointing error swings (a 30 deg step at rest: 1.2 deg after 7.5 s, back to
-  12 deg at 15 s).
+  ``terminal_attitude_weight`` (default 100) times the attitude terms (Q_q, Q_w) at ``x_N``;
+  with the paper's stage cost alone (weight 0) the N = 30 (3 s) horizon sees too little of the
+  attitude manoeuvre and the pointing error swings (a 30 deg step at rest: 1.2 deg after 7.5 s,
+  back to 12 deg at 15 s; with 100: 0.05 deg at 15 s).
 * constraints — ``|u_j| <= u_max`` (eq. 36 inputs), ``|v_j| <= v_max`` and
   ``|omega_j| <= omega_max`` per axis (eq. 42), the keep-out ``|p_k|^2 >= (r_sigma + r_s +
   keepout_margin)^2`` (eq. 40) and the coupled collision constraints
@@ -240,8 +240,8 @@ class NMPCConfig:
         keepout_margin, separation_margin [m]: added to the keep-out / separation radii.
         bound_margin: relative tightening of the velocity / angular-velocity bounds (< 1).
         rk4_steps: attitude RK4 steps per T_s (<= 100); formulation: ``"sx"`` or ``"mx"``.
-        terminal_attitude_weight: multiplier of the attitude weights (Q_q, Q_w) on ``x_N`` (ours;
-            0 is eq. 39 as published).
+        terminal_attitude_weight: multiplier of the attitude weights (Q_q, Q_w) on ``x_N`` (ours,
+            100 by default; 0 is eq. 39 as published).
         solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
     """
@@ -258,7 +258,7 @@ class NMPCConfig:
     max_iter: int = 200
     tol: float = 1e-6
     formulation: str = "sx"
-    terminal_attitude_weight: float = 0.0
+    terminal_attitude_weight: float = 100.0
     solver_options: dict | None = None
     seed: int | None = None
 

@@ -6,7 +6,8 @@ shared cores: 2-5 min for the episode (2 x 1200 NLP solves) plus about 1 min for
 step responses; a progress line per phase goes to stderr.
 
 Runs ``satenv.servicing_v0(preset="pereira2022")`` (2 spacecraft, waypoints of eq. 50 switching at
-t = 40 s and 80 s, 120 s) under ``baselines.nmpc.NMPC`` (N = 30, eq. 39 weights of §5.2, ipopt)
+t = 40 s and 80 s, 120 s) under ``baselines.nmpc.NMPC`` (N = 30, eq. 39 weights of §5.2, ipopt;
+q_d and omega_d of eq. 43-49 inside the NLP; our terminal attitude cost, weight 100)
 through ``satenv.rollout`` and measures, per spacecraft: the time to reach each waypoint within
 0.5 m (from the phase start), the final position error, the pointing error (body z axis vs the
 line of sight to the object) at the end of each phase, its maximum over the last 10 s of each
