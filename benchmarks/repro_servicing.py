@@ -33,23 +33,21 @@ with N = 30 and N = 100, which separates the horizon's effect on the attitude se
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks._io import write_json
-from benchmarks.reproduce import all_met, claim
+from benchmarks._io import progress, write_json
+from benchmarks.claims import all_met, claim, format_claims
 
 PAPER = "pereira2022-servicing"
 COMMAND = "python -m benchmarks.reproduce pereira2022-servicing --out FILE.json --plots DIR"
 REACH_TOL = 0.5            # m
 POINTING_TOL_DEG = 5.0     # our threshold for "pointing achieved"
 SETTLE_WINDOW_S = 10.0     # last seconds of each phase
-RUN_TIME = ("expected run time on 2 shared cores: 2-5 min for the episode plus about 1 min "
-            "for the attitude step responses (--no-diagnostics skips them)")
+RUN_TIME = "3-6 min (2 x 1200 NLP solves, then the attitude step responses: --no-diagnostics)"
 
 
 class PhaseProgress:
@@ -71,8 +69,8 @@ class PhaseProgress:
         out = self.policy.act(observations)
         self.k += 1
         if self.k in self.marks:
-            print(f"[pereira2022-servicing] t = {self.k * self.dt:.0f} s of {self.steps * self.dt:.0f} s "
-                  f"({time.perf_counter() - self.start:.0f} s wall)", file=sys.stderr, flush=True)
+            progress(f"pereira2022-servicing: t = {self.k * self.dt:.0f} s of {self.steps * self.dt:.0f} s "
+                     f"({time.perf_counter() - self.start:.0f} s wall)")
         return out
 
 
@@ -346,8 +344,7 @@ def format_table(result: dict[str, Any]) -> str:
                      f"{r['max_abs_u']:7.3f} {r['max_abs_v_axis_mps']:7.3f} "
                      f"{r['max_abs_omega_axis_radps']:7.3f} {r['final_position_error_m']:9.4f} "
                      f"{r['solve_ms_median']:10.1f} / {r['solve_ms_p90']:.1f}")
-    for c in result["claims"]:
-        lines.append(f"claim {c['claim']}: {'PASS' if c['met'] else 'FAIL'} ({c['target']})")
+    lines.append(format_claims(result["claims"]))
     lines.append(f"fallbacks: {result['fallbacks']}; solver statuses: {result['solver_statuses']}")
     diag = result.get("attitude_step_response")
     if diag:
@@ -359,7 +356,7 @@ def format_table(result: dict[str, Any]) -> str:
 
 def add_arguments(parser) -> None:
     """``benchmarks.reproduce pereira2022-servicing`` options (and the run time in ``--help``)."""
-    group = parser.add_argument_group("pereira2022-servicing", RUN_TIME)
+    group = parser.add_argument_group("pereira2022-servicing", f"expected run time: {RUN_TIME}")
     group.add_argument("--no-diagnostics", dest="diagnostics", action="store_false",
                        help="skip the attitude step responses (N = 30 and 100)")
 
@@ -375,7 +372,7 @@ def run(out: str | Path, plots_dir: str | Path | None = None, seed: int = 0,
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.repro_servicing",
-                                     description=__doc__.splitlines()[0], epilog=RUN_TIME)
+                                     description=__doc__.splitlines()[0], epilog=f"expected run time: {RUN_TIME}")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--plots", type=Path, default=None)
     parser.add_argument("--seed", type=int, default=0)
