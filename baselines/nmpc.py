@@ -15,9 +15,14 @@ Per spacecraft i and decision step, one NLP (eq. 38) over ``N`` steps (``NMPCCon
 * cost — eq. 39, ``sum_{k=0}^{N-1}`` of the stage cost with the scenario's weights
   (§5.2: Q_p = 10 I, Q_v = 0.5 I, Q_q = 15 I_4, Q_w = 0.5 I, H = 2 I_6), ``p_d`` the current
   waypoint held over the horizon (``preview=True``: the eq. 50 schedule over the horizon), ``v_d``;
-  the quaternion error ``q (x) q_d,k_bar`` and ``omega_d,k`` of eq. 43-49 along the horizon are
-  computed from the *previous* predicted trajectory (shifted; the attitude trajectory planning of
-  §4.4), so they enter as parameters;
+  ``q_d,k`` and ``omega_d,k`` of eq. 43-49 are expressions of the stage's own decision variables
+  ``(p_k, v_k, q_k)`` inside the NLP (:func:`attitude_reference_sym`, the env's reference), and
+  the quaternion error enters as ``[1 - |eta~|, eps~]`` of ``q~ = q_k (x) q_d,k_bar``
+  (:func:`quaternion_cost_terms`: the same for ``q_d`` and ``-q_d``). Ours, not in eq. 39:
+  ``terminal_attitude_weight`` (default 100) times the attitude terms (Q_q, Q_w) at ``x_N``;
+  with the paper's stage cost alone (weight 0) the N = 30 (3 s) horizon sees too little of the
+  attitude manoeuvre and the pointing error swings (a 30 deg step at rest: 1.2 deg after 7.5 s,
+  back to 12 deg at 15 s; with 100: 0.05 deg at 15 s).
 * constraints — ``|u_j| <= u_max`` (eq. 36 inputs), ``|v_j| <= v_max`` and
   ``|omega_j| <= omega_max`` per axis (eq. 42), the keep-out ``|p_k|^2 >= (r_sigma + r_s +
   keepout_margin)^2`` (eq. 40) and the coupled collision constraints
@@ -76,9 +81,9 @@ from baselines.base import (
 )
 from satenv.dynamics import cw_continuous, cw_matrices
 from satenv.dynamics.attitude import thruster_matrices
-from satenv.envs.servicing_v0 import attitude_reference, unpack_global_state
+from satenv.envs.servicing_v0 import unpack_global_state
 
-__all__ = ["NMPC", "NMPCConfig", "build_model"]
+__all__ = ["NMPC", "NMPCConfig", "attitude_reference_sym", "build_model", "quaternion_cost_terms"]
 
 _SOLVERS = ("ipopt", "fatrop")
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level", "success"}
@@ -152,6 +157,71 @@ def build_model(scenario, rk4_steps: int = 1):
     return f, big_f
 
 
+def attitude_reference_sym(scenario, p, v, q, min_sine: float = 0.1):
+    """Eq. 43-49 in CasADi: ``(q_d, omega_d)`` as expressions of the stage's ``p``, ``v``, ``q``.
+
+    The same frame as :func:`satenv.dynamics.attitude.pointing_frame` (with its ``min_sine``
+    switch to the LVLH axis least aligned with ``k_d``), ``q_d`` by Shepperd's method (branches by
+    ``if_else``; a branch change flips the sign of ``q_d`` only, which the sign-free error of
+    :func:`quaternion_cost_terms` does not see), ``omega_d = R(q)^T R_d omega^d_fo,d`` (eq. 49
+    with ``n_f = n_l``, eq. 45-47 with ``t_dot = -v``).
+    """
+    import casadi as ca
+
+    def unit(a):
+        return a / ca.sqrt(ca.sumsqr(a))
+
+    t = ca.DM(scenario.pointing_target) - p
+    tn = ca.sqrt(ca.sumsqr(t))
+    k = t / tn
+    ref = ca.DM(scenario.pointing_reference)
+    c = ca.cross(k, ref)
+    ak = [ca.fabs(k[0]), ca.fabs(k[1]), ca.fabs(k[2])]
+    e = [ca.DM([1.0, 0, 0]), ca.DM([0, 1.0, 0]), ca.DM([0, 0, 1.0])]
+    least = ca.if_else(ca.logic_and(ak[0] <= ak[1], ak[0] <= ak[2]), e[0],
+                       ca.if_else(ak[1] <= ak[2], e[1], e[2]))
+    c = ca.if_else(ca.sqrt(ca.sumsqr(c)) / float(np.linalg.norm(scenario.pointing_reference)) < min_sine,
+                   ca.cross(k, least), c)
+    j = unit(c)
+    i = ca.cross(j, k)
+    r = ca.horzcat(i, j, k)
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    cands = []
+    for b, diag in enumerate((tr, r[0, 0], r[1, 1], r[2, 2])):
+        s = 2 * ca.sqrt(ca.fmax(1 + (tr if b == 0 else 2 * diag - tr), 1e-12))
+        if b == 0:
+            cand = [s / 4, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+        elif b == 1:
+            cand = [(r[2, 1] - r[1, 2]) / s, s / 4, (r[1, 0] + r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s]
+        elif b == 2:
+            cand = [(r[0, 2] - r[2, 0]) / s, (r[1, 0] + r[0, 1]) / s, s / 4, (r[2, 1] + r[1, 2]) / s]
+        else:
+            cand = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] + r[1, 2]) / s, s / 4]
+        cands.append(ca.vertcat(*cand))
+    d = [tr, r[0, 0], r[1, 1], r[2, 2]]
+    q_01 = ca.if_else(d[0] >= d[1], cands[0], cands[1])
+    d_01 = ca.fmax(d[0], d[1])
+    q_23 = ca.if_else(d[2] >= d[3], cands[2], cands[3])
+    d_23 = ca.fmax(d[2], d[3])
+    q_d = ca.if_else(d_01 >= d_23, q_01, q_23)
+    t_dot = -v
+    w_frame = ca.vertcat(-ca.dot(t_dot, j) / tn, ca.dot(t_dot, i) / tn, 0)
+    eta, eps = q[0], q[1:4]
+    s_eps = ca.skew(eps)
+    rot = ca.DM.eye(3) + 2 * eta * s_eps + 2 * ca.mtimes(s_eps, s_eps)       # R(q): body -> LVLH
+    w_d = ca.mtimes(rot.T, ca.mtimes(r, w_frame))
+    return q_d, w_d
+
+
+def quaternion_cost_terms(q, q_d):
+    """``[1 - |eta~|, eps~]`` of ``q~ = q (x) q_d_bar`` (eq. 39), the same for ``q_d`` and ``-q_d``."""
+    import casadi as ca
+
+    eta_e = ca.dot(q, q_d)
+    eps_e = q_d[0] * q[1:4] - q[0] * q_d[1:4] - ca.cross(q[1:4], q_d[1:4])
+    return ca.vertcat(1 - ca.fabs(eta_e), eps_e)
+
+
 NLP_CONSTRAINT_TOL = 1e-2
 """Largest accepted violation of an NLP constraint row by a returned point (ipopt's
 ``acceptable_constr_viol_tol``); bounds on the variables are checked to 1e-6 (relative)."""
@@ -170,6 +240,8 @@ class NMPCConfig:
         keepout_margin, separation_margin [m]: added to the keep-out / separation radii.
         bound_margin: relative tightening of the velocity / angular-velocity bounds (< 1).
         rk4_steps: attitude RK4 steps per T_s (<= 100); formulation: ``"sx"`` or ``"mx"``.
+        terminal_attitude_weight: multiplier of the attitude weights (Q_q, Q_w) on ``x_N`` (ours,
+            100 by default; 0 is eq. 39 as published).
         solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
     """
@@ -186,6 +258,7 @@ class NMPCConfig:
     max_iter: int = 200
     tol: float = 1e-6
     formulation: str = "sx"
+    terminal_attitude_weight: float = 100.0
     solver_options: dict | None = None
     seed: int | None = None
 
@@ -200,6 +273,7 @@ class NMPCConfig:
             "keepout_margin": partial(number, zero_ok=True),
             "separation_margin": partial(number, zero_ok=True),
             "bound_margin": partial(number, zero_ok=True, high=0.999999), "tol": number,
+            "terminal_attitude_weight": partial(number, zero_ok=True),
         }
         if self.seed is not None:
             rules["seed"] = partial(integer, low=0, high=2**63 - 1)
@@ -244,6 +318,7 @@ class NMPC(Baseline):
         self.w_lim = sc.omega_max * (1.0 - cfg.bound_margin)
         self.rk4_steps = cfg.rk4_steps
         self.formulation = cfg.formulation
+        self.terminal_attitude_weight = cfg.terminal_attitude_weight
         self._f, self._F = build_model(sc, self.rk4_steps)
         self._a_cw = cw_continuous(sc.mean_motion)[0]
         self._j_f = np.array(sc.inertia)
@@ -263,8 +338,6 @@ class NMPC(Baseline):
         us = [sym.sym(f"u{k}", nu) for k in range(n_h)]
         x_init = sym.sym("x_init", nx)
         p_d = sym.sym("p_d", 3, n_h)
-        q_d = sym.sym("q_d", 4, n_h)
-        w_d = sym.sym("w_d", 3, n_h)
         others = sym.sym("others", 3, n_h * max(m - 1, 0))
         qp, qv = ca.DM(sc.position_weight), ca.DM(sc.velocity_weight)
         qq, qw, hh = ca.DM(sc.quaternion_weight), ca.DM(sc.omega_weight), ca.DM(sc.input_weight)
@@ -283,11 +356,9 @@ class NMPC(Baseline):
         path_lb = [self.keepout**2] + [self.separation**2] * (m - 1)
         for k in range(n_h):
             x, u = xs[k], us[k]
-            ep, ev, ew = x[0:3] - p_d[:, k], x[3:6] - v_d, x[10:13] - w_d[:, k]
-            qk, qdk = x[6:10], q_d[:, k]
-            eta_e = ca.dot(qk, qdk)
-            eps_e = qdk[0] * qk[1:4] - qk[0] * qdk[1:4] - ca.cross(qk[1:4], qdk[1:4])
-            qe = ca.vertcat(1 - eta_e, eps_e)
+            q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])   # eq. 43-49
+            ep, ev, ew = x[0:3] - p_d[:, k], x[3:6] - v_d, x[10:13] - w_d
+            qe = quaternion_cost_terms(x[6:10], q_d)
             cost += (ca.dot(qp, ep**2) + ca.dot(qv, ev**2) + ca.dot(qq, qe**2)
                      + ca.dot(qw, ew**2) + ca.dot(hh, u**2))
             g.append(xs[k + 1] - self._F(x, u))           # dynamics first in each stage (fatrop)
@@ -301,6 +372,11 @@ class NMPC(Baseline):
                 g += path(x, k)
                 lbg += path_lb
                 ubg += [np.inf] * n_path
+        if self.terminal_attitude_weight > 0:           # terminal attitude cost (ours; not in eq. 39)
+            x = xs[n_h]
+            q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])
+            qe, ew = quaternion_cost_terms(x[6:10], q_d), x[10:13] - w_d
+            cost += self.terminal_attitude_weight * (ca.dot(qq, qe**2) + ca.dot(qw, ew**2))
         g += path(xs[n_h], n_h)
         lbg += path_lb
         ubg += [np.inf] * n_path
@@ -321,7 +397,7 @@ class NMPC(Baseline):
                 w_vars.append(us[k])
                 lbx.append(-self.u_max)
                 ubx.append(self.u_max)
-        params = ca.vertcat(x_init, ca.vec(p_d), ca.vec(q_d), ca.vec(w_d), ca.vec(others))
+        params = ca.vertcat(x_init, ca.vec(p_d), ca.vec(others))
         nlp = {"x": ca.vertcat(*w_vars), "f": cost, "g": ca.vertcat(*g), "p": params}
         if self.solver == "ipopt":
             opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
@@ -471,16 +547,9 @@ class NMPC(Baseline):
 
     def _solve_agent(self, i: int, x0: np.ndarray, goal_path: np.ndarray,
                      others: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
-        sc = self.scenario
         w0, duals = self._initial_guess(i, x0, goal_path[0])
-        xg = w0[self._x_idx]
-        p, v, q = xg[:-1, :3].copy(), xg[:-1, 3:6].copy(), xg[:-1, 6:10].copy()
-        q /= np.linalg.norm(q, axis=1, keepdims=True)
-        _, q_d, w_d = attitude_reference(sc, p, v, q)
-        # q_d,k is sign-aligned with the predicted attitude q_k (attitude_reference)
         oth = np.concatenate(others, axis=0).T if others else np.zeros((3, 0))
-        params = np.concatenate([x0, goal_path.T.ravel(order="F"), q_d.T.ravel(order="F"),
-                                 w_d.T.ravel(order="F"), oth.ravel(order="F")])
+        params = np.concatenate([x0, goal_path.T.ravel(order="F"), oth.ravel(order="F")])
         args = {"x0": w0, "p": params, "lbx": self._lbx, "ubx": self._ubx,
                 "lbg": self._lbg, "ubg": self._ubg}
         if duals:

@@ -44,6 +44,9 @@ Choices and deviations (documented; each is an option):
   keep-out constraints are infeasible.
 * ``safety_margin = 5 m`` is added to every keep-out distance: the Jacobi exchange plans against
   the neighbours' *previous* predictions while they re-plan at the same time.
+* :meth:`TubeRDMPCConfig.published` drops the two additions above (``v_max=None``,
+  ``terminal_braking=False``); with the env's ``reallocate_every=1`` (Step 4) it is li2022 as
+  published (``benchmarks/repro_li2022.py`` reports both).
 * Infeasibility: every ipopt solve goes through :func:`baselines.base.guarded_solve` (an
   exception, a failed status, a wrong-shaped or non-finite point, a variable outside its bounds or
   a constraint row violated by more than ``NLP_CONSTRAINT_TOL`` is a failure; why:
@@ -158,6 +161,17 @@ class TubeRDMPCConfig:
         if self.k2 < 1.0 / (4.0 * self.eta):
             raise BaselineError(f"TubeRDMPC: Theorem 1 needs k2 >= 1 / (4 eta): k2 = {self.k2}, "
                                 f"eta = {self.eta}")
+
+    @classmethod
+    def published(cls, **options: Any) -> TubeRDMPCConfig:
+        """li2022 as published: no speed bound (Ξ_i unspecified) and only the terminal set (38).
+
+        Our other choices (``safety_margin``, ``lyapunov_tolerance``, the relaxed NLP) stay as
+        options. The paper's Step 4 re-allocation at every decision is the env's, not the
+        controller's: ``satenv.make("cluster_v0", ..., reallocate_every=1)``.
+        """
+        return config_from_options(cls, options, "TubeRDMPC",
+                                   base=cls(v_max=None, terminal_braking=False))
 
 
 class TubeController:

@@ -5,10 +5,10 @@ import pytest
 
 pytest.importorskip("casadi")
 
-from baselines.nmpc import NMPC, build_model  # noqa: E402
+from baselines.nmpc import NMPC, attitude_reference_sym, build_model, quaternion_cost_terms  # noqa: E402
 from satenv.dynamics import cw_continuous  # noqa: E402
-from satenv.dynamics.attitude import attitude_derivative, thruster_matrices  # noqa: E402
-from satenv.envs.servicing_v0 import parallel_env  # noqa: E402
+from satenv.dynamics.attitude import attitude_derivative, quat_error, thruster_matrices  # noqa: E402
+from satenv.envs.servicing_v0 import attitude_reference, parallel_env  # noqa: E402
 from satenv.rollout import rollout  # noqa: E402
 from satenv.scenarios.servicing import PRESETS  # noqa: E402
 
@@ -132,18 +132,45 @@ def test_bad_options_rejected():
         NMPC(Other())
 
 
+def test_attitude_reference_inside_the_nlp_matches_the_env():
+    """Eq. 43-49 as CasADi expressions of (p, v, q) equal the env's reference (q_d up to sign),
+    also next to the min_sine switch of the frame; the quaternion error ignores q_d's sign."""
+    import casadi as ca
+
+    sc = PRESETS["pereira2022"]
+    p, v, q = ca.SX.sym("p", 3), ca.SX.sym("v", 3), ca.SX.sym("q", 4)
+    q_d, w_d = attitude_reference_sym(sc, p, v, q)
+    fun = ca.Function("ref", [p, v, q], [q_d, w_d, quaternion_cost_terms(q, q_d),
+                                         quaternion_cost_terms(q, -q_d)])
+    rng = np.random.default_rng(1)
+    ref = np.asarray(sc.pointing_reference)
+    for k, x in enumerate(random_states(rng, 300)):
+        pos = -15 * ref + rng.normal(size=3) * 0.5 if k % 10 == 0 else x[:3]
+        qd_s, wd_s, e_s, e_neg = (np.asarray(a).ravel() for a in fun(pos, x[3:6], x[6:10]))
+        _, qd_n, wd_n = attitude_reference(sc, pos, x[3:6], x[6:10])
+        assert min(np.abs(qd_s - qd_n).max(), np.abs(qd_s + qd_n).max()) < 1e-12
+        np.testing.assert_allclose(wd_s, wd_n, atol=1e-12)
+        err = quat_error(x[6:10], qd_n)
+        np.testing.assert_allclose(e_s[0], 1 - err[0], atol=1e-12)
+        np.testing.assert_allclose(np.abs(e_s[1:]), np.abs(err[1:]), atol=1e-12)
+        np.testing.assert_allclose(np.abs(e_neg), np.abs(e_s), atol=1e-12)
+
+
 @pytest.mark.slow
-def test_full_pereira2022_run_keeps_constraints_and_follows_waypoints():
-    """The whole §5.2 episode (120 s, ~2-4 min): the reproduction's claims on constraints/waypoints."""
-    from benchmarks.repro_servicing import analyse
+def test_full_pereira2022_run_meets_the_three_claims_per_phase():
+    """The whole §5.2 episode (120 s, 2-5 min): constraints, waypoints, and the pointing error
+    <= 5 deg at the end of every phase of every spacecraft and over its last 10 s."""
+    from benchmarks.repro_servicing import POINTING_TOL_DEG, analyse
 
     env = parallel_env()
     policy = NMPC(env)
     traj = rollout(env, policy, seed=0)
     result = analyse(traj, env, policy)
-    assert result["claims"]["constraints_satisfied_at_all_times"]
-    assert result["claims"]["waypoints_followed"]
     assert policy.info["fallbacks"] == 0
     for row in result["rows"]:
         assert row["final_position_error_m"] < 0.01
-        assert row["final_pointing_error_deg"] < 5.0
+        for phase in row["phases"]:
+            assert phase["pointing_at_phase_end_deg"] <= POINTING_TOL_DEG, (row["agent"], phase)
+            assert phase["pointing_max_last_10s_deg"] <= POINTING_TOL_DEG, (row["agent"], phase)
+    failed = [c for c in result["claims"] if not c["met"]]
+    assert not failed, failed
