@@ -232,7 +232,7 @@ class NMPCConfig:
     """Settings of :class:`NMPC` (pereira2022 §5.2: N = 30; the rest are our choices).
 
     Args:
-        horizon: N, prediction steps (<= 1000; was the servicing scenario's ``horizon``).
+        horizon: N, prediction steps (<= 200; was the servicing scenario's ``horizon``).
         solver: ``"ipopt"`` or ``"fatrop"``; max_iter, tol: its iteration limit and tolerance.
         order: ``"sequential"`` (Gauss-Seidel) or ``"jacobi"``.
         initial_guess: ``"arc"`` or ``"hold"`` (module docstring); preview: the waypoint schedule
