@@ -45,10 +45,9 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
-
 from dataclasses import asdict, dataclass
 from functools import partial
+from typing import Any
 
 import casadi as ca
 import numpy as np

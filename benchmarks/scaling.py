@@ -16,8 +16,8 @@ graph searches are still the dense O(M^2) kernels (a follow-up; see the README).
 
 from __future__ import annotations
 
-import tracemalloc
 import time
+import tracemalloc
 from collections.abc import Callable
 from typing import Any
 

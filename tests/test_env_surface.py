@@ -217,8 +217,8 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     collision in the chain formation voids it everywhere."""
     baselines = pytest.importorskip("baselines")
     pytest.importorskip("daqp")
-    from benchmarks.scoreboard.registry import POLICIES, SCENARIOS
     from benchmarks.scoreboard import Task, run_episode
+    from benchmarks.scoreboard.registry import POLICIES, SCENARIOS
     from training.evaluate import evaluate
 
     spec = SCENARIOS["platoon-PLF-cw"]

@@ -130,7 +130,7 @@ class _Pool:
             self.suspects.append(task)
 
     def _rebuild(self) -> Iterator[Record]:
-        for fut, (task, alone) in list(self.inflight.items()):
+        for task, alone in list(self.inflight.values()):
             yield from self._lost(task, alone)
         self.inflight.clear()
         self.pool.shutdown(wait=True, cancel_futures=True)

@@ -10,7 +10,13 @@ from typing import Any
 
 from benchmarks.scoreboard.backends import stream
 from benchmarks.scoreboard.plan import Plan, Selection, board_seeds, make_plan, select, split_names
-from benchmarks.scoreboard.registry import POLICIES, QUICK, SCENARIOS, discover_trained_policies, user_policies
+from benchmarks.scoreboard.registry import (
+    POLICIES,
+    QUICK,
+    SCENARIOS,
+    discover_trained_policies,
+    user_policies,
+)
 from benchmarks.scoreboard.report import (
     Board,
     aggregate,

@@ -12,7 +12,13 @@ import argparse
 import sys
 
 from benchmarks._env import single_thread_blas
-from benchmarks.scoreboard.registry import FULL, POLICIES, QUICK, SCENARIOS, discover_trained_policies
+from benchmarks.scoreboard.registry import (
+    FULL,
+    POLICIES,
+    QUICK,
+    SCENARIOS,
+    discover_trained_policies,
+)
 from benchmarks.scoreboard.specs import ScoreboardError, Unavailable
 
 __all__ = ["build_parser", "main"]
@@ -102,7 +108,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.list:
         print(list_registry())
         return 0
-    from benchmarks.scoreboard.board import run_scoreboard   # (imports numpy: after the BLAS setting)
+    from benchmarks.scoreboard.board import (
+        run_scoreboard,  # (imports numpy: after the BLAS setting)
+    )
     from benchmarks.scoreboard.runner import EPISODES_FILE
 
     out = args.out or ("results/scoreboard/quick" if args.quick else "results/scoreboard")

@@ -95,8 +95,8 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v
-from satenv.neighbours import DENSE_MAX, nearest, norm3
 from satenv.envs.base import BatchedCore, SatParallelEnv, StepResult, resolve_preset
+from satenv.neighbours import DENSE_MAX, nearest, norm3
 from satenv.scenarios.platoon import (
     PRESETS,
     PlatoonScenario,
