@@ -192,31 +192,32 @@ def check_net_arch(value: Any) -> tuple[int, ...]:
     return arch
 
 
-def config_from_json(data: dict[str, Any]) -> TrainConfig:
-    """Rebuild a :class:`TrainConfig` from :meth:`TrainConfig.to_json` output (unknown keys rejected)."""
-    known = {f.name for f in fields(TrainConfig)}
+def config_from_json(data: dict[str, Any], cls: type = TrainConfig) -> Any:
+    """Rebuild a config dataclass ``cls`` (:class:`TrainConfig`, or another frozen run config such
+    as :class:`training.imitate.ImitationConfig`) from its ``to_json`` output (unknown keys rejected)."""
+    known = {f.name for f in fields(cls)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ValueError(f"unknown TrainConfig field(s) {unknown}; known: {sorted(known)}")
-    hints = typing.get_type_hints(TrainConfig)
+        raise ValueError(f"unknown {cls.__name__} field(s) {unknown}; known: {sorted(known)}")
+    hints = typing.get_type_hints(cls)
     kwargs = {}
     for k, v in data.items():
         if _is_tuple(hints[k]) and isinstance(v, list):
             v = tuple(v)
         kwargs[k] = v
-    return TrainConfig(**kwargs)
+    return cls(**kwargs)
 
 
-def load_config(path: str) -> TrainConfig:
-    """The :class:`TrainConfig` saved in a ``config.json`` (a clear ``ValueError`` otherwise)."""
+def load_config(path: str, cls: type = TrainConfig) -> Any:
+    """The ``cls`` config saved in a ``config.json`` (a clear ``ValueError`` otherwise)."""
     try:
         with open(path) as f:
             data = json.load(f)
     except (OSError, json.JSONDecodeError) as err:
         raise ValueError(f"--config {path!r}: cannot read a JSON config ({err})") from None
     if not isinstance(data, dict):
-        raise ValueError(f"--config {path!r}: expected a JSON object of TrainConfig fields")
-    return config_from_json(data)
+        raise ValueError(f"--config {path!r}: expected a JSON object of {cls.__name__} fields")
+    return config_from_json(data, cls)
 
 
 def _is_tuple(tp: Any) -> bool:
@@ -258,18 +259,18 @@ def _parse_value(tp: Any, text: str, name: str) -> Any:
                      + (" (comma-separated, or 'a:b' for a range)" if origin is tuple else ""))
 
 
-def build_parser(description: str = "") -> argparse.ArgumentParser:
-    """An argparse parser with ``--config FILE`` and one ``--flag`` per :class:`TrainConfig` field
-    (each default shown once)."""
+def build_parser(description: str = "", cls: type = TrainConfig) -> argparse.ArgumentParser:
+    """An argparse parser with ``--config FILE`` and one ``--flag`` per field of the config
+    dataclass ``cls`` (each default shown once)."""
     parser = argparse.ArgumentParser(
         description=description,
         epilog="Flags given override --config (or, with --resume, the run's saved config.json). "
-               "The fields are documented in training.config.TrainConfig.")
+               f"The fields are documented in {cls.__module__}.{cls.__name__}.")
     parser.add_argument("--config", metavar="FILE", default=None,
                         help="replay a run: start from this config.json (e.g. runs/x/config.json or "
                              "training/policies/<name>/config.json)")
-    hints = typing.get_type_hints(TrainConfig)
-    for f in fields(TrainConfig):
+    hints = typing.get_type_hints(cls)
+    for f in fields(cls):
         default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
         shown = json.dumps(default) if isinstance(default, dict) else (
             _show_tuple(default) if isinstance(default, tuple) else default)
@@ -296,19 +297,19 @@ def _metavar(tp: Any) -> str:
 
 
 def parse_args(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None,
-               base: TrainConfig | None = None) -> tuple[TrainConfig, argparse.Namespace]:
-    """Parse ``argv`` into a :class:`TrainConfig` (flags given override ``base``, else ``--config
-    FILE``, else the defaults); returns also the namespace."""
-    parser = parser or build_parser()
+               base: Any = None, cls: type = TrainConfig) -> tuple[Any, argparse.Namespace]:
+    """Parse ``argv`` into a ``cls`` config (:class:`TrainConfig` by default; flags given override
+    ``base``, else ``--config FILE``, else the defaults); returns also the namespace."""
+    parser = parser or build_parser(cls=cls)
     ns = parser.parse_args(argv)
     if base is None and ns.config is not None:
-        base = load_config(ns.config)
-    hints = typing.get_type_hints(TrainConfig)
+        base = load_config(ns.config, cls)
+    hints = typing.get_type_hints(cls)
     changes = {}
-    for f in fields(TrainConfig):
+    for f in fields(cls):
         text = getattr(ns, f.name)
         if text is not None:
             changes[f.name] = _parse_value(hints[f.name], text, f.name)
-    base = base or TrainConfig()
-    cfg = config_from_json({**base.to_json(), **changes}) if changes else base
+    base = base or cls()
+    cfg = config_from_json({**base.to_json(), **changes}, cls) if changes else base
     return cfg, ns

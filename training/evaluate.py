@@ -7,8 +7,10 @@ targets (tracking RMSE and total delta-v relative to the DMPC on the same seeds)
 
 from __future__ import annotations
 
+import json
 import warnings
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,7 +19,8 @@ import baselines
 from satenv import metrics
 from satenv.rollout import rollout
 
-__all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table"]
+__all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table",
+           "evaluate_baselines", "cached_baselines", "test_summary"]
 
 AUTO = "auto"
 """``eval_baselines`` entry meaning: ``zero`` plus the cheap scripted controllers that support
@@ -138,3 +141,41 @@ def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int]) -> 
             continue
         out[name] = evaluate(env, baselines.make(name, env), seeds)
     return out
+
+
+def cached_baselines(path: Path, eval_env: Any, names: Iterable[str], seeds: Iterable[int],
+                     key: dict[str, Any]) -> dict[str, Any]:
+    """:func:`evaluate_baselines`, cached in the JSON file ``path`` under ``key`` (plus the
+    names, seeds and the scenario's success rule): a run that resumes does not re-run them."""
+    names, seeds = list(names), [int(s) for s in seeds]
+    full_key = {**key, "seeds": seeds, "baselines": names, "tol": eval_env.scenario.success_tol,
+                "collision_voids_success": eval_env.scenario.collision_voids_success}
+    if path.is_file():
+        cached = json.loads(path.read_text())
+        if cached.get("key") == full_key:
+            return cached["results"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        results = evaluate_baselines(eval_env, names, seeds)
+    path.write_text(json.dumps({"key": full_key, "results": results}, indent=1, default=float) + "\n")
+    return results
+
+
+def test_summary(eval_env: Any, policy: Any, baselines: dict[str, Any], seeds: Iterable[int], *,
+                 reference: str = "dmpc", **extra: Any) -> dict[str, Any]:
+    """The ``eval.json`` of a policy folder: ``policy`` evaluated on the held-out ``seeds`` beside
+    the ``baselines`` results on the same seeds, the ratios against ``reference``
+    (:func:`compare`; saved as ``vs_<REFERENCE>``), a Markdown table and ``extra`` fields."""
+    seeds = [int(s) for s in seeds]
+    learned = evaluate(eval_env, policy, seeds)
+    results = {"learned": learned, **baselines}
+    return {
+        "test_seeds": seeds,
+        "success_tol_m": eval_env.scenario.success_tol,
+        "collision_voids_success": eval_env.scenario.collision_voids_success,
+        **extra,
+        "aggregate": {k: v["aggregate"] for k, v in results.items()},
+        f"vs_{reference.upper()}": compare(results, reference=reference),
+        "table": format_table(results),
+        "learned_episodes": learned["episodes"],
+    }

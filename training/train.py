@@ -45,7 +45,7 @@ from training.config import (
     round_timesteps,
 )
 from training.envs import make_env, policy_env_meta
-from training.evaluate import compare, evaluate, evaluate_baselines, format_table
+from training.evaluate import cached_baselines, compare, evaluate, test_summary
 from training.policy import (
     ObsNormalizer,
     action_map_from_config,
@@ -327,34 +327,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
 
 def _summary(cfg: TrainConfig, eval_env, policy, baselines: dict[str, Any], steps, wall: float) -> dict[str, Any]:
-    learned = evaluate(eval_env, policy, cfg.test_seeds)
-    results = {"learned": learned, **baselines}
-    return {
-        "test_seeds": list(cfg.test_seeds),
-        "success_tol_m": eval_env.scenario.success_tol,
-        "collision_voids_success": eval_env.scenario.collision_voids_success,
-        "steps": steps,
-        "train_wall_s_this_session": round(wall, 1),
-        "aggregate": {k: v["aggregate"] for k, v in results.items()},
-        "vs_DMPC": compare(results),
-        "table": format_table(results),
-        "learned_episodes": learned["episodes"],
-    }
+    return test_summary(eval_env, policy, baselines, cfg.test_seeds, reference="dmpc", steps=steps,
+                        train_wall_s_this_session=round(wall, 1))
 
 
 def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str, Any]:
-    key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs, "seeds": list(seeds),
-           "baselines": list(cfg.eval_baselines), "tol": eval_env.scenario.success_tol,
-           "collision_voids_success": eval_env.scenario.collision_voids_success}
-    if path.is_file():
-        cached = json.loads(path.read_text())
-        if cached.get("key") == key:
-            return cached["results"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("always")
-        results = evaluate_baselines(eval_env, cfg.eval_baselines, seeds)
-    path.write_text(json.dumps({"key": key, "results": results}, indent=1, default=float) + "\n")
-    return results
+    return cached_baselines(path, eval_env, cfg.eval_baselines, seeds,
+                            {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs})
 
 
 # --------------------------------------------------------------------------- CLI
