@@ -54,6 +54,8 @@ class BenchMARLConfig:
     checkpoint_every: int = 0
     eval_seeds: tuple[int, ...] = (10000, 10001, 10002)
     out_dir: str = "runs/benchmarl"
+    init_actor: str = ""
+    init_std: float = 0.2
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHMS:
@@ -66,6 +68,10 @@ class BenchMARLConfig:
             check_int(name, getattr(self, name), minimum=0)
         object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
         object.__setattr__(self, "eval_seeds", tuple(int(s) for s in self.eval_seeds))
+        if not isinstance(self.init_actor, str):
+            raise ValueError(f"init_actor must be a policy folder path or '', got {self.init_actor!r}")
+        if not (isinstance(self.init_std, (int, float)) and 0 < self.init_std < 10):
+            raise ValueError(f"init_std must be a number in (0, 10), got {self.init_std!r}")
         if not (self.lr > 0 and 0 < self.gamma <= 1):
             raise ValueError(f"lr must be > 0 and gamma in (0, 1], got lr={self.lr!r}, gamma={self.gamma!r}")
 
@@ -138,6 +144,57 @@ def export_actor(policy: Any, obs_dim: int, act_dim: int, n_agents: int):
     raise ValueError("the exported actor does not reproduce the BenchMARL policy's deterministic actions")
 
 
+def seed_actor(policy: Any, folder: str, init_std: float, n_agents: int) -> None:
+    """Start a BenchMARL policy from the shipped-format policy in ``folder`` (e.g. a DAgger run of
+    :mod:`training.imitate` with ``squash=True``): its layers, with the observation normaliser
+    folded into the first one (``W / s``, ``b - W m / s``; the normaliser's clip is dropped), as
+    the action location, and a constant standard deviation ``init_std`` (the scale rows zeroed,
+    their bias set through BenchMARL's ``biased_softplus_1.0`` mapping). Checked: the BenchMARL
+    policy's deterministic actions then match the seed's on in-distribution observations."""
+    import math
+
+    import numpy as np
+    import torch
+    from benchmarl.models.mlp import Mlp
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from training.policy import load
+
+    seed = load(folder)
+    spec, norm = seed.actor.spec, seed.normalizer
+    if not spec["squash"] or spec["activation"] != "tanh" or seed.features is not None or seed.action_map is not None:
+        raise ValueError(f"init_actor {folder!r}: needs a tanh MLP with squash=True and no feature/action maps, "
+                         f"got {spec} (train it with python -m training.imitate --squash true)")
+    mlps = [m for m in policy.modules() if isinstance(m, Mlp)]
+    params = mlps[0].mlp.params.flatten_keys(".")
+    indices = sorted({int(k.split(".")[0]) for k in params.keys()})
+    layers = [(lin.weight.detach().double(), lin.bias.detach().double()) for lin in seed.actor.linear_layers()]
+    if len(layers) != len(indices) or any(tuple(params[f"{i}.weight"].shape[-2:]) != tuple(w.shape)
+                                          for i, (w, _) in zip(indices[:-1], layers[:-1], strict=True)):
+        raise ValueError(f"init_actor {folder!r}: hidden layers {spec['hidden']} do not fit --net-arch")
+    if norm.mean is not None:
+        s = torch.as_tensor(np.sqrt(norm.var + norm.epsilon))
+        w, b = layers[0]
+        layers[0] = (w / s, b - (w / s) @ torch.as_tensor(norm.mean))
+    w, b = layers[-1]
+    scale_bias = math.log(math.expm1(init_std)) - math.log(math.expm1(1.0))  # biased_softplus_1.0
+    layers[-1] = (torch.cat([w, torch.zeros_like(w)]), torch.cat([b, torch.full_like(b, scale_bias)]))
+    with torch.no_grad():
+        for i, (w, b) in zip(indices, layers, strict=True):
+            params[f"{i}.weight"].data.copy_(w.float().expand_as(params[f"{i}.weight"]))
+            params[f"{i}.bias"].data.copy_(b.float().expand_as(params[f"{i}.bias"]))
+    raw = torch.as_tensor(np.random.default_rng(0).normal(
+        norm.mean if norm.mean is not None else 0.0, np.sqrt(norm.var) if norm.var is not None else 1.0,
+        (64, n_agents, spec["obs_dim"])), dtype=torch.float32)
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        got = policy(TensorDict({("agents", "observation"): raw}, batch_size=[64]))["agents", "action"]
+    want = torch.as_tensor(seed.predict(raw.reshape(-1, spec["obs_dim"]).double().numpy())).reshape(got.shape)
+    if not torch.allclose(got, want, atol=1e-3):
+        raise ValueError(f"init_actor {folder!r}: the seeded BenchMARL policy does not reproduce the seed's "
+                         f"actions (max difference {float((got - want).abs().max()):.3g})")
+
+
 def _relative(path: Path, root: Path) -> str:
     """``path`` relative to the run folder ``root`` where it lies inside it (folders move)."""
     try:
@@ -155,8 +212,10 @@ def run(cfg: BenchMARLConfig) -> Path:
 
     out = Path(cfg.out_dir)
     experiment = build_experiment(cfg)
-    experiment.run()
     env = satenv.make(cfg.env_id, **cfg.env_kwargs)
+    if cfg.init_actor:
+        seed_actor(experiment.policy, cfg.init_actor, cfg.init_std, len(env.possible_agents))
+    experiment.run()
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
     actor = export_actor(experiment.policy, obs_dim, act_dim, len(env.possible_agents))
@@ -186,6 +245,11 @@ def parse_args(argv: list[str] | None = None) -> BenchMARLConfig:
     p.add_argument("--net-arch", default="64,64", help="hidden sizes of actor and critic (default: 64,64)")
     p.add_argument("--eval-seeds", default="10000,10001,10002", help="seeds of eval.json ('' for none)")
     p.add_argument("--out-dir", default=d.out_dir, help=f"(default: {d.out_dir})")
+    p.add_argument("--init-actor", default="", metavar="FOLDER",
+                   help="start the actor from this policy folder (python -m training.imitate --squash true; "
+                        "same --net-arch) instead of at random")
+    p.add_argument("--init-std", type=float, default=d.init_std,
+                   help=f"the seeded actor's initial action standard deviation (default: {d.init_std})")
     ns = p.parse_args(argv)
     try:
         env_kwargs = json.loads(ns.env_kwargs)

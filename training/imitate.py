@@ -52,7 +52,8 @@ class ImitationConfig:
     rounds: DAgger rounds (round 0 is the expert's own flights); episodes_per_round: episodes
         per round, on seeds ``train_seed + episode index`` (disjoint from the evaluation seeds);
         beta: the probability that the expert's action is flown in round k is ``beta ** k``.
-    net_arch, activation: the MLP; epochs, batch_size, learning_rate, weight_decay: the
+    net_arch, activation, squash: the MLP (``squash``: ``tanh`` on the output, as BenchMARL's
+        policies, so the network can seed a BenchMARL fine-tune); epochs, batch_size, learning_rate, weight_decay: the
         regression (mean squared error on the normalised actions, Adam) after each round,
         warm-started from the previous round's network; clip_obs: observation normaliser clip
         (mean and variance from round 0's data).
@@ -72,6 +73,7 @@ class ImitationConfig:
     seed: int = 0
     net_arch: tuple[int, ...] = (256, 256)
     activation: str = "tanh"
+    squash: bool = False
     epochs: int = 20
     batch_size: int = 512
     learning_rate: float = 1e-3
@@ -116,6 +118,8 @@ class ImitationConfig:
 
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
+        if not isinstance(self.squash, bool) or not isinstance(self.progress, bool):
+            raise ValueError(f"squash and progress must be bools, got {self.squash!r}, {self.progress!r}")
         if not isinstance(self.out_dir, str) or not self.out_dir:
             raise ValueError(f"out_dir must be a non-empty path string, got {self.out_dir!r}")
 
@@ -192,7 +196,7 @@ def imitate(cfg: ImitationConfig, resume: bool = False) -> Path:
     meta = policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
-    actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation)
+    actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     names = list(dict.fromkeys([cfg.expert, *cfg.eval_baselines]))
     key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs, "expert_options": cfg.expert_options}
     expert_eval = cached_baselines(out / "baselines_eval.json", eval_env, [cfg.expert], cfg.eval_seeds, key)
