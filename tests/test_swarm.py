@@ -199,3 +199,42 @@ def test_apf_runs_on_a_cluster_swarm():
     assert not any(terms.values())
     end = np.linalg.norm(env.targets() - env.state()[:64 * 6].reshape(64, 6)[:, :3], axis=-1)
     assert end.mean() < start.mean() - 50.0
+
+
+# -------------------------------------------------------------------------------------- formation
+from satenv.envs.formation_v0 import FormationCore  # noqa: E402
+from satenv.neighbours import pairs_within  # noqa: E402
+from satenv.scenarios.formation import resolve_scenario as formation_scenario  # noqa: E402
+
+
+def test_pairs_within_matches_brute_force():
+    rng = np.random.default_rng(0)
+    pos = rng.uniform(-300, 300, (3, 30, 3))
+    pairs = {tuple(p) for p in pairs_within(pos, 150.0).tolist()}
+    d = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)
+    brute = {(b * 30 + i, b * 30 + j) for b, i, j in zip(*np.nonzero(d <= 150.0), strict=True) if i < j}
+    assert pairs == brute
+
+
+@pytest.mark.parametrize("m", [1, 2, 7, 40])
+def test_formation_sparse_path_matches_dense(m):
+    rng = np.random.default_rng(m)
+    sc = formation_scenario("kannan2022-position", initial_state=np.zeros((m, 6)), offsets=np.zeros((m, 3)),
+                            goals=[tuple(g) for g in rng.uniform(-200, 200, (m, 3))],
+                            collision_distance=5.0, terminate_on_collision=False)
+    cores = [FormationCore(sc, batch=4, method=method) for method in ("dense", "sparse")]
+    x = np.zeros((4, m, 6))
+    x[..., :3] = rng.uniform(-150 * m ** (1 / 3), 150 * m ** (1 / 3), (4, m, 3))
+    x[0, :, :3] *= 0.01       # one copy connected, the others (probably) split
+    if m > 1:
+        x[1, -1, :3] = x[1, 0, :3] + [2.0, 0, 0]
+    for core in cores:
+        core.reset(x.copy())
+    accel = rng.uniform(-1, 1, (4, m, 3))
+    a, b = (core.step(accel) for core in cores)
+    for key in a.info:
+        np.testing.assert_allclose(a.info[key], b.info[key], rtol=1e-12, err_msg=key)
+    np.testing.assert_allclose(cores[0].observe(), cores[1].observe())
+    assert a.info["connected"][0].all()
+    if m > 6:
+        assert not a.info["connected"][1:].all() and a.info["violations"].any()
