@@ -49,8 +49,9 @@ from baselines.base import (
     number,
     validate,
 )
-from satenv.cluster_graph import nearest_neighbour_graph
+from satenv.cluster_graph import nearest_neighbour_graph, neighbour_lists
 from satenv.dynamics import cw_continuous, saturate_norm
+from satenv.neighbours import DENSE_MAX
 
 __all__ = ["APF", "APFConfig"]
 
@@ -168,9 +169,7 @@ class APF(Baseline):
         u = saturate_norm(u, cfg.att_fraction * sc.u_max)
         if cfg.cw_compensation:
             u -= x @ self.f_rows.T
-        adj = nearest_neighbour_graph(q, sc.n_neighbours, sc.comm_range)
-        qb = np.where(adj[..., None], q[None, :, :], np.inf)            # (M, M, 3)
-        pb = np.broadcast_to(p[None, :, :], qb.shape)
+        qb, pb = self._neighbour_states(q, p)
         u += self._repulsion(q, p, qb, pb, sc.pair_distance, cfg.rho_pair, e)
         q_o, p_o = env.obstacle_state()
         u += self._repulsion(q, p, np.broadcast_to(q_o, (self.m, 1, 3)),
@@ -180,6 +179,19 @@ class APF(Baseline):
         u += self._repulsion(q, p, np.broadcast_to(q_r, (self.m, 1, 3)), np.zeros((self.m, 1, 3)),
                              sc.target_distance, cfg.rho_target, e)
         return u
+
+    def _neighbour_states(self, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (``inf`` = no link) and velocities ``(M, K, 3)`` of each satellite's graph
+        neighbours: all ``M`` satellites masked by the adjacency up to ``DENSE_MAX`` satellites,
+        else the padded neighbour lists (cost proportional to the links)."""
+        sc = self.sc
+        if self.m <= DENSE_MAX:
+            adj = nearest_neighbour_graph(q, sc.n_neighbours, sc.comm_range)
+            qb = np.where(adj[..., None], q[None, :, :], np.inf)            # (M, M, 3)
+            return qb, np.broadcast_to(p[None, :, :], qb.shape)
+        idx = neighbour_lists(q[None], sc.n_neighbours, sc.comm_range)[0]   # (M, D), -1 = none
+        qb = np.where(idx[..., None] >= 0, q[idx], np.inf)
+        return qb, p[idx]
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         u = self.accelerations() / self.sc.u_max

@@ -22,9 +22,10 @@ Agent-steps per second (one agent advanced by one decision step) of
 
 Four more sections run only when named in ``--sections`` (they take minutes):
 
-* ``scaling`` issue 19's swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 followers the
-              PettingZoo step, the 64-copy batched core, its memory and the DMPC decision per
-              agent, with fitted growth exponents and a plot next to ``--out`` (``*_scaling.png``);
+* ``scaling`` issue 19's swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 spacecraft of
+              the platoon and cluster swarms the PettingZoo step, the 64-copy batched core, its
+              memory and the distributed baselines' decision per agent (DMPC; APF, tube-RDMPC up
+              to 16), with fitted growth exponents and a plot next to ``--out`` (``*_scaling.png``);
 
 * ``cgmres_ipopt`` one C/GMRES update against an ipopt solve (warm and cold) of the same NMPC
               problem along the closed loop on both kannan2022 scenarios, and the first-input gap;
@@ -471,8 +472,10 @@ def _extra_sections(result: dict, sections: tuple[str, ...], scale: float, log: 
     if "scaling" in sections:
         from benchmarks import scaling
 
-        result["scaling"] = scaling.scaling(decisions=max(2, int(5 * scale)), log=log)
-        log(f"scaling: growth exponents {result['scaling']['growth_exponent']}")
+        result["scaling"] = scaling.scaling(scaling.SIZES, scaling.COPIES, decisions=max(2, int(5 * scale)),
+                                            log=log)
+        for key in scaling.FAMILIES:
+            log(f"scaling {key}: growth exponents {result['scaling'][key]['growth_exponent']}")
     if "learning" in sections:
         result["learning"] = learning_throughput(frames=max(64, int(20_000 * scale)),
                                                  steps=max(3, int(100 * scale)), log=log)

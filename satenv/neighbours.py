@@ -12,7 +12,8 @@ flags contacts closer than the bodies' radii. Two interchangeable kernels comput
   position differences alone (the fourth difference is exactly zero). The distances of the
   neighbours found are then recomputed with the dense kernel's formula (:func:`norm3`).
 
-:func:`nearest` picks the kernel by ``M`` (``method="auto"``).
+:func:`nearest` picks the kernel by ``M`` (``method="auto"``). :func:`pairs_within` lists the pairs
+closer than a radius (proximity graphs) with the same batched tree.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["DENSE_MAX", "METHODS", "nearest", "norm3"]
+__all__ = ["DENSE_MAX", "METHODS", "nearest", "norm3", "pairs_within"]
 
 DENSE_MAX: int = 24
 """Largest number of bodies per copy for which ``method="auto"`` uses the dense kernel (measured
@@ -85,13 +86,35 @@ def _dense(pos: np.ndarray, k: int, dist: np.ndarray, index: np.ndarray) -> None
         index[lo:lo + step, :, :k] = idx
 
 
-def _tree(pos: np.ndarray, k: int, dist: np.ndarray, index: np.ndarray) -> None:
+def pairs_within(pos: np.ndarray, radius: float) -> np.ndarray:
+    """The pairs of bodies of the same copy at most ``radius`` apart.
+
+    Args:
+        pos: positions ``(B, M, 3)`` [m], finite.
+        radius: the link distance [m] (inclusive).
+
+    Returns:
+        ``(P, 2)`` int, each pair once as flat indices ``b * M + i < b * M + j``; cost
+        proportional to the pairs (plus the tree).
+    """
+    pos = np.asarray(pos, dtype=np.float64)
+    return _batch_tree(pos, radius).query_pairs(radius, output_type="ndarray")
+
+
+def _batch_tree(pos: np.ndarray, reach: float = 0.0) -> cKDTree:
+    """One tree of every copy's bodies, copies kept more than ``reach`` apart (module docstring)."""
     b, m, _ = pos.shape
     flat = pos.reshape(b * m, 3)
     if b > 1:
-        sep = 4.0 * float(np.abs(flat).max()) + 1.0   # > any distance within a copy
+        sep = max(4.0 * float(np.abs(flat).max()) + 1.0, 2.0 * reach + 1.0)  # > any in-copy distance
         flat = np.column_stack([flat, np.repeat(np.arange(b) * sep, m)])
-    tree = cKDTree(flat, balanced_tree=False, compact_nodes=False)
+    return cKDTree(flat, balanced_tree=False, compact_nodes=False)
+
+
+def _tree(pos: np.ndarray, k: int, dist: np.ndarray, index: np.ndarray) -> None:
+    b, m, _ = pos.shape
+    tree = _batch_tree(pos)
+    flat = tree.data
     d, i = tree.query(flat, k=k + 1)
     # the body itself is one of the zero-distance answers: drop one answer equal to the body
     # (or the last one when a coincident body came first; both are at distance 0)

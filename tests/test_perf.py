@@ -58,3 +58,25 @@ def test_perf_guard_section_smoke():
     pz = out["pettingzoo"]
     assert pz["step_us"] > 0 and pz["check_us"] > 0 and pz["check_share"] == pytest.approx(pz["check_us"] / pz["step_us"], rel=1e-12)
     assert [r["batch"] for r in out["make_vec"]] == [1, 2] and isinstance(out["met"], bool)
+
+
+def test_perf_scaling_section_smoke(tmp_path, monkeypatch):
+    """The swarm table of issue 19 at tiny sizes, through the command line: JSON, targets, plot."""
+    from benchmarks import scaling
+
+    monkeypatch.setattr(scaling, "SIZES", (2, 3))
+    monkeypatch.setattr(scaling, "COPIES", 2)
+    monkeypatch.setattr(scaling, "TUBE_MAX", 0)
+    out = tmp_path / "perf.json"
+    perf.main(["--out", str(out), "--sections", "scaling", "--min-time", "0.002", "--solver-scale", "0.2"])
+    data = json.loads(out.read_text())["scaling"]
+    for key, baselines in (("platoon", {"dmpc"}), ("cluster", {"apf"})):
+        rows = data[key]["rows"]
+        assert [r["n"] for r in rows] == [2, 3]
+        assert all(r["core_agent_steps_per_s"] > 0 and r["core_memory_mib"] > 0 for r in rows)
+        assert {"pettingzoo", "core"} | baselines <= set(data[key]["growth_exponent"])
+    assert all(r["allocation_ms"] >= 0 for r in data["cluster"]["rows"])
+    names = [t["name"] for t in json.loads(out.read_text())["targets"]]
+    assert any("(cluster, cw)" in n for n in names) and any("(platoon, cw)" in n for n in names)
+    png = tmp_path / "perf_scaling.png"
+    assert data["plot"] == str(png) and png.read_bytes().startswith(b"\x89PNG")

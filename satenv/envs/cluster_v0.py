@@ -105,7 +105,7 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.allocation import hungarian_assignment
-from satenv.cluster_graph import nearest_neighbour_graph, pairwise_distances
+from satenv.cluster_graph import in_range_nearest, nearest_neighbour_graph, pairwise_distances
 from satenv.dynamics import (
     BoundedRandomDisturbance,
     RelativeModel,
@@ -113,6 +113,7 @@ from satenv.dynamics import (
     sinusoid_disturbance,
 )
 from satenv.envs.base import BatchedCore, SatenvError, SatParallelEnv, StepResult, resolve_preset
+from satenv.neighbours import DENSE_MAX, nearest, norm3
 from satenv.scenarios.cluster import (
     DEFAULT_PRESET,
     PRESETS,
@@ -130,6 +131,9 @@ POS_SCALE = 1000.0
 VEL_SCALE = 1.0
 """Observation velocity scale V [m/s]."""
 N_FIXED_OBS = 19
+CANDIDATES = 4
+"""Neighbour candidates per satellite of the sparse separation search (module docstring of
+:class:`ClusterCore`)."""
 
 
 class InnerLoop(Protocol):
@@ -140,15 +144,30 @@ class InnerLoop(Protocol):
 
 
 class ClusterCore(BatchedCore):
-    """Batched cluster physics and task logic (``B`` copies, ``M`` satellites)."""
+    """Batched cluster physics and task logic (``B`` copies, ``M`` satellites).
+
+    Two paths give the same numbers (``method``; ``"auto"``: dense up to
+    :data:`satenv.neighbours.DENSE_MAX` satellites, the li2022 sizes): ``"dense"`` builds the
+    ``M x M`` distance matrix at every physics step and the graph as an adjacency matrix;
+    ``"sparse"`` costs ``O(M log M)`` per copy: the observation's neighbours come from an exact
+    k-nearest search (:func:`satenv.cluster_graph.in_range_nearest`), and the nearest-satellite
+    distance over a decision from :data:`CANDIDATES` candidates found once at its start. The
+    candidates hold the nearest satellite at every physics step when the gap between the
+    first and the last candidate is at least 4 times the largest displacement in the copy over the
+    decision (no other satellite can come closer); the copies where that fails are searched again
+    at every physics step, so ``pair_distance`` and ``min_separation`` stay exact.
+    """
 
     state_dim = 6
     action_dim = 3
 
-    def __init__(self, scenario: ClusterScenario, batch: int = 1) -> None:
+    def __init__(self, scenario: ClusterScenario, batch: int = 1, method: str = "auto") -> None:
         super().__init__(scenario, batch)
         sc = scenario
         m = self.n_agents
+        if method not in ("auto", "dense", "sparse"):
+            raise ValueError(f"method must be 'auto', 'dense' or 'sparse', got {method!r}")
+        self.dense = method == "dense" or (method == "auto" and m <= DENSE_MAX)
         self.n_slots = min(sc.n_neighbours, m - 1)
         self.obs_dim = N_FIXED_OBS + 7 * self.n_slots
         self.orbit = sc.orbit
@@ -195,15 +214,43 @@ class ClusterCore(BatchedCore):
         """Per satellite: nearest other satellite, obstacle and target-spacecraft distances."""
         m = self.n_agents
         pos = x[..., :3]
-        if m > 1:
+        if not self.dense:
+            pair = nearest(pos, 1)[0][..., 0]
+        elif m > 1:
             d = pairwise_distances(pos)
             d[..., np.arange(m), np.arange(m)] = np.inf
             pair = d.min(axis=-1)
         else:
             pair = np.full(pos.shape[:-1], np.inf)
+        return (pair,) + self._body_distances(pos, t)
+
+    def _body_distances(self, pos: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per satellite: obstacle and target-spacecraft distances."""
         obs = np.linalg.norm(pos - self.scenario.obstacle_at(t)[:, None, :], axis=-1)
         tgt = np.linalg.norm(pos - self.q_r, axis=-1)
-        return pair, obs, tgt
+        return obs, tgt
+
+    def _pair_minimum(self, path: np.ndarray) -> np.ndarray:
+        """Sparse path: each satellite's distance to the nearest other one, minimum over the
+        physics-step positions ``path`` ``(S + 1, B, M, 3)`` (the first at the decision's start);
+        the candidate search of the class docstring."""
+        m = self.n_agents
+        if m == 1:
+            return np.full(path.shape[1:3], np.inf)
+        start, after = path[0], path[1:]
+        d0, idx = nearest(start, CANDIDATES)
+        idx = idx[..., :m - 1]
+        shift = norm3(after - start).max(axis=(0, 2))                              # (B,) largest move
+        exact = (idx.shape[-1] == m - 1) | (d0[..., idx.shape[-1] - 1] - d0[..., 0] >= 4 * shift[:, None])
+        rows = (idx + (np.arange(idx.shape[0]) * m)[:, None, None]).reshape(-1)
+        pair = np.full(start.shape[:2], np.inf)
+        for p in after:                                                             # (B, M, 3) each
+            cand = p.reshape(-1, 3)[rows].reshape(idx.shape + (3,))
+            np.minimum(pair, norm3(cand - p[:, :, None]).min(axis=-1), out=pair)
+        redo = np.unique(np.nonzero(~exact)[0])
+        if redo.size:
+            pair[redo] = np.min([nearest(p[redo], 1)[0][..., 0] for p in after], axis=0)
+        return pair
 
     def _disturbance(self, t: np.ndarray, rng: np.random.Generator | None) -> np.ndarray | float:
         sc = self.scenario
@@ -221,7 +268,6 @@ class ClusterCore(BatchedCore):
         flags = np.stack([pair < sc.pair_distance, obs < sc.obstacle_distance,
                           tgt < sc.target_distance], axis=-1)
         viol = flags.sum(axis=-1).astype(np.int64)
-        adj = nearest_neighbour_graph(x[..., :3], sc.n_neighbours, sc.comm_range)
         return {
             "state": x.copy(),
             "accel": accel.copy(),
@@ -236,8 +282,24 @@ class ClusterCore(BatchedCore):
             "violations": viol,
             "cost": viol.astype(float),
             "target_index": self.assignment[sel].copy(),
-            "n_neighbours": adj.sum(axis=-1).astype(np.int64),
+            "n_neighbours": self._degrees(x[..., :3]),
         }
+
+    def _degrees(self, pos: np.ndarray) -> np.ndarray:
+        """Graph degree of every satellite ``(B, M)`` int (``out + in - mutual`` links of the
+        k-nearest lists on the sparse path)."""
+        sc = self.scenario
+        if self.dense:
+            adj = nearest_neighbour_graph(pos, sc.n_neighbours, sc.comm_range)
+            return adj.sum(axis=-1).astype(np.int64)
+        b, m = pos.shape[:2]
+        idx = in_range_nearest(pos, sc.n_neighbours, sc.comm_range)[1]
+        valid = idx >= 0
+        node = (idx + (np.arange(b) * m)[:, None, None])[valid]
+        heard = np.bincount(node, minlength=b * m).reshape(b, m)
+        back = np.take_along_axis(idx[:, None, :, :], np.maximum(idx, 0)[..., None], axis=2)
+        mutual = (back == np.arange(m)[None, :, None, None]).any(axis=-1) & valid  # (B, M, K)
+        return (valid.sum(axis=-1) + heard - mutual.sum(axis=-1)).astype(np.int64)
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -271,6 +333,9 @@ class ClusterCore(BatchedCore):
         pair = np.full(shape, np.inf)
         obs = np.full(shape, np.inf)
         tgt = np.full(shape, np.inf)
+        path = None if self.dense else np.empty((n_sub + 1,) + shape + (3,))
+        if path is not None:
+            path[0] = self.x[..., :3]
         for s in range(n_sub):
             ts = t0 + s * h
             u = accel
@@ -282,10 +347,16 @@ class ClusterCore(BatchedCore):
             u_sum += u
             dv += un * h
             np.maximum(peak, un, out=peak)
-            p, o, g = self._distances(self.x, ts + h)
-            np.minimum(pair, p, out=pair)
+            if path is None:
+                p, o, g = self._distances(self.x, ts + h)
+                np.minimum(pair, p, out=pair)
+            else:
+                path[s + 1] = self.x[..., :3]
+                o, g = self._body_distances(self.x[..., :3], ts + h)
             np.minimum(obs, o, out=obs)
             np.minimum(tgt, g, out=tgt)
+        if path is not None:
+            pair = self._pair_minimum(path)
         self.t += 1
         self.accel = u_sum / n_sub
         if sc.reallocate_every > 0:
@@ -317,7 +388,14 @@ class ClusterCore(BatchedCore):
         obs[..., 15:18] = (self.q_r - q) / POS_SCALE
         obs[..., 18] = 1.0 - self.t[:, None] / sc.max_steps
         k = self.n_slots
-        if k > 0:
+        if k > 0 and not self.dense:  # the graph's nearest neighbours are the in-range k-nearest
+            order = in_range_nearest(q, sc.n_neighbours, sc.comm_range)[1]
+            valid = order >= 0
+            nb = np.take_along_axis(x[:, None, :, :], np.maximum(order, 0)[..., None], axis=2)
+            rel = (nb - x[:, :, None, :]) / np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)
+            slots = np.concatenate([np.ones(valid.shape + (1,)), rel], axis=-1) * valid[..., None]
+            obs[..., N_FIXED_OBS:] = slots.reshape(b, m, 7 * k)
+        elif k > 0:
             adj = self.graph()
             d = pairwise_distances(q)
             d = np.where(adj, d, np.inf)

@@ -94,9 +94,12 @@ import numpy as np
 from pettingzoo import AECEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from satenv.dynamics import MU_EARTH, Orbit, RelativeModel, delta_v
 from satenv.envs.base import BatchedCore, SatParallelEnv, StepResult, resolve_preset
+from satenv.neighbours import DENSE_MAX, nearest, pairs_within
 from satenv.scenarios.formation import (
     PRESETS,
     FormationScenario,
@@ -115,14 +118,25 @@ def reference_orbit(scenario: FormationScenario) -> Orbit:
 
 
 class FormationCore(BatchedCore):
-    """Batched kannan2022 formation physics and task logic (``B`` copies, ``M`` spacecraft)."""
+    """Batched kannan2022 formation physics and task logic (``B`` copies, ``M`` spacecraft).
+
+    The infos have two paths giving the same numbers (``method``; ``"auto"``: dense up to
+    :data:`satenv.neighbours.DENSE_MAX` spacecraft): ``"dense"`` builds the ``M x M`` distances and
+    the reachability matrix; ``"sparse"`` finds the nearest spacecraft with an exact k-nearest
+    search and the proximity links and components from the pairs within ``connection_range``
+    (:func:`satenv.neighbours.pairs_within`, ``scipy.sparse.csgraph.connected_components``). The observation lists every other
+    spacecraft (``6 M + 1`` entries), so it stays ``O(M)`` per agent.
+    """
 
     state_dim = 6
     action_dim = 3
 
-    def __init__(self, scenario: FormationScenario, batch: int = 1) -> None:
+    def __init__(self, scenario: FormationScenario, batch: int = 1, method: str = "auto") -> None:
         super().__init__(scenario, batch)
         m = self.n_agents
+        if method not in ("auto", "dense", "sparse"):
+            raise ValueError(f"method must be 'auto', 'dense' or 'sparse', got {method!r}")
+        self.dense = method == "dense" or (method == "auto" and m <= DENSE_MAX)
         self.obs_dim = 6 * m + 1
         self.model = RelativeModel(scenario.dynamics, reference_orbit(scenario), scenario.dt)
         self.targets = scenario.target_positions()
@@ -174,17 +188,9 @@ class FormationCore(BatchedCore):
     def _info(self, x: np.ndarray, accel: np.ndarray) -> dict[str, np.ndarray]:
         sc = self.scenario
         m = self.n_agents
-        b = x.shape[0]
         pos = x[..., :3]
-        dist = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)
-        degree = (dist <= sc.connection_range).sum(axis=-1) - 1
-        dist[:, np.arange(m), np.arange(m)] = np.inf
-        min_sep = dist.min(axis=-1) if m > 1 else np.full((b, m), np.inf)
+        min_sep, degree, connected, cut = (self._graph_dense if self.dense else self._graph_sparse)(pos)
         collision = min_sep < sc.collision_distance
-        reach = proximity_components(pos, sc.connection_range)          # (B, M, M)
-        connected = reach.all(axis=(1, 2))
-        main = np.argmax(reach.sum(axis=-1), axis=-1)                  # first largest component
-        cut = ~reach[np.arange(b), main]                               # (B, M)
         tracking = np.concatenate([pos - self.targets, x[..., 3:]], axis=-1)
         return {
             "state": x.copy(),
@@ -199,6 +205,34 @@ class FormationCore(BatchedCore):
             "violations": cut.astype(np.int64),
             "cost": collision.astype(float) + cut,
         }
+
+    def _graph_dense(self, pos: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Nearest-spacecraft distance, proximity degree ``(B, M)``, whether each copy's graph is
+        connected ``(B,)`` and who is outside its largest component ``(B, M)``."""
+        sc = self.scenario
+        b, m = pos.shape[:2]
+        dist = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)
+        degree = (dist <= sc.connection_range).sum(axis=-1) - 1
+        dist[:, np.arange(m), np.arange(m)] = np.inf
+        min_sep = dist.min(axis=-1) if m > 1 else np.full((b, m), np.inf)
+        reach = proximity_components(pos, sc.connection_range)          # (B, M, M)
+        connected = reach.all(axis=(1, 2))
+        main = np.argmax(reach.sum(axis=-1), axis=-1)                  # first largest component
+        cut = ~reach[np.arange(b), main]                               # (B, M)
+        return min_sep, degree, connected, cut
+
+    def _graph_sparse(self, pos: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:meth:`_graph_dense` from neighbour searches (cost proportional to the links)."""
+        b, m = pos.shape[:2]
+        min_sep = nearest(pos, 1)[0][..., 0]
+        pairs = pairs_within(pos, self.scenario.connection_range)
+        degree = np.bincount(pairs.ravel(), minlength=b * m).reshape(b, m)
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(b * m, b * m))
+        labels = connected_components(graph, directed=False)[1].reshape(b, m)
+        size = np.bincount(labels.ravel())[labels]                       # size of each one's component
+        main = np.argmax(size, axis=-1)                                  # first largest component
+        cut = labels != labels[np.arange(b), main][:, None]
+        return min_sep, degree, ~cut.any(axis=-1), cut
 
     def observe(self) -> np.ndarray:
         sc = self.scenario

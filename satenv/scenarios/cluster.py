@@ -42,6 +42,8 @@ Random episodes (``randomize=True``), drawn from the env's seed:
 * target slots: the T targets are drawn one by one uniformly on the sphere of radius
   ``random_target_radius`` (300 m, as li2022's Table 4 points) around the target spacecraft,
   each redrawn (up to 1000 times) until it is at least ``2 r_s`` + 10 m from the ones before.
+
+Swarms of any size up to ``satenv.scenarios._fields.MAX_AGENTS`` come from :func:`swarm`.
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ from satenv.dynamics import MODELS, R_EARTH, Orbit
 from satenv.scenarios import _fields
 
 __all__ = ["ClusterScenario", "PRESETS", "LI2022_TARGETS", "resolve_scenario", "sample_initial_state",
-           "sample_targets"]
+           "sample_targets", "sphere_points", "swarm"]
 
 LI2022_TARGETS: tuple[tuple[float, float, float], ...] = (
     (-189.9, -11.8, -433.5), (-118.7, 85.5, -156.7), (-103.4, -470.2, -112.5),
@@ -341,6 +343,54 @@ PRESETS: dict[str, ClusterScenario] = {
 """li2022 §4.1: case 1 (Table 2) and case 2 (Table 3)."""
 
 DEFAULT_PRESET = "li2022-case1"
+
+
+def sphere_points(n: int, radius: float, centre=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """``n`` nearly evenly spread points ``(n, 3)`` on a sphere (the Fibonacci lattice: neighbours
+    about ``3.4 radius / sqrt(n)`` apart)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    r = np.sqrt(1.0 - z * z)
+    phi = np.pi * (3.0 - math.sqrt(5.0)) * k
+    return np.asarray(centre, dtype=float) + radius * np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+SWARM_COVERAGE = 0.3
+"""Largest share of the target sphere covered by the random slots' 2 r_s + 10 m exclusion discs
+in :func:`swarm` (the sequential draw of :func:`sample_targets` succeeds easily below it)."""
+
+
+def swarm(n: int, *, gap: float = 1200.0, spread: float = 50.0, **overrides: Any) -> dict[str, Any]:
+    """Keyword arguments of ``cluster_v0`` for a swarm of ``n`` satellites (``1 <= n <= 1024``).
+
+    The ``"li2022-case1"`` preset's physics (satellites, obstacle, target spacecraft,
+    disturbance, J2 + drag) with ``n`` satellites and ``n`` target slots, allocated with the
+    Hungarian algorithm at reset:
+
+    * target slots on a sphere around the target spacecraft whose radius grows with ``n`` so that
+      the slots' exclusion discs cover at most :data:`SWARM_COVERAGE` of it (300 m, li2022's,
+      up to 9 satellites; 3.07 km for 1024); evenly spread (:func:`sphere_points`) without
+      ``randomize``, drawn at random on every reset with it;
+    * starts evenly spread on the concentric sphere ``gap`` metres farther out (outside the
+      obstacle's keep-out at t = 0), each moved by ``U(-spread, spread)`` per axis on every
+      reset (``randomize=True``), at rest.
+
+    ``overrides`` replace any of these (any scenario field, e.g. ``dynamics="cw"``,
+    ``randomize=False``). The APF and tube-RDMPC baselines run on it unchanged.
+
+    >>> env = satenv.make("cluster_v0", **swarm(256))
+    """
+    n = _fields.integer(n, "swarm size n", maximum=_fields.MAX_AGENTS, why="MAX_AGENTS")
+    base = PRESETS[DEFAULT_PRESET]
+    centre = np.asarray(base.target_spacecraft)
+    slot = base.pair_distance + 10.0                       # sample_targets' smallest slot gap
+    radius = max(base.random_target_radius, 0.25 * slot * math.sqrt(n / SWARM_COVERAGE))
+    kwargs = {"preset": DEFAULT_PRESET,
+              "initial_positions": _fields.nested(sphere_points(n, radius + float(gap), centre)),
+              "targets": _fields.nested(sphere_points(n, radius, centre)),
+              "random_target_radius": radius, "random_position_spread": float(spread),
+              "randomize": True}
+    return {**kwargs, **overrides}
 
 
 def resolve_scenario(preset: str = DEFAULT_PRESET, **overrides) -> ClusterScenario:
