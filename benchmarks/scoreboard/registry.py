@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
+from satenv.scenarios import cluster as _cluster
 from satenv.scenarios.platoon import swarm
 
 __all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "discover_trained_policies", "user_policy",
@@ -67,6 +68,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
                  "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
     ScenarioSpec("cluster-case2", "cluster_v0", {"preset": "li2022-case2"},
                  "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
+    ScenarioSpec("cluster-swarm64-cw", "cluster_v0", _cluster.swarm(64, dynamics="cw"),
+                 "li2022 case-1 physics with 64 satellites and 64 slots (random each reset, Hungarian "
+                 "allocation), cw truth (satenv.scenarios.cluster.swarm)"),
     ScenarioSpec("servicing-pereira2022", "servicing_v0", {"preset": "pereira2022"},
                  "pereira2022 §5.2: 6-DOF servicing around a passive object"),
     ScenarioSpec("formation-kannan2022-position", "formation_v0", {"preset": "kannan2022-position"},
@@ -116,7 +120,7 @@ FULL: dict[str, Any] = {
     "scenario_seeds": {"cluster-case1": [0, 1, 2, 3, 4], "cluster-case2": [0, 1, 2, 3, 4],
                        "servicing-pereira2022": [0, 1, 2],
                        # 256 agents: the DMPC takes ~0.5 s per decision of the whole swarm
-                       "platoon-swarm256-ring-cw": [0, 1, 2]},
+                       "platoon-swarm256-ring-cw": [0, 1, 2], "cluster-swarm64-cw": [0, 1, 2]},
 }
 """The full (published) board: every scenario x fitting policy x these seeds."""
 
