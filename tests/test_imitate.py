@@ -62,3 +62,21 @@ def test_tiny_run_writes_a_loadable_policy_and_resumes(tmp_path):
     assert json.loads((again / "eval.json").read_text())["labels"] == 3 * 12 * 2
     obs, _ = satenv.make("platoon_v0", **SHORT).reset(seed=0)
     assert set(policy.act(obs)) == set(obs)
+
+
+def test_policy_cards_read_every_shipped_folder_and_judge_the_targets():
+    from training.card import card, shipped_table, targets
+
+    table = shipped_table()
+    for folder in training.POLICIES_DIR.iterdir():
+        if (folder / "eval.json").is_file():
+            assert f"`{folder.name}`" in table
+    good = {"success": 0.96, "baseline_success": 0.9, "collision_episodes": 0, "violations": 0.0,
+            "rmse_ratio": 1.2, "delta_v_ratio": 1.49}
+    assert all(targets(good).values())
+    assert not targets({**good, "success": 0.88})["success"]          # below 90 %
+    assert not targets({**good, "baseline_success": 1.0})["success"]  # below the baseline
+    assert not targets({**good, "delta_v_ratio": 1.51})["delta_v"]
+    assert not targets({**good, "collision_episodes": 1})["no_collisions"]
+    c = card(training.POLICIES_DIR / "platoon_tplf_ppo")
+    assert c["baseline"].lower() == "dmpc" and c["episodes"] == 50

@@ -1,0 +1,108 @@
+"""Policy cards: the shipped policies' numbers, read from their ``eval.json`` (one source).
+
+    python -m training.card            # the README's shipped-policies table
+    python -m training.card NAME       # one folder's evaluation table and its targets
+
+Each row compares the learned policy with the scripted baseline its ``eval.json`` names (the
+``vs_<BASELINE>`` entry: ratios on the same held-out seeds) against issue 15's targets: no
+collision episode, no hard-constraint violation, success >= 90 % and >= the baseline's, RMSE and
+total delta-v within 1.5x of the baseline's.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from training import POLICIES_DIR
+
+__all__ = ["card", "targets", "shipped_table", "folder_table"]
+
+RATIO_LIMIT = 1.5
+"""RMSE and delta-v of a learned policy may be at most this multiple of its baseline's."""
+SUCCESS_MIN = 0.9
+
+
+def card(folder: Path) -> dict[str, Any]:
+    """The headline numbers of one policy folder (from ``eval.json``, ``env.json``, ``scoreboard.json``)."""
+    ev = json.loads((folder / "eval.json").read_text())
+    ref_key = next(k for k in ev if k.startswith("vs_"))
+    ratios = ev[ref_key]
+    reference = ratios.get("reference", ref_key[3:].lower())
+    agg = ev["aggregate"]
+    base = next((v for k, v in agg.items() if k.lower() == reference.lower()), None)
+    scen = folder / "scoreboard.json"
+    return {
+        "name": folder.name,
+        "scenarios": json.loads(scen.read_text())["scenarios"] if scen.is_file() else [],
+        "source": json.loads((folder / "policy.json").read_text()).get("source", ""),
+        "episodes": agg["learned"]["episodes"],
+        "success": agg["learned"]["success_rate"],
+        "collision_episodes": agg["learned"]["collision_episodes"],
+        "violations": agg["learned"]["violations"],
+        "rmse_ratio": ratios.get("all", {}).get("rmse_ratio"),
+        "delta_v_ratio": ratios.get("all", {}).get("delta_v_ratio"),
+        "baseline": reference,
+        "baseline_success": None if base is None else base["success_rate"],
+        "baseline_episodes": None if base is None else base["episodes"],
+    }
+
+
+def targets(c: dict[str, Any]) -> dict[str, bool]:
+    """Issue 15's targets for one card (``True`` = met)."""
+    ratio_ok = [c[k] is not None and c[k] <= RATIO_LIMIT for k in ("rmse_ratio", "delta_v_ratio")]
+    return {
+        "no_collisions": c["collision_episodes"] == 0,
+        "no_violations": c["violations"] == 0,
+        "success": c["success"] >= SUCCESS_MIN and (c["baseline_success"] is None
+                                                   or c["success"] >= c["baseline_success"]),
+        "rmse": ratio_ok[0],
+        "delta_v": ratio_ok[1],
+    }
+
+
+def _f(v: Any, fmt: str = ".2f") -> str:
+    return "–" if v is None else format(v, fmt)
+
+
+def shipped_table(root: Path = POLICIES_DIR) -> str:
+    """A Markdown table of every shipped policy against its baseline and the targets."""
+    lines = ["| policy | scenario | how it was trained | success | collision episodes | violations / episode "
+             "| RMSE ratio | Δv ratio | baseline success | targets met |",
+             "|---|---|---|--:|--:|--:|--:|--:|---|---|"]
+    for folder in sorted(p for p in root.iterdir() if (p / "eval.json").is_file()):
+        c = card(folder)
+        met = targets(c)
+        lines.append(
+            f"| `{c['name']}` | {', '.join(f'`{s}`' for s in c['scenarios'][:1])} | {c['source']} "
+            f"| {_f(c['success'])} | {c['collision_episodes']} | {_f(c['violations'], '.3g')} "
+            f"| {_f(c['rmse_ratio'])} | {_f(c['delta_v_ratio'])} "
+            f"| {c['baseline']} {_f(c['baseline_success'])} ({c['baseline_episodes']}) "
+            f"| {sum(met.values())}/{len(met)}" + ("" if all(met.values()) else
+                                                   f" (not: {', '.join(k for k, v in met.items() if not v)})")
+            + " |")
+    return "\n".join(lines)
+
+
+def folder_table(folder: Path) -> str:
+    """The folder's full evaluation table (``eval.json``'s ``table``) and its targets."""
+    ev = json.loads((folder / "eval.json").read_text())
+    met = targets(card(folder))
+    return ev.get("table", "") + "\n\ntargets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in met.items())
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv:
+        folder = POLICIES_DIR / argv[0]
+        if not (folder / "eval.json").is_file():
+            raise SystemExit(f"error: no shipped policy {argv[0]!r} with an eval.json under {POLICIES_DIR}")
+        print(folder_table(folder))
+    else:
+        print(shipped_table())
+
+
+if __name__ == "__main__":
+    main()
