@@ -104,12 +104,39 @@ from satenv.scenarios.platoon import (
     sample_initial_state,
 )
 
-__all__ = ["PlatoonCore", "PlatoonEnv", "env", "parallel_env", "raw_env", "POS_SCALE", "VEL_SCALE"]
+__all__ = ["METHODS", "PlatoonCore", "PlatoonEnv", "env", "parallel_env", "raw_env", "POS_SCALE", "VEL_SCALE"]
 
 POS_SCALE = 50.0
 """Observation position scale L [m]."""
 VEL_SCALE = 10.0
 """Observation velocity scale V [m/s]."""
+
+
+METHODS = ("auto", "kernel", "dense", "sparse")
+"""How :class:`PlatoonCore` evaluates a step: ``"dense"`` (affine maps of the whole state) and
+``"sparse"`` (neighbour gathers and a neighbour search) are the numpy reference, ``"kernel"`` the
+compiled kernels of :mod:`satenv.envs._platoon_kernel` (numba); ``"auto"`` takes the kernel when
+numba is installed, the scenario has none of the optional pereira2022 constraints and
+``N <= DENSE_MAX``, else dense up to ``DENSE_MAX`` followers and sparse above."""
+
+
+def _kernel_module(scenario: PlatoonScenario, method: str, n: int) -> Any:
+    """The kernel module if ``method`` selects it (``None`` otherwise)."""
+    if method in ("dense", "sparse"):
+        return None
+    extras = scenario.min_error_constraint or scenario.keepout_radius > 0 or scenario.los_slopes is not None
+    if method == "auto" and (extras or n > DENSE_MAX):
+        return None
+    if extras:
+        raise ValueError("method='kernel' does not evaluate the optional constraints "
+                         "(min_error_constraint, keepout_radius, los_slopes); use 'dense' or 'sparse'")
+    try:
+        from satenv.envs import _platoon_kernel
+    except ImportError:
+        if method == "kernel":
+            raise ValueError("method='kernel' needs numba (pip install numba)") from None
+        return None
+    return _platoon_kernel
 
 
 class PlatoonCore(BatchedCore):
@@ -145,9 +172,12 @@ class PlatoonCore(BatchedCore):
                               dtype=np.int64).reshape(n, n - 1)
             self._slot_src, self._slot_mask = others, np.take_along_axis(self.adj, others, 1)
         self.obs_dim = 15 + 7 * self._slot_src.shape[1]
-        if method not in ("auto", "dense", "sparse"):
-            raise ValueError(f"method must be 'auto', 'dense' or 'sparse', got {method!r}")
-        self.dense = method == "dense" or (method == "auto" and n <= DENSE_MAX)
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        self._kernel = _kernel_module(scenario, method, n)
+        self.method = "kernel" if self._kernel is not None else (
+            method if method != "auto" else ("dense" if n <= DENSE_MAX else "sparse"))
+        self.dense = self.method == "dense"
         r_f = scenario.follower_radius
         self._contact = (scenario.leader_radius + r_f, 2 * r_f)
         self.x = np.zeros((self.batch, n, 6))
@@ -157,6 +187,16 @@ class PlatoonCore(BatchedCore):
         self._vbound = self.gains * scenario.v_max
         self._neg_reward_gain = -self.alpha / scenario.reward_scale
         self._obs_offset = self._observation_offset()
+        if self._kernel is not None:  # the kernels' constant arguments, float64 and contiguous
+            agent = np.zeros((n, 4))
+            agent[:, 0], agent[:, 1], agent[:, 2] = self.gains, self._vbound, self._neg_reward_gain
+            params = np.r_[self.q, self.w, self._contact, scenario.max_distance, scenario.dt,
+                           scenario.collision_penalty, scenario.violation_penalty,
+                           float(scenario.terminate_on_collision)].astype(float)
+            self._kernel_args = (agent, np.ascontiguousarray(self.target, dtype=float), self._nbr,
+                                 self._nbr_mask, params)
+            self._observe_args = (self._obs_offset, self.gains, self._nbr, self._nbr_mask, self._scale,
+                                  self._slot_src, np.ascontiguousarray(self._slot_mask, dtype=float))
         if self.dense:
             # one product gives E (first N rows, eq. 9) and the position of f minus that of each
             # other body (the leader first, then the other followers in ascending order)
@@ -208,13 +248,17 @@ class PlatoonCore(BatchedCore):
         self.t[sel] = 0
         self.chief[sel] = self.model.initial_chief()
         self.accel[sel] = 0.0
-        return self._evaluate(self.x[sel], self.accel[sel])[0]
+        evaluate = self._evaluate if self._kernel is None else self._evaluate_kernel
+        return evaluate(np.ascontiguousarray(self.x[sel]), np.ascontiguousarray(self.accel[sel]))[0]
 
     def step(self, accel, rng=None) -> StepResult:
-        accel = np.asarray(accel, dtype=float)
+        accel = np.ascontiguousarray(accel, dtype=float)
         self.x, self.chief = self.model.step(self.x, accel, self.chief)
         self.accel = accel
         self.t += 1
+        if self._kernel is not None:
+            info, rewards, terminated = self._evaluate_kernel(self.x, accel)
+            return StepResult(rewards, terminated, info)
         info, stage, far = self._evaluate(self.x, accel)
         sc = self.scenario
         rewards = stage * self._neg_reward_gain
@@ -249,6 +293,20 @@ class PlatoonCore(BatchedCore):
             "cost": np.add(collision, viol, dtype=float),
         }
         return info, stage, lead > sc.max_distance
+
+    def _evaluate_kernel(self, x: np.ndarray, accel: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+        """:meth:`_evaluate` and the rewards of :meth:`step` by the compiled kernel: the info
+        arrays, rewards ``(B, N)`` and terminations ``(B,)`` (all new arrays)."""
+        b, n = x.shape[:2]
+        out = (np.empty((b, n, 6)), np.empty((b, n, 6)), np.empty((b, n)), np.empty((b, n), bool),
+               np.empty((b, n), np.int64), np.empty((b, n)), np.empty((b, n)), np.empty((b, n)),
+               np.empty(b, bool))
+        self._kernel.evaluate(x, accel, *self._kernel_args, out)
+        err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated = out
+        info = {"state": x.copy(), "accel": accel.copy(), "delta_v": dv, "tracking_error": err,
+                "neighbourhood_error": err_raw, "min_separation": min_sep, "collision": collision,
+                "violations": viol, "cost": cost}
+        return info, rewards, terminated
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Neighbourhood errors ``E`` (eq. 9) ``(B, N, 6)``, each follower's distance to the nearest
@@ -286,6 +344,10 @@ class PlatoonCore(BatchedCore):
 
     def observe(self) -> np.ndarray:
         b, n = self.batch, self.n_agents
+        if self._kernel is not None:
+            obs = np.empty((b, n, self.obs_dim), np.float32)
+            self._kernel.observe(self.x, self.t / self.scenario.max_steps, *self._observe_args, obs)
+            return obs
         if self.dense:
             obs = (self.x.reshape(b, -1) @ self._obs_map).reshape(b, n, self.obs_dim)
             obs += self._obs_offset

@@ -1,0 +1,112 @@
+"""The compiled platoon kernel (issue 17) against the numpy reference paths it replaces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import satenv
+from satenv.envs.platoon_v0 import PlatoonCore
+from satenv.scenarios.platoon import resolve_scenario
+
+pytest.importorskip("numba")
+
+
+def _cores(n, topology="PLF", slots=False, batch=4, **overrides):
+    rng = np.random.default_rng(n)
+    sc = resolve_scenario("pereira2023", topology=topology, neighbour_slots=slots,
+                          initial_state=rng.uniform(-60, 60, (n, 6)), **overrides)
+    return [PlatoonCore(sc, batch=batch, method=m) for m in ("kernel", "dense", "sparse")]
+
+
+def _assert_same(kernel, ref):
+    for key in ref.info:
+        np.testing.assert_allclose(kernel.info[key], ref.info[key], rtol=1e-12, atol=1e-12, err_msg=key)
+        assert kernel.info[key].dtype == ref.info[key].dtype, key
+    np.testing.assert_allclose(kernel.rewards, ref.rewards, rtol=1e-12)
+    np.testing.assert_array_equal(kernel.terminated, ref.terminated)
+
+
+@pytest.mark.parametrize("topology", ["PLF", "BDL", "TPLF", "RING"])
+@pytest.mark.parametrize("slots", [False, True])
+@pytest.mark.parametrize("n", [1, 4, 9])
+def test_kernel_matches_the_numpy_paths(topology, slots, n):
+    if topology == "RING" and n < 3:
+        pytest.skip("a ring needs 3 followers")
+    cores = _cores(n, topology, slots, max_distance=200.0)
+    assert cores[0].method == "kernel" and cores[1].dense and cores[2].method == "sparse"
+    rng = np.random.default_rng(7)
+    x = rng.uniform(-40, 40, (4, n, 6))
+    x[..., 3:] *= 0.5
+    x[1, 0, 3] = 100.0                             # a velocity-bound violation
+    x[2, -1] = x[2, 0] + [1.0, 0, 0, 0, 0, 0]      # a collision (or the leader when n = 1)
+    x[3, 0, :3] = [250.0, 0.0, 0.0]                # beyond max_distance
+    infos = [c.reset(x) for c in cores]
+    for info in infos[1:]:
+        for key in info:
+            np.testing.assert_allclose(infos[0][key], info[key], rtol=1e-12, atol=1e-12, err_msg=key)
+    for step in range(3):
+        accel = rng.uniform(-1, 1, (4, n, 3)) * (0.0 if step == 0 else 6.0)
+        res = [c.step(accel) for c in cores]
+        obs = [c.observe() for c in cores]
+        for ref, ref_obs in zip(res[1:], obs[1:], strict=True):
+            _assert_same(res[0], ref)
+            np.testing.assert_allclose(obs[0], ref_obs, rtol=1e-6, atol=1e-6)
+            assert obs[0].dtype == np.float32 and obs[0].shape == ref_obs.shape
+        # the kernel's E and observation follow the sparse formulas: the same bits
+        np.testing.assert_array_equal(res[0].info["neighbourhood_error"], res[2].info["neighbourhood_error"])
+        np.testing.assert_array_equal(obs[0], obs[2])
+    assert res[0].terminated[3] and res[0].info["violations"][1, 0] >= 1
+    if n > 1:
+        assert res[0].info["collision"][2].any()
+
+
+def test_kernel_partial_reset_and_fresh_arrays():
+    kernel, dense, _ = _cores(4, batch=3)
+    x = np.random.default_rng(0).uniform(-30, 30, (3, 4, 6))
+    for c in (kernel, dense):
+        c.reset(x)
+    accel = np.full((3, 4, 3), 0.5)
+    first = kernel.step(accel)
+    kept = {k: v.copy() for k, v in first.info.items()}
+    obs1 = kernel.observe()
+    dense.step(accel)
+    idx = np.array([1])
+    part = [c.reset(x[idx] * 0.5, idx) for c in (kernel, dense)]
+    for key in part[1]:
+        np.testing.assert_allclose(part[0][key], part[1][key], rtol=1e-12, atol=1e-12, err_msg=key)
+    np.testing.assert_allclose(kernel.observe(), dense.observe(), rtol=1e-6, atol=1e-6)
+    for key, value in first.info.items():   # the core never writes into arrays it returned
+        np.testing.assert_array_equal(value, kept[key], err_msg=key)
+    assert kernel.observe() is not kernel.observe()
+    assert not np.shares_memory(obs1, kernel.observe())
+
+
+def test_kernel_selection():
+    env = satenv.make("platoon_v0")
+    assert env.core.method == "kernel" and not env.core.dense
+    constrained = satenv.make("platoon_v0", preset="pereira2022")   # optional constraints: numpy
+    assert constrained.core.method == "dense"
+    with pytest.raises(ValueError, match="optional constraints"):
+        PlatoonCore(constrained.scenario, method="kernel")
+    with pytest.raises(ValueError, match="method must be one of"):
+        PlatoonCore(env.scenario, method="fast")
+
+
+def test_pettingzoo_episode_matches_the_reference():
+    """A whole seeded episode of the env, kernel against the dense reference core."""
+    envs = [satenv.make("platoon_v0", randomize=True, max_steps=40) for _ in range(2)]
+    envs[1].core = PlatoonCore(envs[1].scenario, batch=1, method="dense")
+    outs = [env.reset(seed=3) for env in envs]
+    rng = np.random.default_rng(0)
+    while envs[0].agents:
+        acts = {a: rng.uniform(-1, 1, 3).astype(np.float32) for a in envs[0].agents}
+        outs = [env.step(acts) for env in envs]
+        (o0, r0, t0, u0, i0), (o1, r1, t1, u1, i1) = outs
+        assert t0 == t1 and u0 == u1
+        for a in o0:
+            np.testing.assert_allclose(o0[a], o1[a], rtol=1e-6, atol=1e-6)
+            assert r0[a] == pytest.approx(r1[a], rel=1e-12)
+            for key in i1[a]:
+                np.testing.assert_allclose(i0[a][key], i1[a][key], rtol=1e-12, atol=1e-12, err_msg=key)
+        np.testing.assert_array_equal(envs[0].state(), envs[1].state())   # the physics: the same bits
