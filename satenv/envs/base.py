@@ -59,6 +59,11 @@ measures (vector); ``min_separation`` distance to the nearest other body [m]; ``
 (bool); ``violations`` constraint violations this step (int); ``cost`` safety cost (float)."""
 
 
+_PLAIN_ACTION_TYPES = frozenset({np.ndarray, list, tuple})
+"""Action values the env's fast path converts as a whole (anything else, e.g. a masked array, is
+checked one agent at a time)."""
+
+
 @dataclass
 class StepResult:
     """What :meth:`BatchedCore.step` returns for ``B`` copies and ``M`` agents."""
@@ -307,8 +312,7 @@ class SatParallelEnv(ParallelEnv):
             except (KeyError, TypeError, ValueError, OverflowError):
                 out = None
             if (out is not None and out.dtype.kind in "fiu" and out.shape == (self.core.n_agents, dim)
-                    and not any(isinstance(v, np.ma.MaskedArray) for v in values)
-                    and all_finite(out)):
+                    and set(map(type, values)) <= _PLAIN_ACTION_TYPES and all_finite(out)):
                 return out.astype(np.float64, copy=False)
         missing = [a for a in self.agents if a not in actions]
         extra = [a for a in actions if a not in self._index]
@@ -325,9 +329,10 @@ class SatParallelEnv(ParallelEnv):
 
     def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
         # one conversion per key: python scalars for per-agent scalars, rows for per-agent vectors
-        # (views of the core's info arrays, which it never writes into again)
-        columns = {key: (arr[0].tolist() if arr.ndim == 2 else list(arr[0])) for key, arr in info.items()}
-        return {ag: {key: col[i] for key, col in columns.items()} for ag, i in self._index.items()}
+        # (views of the core's info arrays, which it never writes into again); new dicts each call
+        columns = [arr[0].tolist() if arr.ndim == 2 else list(arr[0]) for arr in info.values()]
+        keys = tuple(info)
+        return dict(zip(self.possible_agents, [dict(zip(keys, row)) for row in zip(*columns)], strict=True))
 
     def state(self) -> np.ndarray:
         """The global state (true states of every agent, plus scenario extras)."""
