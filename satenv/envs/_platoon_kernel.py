@@ -32,21 +32,22 @@ def _errors(x, b, f, gains, nbr, nbr_mask, out):
 
 
 @_jit
-def evaluate(x, accel, agent, target, nbr, nbr_mask, params, out):
+def evaluate(x, accel, table, nbr, params, out):
     """Info arrays, rewards and terminations of states ``x`` (B, N, 6) under ``accel`` (B, N, 3).
 
-    ``agent`` (N, 4) holds each follower's ``[gain g_f + d_f, velocity bound, reward gain,
-    0]``, ``target`` (N, 6) ``E*``, ``params`` = ``[Q (6), W (3), leader contact, follower
-    contact, max_distance, dt, collision_penalty, violation_penalty, terminate_on_collision]``.
-    Writes into ``out`` = ``(E, E - E*, min_separation, collision, violations, cost, delta_v,
-    rewards, terminated)`` (the caller allocates them: arrays made here cost more to return).
+    ``table`` (N, 9 + K) holds each follower's ``[gain g_f + d_f, velocity bound, reward gain,
+    E* (6), mask of its K neighbour slots nbr (N, K)]``; ``params`` = ``[Q (6), W (3), leader
+    contact, follower contact, max_distance, dt, collision_penalty, violation_penalty,
+    terminate_on_collision, observation scales (6), max_steps]``. Writes into ``out`` = ``(E,
+    E - E*, min_separation, collision, violations, cost, delta_v, rewards, terminated)`` (the
+    caller allocates them: arrays made here cost more to return).
     """
     err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated = out
     nb, n = x.shape[0], x.shape[1]
     q, w = params[0:6], params[6:9]
     c_lead, c_pair, max_dist, dt, pen_c, pen_v = params[9], params[10], params[11], params[12], params[13], params[14]
     stop_on_contact = params[15] != 0.0
-    gains = agent[:, 0]
+    gains, nbr_mask = table[:, 0], table[:, 9:]
     e = np.empty(6)
     for b in range(nb):
         terminated[b] = False
@@ -55,7 +56,7 @@ def evaluate(x, accel, agent, target, nbr, nbr_mask, params, out):
             stage = 0.0
             for c in range(6):
                 err_raw[b, f, c] = e[c]
-                d = e[c] - target[f, c]
+                d = e[c] - table[f, 3 + c]
                 err[b, f, c] = d
                 stage += d * d * q[c]
             u0, u1, u2 = accel[b, f, 0], accel[b, f, 1], accel[b, f, 2]
@@ -69,7 +70,7 @@ def evaluate(x, accel, agent, target, nbr, nbr_mask, params, out):
                     d0, d1, d2 = p0 - x[b, j, 0], p1 - x[b, j, 1], p2 - x[b, j, 2]
                     sep2 = min(sep2, d0 * d0 + d1 * d1 + d2 * d2)
             sep = np.sqrt(sep2)
-            vb = agent[f, 1]
+            vb = table[f, 1]
             hit = lead < c_lead or sep < c_pair
             bad = abs(e[3]) > vb or abs(e[4]) > vb or abs(e[5]) > vb
             hit_f, bad_f = 1.0 if hit else 0.0, 1.0 if bad else 0.0
@@ -77,16 +78,17 @@ def evaluate(x, accel, agent, target, nbr, nbr_mask, params, out):
             collision[b, f] = hit
             viol[b, f] = 1 if bad else 0
             cost[b, f] = hit_f + bad_f
-            rewards[b, f] = stage * agent[f, 2] - pen_c * hit_f - pen_v * bad_f
+            rewards[b, f] = stage * table[f, 2] - pen_c * hit_f - pen_v * bad_f
             if lead > max_dist or (stop_on_contact and hit):
                 terminated[b] = True
 
 
 @_jit
-def observe(x, elapsed, offset, gains, nbr, nbr_mask, scale, slot_src, slot_mask, obs):
-    """Observations of states ``x`` (B, N, 6) into ``obs`` (B, N, obs_dim) float32: ``offset``
-    (N, obs_dim) is their state-independent part, ``elapsed`` (B,) the fraction of the episode
-    elapsed."""
+def observe(x, t, table, nbr, offset, slot_src, params, obs):
+    """Observations of states ``x`` (B, N, 6) at steps ``t`` (B,) into ``obs`` (B, N, obs_dim)
+    float32; ``offset`` (N, obs_dim) is their state-independent part (slot masks included),
+    ``slot_src`` (N, S) the follower each slot shows; ``table``, ``params`` as in :func:`evaluate`."""
+    gains, nbr_mask, scale, max_steps = table[:, 0], table[:, 9:], params[16:22], params[22]
     nb, n = x.shape[0], x.shape[1]
     e = np.empty(6)
     xs = np.empty((n, 6))  # the copy's states / scale (each division once, as the sparse path)
@@ -101,10 +103,10 @@ def observe(x, elapsed, offset, gains, nbr, nbr_mask, scale, slot_src, slot_mask
                 obs[b, f, 6 + c] = xs[f, c]
             obs[b, f, 12] = offset[f, 12]
             obs[b, f, 13] = offset[f, 13]
-            obs[b, f, 14] = offset[f, 14] - elapsed[b]
+            obs[b, f, 14] = offset[f, 14] - t[b] / max_steps
             for s in range(slot_src.shape[1]):
-                j, m = slot_src[f, s], slot_mask[f, s]
-                k = 15 + 7 * s
+                j, k = slot_src[f, s], 15 + 7 * s
+                m = offset[f, k]
                 obs[b, f, k] = m
                 for c in range(6):
                     obs[b, f, k + 1 + c] = (xs[j, c] - xs[f, c]) * m

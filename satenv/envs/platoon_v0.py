@@ -187,16 +187,14 @@ class PlatoonCore(BatchedCore):
         self._vbound = self.gains * scenario.v_max
         self._neg_reward_gain = -self.alpha / scenario.reward_scale
         self._obs_offset = self._observation_offset()
-        if self._kernel is not None:  # the kernels' constant arguments, float64 and contiguous
-            agent = np.zeros((n, 4))
-            agent[:, 0], agent[:, 1], agent[:, 2] = self.gains, self._vbound, self._neg_reward_gain
-            params = np.r_[self.q, self.w, self._contact, scenario.max_distance, scenario.dt,
-                           scenario.collision_penalty, scenario.violation_penalty,
-                           float(scenario.terminate_on_collision)].astype(float)
-            self._kernel_args = (agent, np.ascontiguousarray(self.target, dtype=float), self._nbr,
-                                 self._nbr_mask, params)
-            self._observe_args = (self._obs_offset, self.gains, self._nbr, self._nbr_mask, self._scale,
-                                  self._slot_src, np.ascontiguousarray(self._slot_mask, dtype=float))
+        if self._kernel is not None:  # the kernels' constant arguments (packed: fewer to pass)
+            self._table = np.hstack([self.gains[:, None], self._vbound[:, None],
+                                     np.broadcast_to(self._neg_reward_gain, (n,))[:, None], self.target,
+                                     self._nbr_mask]).astype(float)
+            self._params = np.r_[self.q, self.w, self._contact, scenario.max_distance, scenario.dt,
+                                 scenario.collision_penalty, scenario.violation_penalty,
+                                 float(scenario.terminate_on_collision), self._scale,
+                                 scenario.max_steps].astype(float)
         if self.dense:
             # one product gives E (first N rows, eq. 9) and the position of f minus that of each
             # other body (the leader first, then the other followers in ascending order)
@@ -301,7 +299,7 @@ class PlatoonCore(BatchedCore):
         out = (np.empty((b, n, 6)), np.empty((b, n, 6)), np.empty((b, n)), np.empty((b, n), bool),
                np.empty((b, n), np.int64), np.empty((b, n)), np.empty((b, n)), np.empty((b, n)),
                np.empty(b, bool))
-        self._kernel.evaluate(x, accel, *self._kernel_args, out)
+        self._kernel.evaluate(x, accel, self._table, self._nbr, self._params, out)
         err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated = out
         info = {"state": x.copy(), "accel": accel.copy(), "delta_v": dv, "tracking_error": err,
                 "neighbourhood_error": err_raw, "min_separation": min_sep, "collision": collision,
@@ -346,7 +344,8 @@ class PlatoonCore(BatchedCore):
         b, n = self.batch, self.n_agents
         if self._kernel is not None:
             obs = np.empty((b, n, self.obs_dim), np.float32)
-            self._kernel.observe(self.x, self.t / self.scenario.max_steps, *self._observe_args, obs)
+            self._kernel.observe(self.x, self.t, self._table, self._nbr, self._obs_offset, self._slot_src,
+                                 self._params, obs)
             return obs
         if self.dense:
             obs = (self.x.reshape(b, -1) @ self._obs_map).reshape(b, n, self.obs_dim)
