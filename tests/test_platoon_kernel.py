@@ -110,3 +110,27 @@ def test_pettingzoo_episode_matches_the_reference():
             for key in i1[a]:
                 np.testing.assert_allclose(i0[a][key], i1[a][key], rtol=1e-12, atol=1e-12, err_msg=key)
         np.testing.assert_array_equal(envs[0].state(), envs[1].state())   # the physics: the same bits
+
+
+def test_pettingzoo_dicts_are_fresh_and_infos_safe_to_keep():
+    """The PettingZoo contract the fast step keeps: new dicts every step, and what a step handed
+    out (observations, infos) never changes afterwards (later steps, resets)."""
+    env = satenv.make("platoon_v0", max_steps=3)
+    obs0, infos0 = env.reset(seed=0)
+    kept_obs0 = {a: v.copy() for a, v in obs0.items()}
+    acts = {a: np.full(3, 0.5, np.float32) for a in env.agents}
+    first = env.step(acts)
+    kept = [{a: {k: np.copy(v) for k, v in info.items()} for a, info in first[4].items()]]
+    second = env.step(acts)
+    assert all(d1 is not d2 for d1, d2 in zip(first, second, strict=True))
+    for a in env.possible_agents:
+        assert first[4][a] is not second[4][a] and first[4][a] is not infos0[a]
+        assert not np.shares_memory(first[4][a]["state"], second[4][a]["state"])
+        assert not np.shares_memory(first[0][a], second[0][a])
+    env.step(acts)
+    env.reset(seed=1)
+    for a, info in first[4].items():
+        for key, value in info.items():
+            np.testing.assert_array_equal(value, kept[0][a][key], err_msg=key)
+    for a, value in obs0.items():
+        np.testing.assert_array_equal(value, kept_obs0[a])
