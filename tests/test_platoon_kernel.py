@@ -120,7 +120,7 @@ def test_pettingzoo_dicts_are_fresh_and_infos_safe_to_keep():
     kept_obs0 = {a: v.copy() for a, v in obs0.items()}
     acts = {a: np.full(3, 0.5, np.float32) for a in env.agents}
     first = env.step(acts)
-    kept = [{a: {k: np.copy(v) for k, v in info.items()} for a, info in first[4].items()]]
+    kept = {a: {k: np.copy(v) for k, v in info.items()} for a, info in first[4].items()}
     second = env.step(acts)
     assert all(d1 is not d2 for d1, d2 in zip(first, second, strict=True))
     for a in env.possible_agents:
@@ -131,6 +131,6 @@ def test_pettingzoo_dicts_are_fresh_and_infos_safe_to_keep():
     env.reset(seed=1)
     for a, info in first[4].items():
         for key, value in info.items():
-            np.testing.assert_array_equal(value, kept[0][a][key], err_msg=key)
+            np.testing.assert_array_equal(value, kept[a][key], err_msg=key)
     for a, value in obs0.items():
         np.testing.assert_array_equal(value, kept_obs0[a])

@@ -332,7 +332,8 @@ class SatParallelEnv(ParallelEnv):
         # (views of the core's info arrays, which it never writes into again); new dicts each call
         columns = [arr[0].tolist() if arr.ndim == 2 else arr[0] for arr in info.values()]
         keys = tuple(info)
-        return dict(zip(self.possible_agents, [dict(zip(keys, row)) for row in zip(*columns)], strict=True))
+        rows = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
+        return dict(zip(self.possible_agents, rows, strict=True))
 
     def state(self) -> np.ndarray:
         """The global state (true states of every agent, plus scenario extras)."""
