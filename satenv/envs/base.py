@@ -330,7 +330,7 @@ class SatParallelEnv(ParallelEnv):
     def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
         # one conversion per key: python scalars for per-agent scalars, rows for per-agent vectors
         # (views of the core's info arrays, which it never writes into again); new dicts each call
-        columns = [arr[0].tolist() if arr.ndim == 2 else arr[0] for arr in info.values()]
+        columns = [arr[0].tolist() if arr.ndim == 2 else list(arr[0]) for arr in info.values()]
         keys = tuple(info)
         rows = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
         return dict(zip(self.possible_agents, rows, strict=True))
