@@ -134,3 +134,19 @@ def test_pettingzoo_dicts_are_fresh_and_infos_safe_to_keep():
             np.testing.assert_array_equal(value, kept[a][key], err_msg=key)
     for a, value in obs0.items():
         np.testing.assert_array_equal(value, kept_obs0[a])
+
+
+@pytest.mark.parametrize(("topology", "slots", "n"), [("PLF", False, 4), ("RING", True, 9)])
+def test_step_observe_is_step_then_observe(topology, slots, n):
+    fused, plain = _cores(n, topology, slots)[0], _cores(n, topology, slots)[0]
+    x = np.random.default_rng(1).uniform(-40, 40, (4, n, 6))
+    for core in (fused, plain):
+        core.reset(x)
+    for k in range(3):
+        accel = np.full((4, n, 3), 0.1 * k)
+        res, obs = fused.step_observe(accel)
+        ref = plain.step(accel)
+        np.testing.assert_array_equal(obs, plain.observe())
+        np.testing.assert_array_equal(res.rewards, ref.rewards)
+        for key in ref.info:
+            np.testing.assert_array_equal(res.info[key], ref.info[key], err_msg=key)

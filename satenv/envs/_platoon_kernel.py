@@ -32,8 +32,34 @@ def _errors(x, b, f, gains, nbr, nbr_mask, out):
 
 
 @_jit
-def evaluate(x, accel, table, nbr, params, out):
-    """Info arrays, rewards and terminations of states ``x`` (B, N, 6) under ``accel`` (B, N, 3).
+def _observe_agent(x, b, f, e, xs, t, offset, slot_src, scale, max_steps, obs):
+    """Observation row of follower ``f`` of copy ``b`` from its error ``e`` and the copy's scaled
+    states ``xs`` (N, 6) (each division once, as the sparse path)."""
+    for c in range(6):
+        obs[b, f, c] = e[c] / scale[c] + offset[f, c]
+        obs[b, f, 6 + c] = xs[f, c]
+    obs[b, f, 12] = offset[f, 12]
+    obs[b, f, 13] = offset[f, 13]
+    obs[b, f, 14] = offset[f, 14] - t[b] / max_steps
+    for s in range(slot_src.shape[1]):
+        j, k = slot_src[f, s], 15 + 7 * s
+        m = offset[f, k]
+        obs[b, f, k] = m
+        for c in range(6):
+            obs[b, f, k + 1 + c] = (xs[j, c] - xs[f, c]) * m
+
+
+@_jit
+def _scaled(x, b, scale, xs):
+    for j in range(x.shape[1]):
+        for c in range(6):
+            xs[j, c] = x[b, j, c] / scale[c]
+
+
+@_jit
+def evaluate(x, accel, table, nbr, params, out, t, offset, slot_src, obs):
+    """Info arrays, rewards and terminations of states ``x`` (B, N, 6) under ``accel`` (B, N, 3),
+    and their observations at steps ``t`` (B,) when ``obs`` is not empty (as :func:`observe`).
 
     ``table`` (N, 9 + K) holds each follower's ``[gain g_f + d_f, velocity bound, reward gain,
     E* (6), mask of its K neighbour slots nbr (N, K)]``; ``params`` = ``[Q (6), W (3), leader
@@ -47,12 +73,19 @@ def evaluate(x, accel, table, nbr, params, out):
     q, w = params[0:6], params[6:9]
     c_lead, c_pair, max_dist, dt, pen_c, pen_v = params[9], params[10], params[11], params[12], params[13], params[14]
     stop_on_contact = params[15] != 0.0
+    scale, max_steps = params[16:22], params[22]
     gains, nbr_mask = table[:, 0], table[:, 9:]
+    observing = obs.shape[0] > 0
     e = np.empty(6)
+    xs = np.empty((n, 6))
     for b in range(nb):
         terminated[b] = False
+        if observing:
+            _scaled(x, b, scale, xs)
         for f in range(n):
             _errors(x, b, f, gains, nbr, nbr_mask, e)
+            if observing:
+                _observe_agent(x, b, f, e, xs, t, offset, slot_src, scale, max_steps, obs)
             stage = 0.0
             for c in range(6):
                 err_raw[b, f, c] = e[c]
@@ -89,24 +122,11 @@ def observe(x, t, table, nbr, offset, slot_src, params, obs):
     float32; ``offset`` (N, obs_dim) is their state-independent part (slot masks included),
     ``slot_src`` (N, S) the follower each slot shows; ``table``, ``params`` as in :func:`evaluate`."""
     gains, nbr_mask, scale, max_steps = table[:, 0], table[:, 9:], params[16:22], params[22]
-    nb, n = x.shape[0], x.shape[1]
+    n = x.shape[1]
     e = np.empty(6)
-    xs = np.empty((n, 6))  # the copy's states / scale (each division once, as the sparse path)
-    for b in range(nb):
-        for j in range(n):
-            for c in range(6):
-                xs[j, c] = x[b, j, c] / scale[c]
+    xs = np.empty((n, 6))
+    for b in range(x.shape[0]):
+        _scaled(x, b, scale, xs)
         for f in range(n):
             _errors(x, b, f, gains, nbr, nbr_mask, e)
-            for c in range(6):
-                obs[b, f, c] = e[c] / scale[c] + offset[f, c]
-                obs[b, f, 6 + c] = xs[f, c]
-            obs[b, f, 12] = offset[f, 12]
-            obs[b, f, 13] = offset[f, 13]
-            obs[b, f, 14] = offset[f, 14] - t[b] / max_steps
-            for s in range(slot_src.shape[1]):
-                j, k = slot_src[f, s], 15 + 7 * s
-                m = offset[f, k]
-                obs[b, f, k] = m
-                for c in range(6):
-                    obs[b, f, k + 1 + c] = (xs[j, c] - xs[f, c]) * m
+            _observe_agent(x, b, f, e, xs, t, offset, slot_src, scale, max_steps, obs)

@@ -116,6 +116,11 @@ class BatchedCore(ABC):
     def observe(self) -> np.ndarray:
         """Normalised observations ``(B, M, obs_dim)`` float32."""
 
+    def step_observe(self, accel: np.ndarray, rng: np.random.Generator | None = None) -> tuple[StepResult, np.ndarray]:
+        """:meth:`step` then :meth:`observe` (a core may do both in one pass)."""
+        res = self.step(accel, rng)
+        return res, self.observe()
+
     def global_state(self) -> np.ndarray:
         """The global state ``(B, ...)`` returned by ``env.state()`` (default: all true states)."""
         raise NotImplementedError
@@ -279,9 +284,8 @@ class SatParallelEnv(ParallelEnv):
                               "(the episode has ended or never started)")
         a = self._action_array(actions)
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
-        res = self.core.step(accel[None], self.np_random)
+        res, obs_arr = self.core.step_observe(accel[None], self.np_random)
         self._last_info = res.info
-        obs_arr = self.core.observe()
         reward_list = res.rewards[0].tolist()
         if not self._finite_step(obs_arr, res.info["state"], sum(reward_list)):
             self._nonfinite(obs_arr, res.rewards, res.info["state"])

@@ -242,6 +242,8 @@ class PlatoonCore(BatchedCore):
     def reset(self, x0, idx=None, rng=None):
         x0 = np.asarray(x0, dtype=float)
         sel = slice(None) if idx is None else idx
+        if self._kernel is not None:   # it hands out self.x itself as the state info: copy on write
+            self.x = self.x.copy()
         self.x[sel] = x0
         self.t[sel] = 0
         self.chief[sel] = self.model.initial_chief()
@@ -250,12 +252,9 @@ class PlatoonCore(BatchedCore):
         return evaluate(np.ascontiguousarray(self.x[sel]), np.ascontiguousarray(self.accel[sel]))[0]
 
     def step(self, accel, rng=None) -> StepResult:
-        accel = np.ascontiguousarray(accel, dtype=float)
-        self.x, self.chief = self.model.step(self.x, accel, self.chief)
-        self.accel = accel
-        self.t += 1
+        accel = self._advance(accel)
         if self._kernel is not None:
-            info, rewards, terminated = self._evaluate_kernel(self.x, accel)
+            info, rewards, terminated, _ = self._evaluate_kernel(self.x, accel)
             return StepResult(rewards, terminated, info)
         info, stage, far = self._evaluate(self.x, accel)
         sc = self.scenario
@@ -266,6 +265,21 @@ class PlatoonCore(BatchedCore):
             far |= info["collision"]
         terminated = far.any(axis=-1)
         return StepResult(rewards, terminated, info)
+
+    def step_observe(self, accel, rng=None) -> tuple[StepResult, np.ndarray]:
+        if self._kernel is None:
+            return super().step_observe(accel, rng)
+        accel = self._advance(accel)
+        info, rewards, terminated, obs = self._evaluate_kernel(self.x, accel, observe=True)
+        return StepResult(rewards, terminated, info), obs
+
+    def _advance(self, accel) -> np.ndarray:
+        """The physics of :meth:`step`; returns the inputs as a contiguous float array."""
+        accel = np.ascontiguousarray(accel, dtype=float)
+        self.x, self.chief = self.model.step(self.x, accel, self.chief)
+        self.accel = accel
+        self.t += 1
+        return accel
 
     # ------------------------------------------------------------------ quantities
     def _evaluate(self, x: np.ndarray, accel: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
@@ -292,19 +306,22 @@ class PlatoonCore(BatchedCore):
         }
         return info, stage, lead > sc.max_distance
 
-    def _evaluate_kernel(self, x: np.ndarray, accel: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    def _evaluate_kernel(self, x: np.ndarray, accel: np.ndarray, observe: bool = False) -> tuple:
         """:meth:`_evaluate` and the rewards of :meth:`step` by the compiled kernel: the info
-        arrays, rewards ``(B, N)`` and terminations ``(B,)`` (all new arrays)."""
+        arrays, rewards ``(B, N)``, terminations ``(B,)`` and, if ``observe``, the observations
+        (all new arrays but the state info, which is ``x``: the core never writes into it)."""
         b, n = x.shape[:2]
         out = (np.empty((b, n, 6)), np.empty((b, n, 6)), np.empty((b, n)), np.empty((b, n), bool),
                np.empty((b, n), np.int64), np.empty((b, n)), np.empty((b, n)), np.empty((b, n)),
                np.empty(b, bool))
-        self._kernel.evaluate(x, accel, self._table, self._nbr, self._params, out)
+        obs = np.empty((b, n, self.obs_dim) if observe else (0, 0, 0), np.float32)
+        self._kernel.evaluate(x, accel, self._table, self._nbr, self._params, out, self.t, self._obs_offset,
+                              self._slot_src, obs)
         err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated = out
-        info = {"state": x.copy(), "accel": accel.copy(), "delta_v": dv, "tracking_error": err,
+        info = {"state": x, "accel": accel.copy(), "delta_v": dv, "tracking_error": err,
                 "neighbourhood_error": err_raw, "min_separation": min_sep, "collision": collision,
                 "violations": viol, "cost": cost}
-        return info, rewards, terminated
+        return info, rewards, terminated, obs
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Neighbourhood errors ``E`` (eq. 9) ``(B, N, 6)``, each follower's distance to the nearest
