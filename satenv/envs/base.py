@@ -10,7 +10,8 @@ Every satenv environment has two layers:
 
 A core subclass implements :meth:`BatchedCore.sample_initial_state`, :meth:`BatchedCore.reset`,
 :meth:`BatchedCore.step`, :meth:`BatchedCore.observe` (and optionally
-:meth:`BatchedCore.global_state` and :meth:`BatchedCore.render_scene`). An env subclass sets
+:meth:`BatchedCore.global_state`, :meth:`BatchedCore.render_scene` and a fused
+:meth:`BatchedCore.step_observe`, which the PettingZoo step calls). An env subclass sets
 ``core_class``, ``agent_prefix``, ``metadata["name"]`` and builds its scenario in ``__init__``.
 
 Conventions: float32 ``Box`` spaces cached per env (``observation_spaces`` / ``action_spaces``
@@ -291,8 +292,8 @@ class SatParallelEnv(ParallelEnv):
             self._nonfinite(obs_arr, res.rewards, res.info["state"])
         truncated = bool(self.core.t[0] >= self.scenario.max_steps)
         terminated = bool(res.terminated[0])
-        obs = dict(zip(self.possible_agents, obs_arr[0], strict=True))
-        rewards = dict(zip(self.possible_agents, reward_list, strict=True))
+        obs = dict(zip(self.possible_agents, obs_arr[0], strict=False))  # the core's rows (strict costs)
+        rewards = dict(zip(self.possible_agents, reward_list, strict=False))
         terms = dict.fromkeys(self.agents, terminated)
         truncs = dict.fromkeys(self.agents, truncated and not terminated)
         infos = self._info_dicts(res.info)
@@ -336,8 +337,8 @@ class SatParallelEnv(ParallelEnv):
         # (views of the core's info arrays, which it never writes into again); new dicts each call
         columns = [arr[0].tolist() if arr.ndim == 2 else list(arr[0]) for arr in info.values()]
         keys = tuple(info)
-        rows = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
-        return dict(zip(self.possible_agents, rows, strict=True))
+        rows = [dict(zip(keys, row, strict=False)) for row in zip(*columns, strict=False)]
+        return dict(zip(self.possible_agents, rows, strict=False))  # equal lengths: the core's rows
 
     def state(self) -> np.ndarray:
         """The global state (true states of every agent, plus scenario extras)."""
