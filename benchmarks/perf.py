@@ -10,7 +10,7 @@ Agent-steps per second (one agent advanced by one decision step) of
               continuous actions, ``max_cycles=180`` like the platoon episode), the same loop;
 * ``batched`` satenv's batched path at each batch size (env copies x 4 agents), for ``cw`` and
               ``j2``: ``dynamics`` = ``RelativeModel.step`` alone, ``core`` = the training path
-              (``PlatoonCore.step`` + ``observe``: physics, rewards, infos, observations);
+              (``PlatoonCore.step_observe``: physics, rewards, infos, observations);
 * ``vmas``    VMAS ``navigation`` (4 agents, continuous, CPU, one torch thread) at the same batch
               sizes, ``env.step`` (skipped with a note when ``vmas`` is not installed);
 * ``limit``   the machine's limit: a numpy copy of the same state + action (+ chief) bytes;
@@ -108,7 +108,8 @@ def batched_dynamics(model: str, batch: int, dt: float = 0.1, min_time: float = 
 
 
 def batched_core(model: str, batch: int, min_time: float = 0.2) -> dict | None:
-    """Agent-steps/s of the platoon training path: ``core.step`` + ``core.observe`` on ``batch`` copies."""
+    """Agent-steps/s of the platoon training path: ``core.step_observe`` (the step and its
+    observations, as ``satenv.make_vec`` calls it) on ``batch`` copies."""
     try:
         from satenv.envs.platoon_v0 import PlatoonCore
         from satenv.scenarios.platoon import resolve_scenario
@@ -123,8 +124,7 @@ def batched_core(model: str, batch: int, min_time: float = 0.2) -> dict | None:
     accel = rng.uniform(-1.0, 1.0, size=(batch, core.n_agents, 3)) * 0.01 * scenario.u_max
 
     def step() -> None:
-        core.step(accel, rng)
-        core.observe()
+        core.step_observe(accel, rng)
 
     return {"model": model, "batch": batch, "agents": batch * core.n_agents,
             "agent_steps_per_s": _rate(step, batch * core.n_agents, min_time)}

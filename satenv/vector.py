@@ -190,10 +190,9 @@ class SatVectorEnv:
                               "reset(indices=...) (or reset()) first")
         a = self._check_actions(actions)
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
-        res = self.core.step(accel, self._rngs)
+        res, obs = self.core.step_observe(accel, self._rngs)
         terminated = np.asarray(res.terminated, dtype=bool)
         truncated = (self.core.t >= self.max_steps) & ~terminated
-        obs = self.core.observe()
         rewards = np.asarray(res.rewards, dtype=np.float64)
         done = terminated | truncated
         if not all_finite(obs, res.info["state"], rewards):

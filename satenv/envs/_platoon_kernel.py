@@ -1,14 +1,13 @@
-"""Compiled (numba) kernels of the platoon core: every per-step quantity in one pass.
+"""Compiled (numba) kernel of the platoon core: every per-step quantity in one pass.
 
 :class:`satenv.envs.platoon_v0.PlatoonCore` evaluates a step with numpy (``method="dense"``
-or ``"sparse"``, the reference) or, when numba is installed, with these two kernels
-(``method="kernel"``): :func:`evaluate` gives the info arrays, rewards and terminations of a
-batch of states, :func:`observe` its observations. Each loops over copies and followers once, so a
-step costs a few microseconds at one copy and no temporaries at thousands. They compute the
-reference's formulas (neighbourhood errors by neighbour gathers, separations from the position
-differences, the observation of the ``sparse`` path), so both agree to rounding
-(``tests/test_platoon_kernel.py``). Importing this module imports numba (``ImportError`` without
-it); compiled code is cached next to the module.
+or ``"sparse"``, the reference) or, when numba is installed, with :func:`evaluate`
+(``method="kernel"``): the info arrays, rewards, terminations and observations of a batch of
+states in one loop over copies and followers, so a step costs a few microseconds at one copy and
+no temporaries at thousands. It computes the reference's formulas (neighbourhood errors by
+neighbour gathers, separations from the position differences, the observation of the
+``sparse`` path), so both agree to rounding (``tests/test_platoon_kernel.py``). Importing this
+module imports numba (``ImportError`` without it); compiled code is cached next to the module.
 """
 
 from __future__ import annotations
@@ -16,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["evaluate", "observe"]
+__all__ = ["evaluate"]
 
 _jit = numba.njit(cache=True, nogil=True)
 
@@ -32,34 +31,11 @@ def _errors(x, b, f, gains, nbr, nbr_mask, out):
 
 
 @_jit
-def _observe_agent(x, b, f, e, xs, t, offset, slot_src, scale, max_steps, obs):
-    """Observation row of follower ``f`` of copy ``b`` from its error ``e`` and the copy's scaled
-    states ``xs`` (N, 6) (each division once, as the sparse path)."""
-    for c in range(6):
-        obs[b, f, c] = e[c] / scale[c] + offset[f, c]
-        obs[b, f, 6 + c] = xs[f, c]
-    obs[b, f, 12] = offset[f, 12]
-    obs[b, f, 13] = offset[f, 13]
-    obs[b, f, 14] = offset[f, 14] - t[b] / max_steps
-    for s in range(slot_src.shape[1]):
-        j, k = slot_src[f, s], 15 + 7 * s
-        m = offset[f, k]
-        obs[b, f, k] = m
-        for c in range(6):
-            obs[b, f, k + 1 + c] = (xs[j, c] - xs[f, c]) * m
-
-
-@_jit
-def _scaled(x, b, scale, xs):
-    for j in range(x.shape[1]):
-        for c in range(6):
-            xs[j, c] = x[b, j, c] / scale[c]
-
-
-@_jit
 def evaluate(x, accel, table, nbr, params, out, t, offset, slot_src, obs):
     """Info arrays, rewards and terminations of states ``x`` (B, N, 6) under ``accel`` (B, N, 3),
-    and their observations at steps ``t`` (B,) when ``obs`` is not empty (as :func:`observe`).
+    and, unless ``obs`` is empty, their observations at steps ``t`` (B,) into ``obs`` (B, N,
+    obs_dim) float32: ``offset`` (N, obs_dim) is their state-independent part (slot masks
+    included), ``slot_src`` (N, S) the follower each slot shows.
 
     ``table`` (N, 9 + K) holds each follower's ``[gain g_f + d_f, velocity bound, reward gain,
     E* (6), mask of its K neighbour slots nbr (N, K)]``; ``params`` = ``[Q (6), W (3), leader
@@ -80,12 +56,25 @@ def evaluate(x, accel, table, nbr, params, out, t, offset, slot_src, obs):
     xs = np.empty((n, 6))
     for b in range(nb):
         terminated[b] = False
-        if observing:
-            _scaled(x, b, scale, xs)
+        if observing:   # the copy's states / scale (each division once, as the sparse path)
+            for j in range(n):
+                for c in range(6):
+                    xs[j, c] = x[b, j, c] / scale[c]
         for f in range(n):
             _errors(x, b, f, gains, nbr, nbr_mask, e)
-            if observing:
-                _observe_agent(x, b, f, e, xs, t, offset, slot_src, scale, max_steps, obs)
+            if observing:   # written out here: a helper call per follower costs 4x (measured)
+                for c in range(6):
+                    obs[b, f, c] = e[c] / scale[c] + offset[f, c]
+                    obs[b, f, 6 + c] = xs[f, c]
+                obs[b, f, 12] = offset[f, 12]
+                obs[b, f, 13] = offset[f, 13]
+                obs[b, f, 14] = offset[f, 14] - t[b] / max_steps
+                for s in range(slot_src.shape[1]):
+                    j, k = slot_src[f, s], 15 + 7 * s
+                    m = offset[f, k]
+                    obs[b, f, k] = m
+                    for c in range(6):
+                        obs[b, f, k + 1 + c] = (xs[j, c] - xs[f, c]) * m
             stage = 0.0
             for c in range(6):
                 err_raw[b, f, c] = e[c]
@@ -114,19 +103,3 @@ def evaluate(x, accel, table, nbr, params, out, t, offset, slot_src, obs):
             rewards[b, f] = stage * table[f, 2] - pen_c * hit_f - pen_v * bad_f
             if lead > max_dist or (stop_on_contact and hit):
                 terminated[b] = True
-
-
-@_jit
-def observe(x, t, table, nbr, offset, slot_src, params, obs):
-    """Observations of states ``x`` (B, N, 6) at steps ``t`` (B,) into ``obs`` (B, N, obs_dim)
-    float32; ``offset`` (N, obs_dim) is their state-independent part (slot masks included),
-    ``slot_src`` (N, S) the follower each slot shows; ``table``, ``params`` as in :func:`evaluate`."""
-    gains, nbr_mask, scale, max_steps = table[:, 0], table[:, 9:], params[16:22], params[22]
-    n = x.shape[1]
-    e = np.empty(6)
-    xs = np.empty((n, 6))
-    for b in range(x.shape[0]):
-        _scaled(x, b, scale, xs)
-        for f in range(n):
-            _errors(x, b, f, gains, nbr, nbr_mask, e)
-            _observe_agent(x, b, f, e, xs, t, offset, slot_src, scale, max_steps, obs)
