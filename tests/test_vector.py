@@ -136,7 +136,8 @@ def test_one_batched_core_step_per_step(monkeypatch):
     vec = satenv.make_vec("platoon_v0", 8, seed=0)
     vec.reset()
     calls = []
-    original = vec.core.step
-    monkeypatch.setattr(vec.core, "step", lambda accel, rng=None: calls.append(accel.shape) or original(accel, rng))
+    original = vec.core.step_observe   # the step and its observations: one batched call
+    monkeypatch.setattr(vec.core, "step_observe",
+                        lambda accel, rng=None: calls.append(accel.shape) or original(accel, rng))
     vec.step(np.zeros(vec.action_shape))
     assert calls == [(8, 4, 3)]
