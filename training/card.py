@@ -18,7 +18,7 @@ from typing import Any
 
 from training import POLICIES_DIR
 
-__all__ = ["card", "targets", "shipped_table", "folder_table"]
+__all__ = ["card", "targets", "shipped_table", "folder_table", "readme"]
 
 RATIO_LIMIT = 1.5
 """RMSE and delta-v of a learned policy may be at most this multiple of its baseline's."""
@@ -91,6 +91,29 @@ def folder_table(folder: Path) -> str:
     ev = json.loads((folder / "eval.json").read_text())
     met = targets(card(folder))
     return ev.get("table", "") + "\n\ntargets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in met.items())
+
+
+def readme(folder: Path, *, title: str, about: str, command: str, notes: str = "") -> str:
+    """A policy folder's README: what it is, how to load and retrain it, its learning curve and
+    evaluation table (from ``eval.json``) and which targets it meets."""
+    meta = json.loads((folder / "env.json").read_text())
+    c = card(folder)
+    kwargs = ", ".join(f"{k}={v!r}" for k, v in meta["eval_env_kwargs"].items())
+    parts = [
+        f"# {folder.name} — {title}\n", about.strip() + "\n",
+        "```python\nimport satenv, training\nfrom satenv.rollout import rollout\n"
+        f"env = satenv.make({meta['env_id']!r}, {kwargs})\n"
+        f"policy = training.load(training.POLICIES_DIR / {folder.name!r}, env=env)\n"
+        f"traj = rollout(env, policy, seed={json.loads((folder / 'eval.json').read_text())['test_seeds'][0]})\n```\n",
+        f"**Retrain** (one command, {c['source']}; `config.json` holds every setting):\n\n```bash\n{command}\n```\n",
+    ]
+    if (folder / "learning_curve.png").is_file():
+        parts.append("**Learning curve** (evaluation seeds, not the held-out ones):\n\n![learning curve](learning_curve.png)\n")
+    parts.append(f"**Evaluation** (`eval.json`: {c['episodes']} held-out seeds, never used for training or "
+                 f"selection; ratios against `{c['baseline']}` on the same seeds):\n\n{folder_table(folder)}\n")
+    if notes:
+        parts.append(notes.strip() + "\n")
+    return "\n".join(parts)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -86,28 +86,32 @@ def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
 
 def compare(results: dict[str, dict[str, Any]], learned: str = "learned",
             reference: str = "dmpc") -> dict[str, Any]:
-    """Ratios learned/reference of mean RMSE and mean delta-v on the same seeds.
+    """Ratios learned/reference of mean RMSE and mean delta-v on the seeds both were evaluated on.
 
-    ``all``: over every seed; ``reference_ok``: over the seeds where the reference episode ran
-    to truncation without a collision (a terminated reference episode has a shorter window).
+    ``all``: over every common seed; ``reference_ok``: over the common seeds where the reference
+    episode ran to truncation without a collision (a terminated reference episode has a shorter
+    window). A reference evaluated on a subset of the learned policy's seeds (an expensive
+    controller) is compared on that subset (``seeds`` says how many).
     """
     if learned not in results or reference not in results:
         return {}
-    le, re = results[learned]["episodes"], results[reference]["episodes"]
-    if [e["seed"] for e in le] != [e["seed"] for e in re]:
-        raise ValueError("compare() needs both policies evaluated on the same seeds in the same order")
+    by_seed = {e["seed"]: e for e in results[learned]["episodes"]}
+    pairs = [(by_seed[e["seed"]], e) for e in results[reference]["episodes"] if e["seed"] in by_seed]
+    if not pairs:
+        raise ValueError(f"compare() needs {learned!r} and {reference!r} evaluated on common seeds")
     out: dict[str, Any] = {"reference": reference}
-    ok = [i for i, e in enumerate(re) if e["collisions"] == 0 and not e["terminated"]]
-    for label, idx in (("all", list(range(len(le)))), ("reference_ok", ok)):
-        if not idx:
+    ok = [(le, re) for le, re in pairs if re["collisions"] == 0 and not re["terminated"]]
+    for label, sel in (("all", pairs), ("reference_ok", ok)):
+        if not sel:
             out[label] = {"seeds": 0}
             continue
+        le, re = [p[0] for p in sel], [p[1] for p in sel]
         out[label] = {
-            "seeds": len(idx),
-            "rmse_ratio": float(np.mean([le[i]["rmse"] for i in idx]) / np.mean([re[i]["rmse"] for i in idx])),
-            "delta_v_ratio": float(np.mean([le[i]["delta_v"] for i in idx]) / np.mean([re[i]["delta_v"] for i in idx])),
-            "learned_success_rate": float(np.mean([le[i]["success"] for i in idx])),
-            "reference_success_rate": float(np.mean([re[i]["success"] for i in idx])),
+            "seeds": len(sel),
+            "rmse_ratio": float(np.mean([e["rmse"] for e in le]) / np.mean([e["rmse"] for e in re])),
+            "delta_v_ratio": float(np.mean([e["delta_v"] for e in le]) / np.mean([e["delta_v"] for e in re])),
+            "learned_success_rate": float(np.mean([e["success"] for e in le])),
+            "reference_success_rate": float(np.mean([e["success"] for e in re])),
         }
     return out
 

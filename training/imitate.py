@@ -58,7 +58,9 @@ class ImitationConfig:
         warm-started from the previous round's network; clip_obs: observation normaliser clip
         (mean and variance from round 0's data).
     eval_seeds: seeds of the per-round evaluation (the learning curve); test_seeds: held-out
-        seeds of the final ``eval.json``; eval_baselines: scripted baselines evaluated there.
+        seeds of the final ``eval.json``; eval_baselines: scripted baselines evaluated there
+        besides the expert; baseline_seeds: how many of the test seeds (the first ones) the
+        expert and baselines run on (0: all; for an expert of minutes per episode).
     """
 
     env_id: str = "platoon_v0"
@@ -82,6 +84,7 @@ class ImitationConfig:
     eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_005))
     test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
     eval_baselines: tuple[str, ...] = ("zero",)
+    baseline_seeds: int = 0
     out_dir: str = "runs/imitate"
     torch_threads: int = 1
     progress: bool = True
@@ -97,7 +100,7 @@ class ImitationConfig:
             raise ValueError(f"expert must be a baseline name such as 'dmpc', got {self.expert!r}")
         for name in ("rounds", "episodes_per_round", "epochs", "batch_size", "torch_threads"):
             check_int(name, getattr(self, name), minimum=1)
-        for name in ("train_seed", "seed"):
+        for name in ("train_seed", "seed", "baseline_seeds"):
             check_int(name, getattr(self, name), minimum=0)
         s(self, "net_arch", check_net_arch(self.net_arch))
         for name in ("eval_seeds", "test_seeds"):
@@ -227,7 +230,8 @@ def imitate(cfg: ImitationConfig, resume: bool = False) -> Path:
     bar.close()
 
     policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), meta=meta)
-    test_baselines = cached_baselines(out / "baselines_test.json", eval_env, names, cfg.test_seeds, key)
+    base_seeds = cfg.test_seeds[:cfg.baseline_seeds] if cfg.baseline_seeds else cfg.test_seeds
+    test_baselines = cached_baselines(out / "baselines_test.json", eval_env, names, base_seeds, key)
     summary = test_summary(eval_env, policy, test_baselines, cfg.test_seeds, reference=cfg.expert,
                            labels=int(sum(len(x) for x in data["x"])), rounds=cfg.rounds,
                            train_wall_s_this_session=round(time.perf_counter() - t0, 1))
