@@ -105,7 +105,7 @@ def readme(folder: Path, *, title: str, about: str, command: str, notes: str = "
         f"env = satenv.make({meta['env_id']!r}, {kwargs})\n"
         f"policy = training.load(training.POLICIES_DIR / {folder.name!r}, env=env)\n"
         f"traj = rollout(env, policy, seed={json.loads((folder / 'eval.json').read_text())['test_seeds'][0]})\n```\n",
-        f"**Retrain** (one command, {c['source']}; `config.json` holds every setting):\n\n```bash\n{command}\n```\n",
+        f"**Retrain** ({c['source']}; `config.json` holds every setting):\n\n```bash\n{command}\n```\n",
     ]
     if (folder / "learning_curve.png").is_file():
         parts.append("**Learning curve** (evaluation seeds, not the held-out ones):\n\n![learning curve](learning_curve.png)\n")
