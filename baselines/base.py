@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import tempfile
 from collections.abc import Callable
 from dataclasses import fields
 from typing import Any, Protocol, TypeVar, runtime_checkable
@@ -184,7 +186,8 @@ def validate(cfg: Any, owner: str, rules: dict[str, Callable[[str, str, Any], An
 # ---------------------------------------------------------------------------------------------
 # compiled NLP solvers, built once per process
 # ---------------------------------------------------------------------------------------------
-JIT_OPTIONS: dict[str, Any] = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"]}}
+JIT_OPTIONS: dict[str, Any] = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
+                               "jit_options": {"flags": ["-O1"], "directory": tempfile.gettempdir() + os.sep}}
 """CasADi options that compile the NLP's functions (objective, constraints, their derivatives)
 to C with gcc once; the solver's algorithm and its answers are those of the uncompiled build."""
 _NLPSOL_CACHE: dict[tuple, Any] = {}

@@ -67,8 +67,9 @@ the exact worst case is ``sup ||ε|| = w̄ / (1 + k1)`` — the closed loop
 ``ε'' + (k1 + k2) ε' + (1 + k1) ε = w`` has a non-negative impulse response — which exceeds
 (15) for ``eta < (k1 / (1 + k1)^2) = 0.22``; ``benchmarks/repro_li2022.py`` measures it).
 
-Solver: CasADi + ipopt (MUMPS), one NLP built once per controller (the structure is the same for
-every satellite) and warm-started per satellite from its shifted previous solution.
+Solver: CasADi + ipopt (MUMPS), one NLP built once per process and config (the structure is the
+same for every satellite; :func:`baselines.base.nlpsol_cached`) and warm-started per satellite
+from its shifted previous solution; ``solver="ipopt-jit"`` compiles its functions with gcc.
 """
 
 from __future__ import annotations
@@ -128,9 +129,9 @@ class TubeRDMPCConfig:
         relax_on_failure: solve the relaxed NLP when the exact one fails.
         tube: run the tube controller κ (False: nominal DMPC applied open loop to the truth).
         max_iter, tol: ipopt iteration limit and tolerance.
-        solver: ``"ipopt-jit"`` (default: ipopt on gcc-compiled problem functions, built once per
-            process) or ``"ipopt"`` (the same NLP and ipopt options, functions interpreted: the
-            reference the compiled build is tested against).
+        solver: ``"ipopt"`` (default, the reference) or ``"ipopt-jit"``: the same NLP and ipopt
+            options on gcc-compiled problem functions (the same iterates to round-off), compiled
+            once per process and config (about 20-50 s of gcc on 2 cores).
     """
 
     horizon: float = 50.0
@@ -152,7 +153,7 @@ class TubeRDMPCConfig:
     tube: bool = True
     max_iter: int = 150
     tol: float = 1e-6
-    solver: str = "ipopt-jit"
+    solver: str = "ipopt"
 
     def __post_init__(self) -> None:
         zero_ok = ("beta", "gamma", "model_error_bound", "lyapunov_tolerance", "safety_margin")
