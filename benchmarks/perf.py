@@ -358,9 +358,9 @@ def _record(scen_name: str, make: Callable, hook: str, decisions: int) -> tuple[
     owner = ref if not owner_path else getattr(ref, owner_path)
     inner, calls = getattr(owner, name), []
 
-    def recording(*args):
-        calls.append(args)
-        return inner(*args)
+    def recording(*args, **kwargs):
+        calls.append((*args, *kwargs.values()))
+        return inner(*args, **kwargs)
 
     setattr(owner, name, recording)
     obs, _ = env.reset(seed=0)
@@ -373,7 +373,7 @@ def _record(scen_name: str, make: Callable, hook: str, decisions: int) -> tuple[
     return ref, calls
 
 
-def fast_vs_ipopt(decisions_scale: float = 1.0) -> dict:
+def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None = None) -> dict:
     """ms per agent decision of ``solver="ipopt-jit"`` and of the ipopt reference on the same
     recorded decision problems (tube-RDMPC li2022 case 1, N = 10; NMPC pereira2022 §5.2, N = 30),
     medians, the compile time and the largest first-control gap."""
@@ -383,6 +383,8 @@ def fast_vs_ipopt(decisions_scale: float = 1.0) -> dict:
     out: dict[str, Any] = {}
     for key, cls, hook, decisions in (("tube_rdmpc@cluster-case1", TubeRDMPC, "nlp.solve", 3),
                                       ("nmpc@servicing-pereira2022", NMPC, "_run_nlp", 10)):
+        if policies is not None and key.split("@")[0] not in policies:
+            continue
         ref, calls = _record(key.split("@")[1], lambda env, c=cls: c(env, solver="ipopt"), hook,
                              max(1, int(decisions * decisions_scale)))
         start = time.perf_counter()
@@ -754,7 +756,7 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
                                    f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
         if solvers is None or {"tube_rdmpc", "nmpc"} & set(solvers):
-            result["solvers"]["fast_vs_ipopt"] = fast_vs_ipopt(solver_scale)
+            result["solvers"]["fast_vs_ipopt"] = fast_vs_ipopt(solver_scale, solvers)
             for k, v in result["solvers"]["fast_vs_ipopt"].items():
                 log(f"fast solver {k}: {v['fast_ms_per_agent_decision_median']:.3g} ms/agent decision, "
                     f"ipopt {v['ipopt_ms_per_agent_decision_median']:.3g} ms on the same {v['problems']} "
