@@ -18,7 +18,8 @@ Agent-steps per second (one agent advanced by one decision step) of
               ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too,
               and ``fast_vs_ipopt``: the compiled ``solver="ipopt-jit"`` of tube-RDMPC and NMPC
               against the ipopt reference on the same recorded decision problems (ms per agent
-              decision, medians, issue 17's targets 5 ms / 10 ms; includes one gcc compile each);
+              decision, medians, issue 17's targets 5 ms / 10 ms; includes one gcc compile each:
+              about 1 min for the tube NLP, about 10 min for the N = 30 NMPC on 2 busy cores);
 * ``guard``   the finiteness guard's cost: the check alone on one step's arrays as a share of the
               ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
               on and off) and of the ``satenv.make_vec`` step at each batch size.
