@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import tempfile
 from collections.abc import Callable
 from dataclasses import fields
 from typing import Any, Protocol, TypeVar, runtime_checkable
@@ -26,7 +28,7 @@ from satenv.dynamics._checks import show
 
 __all__ = [
     "Baseline", "BaselineError", "BaselineTypeError", "Policy", "RandomPolicy", "ZeroPolicy", "check_env",
-    "config_from_options", "flag", "choice", "guarded_solve", "is_satenv_env", "new_info",
+    "config_from_options", "flag", "choice", "guarded_solve", "is_satenv_env", "new_info", "nlpsol_cached",
     "number", "integer", "record_fallback", "row_violation", "weights",
 ]
 
@@ -179,6 +181,28 @@ def validate(cfg: Any, owner: str, rules: dict[str, Callable[[str, str, Any], An
     """Apply ``rules[field](owner, field, value)`` to a frozen config and store the cleaned values."""
     for name, rule in rules.items():
         object.__setattr__(cfg, name, rule(owner, name, getattr(cfg, name)))
+
+
+# ---------------------------------------------------------------------------------------------
+# compiled NLP solvers, built once per process
+# ---------------------------------------------------------------------------------------------
+JIT_OPTIONS: dict[str, Any] = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
+                               "jit_options": {"flags": ["-O1"], "directory": tempfile.gettempdir() + os.sep}}
+"""CasADi options that compile the NLP's functions (objective, constraints, their derivatives)
+to C with gcc once; the solver's algorithm and its answers are those of the uncompiled build."""
+_NLPSOL_CACHE: dict[tuple, Any] = {}
+
+
+def nlpsol_cached(key: tuple, build: Callable[[], Any]) -> Any:
+    """``build()`` (a CasADi ``nlpsol`` and its row data) once per process for ``key``.
+
+    ``key`` must name everything the build depends on (the config fields and scenario numbers
+    that enter the problem), so every episode, env and controller with the same problem reuses
+    one compiled solver and no episode pays the compile cost again.
+    """
+    if key not in _NLPSOL_CACHE:
+        _NLPSOL_CACHE[key] = build()
+    return _NLPSOL_CACHE[key]
 
 
 # ---------------------------------------------------------------------------------------------

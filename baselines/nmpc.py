@@ -55,6 +55,7 @@ keep-out sphere and drift into it), and is counted in ``info["fallbacks"]``. ``i
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import Counter
 from dataclasses import dataclass
@@ -64,6 +65,7 @@ from typing import Any
 import numpy as np
 
 from baselines.base import (
+    JIT_OPTIONS,
     MAX_HORIZON,
     Baseline,
     BaselineError,
@@ -74,6 +76,7 @@ from baselines.base import (
     guarded_solve,
     integer,
     new_info,
+    nlpsol_cached,
     number,
     record_fallback,
     row_violation,
@@ -85,7 +88,7 @@ from satenv.envs.servicing_v0 import unpack_global_state
 
 __all__ = ["NMPC", "NMPCConfig", "attitude_reference_sym", "build_model", "quaternion_cost_terms"]
 
-_SOLVERS = ("ipopt", "fatrop")
+_SOLVERS = ("ipopt", "ipopt-jit", "fatrop")
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level", "success"}
 
 
@@ -233,7 +236,9 @@ class NMPCConfig:
 
     Args:
         horizon: N, prediction steps (<= 200; was the servicing scenario's ``horizon``).
-        solver: ``"ipopt"`` or ``"fatrop"``; max_iter, tol: its iteration limit and tolerance.
+        solver: ``"ipopt"``, ``"ipopt-jit"`` (ipopt on gcc-compiled problem functions: the same
+            iterates to round-off; compiled once per process) or ``"fatrop"``; max_iter, tol: its
+            iteration limit and tolerance.
         order: ``"sequential"`` (Gauss-Seidel) or ``"jacobi"``.
         initial_guess: ``"arc"`` or ``"hold"`` (module docstring); preview: the waypoint schedule
             over the horizon instead of the current waypoint.
@@ -399,7 +404,7 @@ class NMPC(Baseline):
                 ubx.append(self.u_max)
         params = ca.vertcat(x_init, ca.vec(p_d), ca.vec(others))
         nlp = {"x": ca.vertcat(*w_vars), "f": cost, "g": ca.vertcat(*g), "p": params}
-        if self.solver == "ipopt":
+        if self.solver.startswith("ipopt"):
             opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                     "ipopt.max_iter": int(max_iter), "ipopt.tol": float(tol),
                     "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3,
@@ -410,8 +415,12 @@ class NMPC(Baseline):
                     "fatrop.mu_init": 1e-3}
         if self.solver == "fatrop":
             opts["equality"] = [bool(lo == hi) for lo, hi in zip(lbg, ubg, strict=True)]
+        if self.solver == "ipopt-jit":
+            opts.update(JIT_OPTIONS)
         opts.update(extra)
-        self._nlp = ca.nlpsol("servicing_nmpc", self.solver, nlp, opts)
+        key = ("nmpc", repr(sc), repr(dataclasses.replace(self.cfg, seed=None)), m)
+        self._nlp = nlpsol_cached(key, lambda: ca.nlpsol("servicing_nmpc", self.solver.removesuffix("-jit"),
+                                                         nlp, opts))
         self._lbx = np.concatenate(lbx)
         self._ubx = np.concatenate(ubx)
         self._lbg = np.asarray(lbg, dtype=float)

@@ -67,8 +67,9 @@ the exact worst case is ``sup ||ε|| = w̄ / (1 + k1)`` — the closed loop
 ``ε'' + (k1 + k2) ε' + (1 + k1) ε = w`` has a non-negative impulse response — which exceeds
 (15) for ``eta < (k1 / (1 + k1)^2) = 0.22``; ``benchmarks/repro_li2022.py`` measures it).
 
-Solver: CasADi + ipopt (MUMPS), one NLP built once per controller (the structure is the same for
-every satellite) and warm-started per satellite from its shifted previous solution.
+Solver: CasADi + ipopt (MUMPS), one NLP built once per process and config (the structure is the
+same for every satellite; :func:`baselines.base.nlpsol_cached`) and warm-started per satellite
+from its shifted previous solution; ``solver="ipopt-jit"`` compiles its functions with gcc.
 """
 
 from __future__ import annotations
@@ -82,15 +83,18 @@ from typing import Any
 import numpy as np
 
 from baselines.base import (
+    JIT_OPTIONS,
     MAX_HORIZON,
     Baseline,
     BaselineError,
     check_env,
+    choice,
     config_from_options,
     flag,
     guarded_solve,
     integer,
     new_info,
+    nlpsol_cached,
     number,
     record_fallback,
     row_violation,
@@ -105,6 +109,7 @@ _FAR = 1.0e5  # [m] position of an unused neighbour slot (its constraints are in
 _SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed problem only)
 _TERMINAL_SLACK_WEIGHT = 1.0e8  # L1 weight of the terminal / speed slack (relaxed problem only)
 NLP_CONSTRAINT_TOL = 1e-2       # largest accepted row violation (ipopt's acceptable_constr_viol_tol)
+SOLVERS = ("ipopt-jit", "ipopt")
 
 
 @dataclass(frozen=True)
@@ -124,6 +129,9 @@ class TubeRDMPCConfig:
         relax_on_failure: solve the relaxed NLP when the exact one fails.
         tube: run the tube controller κ (False: nominal DMPC applied open loop to the truth).
         max_iter, tol: ipopt iteration limit and tolerance.
+        solver: ``"ipopt"`` (default, the reference) or ``"ipopt-jit"``: the same NLP and ipopt
+            options on gcc-compiled problem functions (the same iterates to round-off), compiled
+            once per process and config (about 20-50 s of gcc on 2 cores).
     """
 
     horizon: float = 50.0
@@ -145,6 +153,7 @@ class TubeRDMPCConfig:
     tube: bool = True
     max_iter: int = 150
     tol: float = 1e-6
+    solver: str = "ipopt"
 
     def __post_init__(self) -> None:
         zero_ok = ("beta", "gamma", "model_error_bound", "lyapunov_tolerance", "safety_margin")
@@ -152,6 +161,8 @@ class TubeRDMPCConfig:
         for f in fields(self):
             if f.name in ("terminal_braking", "relax_on_failure", "tube"):
                 rules[f.name] = flag
+            elif f.name == "solver":
+                rules[f.name] = partial(choice, choices=SOLVERS)
             elif f.name != "v_max" or self.v_max is not None:
                 rules[f.name] = partial(number, zero_ok=f.name in zero_ok)
         rules["max_iter"] = integer
@@ -238,13 +249,24 @@ class _NominalNLP:
 
     def __init__(self, cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int,
                  u_nom: float, mass: float, r_pair: float, r_obs: float, r_tgt: float) -> None:
-        import casadi as ca
-
         self.N, self.K = horizon, k_slots
         self.u_nom = u_nom
         a, b = cw_matrices(n, dt)
+        self.cal_a, self.cal_b = prediction_matrices(a, b, horizon)
+        args = (cfg, n, dt, horizon, k_slots, u_nom, mass, r_pair, r_obs, r_tgt)
+        self.solver, self.lbg, self.ubg = nlpsol_cached(("tube_rdmpc", *args), lambda: self._build(*args))
+        self.n_w = 5 * horizon + 1
+        self.sigma = cfg.sigma
+
+    @staticmethod
+    def _build(cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int, u_nom: float,
+               mass: float, r_pair: float, r_obs: float, r_tgt: float) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The CasADi solver (ipopt; its functions compiled for ``solver="ipopt-jit"``) and the
+        row bounds ``(lbg, ubg)``."""
+        import casadi as ca
+
+        a, b = cw_matrices(n, dt)
         cal_a, cal_b = prediction_matrices(a, b, horizon)
-        self.cal_a, self.cal_b = cal_a, cal_b
         N, K = horizon, k_slots
         v = ca.SX.sym("v", 3 * N)
         lam = ca.SX.sym("lam", N)
@@ -340,12 +362,10 @@ class _NominalNLP:
             "ipopt.acceptable_tol": 1e-4,
             "ipopt.acceptable_iter": 5,
             "ipopt.mu_strategy": "adaptive",
+            **(JIT_OPTIONS if cfg.solver == "ipopt-jit" else {}),
         }
-        self.solver = ca.nlpsol("tube_rdmpc", "ipopt", nlp, opts)
-        self.lbg = np.array(lbg, dtype=float)
-        self.ubg = np.array(ubg, dtype=float)
-        self.n_w = 5 * N + 1
-        self.sigma = cfg.sigma
+        return (ca.nlpsol("tube_rdmpc", "ipopt", nlp, opts), np.array(lbg, dtype=float),
+                np.array(ubg, dtype=float))
 
     def bounds(self, relaxed: bool) -> tuple[np.ndarray, np.ndarray]:
         N = self.N

@@ -15,7 +15,11 @@ Agent-steps per second (one agent advanced by one decision step) of
               sizes, ``env.step`` (skipped with a note when ``vmas`` is not installed);
 * ``limit``   the machine's limit: a numpy copy of the same state + action (+ chief) bytes;
 * ``solvers`` per-decision solve times of the scripted MPC baselines (DMPC on
-              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too;
+              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too,
+              and ``fast_vs_ipopt``: the compiled ``solver="ipopt-jit"`` of tube-RDMPC and NMPC
+              against the ipopt reference on the same recorded decision problems (ms per agent
+              decision, medians, issue 17's targets 5 ms / 10 ms; includes one gcc compile each:
+              about 1 min for the tube NLP, about 10 min for the N = 30 NMPC on 2 busy cores);
 * ``guard``   the finiteness guard's cost: the check alone on one step's arrays as a share of the
               ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
               on and off) and of the ``satenv.make_vec`` step at each batch size.
@@ -340,6 +344,79 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
     return out
 
 
+FAST_SOLVER_TARGETS_MS = {"tube_rdmpc@cluster-case1": 5.0, "nmpc@servicing-pereira2022": 10.0}
+"""Issue 17's targets: ms per agent decision of the fast solver path."""
+
+
+def _record(scen_name: str, make: Callable, hook: str, decisions: int) -> tuple[Any, list[tuple]]:
+    """Run ``make(env)`` (the ipopt reference) for ``decisions`` and record the arguments of every
+    call of its solve method ``hook`` (``"nlp.solve"`` or ``"_run_nlp"``)."""
+    from benchmarks.scoreboard.registry import SCENARIOS
+
+    env = SCENARIOS[scen_name].make()
+    ref = make(env)
+    owner_path, name = hook.rsplit(".", 1) if "." in hook else ("", hook)
+    owner = ref if not owner_path else getattr(ref, owner_path)
+    inner, calls = getattr(owner, name), []
+
+    def recording(*args, **kwargs):
+        calls.append((*args, *kwargs.values()))
+        return inner(*args, **kwargs)
+
+    setattr(owner, name, recording)
+    obs, _ = env.reset(seed=0)
+    ref.reset(seed=0)
+    for _ in range(decisions):
+        obs, *_ = env.step(ref.act(obs))
+        if not env.agents:
+            break
+    setattr(owner, name, inner)
+    return ref, calls
+
+
+def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None = None) -> dict:
+    """ms per agent decision of ``solver="ipopt-jit"`` and of the ipopt reference on the same
+    recorded decision problems (tube-RDMPC li2022 case 1, N = 10; NMPC pereira2022 §5.2, N = 30),
+    medians, the compile time and the largest first-control gap."""
+    from baselines.nmpc import NMPC
+    from baselines.tube_rdmpc import TubeRDMPC
+
+    out: dict[str, Any] = {}
+    for key, cls, hook, decisions in (("tube_rdmpc@cluster-case1", TubeRDMPC, "nlp.solve", 3),
+                                      ("nmpc@servicing-pereira2022", NMPC, "_run_nlp", 10)):
+        if policies is not None and key.split("@")[0] not in policies:
+            continue
+        ref, calls = _record(key.split("@")[1], lambda env, c=cls: c(env, solver="ipopt"), hook,
+                             max(1, int(decisions * decisions_scale)))
+        start = time.perf_counter()
+        fast = cls(ref.env, solver="ipopt-jit")
+        compile_s = time.perf_counter() - start
+        times: dict[str, list[float]] = {"ipopt": [], "fast": []}
+        gap = 0.0
+        for args in calls:
+            first = []
+            for label, pol in (("ipopt", ref), ("fast", fast)):
+                if cls is TubeRDMPC:
+                    t0 = time.perf_counter()
+                    w = pol.nlp.solve({}, *args[1:])
+                    times[label].append(time.perf_counter() - t0)
+                    first.append(None if w is None else w[:3] * pol.u_nom)
+                else:
+                    res: dict[str, Any] = {}
+                    t0 = time.perf_counter()
+                    w, _, _ = pol._run_nlp(args[0], res)
+                    times[label].append(time.perf_counter() - t0)
+                    first.append(w[pol._u_idx[0]])
+            if first[0] is not None and first[1] is not None:
+                gap = max(gap, float(np.abs(first[0] - first[1]).max()))
+        ipopt_ms, fast_ms = (float(np.median(times[k]) * 1e3) for k in ("ipopt", "fast"))
+        out[key] = {"problems": len(calls), "ipopt_ms_per_agent_decision_median": ipopt_ms,
+                    "fast_ms_per_agent_decision_median": fast_ms, "speedup": ipopt_ms / fast_ms,
+                    "fast_solver": "ipopt-jit", "compile_s": compile_s,
+                    "max_first_control_diff": gap, "target_ms": FAST_SOLVER_TARGETS_MS[key]}
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # C/GMRES against ipopt on the same problem (kannan2022).
 # ----------------------------------------------------------------------------------------------
@@ -604,6 +681,10 @@ def _ratios(result: dict) -> tuple[dict, list[dict]]:
                     ratios[f"{kind}_{model}_vs_vmas_by_batch"] = by_batch
                     goal = CORE_VS_VMAS if (kind, model) == ("core", "cw") else 1.0
                     target(f"(d) {kind} {model} / VMAS navigation, worst batch", min(by_batch.values()), goal)
+    for key, row in ((result.get("solvers") or {}).get("fast_vs_ipopt") or {}).items():
+        ratios[f"{key}_fast_vs_ipopt_speedup"] = row["speedup"]
+        target(f"(e) {key} fast solver ms per agent decision", row["fast_ms_per_agent_decision_median"],
+               row["target_ms"], op="<=")
     if "scaling" in result:
         from benchmarks.scaling import scaling_targets
 
@@ -675,6 +756,12 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
         for k, v in result["solvers"].items():
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
                                    f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
+        if solvers is None or {"tube_rdmpc", "nmpc"} & set(solvers):
+            result["solvers"]["fast_vs_ipopt"] = fast_vs_ipopt(solver_scale, solvers)
+            for k, v in result["solvers"]["fast_vs_ipopt"].items():
+                log(f"fast solver {k}: {v['fast_ms_per_agent_decision_median']:.3g} ms/agent decision, "
+                    f"ipopt {v['ipopt_ms_per_agent_decision_median']:.3g} ms on the same {v['problems']} "
+                    f"problems (compile {v['compile_s']:.0f} s)")
     if "guard" in sections:
         result["guard"] = guard_cost(api_time, batches, log)
     _extra_sections(result, sections, solver_scale, log)

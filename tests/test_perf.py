@@ -80,3 +80,15 @@ def test_perf_scaling_section_smoke(tmp_path, monkeypatch):
     assert any("(cluster, cw)" in n for n in names) and any("(platoon, cw)" in n for n in names)
     png = tmp_path / "perf_scaling.png"
     assert data["plot"] == str(png) and png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_fast_solver_targets_are_flagged_against_issue_17():
+    from benchmarks.perf import FAST_SOLVER_TARGETS_MS, _ratios
+
+    rows = {key: {"fast_ms_per_agent_decision_median": goal * factor, "speedup": 2.0, "target_ms": goal}
+            for (key, goal), factor in zip(FAST_SOLVER_TARGETS_MS.items(), (0.5, 3.0), strict=True)}
+    ratios, targets = _ratios({"solvers": {"fast_vs_ipopt": rows}})
+    flags = {t["name"]: (t["met"], t["op"]) for t in targets}
+    assert flags == {"(e) tube_rdmpc@cluster-case1 fast solver ms per agent decision": (True, "<="),
+                     "(e) nmpc@servicing-pereira2022 fast solver ms per agent decision": (False, "<=")}
+    assert ratios["tube_rdmpc@cluster-case1_fast_vs_ipopt_speedup"] == 2.0

@@ -1,0 +1,94 @@
+"""The compiled solvers (``solver="ipopt-jit"``) against the ipopt reference on recorded problems.
+
+Decision problems (initial state, neighbours' predictions, waypoints: the NLP parameters and the
+warm start) are recorded from the li2022 case-1 cluster under the tube-RDMPC and from the
+pereira2022 §5.2 servicing scenario under the NMPC, each solved by the interpreted ipopt build
+(the reference) and by the compiled one. Agreement: objective within 1e-6 relative, first control
+within 1e-6 (tube: of the unit-ball-scaled input; NMPC: in N, of inputs up to 3 N). The horizons are
+shortened (N = 3) so the gcc compile stays a few seconds in the default suite;
+``benchmarks.perf`` times the full horizons against the same reference.
+"""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("casadi")
+
+from baselines.nmpc import NMPC  # noqa: E402
+from baselines.tube_rdmpc import TubeRDMPC  # noqa: E402
+from satenv.envs.cluster_v0 import parallel_env as cluster_env  # noqa: E402
+from satenv.envs.servicing_v0 import parallel_env as servicing_env  # noqa: E402
+
+REL_OBJECTIVE_TOL = 1e-6
+FIRST_CONTROL_TOL = 1e-6
+
+
+def record_tube_problems(decisions: int = 2, horizon: float = 15.0) -> tuple[list[dict], dict]:
+    env = cluster_env(preset="li2022-case1", terminate_on_collision=False)
+    ref = TubeRDMPC(env, solver="ipopt", horizon=horizon)
+    problems: list[dict] = []
+    solve = ref.nlp.solve
+
+    def recording(info, params, w0, relaxed):
+        problems.append({"params": params.copy(), "w0": w0.copy(), "relaxed": relaxed})
+        return solve(info, params, w0, relaxed)
+
+    ref.nlp.solve = recording
+    obs, _ = env.reset(seed=0)
+    ref.reset(seed=0)
+    for _ in range(decisions):
+        obs, *_ = env.step(ref.act(obs))
+    return problems, {"ref": ref, "fast": TubeRDMPC(env, solver="ipopt-jit", horizon=horizon)}
+
+
+def tube_solution(pol: TubeRDMPC, problem: dict) -> tuple[float, np.ndarray, bool]:
+    nlp = pol.nlp
+    lbx, ubx = nlp.bounds(problem["relaxed"])
+    w0 = np.clip(problem["w0"], lbx, np.where(np.isfinite(ubx), ubx, problem["w0"]))
+    sol = nlp.solver(x0=w0, p=problem["params"], lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+    return float(sol["f"]), np.asarray(sol["x"]).ravel(), bool(nlp.solver.stats()["success"])
+
+
+def test_compiled_tube_rdmpc_finds_the_ipopt_optimum_on_recorded_li2022_problems():
+    problems, pols = record_tube_problems()
+    assert len(problems) >= 20
+    for problem in problems:
+        f_ref, w_ref, ok_ref = tube_solution(pols["ref"], problem)
+        f_fast, w_fast, ok_fast = tube_solution(pols["fast"], problem)
+        assert ok_fast == ok_ref
+        assert abs(f_fast - f_ref) <= REL_OBJECTIVE_TOL * max(1.0, abs(f_ref))
+        assert np.abs(w_fast[:3] - w_ref[:3]).max() <= FIRST_CONTROL_TOL
+
+
+def test_compiled_nmpc_finds_the_ipopt_optimum_on_recorded_pereira2022_problems():
+    env = servicing_env(preset="pereira2022")
+    ref, fast = NMPC(env, solver="ipopt", horizon=3), NMPC(env, solver="ipopt-jit", horizon=3)
+    problems: list[dict] = []
+    run = ref._run_nlp
+
+    def recording(args, out):
+        problems.append({k: np.array(v, dtype=float) for k, v in args.items()})
+        return run(args, out)
+
+    ref._run_nlp = recording
+    obs, _ = env.reset(seed=0)
+    ref.reset(seed=0)
+    for _ in range(6):
+        obs, *_ = env.step(ref.act(obs))
+    assert len(problems) == 12
+    u0 = ref._u_idx[0]
+    for args in problems:
+        sol_ref, sol_fast = ref._nlp(**args), fast._nlp(**args)
+        assert fast._nlp.stats()["success"] == ref._nlp.stats()["success"]
+        f_ref, f_fast = float(sol_ref["f"]), float(sol_fast["f"])
+        assert abs(f_fast - f_ref) <= REL_OBJECTIVE_TOL * max(1.0, abs(f_ref))
+        x_ref, x_fast = np.asarray(sol_ref["x"]).ravel(), np.asarray(sol_fast["x"]).ravel()
+        assert np.abs(x_fast[u0] - x_ref[u0]).max() <= FIRST_CONTROL_TOL
+
+
+def test_solver_option_is_validated():
+    env = cluster_env(preset="li2022-case1")
+    with pytest.raises(ValueError, match="solver"):
+        TubeRDMPC(env, solver="snopt")
+    with pytest.raises(ValueError, match="solver"):
+        NMPC(servicing_env(preset="pereira2022"), solver="ipopt_jit")
