@@ -15,17 +15,18 @@ Agent-steps per second (one agent advanced by one decision step) of
               sizes, ``env.step`` (skipped with a note when ``vmas`` is not installed);
 * ``limit``   the machine's limit: a numpy copy of the same state + action (+ chief) bytes;
 * ``solvers`` per-decision solve times of the scripted MPC baselines (DMPC on
-              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too,
-              and ``fast_vs_ipopt``: the compiled ``solver="ipopt-jit"`` of tube-RDMPC and NMPC
-              against the ipopt reference on the same recorded decision problems (ms per agent
-              decision, medians, issue 17's targets 5 ms / 10 ms; includes one gcc compile each:
-              about 1 min for the tube NLP, about 10 min for the N = 30 NMPC on 2 busy cores);
+              ``platoon-PLF-cw``; tube-RDMPC, NMPC, C/GMRES on their scenarios), per agent too;
 * ``guard``   the finiteness guard's cost: the check alone on one step's arrays as a share of the
               ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
               on and off) and of the ``satenv.make_vec`` step at each batch size.
 
-Four more sections run only when named in ``--sections`` (they take minutes):
+Five more sections run only when named in ``--sections`` (they take minutes):
 
+* ``fast_solvers`` (stored as ``solvers.fast_vs_ipopt``) the compiled ``solver="ipopt-jit"`` of
+              tube-RDMPC and NMPC against the ipopt reference on the same recorded decision
+              problems (ms per agent decision, medians, issue 17's targets 5 ms / 10 ms; includes
+              one gcc compile each: about 1 min for the tube NLP, about 10 min for the N = 30 NMPC
+              on 2 busy cores); ``--solvers`` selects which;
 * ``scaling`` issue 19's swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 spacecraft of
               the platoon and cluster swarms the PettingZoo step, the 64-copy batched core, its
               memory and the distributed baselines' decision per agent (DMPC; APF, tube-RDMPC up
@@ -65,7 +66,7 @@ from satenv.dynamics import R_EARTH, Orbit, RelativeModel
 AGENTS = 4
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard")
 """The default sections."""
-EXTRA_SECTIONS = ("cgmres_ipopt", "training", "learning", "scaling")
+EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -756,12 +757,12 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
         for k, v in result["solvers"].items():
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
                                    f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
-        if solvers is None or {"tube_rdmpc", "nmpc"} & set(solvers):
-            result["solvers"]["fast_vs_ipopt"] = fast_vs_ipopt(solver_scale, solvers)
-            for k, v in result["solvers"]["fast_vs_ipopt"].items():
-                log(f"fast solver {k}: {v['fast_ms_per_agent_decision_median']:.3g} ms/agent decision, "
-                    f"ipopt {v['ipopt_ms_per_agent_decision_median']:.3g} ms on the same {v['problems']} "
-                    f"problems (compile {v['compile_s']:.0f} s)")
+    if "fast_solvers" in sections and (solvers is None or {"tube_rdmpc", "nmpc"} & set(solvers)):
+        fast = result.setdefault("solvers", {})["fast_vs_ipopt"] = fast_vs_ipopt(solver_scale, solvers)
+        for k, v in fast.items():
+            log(f"fast solver {k}: {v['fast_ms_per_agent_decision_median']:.3g} ms/agent decision, "
+                f"ipopt {v['ipopt_ms_per_agent_decision_median']:.3g} ms on the same {v['problems']} "
+                f"problems (compile {v['compile_s']:.0f} s)")
     if "guard" in sections:
         result["guard"] = guard_cost(api_time, batches, log)
     _extra_sections(result, sections, solver_scale, log)
