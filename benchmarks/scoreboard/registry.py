@@ -68,11 +68,16 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
                  "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
     ScenarioSpec("cluster-case2", "cluster_v0", {"preset": "li2022-case2"},
                  "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
+    ScenarioSpec("cluster-case1-random", "cluster_v0", {"preset": "li2022-case1", "randomize": True},
+                 "li2022 case 1 with randomised starts (±50 m) and target slots (on the 300 m sphere); "
+                 "the learned policy's scenario"),
     ScenarioSpec("cluster-swarm64-cw", "cluster_v0", _cluster.swarm(64, dynamics="cw"),
                  "li2022 case-1 physics with 64 satellites and 64 slots (random each reset, Hungarian "
                  "allocation), cw truth (satenv.scenarios.cluster.swarm)"),
     ScenarioSpec("servicing-pereira2022", "servicing_v0", {"preset": "pereira2022"},
                  "pereira2022 §5.2: 6-DOF servicing around a passive object"),
+    ScenarioSpec("servicing-pereira2022-random", "servicing_v0", {"preset": "pereira2022", "randomize": True},
+                 "pereira2022 §5.2 with randomised initial states (the learned policy's scenario)"),
     ScenarioSpec("formation-kannan2022-position", "formation_v0", {"preset": "kannan2022-position"},
                  "kannan2022 §5.1: 3 spacecraft to a connected in-plane network"),
     ScenarioSpec("formation-kannan2022-collision", "formation_v0", {"preset": "kannan2022-collision"},
@@ -120,7 +125,8 @@ FULL: dict[str, Any] = {
     "scenario_seeds": {"cluster-case1": [0, 1, 2, 3, 4], "cluster-case2": [0, 1, 2, 3, 4],
                        "servicing-pereira2022": [0, 1, 2],
                        # 256 agents: the DMPC takes ~0.5 s per decision of the whole swarm
-                       "platoon-swarm256-ring-cw": [0, 1, 2], "cluster-swarm64-cw": [0, 1, 2]},
+                       "platoon-swarm256-ring-cw": [0, 1, 2], "cluster-swarm64-cw": [0, 1, 2],
+                       "cluster-case1-random": [0, 1, 2, 3, 4], "servicing-pereira2022-random": [0, 1, 2]},
 }
 """The full (published) board: every scenario x fitting policy x these seeds."""
 
