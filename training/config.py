@@ -103,17 +103,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         s = object.__setattr__
-        if not isinstance(self.env_id, str) or not self.env_id:
-            raise ValueError(f"env_id must be a non-empty string such as 'platoon_v0', got {self.env_id!r}")
-        for name in ("env_kwargs", "eval_env_kwargs", "reward_shaping"):
-            value = getattr(self, name)
-            if not isinstance(value, dict):
-                raise ValueError(f"{name} must be a dict (a JSON object on the command line), got {value!r}")
-            try:
-                json.dumps(value)
-            except TypeError:
-                raise ValueError(f"{name} must be JSON-serialisable (it is saved with the model), "
-                                 f"got {value!r}") from None
+        check_run_fields(self, ("env_kwargs", "eval_env_kwargs", "reward_shaping"))
         if self.lr_schedule not in ("constant", "linear"):
             raise ValueError(f"lr_schedule must be 'constant' or 'linear', got {self.lr_schedule!r}")
         if self.algo not in ALGOS:
@@ -124,12 +114,6 @@ class TrainConfig:
         for name in ("seed", "learning_starts", "eval_every", "checkpoint_every"):
             check_int(name, getattr(self, name), minimum=0)
         s(self, "net_arch", check_net_arch(self.net_arch))
-        for name in ("eval_seeds", "test_seeds"):
-            seeds = tuple(getattr(self, name))
-            for v in seeds:
-                check_int(name, v, minimum=0)
-            s(self, name, seeds)
-        s(self, "eval_baselines", tuple(str(b) for b in self.eval_baselines))
         for name, lo, hi in (("learning_rate", 0.0, math.inf), ("gamma", 0.0, 1.0),
                              ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
                              ("tau", 0.0, 1.0), ("clip_obs", 0.0, math.inf),
@@ -148,8 +132,6 @@ class TrainConfig:
         ActionMap(self.action_power)
         RewardShaping.from_dict(self.reward_shaping)
         ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims)
-        if not isinstance(self.out_dir, str) or not self.out_dir:
-            raise ValueError(f"out_dir must be a non-empty path string, got {self.out_dir!r}")
 
     @property
     def resolved_eval_env_kwargs(self) -> dict[str, Any]:
@@ -176,6 +158,30 @@ def planned_timesteps(cfg: TrainConfig, n_agents: int) -> int:
     """``cfg.total_timesteps`` rounded up to whole collection rounds (what SB3 actually runs)."""
     per_round = round_timesteps(cfg, n_agents)
     return -(-cfg.total_timesteps // per_round) * per_round
+
+
+def check_run_fields(cfg: Any, dict_fields: tuple[str, ...]) -> None:
+    """Validate (and freeze) the fields every run config shares: ``env_id``, the JSON-object
+    ``dict_fields``, ``eval_seeds``/``test_seeds`` (tuples of ints >= 0), ``eval_baselines``
+    (a tuple of names) and ``out_dir``."""
+    if not isinstance(cfg.env_id, str) or not cfg.env_id:
+        raise ValueError(f"env_id must be a non-empty string such as 'platoon_v0', got {cfg.env_id!r}")
+    for name in dict_fields:
+        value = getattr(cfg, name)
+        if not isinstance(value, dict):
+            raise ValueError(f"{name} must be a dict (a JSON object on the command line), got {value!r}")
+        try:
+            json.dumps(value)
+        except TypeError:
+            raise ValueError(f"{name} must be JSON-serialisable (it is saved with the model), got {value!r}") from None
+    for name in ("eval_seeds", "test_seeds"):
+        seeds = tuple(getattr(cfg, name))
+        for v in seeds:
+            check_int(name, v, minimum=0)
+        object.__setattr__(cfg, name, seeds)
+    object.__setattr__(cfg, "eval_baselines", tuple(str(b) for b in cfg.eval_baselines))
+    if not isinstance(cfg.out_dir, str) or not cfg.out_dir:
+        raise ValueError(f"out_dir must be a non-empty path string, got {cfg.out_dir!r}")
 
 
 def check_int(name: str, v: Any, minimum: int) -> None:

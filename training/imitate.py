@@ -34,7 +34,14 @@ from typing import Any
 
 import numpy as np
 
-from training.config import build_parser, check_int, check_net_arch, config_from_json, parse_args
+from training.config import (
+    build_parser,
+    check_int,
+    check_net_arch,
+    check_run_fields,
+    config_from_json,
+    parse_args,
+)
 from training.envs import make_env, policy_env_meta
 from training.evaluate import cached_baselines, evaluate, test_summary
 from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
@@ -90,25 +97,14 @@ class ImitationConfig:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        s = object.__setattr__
-        if not isinstance(self.env_id, str) or not self.env_id:
-            raise ValueError(f"env_id must be a non-empty string such as 'platoon_v0', got {self.env_id!r}")
-        for name in ("env_kwargs", "eval_env_kwargs", "expert_options"):
-            if not isinstance(getattr(self, name), dict):
-                raise ValueError(f"{name} must be a dict (a JSON object), got {getattr(self, name)!r}")
+        check_run_fields(self, ("env_kwargs", "eval_env_kwargs", "expert_options"))
         if not isinstance(self.expert, str) or not self.expert:
             raise ValueError(f"expert must be a baseline name such as 'dmpc', got {self.expert!r}")
         for name in ("rounds", "episodes_per_round", "epochs", "batch_size", "torch_threads"):
             check_int(name, getattr(self, name), minimum=1)
         for name in ("train_seed", "seed", "baseline_seeds"):
             check_int(name, getattr(self, name), minimum=0)
-        s(self, "net_arch", check_net_arch(self.net_arch))
-        for name in ("eval_seeds", "test_seeds"):
-            seeds = tuple(getattr(self, name))
-            for v in seeds:
-                check_int(name, v, minimum=0)
-            s(self, name, seeds)
-        s(self, "eval_baselines", tuple(str(b) for b in self.eval_baselines))
+        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
         if isinstance(self.beta, bool) or not isinstance(self.beta, (int, float)) or not 0 <= self.beta <= 1:
             raise ValueError(f"beta must be a number in [0, 1], got {self.beta!r}")
         for name in ("learning_rate", "clip_obs"):
@@ -123,8 +119,6 @@ class ImitationConfig:
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
         if not isinstance(self.squash, bool) or not isinstance(self.progress, bool):
             raise ValueError(f"squash and progress must be bools, got {self.squash!r}, {self.progress!r}")
-        if not isinstance(self.out_dir, str) or not self.out_dir:
-            raise ValueError(f"out_dir must be a non-empty path string, got {self.out_dir!r}")
 
     @property
     def resolved_eval_env_kwargs(self) -> dict[str, Any]:
