@@ -71,7 +71,7 @@ class ImitationConfig:
     """
 
     env_id: str = "platoon_v0"
-    env_kwargs: dict[str, Any] = field(default_factory=lambda: {"preset": "pereira2022", "randomize": True})
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
     eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
     expert: str = "dmpc"
     expert_options: dict[str, Any] = field(default_factory=dict)
