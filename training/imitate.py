@@ -66,7 +66,8 @@ class ImitationConfig:
         (mean and variance from round 0's data).
     eval_seeds: seeds of the per-round evaluation (the learning curve); test_seeds: held-out
         seeds of the final ``eval.json``; eval_baselines: scripted baselines evaluated there
-        besides the expert; baseline_seeds: how many of the test seeds (the first ones) the
+        besides the expert (every reference runs at its default config: ``expert_options``
+        shape the labels only); baseline_seeds: how many of the test seeds (the first ones) the
         expert and baselines run on (0: all; for an expert of minutes per episode).
     """
 
@@ -195,7 +196,7 @@ def imitate(cfg: ImitationConfig, resume: bool = False) -> Path:
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
     actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     names = list(dict.fromkeys([cfg.expert, *cfg.eval_baselines]))
-    key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs, "expert_options": cfg.expert_options}
+    key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs}  # baselines at their defaults
     expert_eval = cached_baselines(out / "baselines_eval.json", eval_env, [cfg.expert], cfg.eval_seeds, key)
 
     data, normalizer, history = _restore(out, done, actor) if done else ({"x": [], "y": []}, None, [])
