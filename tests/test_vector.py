@@ -17,12 +17,13 @@ def _stack(d, agents):
 CASES = [
     ("platoon_v0", {"randomize": True}),
     ("cluster_v0", {"disturbance": "random"}),  # in-step randomness: per-copy streams
+    ("cluster_v0", {"preset": "li2022-case1", "randomize": True}),  # random target slots per copy
     ("servicing_v0", {"randomize": True}),
     ("formation_v0", {"randomize": True}),
 ]
 
 
-@pytest.mark.parametrize(("env_id", "kwargs"), CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(("env_id", "kwargs"), CASES, ids=[c[0] + "-" + "-".join(c[1]) for c in CASES])
 def test_copy_b_reproduces_the_pettingzoo_env_across_an_auto_reset(env_id, kwargs):
     steps, seed = 3, 11
     kw = {**kwargs, "max_steps": steps}

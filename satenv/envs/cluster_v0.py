@@ -315,7 +315,9 @@ class ClusterCore(BatchedCore):
         k = self.x[sel].shape[0]
         if self.scenario.randomize:
             rng = rng if rng is not None else self._own_rng
-            self.all_targets[sel] = np.stack([sample_targets(self.scenario, rng) for _ in range(k)])
+            # a batched reset passes one generator per copy (satenv.vector.CopyGenerators)
+            gens = getattr(rng, "generators", None) or [rng] * k
+            self.all_targets[sel] = np.stack([sample_targets(self.scenario, g) for g in gens])
         self.allocate(sel)
         zeros = np.zeros((k, self.n_agents))
         pair, obs, tgt = self._distances(self.x[sel], np.zeros(k))
