@@ -230,14 +230,21 @@ def test_look_ahead_penalty():
 def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
     from training.shaping import ActionMap
 
-    cfg = _cfg(tmp_path, obs_symlog_scale=10.0, obs_symlog_dims=3, eval_every=0, checkpoint_every=0,
-               action_power=3.0, reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
+    cfg = _cfg(tmp_path, obs_symlog_scale=10.0, obs_symlog_dims=3, obs_drop_dims=(4,), eval_every=0,
+               checkpoint_every=0, action_power=3.0, reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
     final = train(cfg)
     policy = training.load(final, env=ToyEnv(max_steps=10))
     assert policy.actor.spec["obs_dim"] == 9 and policy.obs_shape == (6,)
     env = ToyEnv()
     obs, _ = env.reset(seed=0)
     act = policy.act(obs)
+    changed = {a: o.copy() for a, o in obs.items()}
+    for o in changed.values():
+        o[4] += 3.0                      # a dropped entry: the actions do not change
+    np.testing.assert_array_equal(np.stack(list(policy.act(changed).values())), np.stack(list(act.values())))
+    for o in changed.values():
+        o[0] += 3.0                      # a kept one: they do
+    assert not np.allclose(np.stack(list(policy.act(changed).values())), np.stack(list(act.values())))
     stacked = np.stack([obs[a] for a in env.possible_agents])
     import torch
 
@@ -248,6 +255,8 @@ def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
     np.testing.assert_allclose(ActionMap(2.0)(np.array([-2.0, -0.5, 0.5])), [-1.0, -0.25, 0.25])
     with pytest.raises(ValueError, match="action_power"):
         TrainConfig(action_power=0)
+    with pytest.raises(ValueError, match="obs_drop_dims"):
+        TrainConfig(obs_drop_dims=(-1,))
 
 
 @pytest.mark.rllib

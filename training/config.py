@@ -43,6 +43,8 @@ class TrainConfig:
             e.g. ``{"precision": 1.0, "proximity": 1.0}``); evaluation uses the env's metrics.
         obs_symlog_scale / obs_symlog_dims: appended symlog features of the first observation
             entries (``training.shaping.ObsFeatures``; 0 disables), re-applied at inference.
+        obs_drop_dims: observation entries zeroed before the policy sees them (e.g. platoon_v0's
+            entry 14, the fraction of the episode remaining), re-applied at inference.
         action_power: env action = ``sign(y)|y|^action_power`` of the network's ``y``
             (``training.shaping.ActionMap``; 1 = identity), re-applied at inference.
     Evaluation and artefacts:
@@ -91,6 +93,7 @@ class TrainConfig:
     reward_shaping: dict[str, Any] = field(default_factory=dict)
     obs_symlog_scale: float = 0.0
     obs_symlog_dims: int = 6
+    obs_drop_dims: tuple[int, ...] = ()
     action_power: float = 1.0
     eval_every: int = 100_000
     eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_010))
@@ -131,7 +134,7 @@ class TrainConfig:
 
         ActionMap(self.action_power)
         RewardShaping.from_dict(self.reward_shaping)
-        ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims)
+        ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims, self.obs_drop_dims)
 
     @property
     def resolved_eval_env_kwargs(self) -> dict[str, Any]:

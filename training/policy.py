@@ -204,7 +204,8 @@ def features_from_config(config: dict[str, Any]):
     """The observation feature map of a run config (``None`` when off)."""
     from training.shaping import ObsFeatures
 
-    feats = ObsFeatures(config.get("obs_symlog_scale", 0.0), config.get("obs_symlog_dims", 6))
+    feats = ObsFeatures(config.get("obs_symlog_scale", 0.0), config.get("obs_symlog_dims", 6),
+                        tuple(config.get("obs_drop_dims", ())))
     return feats if feats.active else None
 
 

@@ -134,12 +134,19 @@ class RewardShaping:
 
 @dataclass(frozen=True)
 class ObsFeatures:
-    """Appended symlog features of the first ``symlog_dims`` observation entries (0: identity)."""
+    """Appended symlog features of the first ``symlog_dims`` observation entries (0: identity),
+    after zeroing the entries ``drop_dims`` (inputs the policy must not use; shape unchanged)."""
 
     symlog_scale: float = 0.0
     symlog_dims: int = 6
+    drop_dims: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
+        drop = self.drop_dims
+        if isinstance(drop, str | bytes) or not isinstance(drop, tuple | list) or any(
+                isinstance(d, bool) or not isinstance(d, int) or d < 0 for d in drop):
+            raise ValueError(f"obs_drop_dims must be a tuple of observation indices >= 0, got {drop!r}")
+        object.__setattr__(self, "drop_dims", tuple(sorted(set(drop))))
         if isinstance(self.symlog_scale, bool) or not isinstance(self.symlog_scale, (int, float)) \
                 or not math.isfinite(self.symlog_scale) or self.symlog_scale < 0:
             raise ValueError(f"obs_symlog_scale must be a finite number >= 0, got {self.symlog_scale!r}")
@@ -148,13 +155,19 @@ class ObsFeatures:
 
     @property
     def active(self) -> bool:
-        return self.symlog_scale > 0
+        return self.symlog_scale > 0 or bool(self.drop_dims)
 
     def out_dim(self, obs_dim: int) -> int:
-        return obs_dim + min(self.symlog_dims, obs_dim) if self.active else obs_dim
+        if self.drop_dims and self.drop_dims[-1] >= obs_dim:
+            raise ValueError(f"obs_drop_dims {list(self.drop_dims)} must index the {obs_dim}-d observation")
+        return obs_dim + min(self.symlog_dims, obs_dim) if self.symlog_scale > 0 else obs_dim
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        if not self.active:
+        if self.drop_dims:
+            self.out_dim(obs.shape[-1])
+            obs = obs.copy()
+            obs[..., list(self.drop_dims)] = 0
+        if not self.symlog_scale > 0:
             return obs
         x = obs[..., : self.symlog_dims]
         extra = np.sign(x) * np.log1p(np.abs(x) * self.symlog_scale)
