@@ -79,6 +79,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, fields
 from functools import partial
 from typing import Any
@@ -113,6 +114,7 @@ _SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed pro
 _TERMINAL_SLACK_WEIGHT = 1.0e8  # L1 weight of the terminal / speed slack (relaxed problem only)
 NLP_CONSTRAINT_TOL = 1e-2       # largest accepted row violation (ipopt's acceptable_constr_viol_tol)
 SOLVERS = ("ipopt-jit", "ipopt")
+MAX_WORKERS = 16
 WARM_DUAL_OPTIONS = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                      "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6}
 """ipopt options of ``warm_duals``: start from the given point and multipliers, near the central path."""
@@ -138,6 +140,9 @@ class TubeRDMPCConfig:
         warm_duals: also warm-start ipopt's multipliers (``warm_start_init_point``, ``mu_init``
             1e-4) from the satellite's previous exact solve; about half the iterations, the same
             optimum (``tests/test_fast_solvers.py``). False: the primal warm start only.
+        workers: threads that solve the satellites' exact NLPs of one decision in parallel (they
+            are independent: each plans against the others' previous plans), each with its own
+            solver copy (``ipopt-jit`` compiles one per thread); the same points as ``workers=1``.
         solver: ``"ipopt"`` (default, the reference) or ``"ipopt-jit"``: the same NLP and ipopt
             options on gcc-compiled problem functions (the same iterates to round-off), compiled
             once per process and config (about 20-50 s of gcc on 2 cores).
@@ -163,6 +168,7 @@ class TubeRDMPCConfig:
     max_iter: int = 150
     tol: float = 1e-6
     warm_duals: bool = True
+    workers: int = 1
     solver: str = "ipopt"
 
     def __post_init__(self) -> None:
@@ -176,6 +182,7 @@ class TubeRDMPCConfig:
             elif f.name != "v_max" or self.v_max is not None:
                 rules[f.name] = partial(number, zero_ok=f.name in zero_ok)
         rules["max_iter"] = integer
+        rules["workers"] = partial(integer, high=MAX_WORKERS)
         rules["sigma"] = partial(number, high=0.999999)
         rules["braking_fraction"] = partial(number, high=1.0)
         validate(self, "TubeRDMPC", rules)
@@ -264,7 +271,10 @@ class _NominalNLP:
         a, b = cw_matrices(n, dt)
         self.cal_a, self.cal_b = prediction_matrices(a, b, horizon)
         args = (cfg, n, dt, horizon, k_slots, u_nom, mass, r_pair, r_obs, r_tgt)
-        self.solver, self.lbg, self.ubg = nlpsol_cached(("tube_rdmpc", *args), lambda: self._build(*args))
+        built = [nlpsol_cached(("tube_rdmpc", *args, copy), lambda: self._build(*args))
+                 for copy in range(cfg.workers)]
+        self.solvers = [solver for solver, _, _ in built]       # one per worker thread
+        self.solver, self.lbg, self.ubg = built[0]
         self.n_w = 5 * horizon + 1
         self.sigma = cfg.sigma
 
@@ -386,21 +396,23 @@ class _NominalNLP:
         return lb, ub
 
     def solve(self, info: dict[str, Any], params: np.ndarray, w0: np.ndarray,
-              relaxed: bool, duals: dict[str, np.ndarray] | None = None) -> np.ndarray | None:
+              relaxed: bool, duals: dict[str, np.ndarray] | None = None, copy: int = 0) -> np.ndarray | None:
         """One guarded ipopt solve (:func:`baselines.base.guarded_solve`): the point, or ``None``
         on an exception, a failed status, a wrong-shaped or non-finite point, a variable outside
         its bounds or a constraint row violated by more than ``NLP_CONSTRAINT_TOL``.
 
         ``duals`` (``lam_x``, ``lam_g``): the multipliers to start from (used by a solver built
-        with ``warm_duals``); the solve writes its own multipliers back into the dict."""
+        with ``warm_duals``); the solve writes its own multipliers back into the dict. ``copy``:
+        which solver copy (one per worker thread) runs it."""
         lbx, ubx = self.bounds(relaxed)
         w0 = np.clip(w0, lbx, np.where(np.isfinite(ubx), ubx, w0))
         g: dict[str, np.ndarray] = {}
         start = {} if not duals else {"lam_x0": duals["lam_x"], "lam_g0": duals["lam_g"]}
 
         def run() -> tuple[np.ndarray, bool, str]:
-            sol = self.solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=self.lbg, ubg=self.ubg, **start)
-            stats = self.solver.stats()
+            solver = self.solvers[copy]
+            sol = solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=self.lbg, ubg=self.ubg, **start)
+            stats = solver.stats()
             status = str(stats.get("return_status", ""))
             g["g"] = np.asarray(sol["g"], dtype=float).ravel()
             if duals is not None:
@@ -476,6 +488,7 @@ class TubeRDMPC(Baseline):
                                r_tgt=sc.target_distance + self.eps_bar + cfg.safety_margin)
         self.tube = TubeController(self.n, sc.physics_dt, cfg.k1, cfg.k2)
         self.tube.enabled = cfg.tube
+        self._pool: ThreadPoolExecutor | None = None
         self.info: dict[str, Any] = {}
         self._reset_state()
 
@@ -544,7 +557,8 @@ class TubeRDMPC(Baseline):
         actions: dict[str, np.ndarray] = {}
         lam0 = np.zeros(self.m)
         status_row = []
-        for i, agent in enumerate(self.agents):
+        params_all = []
+        for i in range(self.m):
             qn = np.full((K, N + 1, 3), _FAR)
             dn = np.zeros((K, 3))
             pn = np.zeros((K, 3))
@@ -553,17 +567,15 @@ class TubeRDMPC(Baseline):
                 qn[slot] = pred_q[j]
                 dn[slot] = coast[j]
                 pn[slot] = pred_p_end[j]
-            params = np.concatenate([nominal[i], targets[i], qn.ravel(), dn.ravel(), pn.ravel(),
-                                     qo.ravel(), p_o, q_r])
-            w0 = self.warm[i]
-            start = time.perf_counter()
-            duals = self.duals[i] if self.cfg.warm_duals else None
-            w = self.nlp.solve(self.info, params, w0, relaxed=False, duals=duals)
-            self.info["solve_ms"].append((time.perf_counter() - start) * 1e3)
-            self.info["solves"] += 1
+            params_all.append(np.concatenate([nominal[i], targets[i], qn.ravel(), dn.ravel(), pn.ravel(),
+                                              qo.ravel(), p_o, q_r]))
+        exact = self._solve_exact(params_all)
+        for i, agent in enumerate(self.agents):
+            params, w0 = params_all[i], self.warm[i]
+            w = exact[i]
             kind = "ok"
-            if w is None and duals is not None:
-                duals.clear()                        # the next decision starts from no multipliers
+            if w is None and self.cfg.warm_duals:
+                self.duals[i].clear()                # the next decision starts from no multipliers
             if w is None and self.cfg.relax_on_failure:
                 start = time.perf_counter()
                 w = self.nlp.solve(self.info, params, w0, relaxed=True)
@@ -599,6 +611,37 @@ class TubeRDMPC(Baseline):
         h["u_nominal"].append(np.array([actions[a] * sc.u_max for a in self.agents]))
         h["status"].append(status_row)
         return actions
+
+    def _solve_exact(self, params_all: list[np.ndarray]) -> list[np.ndarray | None]:
+        """Every satellite's exact NLP (their parameters come from the previous decision's plans,
+        so they are independent): in turn, or on ``workers`` threads, each with its own solver
+        copy (CasADi releases the GIL while ipopt runs). Same points either way; ``info`` gets the
+        statuses, failures and times in satellite order."""
+        def solve(i: int, copy: int) -> tuple[np.ndarray | None, dict[str, Any], float]:
+            local: dict[str, Any] = {}
+            start = time.perf_counter()
+            duals = self.duals[i] if self.cfg.warm_duals else None
+            w = self.nlp.solve(local, params_all[i], self.warm[i], relaxed=False, duals=duals, copy=copy)
+            return w, local, (time.perf_counter() - start) * 1e3
+
+        workers = min(self.cfg.workers, self.m)
+        if workers == 1:
+            results = [solve(i, 0) for i in range(self.m)]
+        else:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="tube_rdmpc")
+
+            def chunk(copy: int) -> list[tuple]:
+                return [solve(i, copy) for i in range(copy, self.m, workers)]
+
+            chunks = list(self._pool.map(chunk, range(workers)))
+            results = [chunks[i % workers][i // workers] for i in range(self.m)]
+        for _, local, ms in results:
+            self.info["solver_status"] = local["solver_status"]
+            self.info["solver_failures"] = self.info.get("solver_failures", 0) + local.get("solver_failures", 0)
+            self.info["solve_ms"].append(ms)
+            self.info["solves"] += 1
+        return [w for w, _, _ in results]
 
     # ------------------------------------------------------------------ diagnostics
     def tube_errors(self) -> np.ndarray:

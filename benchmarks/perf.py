@@ -360,8 +360,8 @@ def _record(scen_name: str, make: Callable, hook: str, decisions: int) -> tuple[
     owner = ref if not owner_path else getattr(ref, owner_path)
     inner, calls = getattr(owner, name), []
 
-    def recording(*args, **kwargs):
-        calls.append((*args, *kwargs.values()))
+    def recording(*args, **kwargs):  # copies: the controller reuses its warm-start rows
+        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in (*args, *kwargs.values())))
         return inner(*args, **kwargs)
 
     setattr(owner, name, recording)

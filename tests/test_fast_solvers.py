@@ -29,9 +29,9 @@ def record_tube_problems(decisions: int = 2, horizon: float = 15.0) -> tuple[lis
     problems: list[dict] = []
     solve = ref.nlp.solve
 
-    def recording(info, params, w0, relaxed, duals=None):
+    def recording(info, params, w0, relaxed, duals=None, copy=0):
         problems.append({"params": params.copy(), "w0": w0.copy(), "relaxed": relaxed})
-        return solve(info, params, w0, relaxed, duals)
+        return solve(info, params, w0, relaxed, duals, copy)
 
     ref.nlp.solve = recording
     obs, _ = env.reset(seed=0)

@@ -103,7 +103,7 @@ def test_solver_failure_degrades_to_flagged_fallback(monkeypatch):
     def fail(**_):
         raise RuntimeError("forced failure")
 
-    monkeypatch.setattr(pol.nlp, "solver", fail)
+    monkeypatch.setattr(pol.nlp, "solvers", [fail])
     obs, _ = env.reset(seed=0)
     pol.reset()
     for _ in range(2):
@@ -112,6 +112,27 @@ def test_solver_failure_degrades_to_flagged_fallback(monkeypatch):
         obs, *_ = env.step(actions)
     assert pol.info["fallbacks"] == 2 * 10 and pol.info["relaxed"] == 2 * 10
     assert pol.info["solver_status"] == "error: RuntimeError: forced failure"
+
+
+def test_worker_threads_give_the_same_decisions_as_one():
+    """``workers=2`` solves the satellites' independent NLPs on two threads with two solver copies:
+    the same actions, statuses and counts as in turn."""
+    runs = []
+    for workers in (1, 2):
+        env = parallel_env(max_steps=3)
+        pol = TubeRDMPC(env, horizon=15.0, workers=workers)
+        obs, _ = env.reset(seed=3)
+        pol.reset(seed=3)
+        acts = []
+        for _ in range(3):
+            act = pol.act(obs)
+            acts.append(np.stack([act[a] for a in env.possible_agents]))
+            obs, *_ = env.step(act)
+        runs.append((np.stack(acts), pol.info["solves"], pol.info["relaxed"], pol.history["status"]))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    assert runs[0][1:] == runs[1][1:]
+    with pytest.raises(ValueError, match="workers"):
+        TubeRDMPC(parallel_env(), workers=0)
 
 
 def test_options_are_validated():
