@@ -428,6 +428,28 @@ def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None
                     "max_first_control_diff": gap, "target_ms": FAST_SOLVER_TARGETS_MS[key]}
         if tube:
             out[key]["warm_duals_ms_per_agent_decision_median"] = ms["warm_duals"]
+            out[key]["closed_loop_ms_per_agent_decision"] = tube_closed_loop(ref.env)
+    return out
+
+
+def tube_closed_loop(env, decisions: int = 6, workers: tuple[int, ...] = (1, 2)) -> dict[str, float]:
+    """Wall time of whole ``TubeRDMPC.act`` calls (ipopt with ``warm_duals``) divided by the number
+    of satellites, median over ``decisions`` from the same start, for each thread count (the
+    decisions are identical; ``tests/test_tube_rdmpc.py``)."""
+    from baselines.tube_rdmpc import TubeRDMPC
+
+    out = {}
+    for n in workers:
+        pol = TubeRDMPC(env, workers=n)
+        obs, _ = env.reset(seed=0)
+        pol.reset(seed=0)
+        times = []
+        for _ in range(decisions):
+            t0 = time.perf_counter()
+            act = pol.act(obs)
+            times.append(time.perf_counter() - t0)
+            obs, *_ = env.step(act)
+        out[f"workers_{n}"] = float(np.median(times) * 1e3 / pol.m)
     return out
 
 
