@@ -273,7 +273,7 @@ class _NominalNLP:
         args = (cfg, n, dt, horizon, k_slots, u_nom, mass, r_pair, r_obs, r_tgt)
         built = [nlpsol_cached(("tube_rdmpc", *args, copy), lambda: self._build(*args))
                  for copy in range(cfg.workers)]
-        self.solvers = [solver for solver, _, _ in built]       # one per worker thread
+        self.solvers = [solver for solver, _, _ in built]       # one per worker thread (0: .solver)
         self.solver, self.lbg, self.ubg = built[0]
         self.n_w = 5 * horizon + 1
         self.sigma = cfg.sigma
@@ -410,7 +410,7 @@ class _NominalNLP:
         start = {} if not duals else {"lam_x0": duals["lam_x"], "lam_g0": duals["lam_g"]}
 
         def run() -> tuple[np.ndarray, bool, str]:
-            solver = self.solvers[copy]
+            solver = self.solver if copy == 0 else self.solvers[copy]
             sol = solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=self.lbg, ubg=self.ubg, **start)
             stats = solver.stats()
             status = str(stats.get("return_status", ""))

@@ -103,7 +103,7 @@ def test_solver_failure_degrades_to_flagged_fallback(monkeypatch):
     def fail(**_):
         raise RuntimeError("forced failure")
 
-    monkeypatch.setattr(pol.nlp, "solvers", [fail])
+    monkeypatch.setattr(pol.nlp, "solver", fail)
     obs, _ = env.reset(seed=0)
     pol.reset()
     for _ in range(2):
