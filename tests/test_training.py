@@ -80,7 +80,9 @@ def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     cfg = _cfg(tmp_path)
     final = train(cfg)
     assert {p.name for p in final.iterdir()} == {"policy.json", "weights.pt", "obs_norm.json", "env.json",
-                                                  "config.json", "manifest.json", "eval.json"}
+                                                  "config.json", "manifest.json", "eval.json",
+                                                  "learning_curve.png"}
+    assert (final / "learning_curve.png").read_bytes().startswith(b"\x89PNG")
     meta = json.loads((final / "env.json").read_text())
     assert meta["env_id"] == TOY and meta["env_kwargs"] == {"max_steps": 10} and meta["observation_shape"] == [6]
     assert json.loads((final / "config.json").read_text()) == cfg.to_json()

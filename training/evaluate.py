@@ -20,7 +20,7 @@ from satenv import metrics
 from satenv.rollout import rollout
 
 __all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table",
-           "evaluate_baselines", "cached_baselines", "test_summary"]
+           "evaluate_baselines", "cached_baselines", "test_summary", "learning_curve"]
 
 AUTO = "auto"
 """``eval_baselines`` entry meaning: ``zero`` plus the cheap scripted controllers that support
@@ -183,3 +183,31 @@ def test_summary(eval_env: Any, policy: Any, baselines: dict[str, Any], seeds: I
         "table": format_table(results),
         "learned_episodes": learned["episodes"],
     }
+
+
+def learning_curve(history: list[dict[str, Any]], expert: dict[str, Any] | None, expert_name: str,
+                   path: Path, x_key: str = "labels", x_label: str = "expert labels (agent-steps)") -> None:
+    """Success rate, RMSE and total Δv on the evaluation seeds at each entry of ``history``
+    (``x_key``: ``"labels"`` for DAgger rounds, ``"step"`` for RL), a scripted reference's as
+    dashed lines; skipped without matplotlib."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # plotting is optional (the render extra)
+        return
+    labels = [h[x_key] for h in history]
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
+    for ax, key, title in zip(axes, ("success_rate", "rmse", "delta_v"), ("success rate", "RMSE", "total Δv"),
+                              strict=True):
+        ax.plot(labels, [h["aggregate"][key] for h in history], "o-", label="learned")
+        if expert:
+            ax.axhline(expert["aggregate"][key], color="k", ls="--", label=expert_name)
+        ax.set_xlabel(x_label)
+        ax.set_title(title)
+    axes[0].set_ylim(-0.05, 1.05)
+    axes[0].legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

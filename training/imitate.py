@@ -43,7 +43,7 @@ from training.config import (
     parse_args,
 )
 from training.envs import make_env, policy_env_meta
-from training.evaluate import cached_baselines, evaluate, test_summary
+from training.evaluate import cached_baselines, evaluate, learning_curve, test_summary
 from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
 
 __all__ = ["ImitationConfig", "imitate", "collect_episode", "fit", "main"]
@@ -272,32 +272,6 @@ def _restore(out: Path, done: int, actor: Any):
     cuts = np.cumsum(lengths)[:-1]
     data = {"x": np.split(x, cuts), "y": np.split(y, cuts)}
     return data, last.normalizer, json.loads((out / "eval_history.json").read_text())
-
-
-def learning_curve(history: list[dict[str, Any]], expert: dict[str, Any] | None, expert_name: str,
-                   path: Path) -> None:
-    """Success rate and RMSE on the evaluation seeds per round, the expert's as dashed lines."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:  # plotting is optional (the render extra)
-        return
-    labels = [h["labels"] for h in history]
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
-    for ax, key, title in zip(axes, ("success_rate", "rmse", "delta_v"), ("success rate", "RMSE", "total Δv"),
-                              strict=True):
-        ax.plot(labels, [h["aggregate"][key] for h in history], "o-", label="learned")
-        if expert:
-            ax.axhline(expert["aggregate"][key], color="k", ls="--", label=expert_name)
-        ax.set_xlabel("expert labels (agent-steps)")
-        ax.set_title(title)
-    axes[0].set_ylim(-0.05, 1.05)
-    axes[0].legend(loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- CLI

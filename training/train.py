@@ -45,7 +45,7 @@ from training.config import (
     round_timesteps,
 )
 from training.envs import make_env, policy_env_meta
-from training.evaluate import cached_baselines, compare, evaluate, test_summary
+from training.evaluate import cached_baselines, compare, evaluate, learning_curve, test_summary
 from training.policy import (
     ObsNormalizer,
     action_map_from_config,
@@ -306,6 +306,10 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         if cfg.checkpoint_every:
             save_checkpoint(model, venv, out, model.num_timesteps)
     wall = time.perf_counter() - t0
+    ref = "dmpc" if "dmpc" in baseline_eval else next(iter(baseline_eval), None)
+    if history:
+        learning_curve(history, baseline_eval.get(ref), ref or "", out / "learning_curve.png",
+                       x_key="step", x_label="agent-steps")
 
     # 7. artefacts with the held-out evaluation
     test_baselines = _cached_baselines(out / "baselines_test.json", eval_env, cfg, cfg.test_seeds)
@@ -313,6 +317,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     summary = _summary(cfg, eval_env, final_policy, test_baselines, model.num_timesteps, wall)
     final = save_artifacts(out / "final", final_policy, env_meta={**meta, "step": model.num_timesteps},
                            config=cfg.to_json(), evaluation=summary, source=f"stable-baselines3 {cfg.algo.upper()}")
+    if (out / "learning_curve.png").is_file():
+        shutil.copyfile(out / "learning_curve.png", final / "learning_curve.png")
     print(f"final policy ({model.num_timesteps} steps, {wall / 60:.1f} min this session) on "
           f"{len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
     if (out / "best" / "weights.pt").is_file():
