@@ -438,19 +438,24 @@ def tube_closed_loop(env, decisions: int = 6, workers: tuple[int, ...] = (1, 2))
     decisions are identical; ``tests/test_tube_rdmpc.py``)."""
     from baselines.tube_rdmpc import TubeRDMPC
 
-    out = {}
-    for n in workers:
-        pol = TubeRDMPC(env, workers=n)
-        obs, _ = env.reset(seed=0)
-        pol.reset(seed=0)
-        times = []
-        for _ in range(decisions):
-            t0 = time.perf_counter()
-            act = pol.act(obs)
-            times.append(time.perf_counter() - t0)
-            obs, *_ = env.step(act)
-        out[f"workers_{n}"] = float(np.median(times) * 1e3 / pol.m)
-    return out
+    return {f"workers_{n}": float(np.median(act_times(env, TubeRDMPC(env, workers=n), decisions)) * 1e3 / len(env.possible_agents))
+            for n in workers}
+
+
+def act_times(env, policy, decisions: int, seed: int = 0) -> list[float]:
+    """Wall time [s] of each ``policy.act`` over the first ``decisions`` of one episode from
+    ``reset(seed)`` (fewer if it ends)."""
+    obs, _ = env.reset(seed=seed)
+    policy.reset(seed=seed)
+    times = []
+    for _ in range(decisions):
+        t0 = time.perf_counter()
+        act = policy.act(obs)
+        times.append(time.perf_counter() - t0)
+        obs, *_ = env.step(act)
+        if not env.agents:
+            break
+    return times
 
 
 # ----------------------------------------------------------------------------------------------

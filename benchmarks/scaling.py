@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.perf import _rate
+from benchmarks.perf import _rate, act_times
 
 SIZES = (4, 16, 64, 256, 1024)
 COPIES = 64
@@ -134,17 +134,7 @@ def decision_ms_per_agent(family: Family, baseline: str, n: int, decisions: int)
         policy = baselines.make(baseline, env)
     except ImportError:
         return None
-    obs, _ = env.reset(seed=0)
-    policy.reset(seed=0)
-    times = []
-    for _ in range(decisions):
-        t0 = time.perf_counter()
-        act = policy.act(obs)
-        times.append(time.perf_counter() - t0)
-        obs, *_ = env.step(act)
-        if not env.agents:
-            break
-    return 1e3 * float(np.median(times)) / n
+    return 1e3 * float(np.median(act_times(env, policy, decisions))) / n
 
 
 def growth_exponent(sizes: list[int], per_agent_cost: list[float]) -> float:
