@@ -22,11 +22,12 @@ Agent-steps per second (one agent advanced by one decision step) of
 
 Five more sections run only when named in ``--sections`` (they take minutes):
 
-* ``fast_solvers`` (stored as ``solvers.fast_vs_ipopt``) the compiled ``solver="ipopt-jit"`` of
-              tube-RDMPC and NMPC against the ipopt reference on the same recorded decision
-              problems (ms per agent decision, medians, issue 17's targets 5 ms / 10 ms; includes
-              one gcc compile each: about 1 min for the tube NLP, about 10 min for the N = 30 NMPC
-              on 2 busy cores); ``--solvers`` selects which;
+* ``fast_solvers`` (stored as ``solvers.fast_vs_ipopt``) the fast paths of tube-RDMPC (compiled
+              ``solver="ipopt-jit"`` with ``warm_duals``; one gcc compile, about 1 min) and NMPC
+              (ipopt with its default Gauss-Newton Hessian) against the ipopt reference (primal
+              warm start only; exact Hessian) on the same recorded decision problems (ms per agent
+              decision, medians, issue 17's targets 5 ms / 10 ms), and each one's closed-loop
+              decision time; ``--solvers`` selects which;
 * ``scaling`` issue 19's swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 spacecraft of
               the platoon and cluster swarms the PettingZoo step, the 64-copy batched core, its
               memory and the distributed baselines' decision per agent (DMPC; APF, tube-RDMPC up
@@ -214,30 +215,58 @@ def _best_call_s(fn: Callable[[], Any], number: int = 2000, repeats: int = 7) ->
     return min(timeit.repeat(fn, number=number, repeat=repeats)) / number
 
 
+def _fused_check_s(core, number: int = 2000) -> float:
+    """Seconds the compiled kernel's fused finiteness check adds to its pass: the best time of
+    the kernel with the check on minus off, interleaved three times (0 if not measurable)."""
+    accel = np.zeros(core.x.shape[:-1] + (3,))
+    timed: dict[bool, list[float]] = {True: [], False: []}
+    for _ in range(3):
+        for flag in (True, False):
+            core.fused_check = flag
+            timed[flag].append(_best_call_s(lambda: core._evaluate_kernel(core.x, accel, observe=True),
+                                            number=number))
+    core.fused_check = True
+    return max(min(timed[True]) - min(timed[False]), 0.0)
+
+
 def guard_cost(min_time: float = 0.5, batches: list[int] = (1, 64, 1024),
                log: Callable[[str], None] = print) -> dict:
     """The finiteness guard's cost (``satenv.dynamics._checks``): the check alone on one step's
     arrays (best of repeats, so the machine's load barely matters) as a share of the step time,
     for the ``platoon_v0`` PettingZoo step (also an A/B: the median of paired ratios of blocks of
-    steps with the check on and off, interleaved) and the ``make_vec`` step of each batch size."""
+    steps with the check on and off, interleaved) and the ``make_vec`` step of each batch size.
+    With the compiled platoon kernel the check is fused into its pass
+    (``PlatoonCore.fused_check``): its cost is the kernel's time with it on minus off, plus the
+    env's read of the flag."""
     import satenv
     from satenv.dynamics._checks import all_finite
 
     env = satenv.make("platoon_v0")
-    loop, guard = PettingZooLoop(env, -1.0, 1.0), env._finite_step
+    core = env.core
+    loop, guard, fused = PettingZooLoop(env, -1.0, 1.0), env._finite_step, core.fused_check
+
+    def enable(on: bool) -> None:   # the kernel's fused check, else the env's StepGuard
+        env._finite_step = guard if on else (lambda *args: True)
+        if fused:
+            core.fused_check = on
+
     on, off, start = [], [], time.perf_counter()
     while time.perf_counter() - start < 4 * min_time or len(on) < 10:
         for enabled in ((True, False) if len(on) % 2 else (False, True)):
-            env._finite_step = guard if enabled else (lambda *args: True)
+            enable(enabled)
             t0 = time.perf_counter()
             n = loop._chunk()
             (on if enabled else off).append((time.perf_counter() - t0) / n * AGENTS)
-    env._finite_step = guard
+    enable(True)
     env.reset(seed=0)
-    res, obs = env.core.step(np.zeros((1, AGENTS, 3))), env.core.observe()
-    check = _best_call_s(lambda: guard(obs, res.info["state"], sum(res.rewards[0].tolist())))
+    res, obs = core.step(np.zeros((1, AGENTS, 3))), core.observe()
+    if fused:
+        check = _fused_check_s(core) + _best_call_s(lambda: res.finite[0])
+    else:
+        check = _best_call_s(lambda: guard(obs, res.info["state"], sum(res.rewards[0].tolist())))
     step = float(np.median(off))
     pz = {"step_us": 1e6 * step, "step_us_fastest": 1e6 * min(off), "check_us": 1e6 * check,
+          "check": "fused in the compiled kernel" if fused else "StepGuard",
           "check_share": check / step, "check_share_of_fastest": check / min(off),
           "ab_overhead": float(np.median(np.array(on) / np.array(off)) - 1), "ab_pairs": len(on)}
     rows = []
@@ -247,7 +276,11 @@ def guard_cost(min_time: float = 0.5, batches: list[int] = (1, 64, 1024),
         acts = np.random.default_rng(0).uniform(-1.0, 1.0, vec.action_shape)
         rate = _rate(lambda vec=vec, acts=acts: vec.step(acts), batch * AGENTS, min_time / 2)
         o, r, _, _, info = vec.step(acts)
-        check_b = _best_call_s(lambda o=o, s=info["state"], r=r: all_finite(o, s, r), number=200)
+        if vec.core.fused_check:
+            ok = np.ones(batch, bool)
+            check_b = _fused_check_s(vec.core, number=200) + _best_call_s(ok.all, number=200)
+        else:
+            check_b = _best_call_s(lambda o=o, s=info["state"], r=r: all_finite(o, s, r), number=200)
         step_b = batch * AGENTS / rate
         rows.append({"batch": batch, "step_us": 1e6 * step_b, "check_us": 1e6 * check_b,
                      "check_share": check_b / step_b})
@@ -383,7 +416,9 @@ def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None
     Tube-RDMPC: the reference is ipopt with the primal warm start only (``warm_duals=False``); the
     fast path is ``solver="ipopt-jit"`` with ``warm_duals`` (each satellite's multipliers chained
     through the recorded decisions, as in the controller); ``warm_duals_ms_...`` is the
-    interpreted ipopt with ``warm_duals`` alone. NMPC: ``solver="ipopt-jit"`` against ipopt."""
+    interpreted ipopt with ``warm_duals`` alone. NMPC: the default ``hessian="gauss-newton"``
+    against ``hessian="exact"``, and both one's median NLP time along the closed loop
+    (:func:`nmpc_closed_loop`)."""
     from baselines.nmpc import NMPC
     from baselines.tube_rdmpc import TubeRDMPC
 
@@ -393,11 +428,11 @@ def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None
         if policies is not None and key.split("@")[0] not in policies:
             continue
         tube = cls is TubeRDMPC
-        ref_options = {"warm_duals": False} if tube else {}
+        ref_options = {"warm_duals": False} if tube else {"hessian": "exact"}
         ref, calls = _record(key.split("@")[1], lambda env, c=cls, o=ref_options: c(env, solver="ipopt", **o),
                              hook, max(1, int(decisions * decisions_scale)))
         start = time.perf_counter()
-        pols = {"ipopt": ref, "fast": cls(ref.env, solver="ipopt-jit")}
+        pols = {"ipopt": ref, "fast": cls(ref.env, solver="ipopt-jit") if tube else cls(ref.env)}
         compile_s = time.perf_counter() - start
         if tube:
             pols["warm_duals"] = cls(ref.env, solver="ipopt")
@@ -424,11 +459,28 @@ def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None
         ms = {label: float(np.median(t) * 1e3) for label, t in times.items()}
         out[key] = {"problems": len(calls), "ipopt_ms_per_agent_decision_median": ms["ipopt"],
                     "fast_ms_per_agent_decision_median": ms["fast"], "speedup": ms["ipopt"] / ms["fast"],
-                    "fast_solver": "ipopt-jit + warm_duals" if tube else "ipopt-jit", "compile_s": compile_s,
+                    "fast_solver": "ipopt-jit + warm_duals" if tube else "ipopt + gauss-newton",
+                    "compile_s": compile_s,
                     "max_first_control_diff": gap, "target_ms": FAST_SOLVER_TARGETS_MS[key]}
         if tube:
             out[key]["warm_duals_ms_per_agent_decision_median"] = ms["warm_duals"]
             out[key]["closed_loop_ms_per_agent_decision"] = tube_closed_loop(ref.env)
+        else:
+            out[key]["closed_loop_ms_per_agent_decision"] = nmpc_closed_loop(
+                ref.env, max(10, int(300 * decisions_scale)))
+    return out
+
+
+def nmpc_closed_loop(env, decisions: int = 300) -> dict[str, float]:
+    """Median ms per NLP solve of the NMPC along its own closed loop (the first ``decisions``
+    steps of §5.2 from seed 0: the first waypoint phase is 400), per Hessian."""
+    from baselines.nmpc import NMPC
+
+    out = {}
+    for hessian in ("exact", "gauss-newton"):
+        pol = NMPC(env, hessian=hessian)
+        act_times(env, pol, decisions)
+        out[hessian.replace("-", "_")] = float(np.median(pol.info["agent_solve_ms"]))
     return out
 
 

@@ -195,7 +195,7 @@ class SatVectorEnv:
         truncated = (self.core.t >= self.max_steps) & ~terminated
         rewards = np.asarray(res.rewards, dtype=np.float64)
         done = terminated | truncated
-        if not all_finite(obs, res.info["state"], rewards):
+        if not (res.finite.all() if res.finite is not None else all_finite(obs, res.info["state"], rewards)):
             self._ended |= done   # copies that also ended normally wait for a reset too
             self._nonfinite(np.arange(self.num_envs), obs, res.info["state"], rewards)
         infos: dict[str, Any] = dict(res.info)

@@ -301,7 +301,7 @@ def test_per_agent_stopping_is_algorithm_1():
         ctl = OneHopDMPC(sc, stopping=stopping, sigma=1e-6, seed=3)
         calls = []
         orig = ctl._local_constrained
-        ctl._local_constrained = lambda *a: (calls.append(a[-1].copy()), orig(*a))[1]
+        ctl._local_constrained = lambda *a, calls=calls, orig=orig: (calls.append(a[-1].copy()), orig(*a))[1]
         ctl.solve(x)
         solved[stopping] = np.sum(calls, axis=0)
     assert solved["per_agent"][0] == 2 and solved["all"][0] == solved["all"].max() > 2

@@ -1,4 +1,5 @@
-"""The compiled solvers (``solver="ipopt-jit"``) against the ipopt reference on recorded problems.
+"""The fast solver paths (``solver="ipopt-jit"``, tube ``warm_duals``, NMPC
+``hessian="gauss-newton"``) against the ipopt reference on recorded problems.
 
 Decision problems (initial state, neighbours' predictions, waypoints: the NLP parameters and the
 warm start) are recorded from the li2022 case-1 cluster under the tube-RDMPC and from the
@@ -86,9 +87,11 @@ def test_tube_rdmpc_dual_warm_start_finds_the_cold_ipopt_optimum_on_recorded_pro
     assert iterations["warm"] < iterations["cold"]
 
 
-def test_compiled_nmpc_finds_the_ipopt_optimum_on_recorded_pereira2022_problems():
+def record_nmpc_problems(decisions: int = 6, **options) -> tuple[NMPC, list[dict]]:
+    """The NLP arguments (parameters, warm start, multipliers) of every NMPC solve of the first
+    ``decisions`` steps of pereira2022 §5.2 under the ipopt reference."""
     env = servicing_env(preset="pereira2022")
-    ref, fast = NMPC(env, solver="ipopt", horizon=3), NMPC(env, solver="ipopt-jit", horizon=3)
+    ref = NMPC(env, solver="ipopt", hessian="exact", **options)
     problems: list[dict] = []
     run = ref._run_nlp
 
@@ -99,8 +102,15 @@ def test_compiled_nmpc_finds_the_ipopt_optimum_on_recorded_pereira2022_problems(
     ref._run_nlp = recording
     obs, _ = env.reset(seed=0)
     ref.reset(seed=0)
-    for _ in range(6):
+    for _ in range(decisions):
         obs, *_ = env.step(ref.act(obs))
+    ref._run_nlp = run
+    return ref, problems
+
+
+def test_compiled_nmpc_finds_the_ipopt_optimum_on_recorded_pereira2022_problems():
+    ref, problems = record_nmpc_problems(horizon=3)
+    fast = NMPC(ref.env, solver="ipopt-jit", hessian="exact", horizon=3)
     assert len(problems) == 12
     u0 = ref._u_idx[0]
     for args in problems:
@@ -112,9 +122,30 @@ def test_compiled_nmpc_finds_the_ipopt_optimum_on_recorded_pereira2022_problems(
         assert np.abs(x_fast[u0] - x_ref[u0]).max() <= FIRST_CONTROL_TOL
 
 
+@pytest.mark.parametrize(("tol", "control_tol", "objective_tol"), [(1e-6, 1e-3, 1e-7), (1e-8, 1e-5, 1e-10)])
+def test_gauss_newton_nmpc_finds_the_exact_hessian_optimum(tol, control_tol, objective_tol):
+    """``hessian="gauss-newton"`` against the exact Hessian on recorded §5.2 problems (N = 30):
+    the same optimum, the gap shrinking with the tolerance both are solved to."""
+    ref, problems = record_nmpc_problems(decisions=4, tol=tol)
+    gn = NMPC(ref.env, solver="ipopt", hessian="gauss-newton", tol=tol)
+    u0 = ref._u_idx[0]
+    for args in problems:
+        sol_ref, sol_gn = ref._nlp(**args), gn._nlp(**args)
+        assert gn._nlp.stats()["success"] and ref._nlp.stats()["success"]
+        f_ref, f_gn = float(sol_ref["f"]), float(sol_gn["f"])
+        assert abs(f_gn - f_ref) <= objective_tol * abs(f_ref)
+        x_ref, x_gn = np.asarray(sol_ref["x"]).ravel(), np.asarray(sol_gn["x"]).ravel()
+        assert np.abs(x_gn[u0] - x_ref[u0]).max() <= control_tol
+
+
 def test_solver_option_is_validated():
     env = cluster_env(preset="li2022-case1")
     with pytest.raises(ValueError, match="solver"):
         TubeRDMPC(env, solver="snopt")
     with pytest.raises(ValueError, match="solver"):
         NMPC(servicing_env(preset="pereira2022"), solver="ipopt_jit")
+    assert NMPC(servicing_env(preset="pereira2022"), solver="fatrop", horizon=3).cfg.hessian == "exact"
+    with pytest.raises(ValueError, match="hessian"):
+        NMPC(servicing_env(preset="pereira2022"), solver="fatrop", hessian="gauss-newton")
+    with pytest.raises(ValueError, match="hessian"):
+        NMPC(servicing_env(preset="pereira2022"), hessian="newton")

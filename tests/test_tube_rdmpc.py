@@ -135,6 +135,23 @@ def test_worker_threads_give_the_same_decisions_as_one():
         TubeRDMPC(parallel_env(), workers=0)
 
 
+def test_exact_max_iter_caps_the_exact_nlp_only():
+    """``exact_max_iter`` limits the exact NLP's ipopt iterations; the relaxed NLP that follows a
+    failure keeps ``max_iter`` (its own solver)."""
+    env = parallel_env(max_steps=3)
+    default = TubeRDMPC(env, horizon=15.0)
+    assert default.nlp.relaxed_solver is default.nlp.solver
+    capped = TubeRDMPC(env, horizon=15.0, exact_max_iter=1)     # too few for any exact solve
+    assert capped.nlp.relaxed_solver is not capped.nlp.solver
+    obs, _ = env.reset(seed=0)
+    capped.reset(seed=0)
+    capped.act(obs)
+    assert capped.info["relaxed"] == 10 and capped.info["fallbacks"] == 0
+    assert capped.info["solver_status"] == "Solve_Succeeded"   # the relaxed solves succeeded
+    with pytest.raises(ValueError, match="exact_max_iter"):
+        TubeRDMPC(env, exact_max_iter=0)
+
+
 def test_options_are_validated():
     env = parallel_env()
     with pytest.raises(ValueError, match="unknown option"):

@@ -120,6 +120,13 @@ class RelativeModel:
             self._cache["ab"] = cw_matrices(self.orbit.n, self.dt)
         return self._cache["ab"]
 
+    def linear_step_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(A^T, B^T, R^T)`` of the ``cw`` model's step (states, inputs, chief; contiguous), or
+        ``None`` for the nonlinear models: for compiled steppers that fuse :meth:`step`."""
+        if self.model != "cw":
+            return None
+        return (*self._cache["abT"], self._cache["chief_rotT"])
+
     def initial_chief(self) -> np.ndarray:
         """The chief's ECI state at epoch (6,)."""
         return self.orbit.rv

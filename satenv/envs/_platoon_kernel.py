@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["evaluate"]
+__all__ = ["cw_step", "evaluate"]
 
 _jit = numba.njit(cache=True, nogil=True)
 
@@ -40,16 +40,18 @@ def evaluate(x, accel, table, nbr, params, out, t, offset, slot_src, obs):
     ``table`` (N, 9 + K) holds each follower's ``[gain g_f + d_f, velocity bound, reward gain,
     E* (6), mask of its K neighbour slots nbr (N, K)]``; ``params`` = ``[Q (6), W (3), leader
     contact, follower contact, max_distance, dt, collision_penalty, violation_penalty,
-    terminate_on_collision, observation scales (6), max_steps]``. Writes into ``out`` = ``(E,
-    E - E*, min_separation, collision, violations, cost, delta_v, rewards, terminated)`` (the
-    caller allocates them: arrays made here cost more to return).
+    terminate_on_collision, observation scales (6), max_steps, check]``. Writes into ``out`` =
+    ``(E, E - E*, min_separation, collision, violations, cost, delta_v, rewards, terminated,
+    finite)`` (the caller allocates them: arrays made here cost more to return); ``finite[b]``:
+    every state, reward and observation entry of copy b is finite (the env's step guard, fused:
+    :func:`_check_finite`), computed when ``check`` is not 0 (else True).
     """
-    err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated = out
+    err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated, finite = out
     nb, n = x.shape[0], x.shape[1]
     q, w = params[0:6], params[6:9]
     c_lead, c_pair, max_dist, dt, pen_c, pen_v = params[9], params[10], params[11], params[12], params[13], params[14]
     stop_on_contact = params[15] != 0.0
-    scale, max_steps = params[16:22], params[22]
+    scale, max_steps, checking = params[16:22], params[22], params[23] != 0.0
     gains, nbr_mask = table[:, 0], table[:, 9:]
     observing = obs.shape[0] > 0
     e = np.empty(6)
@@ -103,3 +105,53 @@ def evaluate(x, accel, table, nbr, params, out, t, offset, slot_src, obs):
             rewards[b, f] = stage * table[f, 2] - pen_c * hit_f - pen_v * bad_f
             if lead > max_dist or (stop_on_contact and hit):
                 terminated[b] = True
+    _check_finite(x, rewards, obs, checking, finite)
+
+
+_EXP64 = np.uint64(0x7FF0000000000000)
+_EXP32 = np.uint32(0x7F800000)
+
+
+@_jit
+def _check_finite(x, rewards, obs, checking, finite):
+    """``finite[b]``: no entry of copy b's states, rewards and observations has all exponent bits
+    set (inf / NaN). An integer max over the masked bits: exact, and it vectorises."""
+    nb = x.shape[0]
+    if not checking:
+        finite[:] = True
+        return
+    xv = x.reshape(nb, -1).view(np.uint64)
+    rv = rewards.view(np.uint64)
+    ov = obs.reshape(obs.shape[0], -1).view(np.uint32)
+    for b in range(nb):
+        m64 = np.uint64(0)
+        for k in range(xv.shape[1]):
+            m64 = max(m64, xv[b, k] & _EXP64)
+        for k in range(rv.shape[1]):
+            m64 = max(m64, rv[b, k] & _EXP64)
+        m32 = np.uint32(0)
+        if ov.shape[0] > 0:
+            for k in range(ov.shape[1]):
+                m32 = max(m32, ov[b, k] & _EXP32)
+        finite[b] = m64 != _EXP64 and m32 != _EXP32
+
+
+@_jit
+def cw_step(x, accel, chief, a_t, b_t, rot_t, x_next, chief_next):
+    """One Clohessy-Wiltshire step ``x_next = x A^T + u B^T`` (B, N, 6) and the chief's
+    ``chief_next = chief R^T`` (B, 6): :meth:`satenv.dynamics.RelativeModel.step` of the ``cw``
+    model in one pass (its numpy products are the reference, ``tests/test_platoon_kernel.py``)."""
+    for b in range(x.shape[0]):
+        for f in range(x.shape[1]):
+            for c in range(6):
+                s = 0.0
+                for k in range(6):
+                    s += x[b, f, k] * a_t[k, c]
+                for k in range(3):
+                    s += accel[b, f, k] * b_t[k, c]
+                x_next[b, f, c] = s
+        for c in range(6):
+            s = 0.0
+            for k in range(6):
+                s += chief[b, k] * rot_t[k, c]
+            chief_next[b, c] = s

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import operator
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -72,6 +73,8 @@ class StepResult:
     rewards: np.ndarray          # (B, M) float
     terminated: np.ndarray       # (B,) bool: collision / left the allowed region
     info: dict[str, np.ndarray]  # key -> (B, M, ...) raw physical quantities (INFO_KEYS at least)
+    finite: np.ndarray | None = None  # (B,) bool: states, rewards (and observations of
+    # step_observe) all finite, when the core checked them in its own pass; None: not checked
 
 
 class BatchedCore(ABC):
@@ -162,6 +165,11 @@ class SatParallelEnv(ParallelEnv):
         m = self.core.n_agents
         self.possible_agents = [f"{self.agent_prefix}_{i + 1}" for i in range(m)]
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        # the rows of a (M, ...) array as a tuple of views, and the actions of a dict in agent
+        # order, in one call each (2-3x faster than iterating in Python)
+        self._rows = operator.itemgetter(*range(m)) if m > 1 else (lambda arr: (arr[0],))
+        self._pick = (operator.itemgetter(*self.possible_agents) if m > 1
+                      else (lambda d, a=self.possible_agents[0]: (d[a],)))
         self.agents: list[str] = []
         self._finite_step = StepGuard(m * self.core.obs_dim, m * self.core.state_dim)
         self._obs_space = spaces.Box(-np.inf, np.inf, (self.core.obs_dim,), np.float32)
@@ -288,12 +296,14 @@ class SatParallelEnv(ParallelEnv):
         res, obs_arr = self.core.step_observe(accel[None], self.np_random)
         self._last_info = res.info
         reward_list = res.rewards[0].tolist()
-        if not self._finite_step(obs_arr, res.info["state"], sum(reward_list)):
+        if not (res.finite[0] if res.finite is not None
+                else self._finite_step(obs_arr, res.info["state"], sum(reward_list))):
             self._nonfinite(obs_arr, res.rewards, res.info["state"])
         truncated = bool(self.core.t[0] >= self.scenario.max_steps)
         terminated = bool(res.terminated[0])
-        obs = dict(zip(self.possible_agents, obs_arr[0], strict=False))  # the core's rows (strict costs)
-        rewards = dict(zip(self.possible_agents, reward_list, strict=False))
+        # zips of equal lengths (the core's rows); strict= costs time
+        obs = dict(zip(self.possible_agents, self._rows(obs_arr[0])))  # noqa: B905
+        rewards = dict(zip(self.possible_agents, reward_list))  # noqa: B905
         terms = dict.fromkeys(self.agents, terminated)
         truncs = dict.fromkeys(self.agents, truncated and not terminated)
         infos = self._info_dicts(res.info)
@@ -312,7 +322,7 @@ class SatParallelEnv(ParallelEnv):
             # fast path: one conversion and one finiteness check for the whole team (real,
             # unmasked values only: anything else takes the checked path below)
             try:
-                values = [actions[a] for a in self.possible_agents]
+                values = self._pick(actions)
                 out = np.array(values)
             except (KeyError, TypeError, ValueError, OverflowError):
                 out = None
@@ -335,10 +345,10 @@ class SatParallelEnv(ParallelEnv):
     def _info_dicts(self, info: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
         # one conversion per key: python scalars for per-agent scalars, rows for per-agent vectors
         # (views of the core's info arrays, which it never writes into again); new dicts each call
-        columns = [arr[0].tolist() if arr.ndim == 2 else list(arr[0]) for arr in info.values()]
+        columns = [arr[0].tolist() if arr.ndim == 2 else self._rows(arr[0]) for arr in info.values()]
         keys = tuple(info)
-        rows = [dict(zip(keys, row, strict=False)) for row in zip(*columns, strict=False)]
-        return dict(zip(self.possible_agents, rows, strict=False))  # equal lengths: the core's rows
+        rows = [dict(zip(keys, row)) for row in zip(*columns)]  # noqa: B905 (equal lengths)
+        return dict(zip(self.possible_agents, rows))  # noqa: B905 (the core's rows)
 
     def state(self) -> np.ndarray:
         """The global state (true states of every agent, plus scenario extras)."""

@@ -187,6 +187,8 @@ class PlatoonCore(BatchedCore):
         self._vbound = self.gains * scenario.v_max
         self._neg_reward_gain = -self.alpha / scenario.reward_scale
         self._obs_offset = self._observation_offset()
+        # the compiled CW step (kernel path; the model's numpy step is its reference)
+        self._cw_step = self.model.linear_step_matrices() if self._kernel is not None else None
         if self._kernel is not None:  # the kernels' constant arguments (packed: fewer to pass)
             self._table = np.hstack([self.gains[:, None], self._vbound[:, None],
                                      np.broadcast_to(self._neg_reward_gain, (n,))[:, None], self.target,
@@ -194,7 +196,7 @@ class PlatoonCore(BatchedCore):
             self._params = np.r_[self.q, self.w, self._contact, scenario.max_distance, scenario.dt,
                                  scenario.collision_penalty, scenario.violation_penalty,
                                  float(scenario.terminate_on_collision), self._scale,
-                                 scenario.max_steps].astype(float)
+                                 scenario.max_steps, 1.0].astype(float)
         if self.dense:
             # one product gives E (first N rows, eq. 9) and the position of f minus that of each
             # other body (the leader first, then the other followers in ascending order)
@@ -254,8 +256,8 @@ class PlatoonCore(BatchedCore):
     def step(self, accel, rng=None) -> StepResult:
         accel = self._advance(accel)
         if self._kernel is not None:
-            info, rewards, terminated, _ = self._evaluate_kernel(self.x, accel)
-            return StepResult(rewards, terminated, info)
+            info, rewards, terminated, _, finite = self._evaluate_kernel(self.x, accel)
+            return StepResult(rewards, terminated, info, finite)
         info, stage, far = self._evaluate(self.x, accel)
         sc = self.scenario
         rewards = stage * self._neg_reward_gain
@@ -270,13 +272,18 @@ class PlatoonCore(BatchedCore):
         if self._kernel is None:
             return super().step_observe(accel, rng)
         accel = self._advance(accel)
-        info, rewards, terminated, obs = self._evaluate_kernel(self.x, accel, observe=True)
-        return StepResult(rewards, terminated, info), obs
+        info, rewards, terminated, obs, finite = self._evaluate_kernel(self.x, accel, observe=True)
+        return StepResult(rewards, terminated, info, finite), obs
 
     def _advance(self, accel) -> np.ndarray:
         """The physics of :meth:`step`; returns the inputs as a contiguous float array."""
         accel = np.ascontiguousarray(accel, dtype=float)
-        self.x, self.chief = self.model.step(self.x, accel, self.chief)
+        if self._cw_step is not None and accel.shape == self.x.shape[:-1] + (3,):
+            x_next, chief_next = np.empty_like(self.x), np.empty_like(self.chief)
+            self._kernel.cw_step(self.x, accel, self.chief, *self._cw_step, x_next, chief_next)
+            self.x, self.chief = x_next, chief_next
+        else:
+            self.x, self.chief = self.model.step(self.x, accel, self.chief)
         self.accel = accel
         self.t += 1
         return accel
@@ -308,20 +315,35 @@ class PlatoonCore(BatchedCore):
 
     def _evaluate_kernel(self, x: np.ndarray, accel: np.ndarray, observe: bool = False) -> tuple:
         """:meth:`_evaluate` and the rewards of :meth:`step` by the compiled kernel: the info
-        arrays, rewards ``(B, N)``, terminations ``(B,)`` and, if ``observe``, the observations
-        (all new arrays but the state info, which is ``x``: the core never writes into it)."""
+        arrays, rewards ``(B, N)``, terminations ``(B,)``, if ``observe`` the observations (all
+        new arrays but the state info, which is ``x``: the core never writes into it) and which
+        copies are all finite ``(B,)`` (:attr:`StepResult.finite`)."""
         b, n = x.shape[:2]
         out = (np.empty((b, n, 6)), np.empty((b, n, 6)), np.empty((b, n)), np.empty((b, n), bool),
                np.empty((b, n), np.int64), np.empty((b, n)), np.empty((b, n)), np.empty((b, n)),
-               np.empty(b, bool))
+               np.empty(b, bool), np.empty(b, bool))
         obs = np.empty((b, n, self.obs_dim) if observe else (0, 0, 0), np.float32)
         self._kernel.evaluate(x, accel, self._table, self._nbr, self._params, out, self.t, self._obs_offset,
                               self._slot_src, obs)
-        err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated = out
+        err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated, finite = out
+        finite = finite if self._params[23] else None
         info = {"state": x, "accel": accel.copy(), "delta_v": dv, "tracking_error": err,
                 "neighbourhood_error": err_raw, "min_separation": min_sep, "collision": collision,
                 "violations": viol, "cost": cost}
-        return info, rewards, terminated, obs
+        return info, rewards, terminated, obs, finite
+
+    @property
+    def fused_check(self) -> bool:
+        """Whether the compiled kernel checks that its outputs are finite in its own pass
+        (:attr:`StepResult.finite`; on by default). Off, the env's :class:`StepGuard` checks
+        instead; ``benchmarks.perf`` turns it off (and that guard) to time the check."""
+        return self._kernel is not None and bool(self._params[23])
+
+    @fused_check.setter
+    def fused_check(self, on: bool) -> None:
+        if self._kernel is None:
+            raise ValueError(f"fused_check needs the compiled kernel; this core's method is {self.method!r}")
+        self._params[23] = 1.0 if on else 0.0
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Neighbourhood errors ``E`` (eq. 9) ``(B, N, 6)``, each follower's distance to the nearest
