@@ -107,7 +107,7 @@ from baselines.base import (
 from satenv.cluster_graph import nearest_neighbour_graph
 from satenv.dynamics import cw_continuous, cw_matrices, prediction_matrices
 
-__all__ = ["TubeController", "TubeRDMPC", "TubeRDMPCConfig"]
+__all__ = ["TubeController", "TubeRDMPC", "TubeRDMPCConfig", "slot_sizes"]
 
 _FAR = 1.0e5  # [m] position of an unused neighbour slot (its constraints are inactive)
 _SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed problem only)
@@ -260,8 +260,18 @@ class TubeController:
         return kappa[None]
 
 
+def slot_sizes(m: int, n_nearest: int) -> tuple[int, ...]:
+    """Neighbour-slot counts of the tube-RDMPC NLPs for ``m`` satellites on the symmetric
+    ``n_nearest``-nearest graph (ascending; the last holds every other satellite): most satellites
+    have ``n_nearest`` to ``2 n_nearest`` neighbours, so the NLP stays that size in any swarm."""
+    top = max(m - 1, 1)
+    return tuple(sorted({min(top, max(1, v)) for v in (n_nearest + 1, 2 * n_nearest, 4 * n_nearest)} | {top}))
+
+
 class _NominalNLP:
-    """The nominal DMPC problem (36)+(38) of one satellite as one CasADi/ipopt solver.
+    """The nominal DMPC problem (36)+(38) of one satellite as CasADi/ipopt solvers, one per
+    neighbour-slot count K of ``slot_sizes`` (a satellite uses the smallest that holds its
+    neighbours: the unused slots' rows would only enlarge ipopt's linear systems).
 
     Decision variables ``w = [v (3N), lambda (N), s (N), s_t (1)]``: the inputs scaled to the
     unit ball (``u~ = u_nom v``), the slack of the Lyapunov rows, and two slacks that are fixed
@@ -272,28 +282,55 @@ class _NominalNLP:
     obstacle velocity (3), q_r]``.
     """
 
-    def __init__(self, cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int,
+    def __init__(self, cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, slot_sizes: tuple[int, ...],
                  u_nom: float, mass: float, r_pair: float, r_obs: float, r_tgt: float) -> None:
-        self.N, self.K = horizon, k_slots
-        self.u_nom = u_nom
+        self.N, self.slot_sizes, self.K = horizon, tuple(slot_sizes), max(slot_sizes)
+        self.cfg, self.u_nom = cfg, u_nom
+        self._constants = (n, dt, horizon)
+        self._radii = (u_nom, mass, r_pair, r_obs, r_tgt)
         a, b = cw_matrices(n, dt)
         self.cal_a, self.cal_b = prediction_matrices(a, b, horizon)
-        args = (cfg, n, dt, horizon, k_slots, u_nom, mass, r_pair, r_obs, r_tgt)
-        exact_iter = cfg.exact_max_iter or cfg.max_iter
-        built = [nlpsol_cached(("tube_rdmpc", *args, exact_iter, copy), lambda: self._build(*args, exact_iter))
-                 for copy in range(cfg.workers)]
-        self.solvers = [solver for solver, _, _ in built]       # one per worker thread (0: .solver)
-        self.solver, self.lbg, self.ubg = built[0]
-        self._relaxed = None if exact_iter == cfg.max_iter else nlpsol_cached(
-            ("tube_rdmpc", *args, cfg.max_iter, 0), lambda: self._build(*args, cfg.max_iter))[0]
         self.n_w = 5 * horizon + 1
         self.sigma = cfg.sigma
+        self._fixed = 15 + 3 * (horizon + 2)          # parameter entries that are not per slot
+        self._per_slot = 3 * (horizon + 1) + 6
+
+    def slots(self, params: np.ndarray) -> int:
+        """The neighbour-slot count K of a parameter vector (its length: the layout above)."""
+        return (params.size - self._fixed) // self._per_slot
+
+    def slots_for(self, degree: int) -> int:
+        """The smallest built slot count that holds ``degree`` neighbours."""
+        return next(k for k in self.slot_sizes if k >= degree)
+
+    def _built(self, k: int, relaxed: bool, copy: int) -> tuple[Any, np.ndarray, np.ndarray]:
+        cfg = self.cfg
+        max_iter = cfg.max_iter if relaxed else (cfg.exact_max_iter or cfg.max_iter)
+        args = (cfg, *self._constants, k, *self._radii)
+        copy = 0 if relaxed else copy
+        return nlpsol_cached(("tube_rdmpc", *args, max_iter, copy), lambda: self._build(*args, max_iter))
+
+    def prepare(self, slots: list[int] | None = None, copies: int = 1) -> None:
+        """Build (compile, for ``ipopt-jit``) the solvers of these slot counts (all when None) and
+        worker copies now: CasADi builds are not thread-safe and a compile is slow."""
+        for k in sorted(set(self.slot_sizes if slots is None else slots)):
+            for copy in range(copies):
+                self._built(k, False, copy)
+            self._built(k, True, 0)
+
+    def solver_for(self, k: int, copy: int = 0, relaxed: bool = False) -> Any:
+        """The CasADi solver of the NLP with ``k`` neighbour slots: worker ``copy``'s for the
+        exact NLP, or the relaxed one's (its own iteration limit when ``exact_max_iter`` is set)."""
+        return self._built(k, relaxed, copy)[0]
+
+    def row_bounds(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(lbg, ubg)`` of the NLP with ``k`` neighbour slots."""
+        return self._built(k, False, 0)[1:]
 
     @property
-    def relaxed_solver(self) -> Any:
-        """The solver of the relaxed NLP: ``solver`` unless ``exact_max_iter`` gave the exact
-        one a lower iteration limit."""
-        return self.solver if self._relaxed is None else self._relaxed
+    def solver(self) -> Any:
+        """The exact solver with every slot (``K``), copy 0."""
+        return self.solver_for(self.K)
 
     @staticmethod
     def _build(cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int, u_nom: float,
@@ -421,15 +458,20 @@ class _NominalNLP:
 
         ``duals`` (``lam_x``, ``lam_g``): the multipliers to start from (used by a solver built
         with ``warm_duals``); the solve writes its own multipliers back into the dict. ``copy``:
-        which solver copy (one per worker thread) runs it."""
+        which solver copy (one per worker thread) runs it. The NLP's slot count is that of
+        ``params`` (:meth:`slots`)."""
         lbx, ubx = self.bounds(relaxed)
         w0 = np.clip(w0, lbx, np.where(np.isfinite(ubx), ubx, w0))
+        k = self.slots(params)
+        lbg, ubg = self.row_bounds(k)
         g: dict[str, np.ndarray] = {}
+        if duals and duals["lam_g"].size != lbg.size:
+            duals.clear()                        # multipliers of another slot count: start without
         start = {} if not duals else {"lam_x0": duals["lam_x"], "lam_g0": duals["lam_g"]}
 
         def run() -> tuple[np.ndarray, bool, str]:
-            solver = self.relaxed_solver if relaxed else self.solver if copy == 0 else self.solvers[copy]
-            sol = solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=self.lbg, ubg=self.ubg, **start)
+            solver = self.solver_for(k, copy, relaxed)
+            sol = solver(x0=w0, p=params, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **start)
             stats = solver.stats()
             status = str(stats.get("return_status", ""))
             g["g"] = np.asarray(sol["g"], dtype=float).ravel()
@@ -440,7 +482,7 @@ class _NominalNLP:
             return np.asarray(sol["x"], dtype=float).ravel(), ok, status
 
         return guarded_solve(info, run, shape=(self.n_w,), lower=lbx, upper=ubx, fallback=False,
-                             violation=lambda _: row_violation(g["g"], self.lbg, self.ubg),
+                             violation=lambda _: row_violation(g["g"], lbg, ubg),
                              violation_tol=NLP_CONSTRAINT_TOL)
 
     def states(self, x0: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -498,9 +540,8 @@ class TubeRDMPC(Baseline):
         if self.u_nom <= 0:
             raise BaselineError(f"the disturbance bound {self.w_bar:.3g} m/s^2 leaves no thrust for the "
                              f"nominal DMPC (u_max = {sc.u_max:.3g} m/s^2)")
-        self.k_slots = max(self.m - 1, 1)
         self.a, self.b = cw_matrices(self.n, sc.dt)
-        self.nlp = _NominalNLP(cfg, self.n, sc.dt, self.N, self.k_slots, self.u_nom, sc.mass,
+        self.nlp = _NominalNLP(cfg, self.n, sc.dt, self.N, slot_sizes(self.m, sc.n_neighbours), self.u_nom, sc.mass,
                                r_pair=sc.pair_distance + 2 * self.eps_bar + cfg.safety_margin,
                                r_obs=sc.obstacle_distance + self.eps_bar + cfg.safety_margin,
                                r_tgt=sc.target_distance + self.eps_bar + cfg.safety_margin)
@@ -557,7 +598,7 @@ class TubeRDMPC(Baseline):
             if self.tube.nominal is not None:
                 self.info["resyncs"] += 1
             self._attach()
-        sc, N, K = self.sc, self.N, self.k_slots
+        sc, N = self.sc, self.N
         t_k = env.time
         nominal = self.tube.nominal.copy()
         pred = self._shifted()
@@ -577,10 +618,11 @@ class TubeRDMPC(Baseline):
         status_row = []
         params_all = []
         for i in range(self.m):
+            nbrs = np.nonzero(adj[i])[0]
+            K = self.nlp.slots_for(nbrs.size)
             qn = np.full((K, N + 1, 3), _FAR)
             dn = np.zeros((K, 3))
             pn = np.zeros((K, 3))
-            nbrs = np.nonzero(adj[i])[0][:K]
             for slot, j in enumerate(nbrs):
                 qn[slot] = pred_q[j]
                 dn[slot] = coast[j]
@@ -643,6 +685,7 @@ class TubeRDMPC(Baseline):
             return w, local, (time.perf_counter() - start) * 1e3
 
         workers = min(self.cfg.workers, self.m)
+        self.nlp.prepare([self.nlp.slots(p) for p in params_all], workers)   # builds: not in threads
         if workers == 1:
             results = [solve(i, 0) for i in range(self.m)]
         else:

@@ -516,22 +516,28 @@ def _fault_cases():
 
     def nlp(attr, bounds):
         def install(pol, kind, hits):
-            owner, name = (pol.nlp, "solver") if attr == "tube" else (pol, "_nlp")
+            owner, name = (pol.nlp, "solver_for") if attr == "tube" else (pol, "_nlp")
             real = getattr(owner, name)
-            fake = _FakeNLP(kind, *bounds(pol))
 
-            def faulty(**args):
-                hits[0] += 1
-                return fake(**args)
-            faulty.stats = fake.stats
-            setattr(owner, name, faulty)
+            def faulty_for(*bounds_args):
+                fake = _FakeNLP(kind, *bounds(pol, *bounds_args))
+
+                def faulty(**args):
+                    hits[0] += 1
+                    return fake(**args)
+                faulty.stats = fake.stats
+                return faulty
+            if attr == "tube":   # one solver per neighbour-slot count
+                setattr(owner, name, lambda k, copy=0, relaxed=False: faulty_for(k))
+            else:
+                setattr(owner, name, faulty_for())
             return lambda: setattr(owner, name, real)
         return install
 
     return [("dmpc", "platoon_v0", {"topology": "BDL"}, {"seed": 0}, dmpc),
             ("apf", "cluster_v0", {}, {}, apf),
             ("cgmres", "formation_v0", {}, {}, cgmres),
-            ("tube_rdmpc", "cluster_v0", {}, {}, nlp("tube", lambda p: (p.nlp.lbg, p.nlp.ubg))),
+            ("tube_rdmpc", "cluster_v0", {}, {}, nlp("tube", lambda p, k: p.nlp.row_bounds(k))),
             ("nmpc", "servicing_v0", {}, {"horizon": 5}, nlp("nmpc", lambda p: (p._lbg, p._ubg)))]
 
 

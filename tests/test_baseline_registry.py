@@ -262,7 +262,8 @@ def test_tube_rdmpc_faults(monkeypatch, tube, kind):
     env, pol = tube
     obs, _ = env.reset(seed=0)
     pol.reset()
-    monkeypatch.setattr(pol.nlp, "solver", _FakeNLP(kind, pol.nlp.lbg, pol.nlp.ubg))
+    monkeypatch.setattr(pol.nlp, "solver_for",
+                        lambda k, copy=0, relaxed=False: _FakeNLP(kind, *pol.nlp.row_bounds(k)))
     _check_episode_goes_on(env, pol, obs)
     assert pol.info["fallbacks"] == 2 * pol.m and pol.info["relaxed"] == 2 * pol.m
     assert pol.info["solver_status"] != "Solve_Succeeded"

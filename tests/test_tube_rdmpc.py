@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("casadi")
 
-from baselines.tube_rdmpc import TubeController, TubeRDMPC, TubeRDMPCConfig  # noqa: E402
+from baselines.tube_rdmpc import TubeController, TubeRDMPC, TubeRDMPCConfig, slot_sizes  # noqa: E402
 from satenv import metrics  # noqa: E402
 from satenv.envs.cluster_v0 import parallel_env  # noqa: E402
 from satenv.rollout import rollout  # noqa: E402
@@ -103,7 +103,7 @@ def test_solver_failure_degrades_to_flagged_fallback(monkeypatch):
     def fail(**_):
         raise RuntimeError("forced failure")
 
-    monkeypatch.setattr(pol.nlp, "solver", fail)
+    monkeypatch.setattr(pol.nlp, "solver_for", lambda k, copy=0, relaxed=False: fail)
     obs, _ = env.reset(seed=0)
     pol.reset()
     for _ in range(2):
@@ -140,9 +140,9 @@ def test_exact_max_iter_caps_the_exact_nlp_only():
     failure keeps ``max_iter`` (its own solver)."""
     env = parallel_env(max_steps=3)
     default = TubeRDMPC(env, horizon=15.0)
-    assert default.nlp.relaxed_solver is default.nlp.solver
+    assert default.nlp.solver_for(9, relaxed=True) is default.nlp.solver_for(9)
     capped = TubeRDMPC(env, horizon=15.0, exact_max_iter=1)     # too few for any exact solve
-    assert capped.nlp.relaxed_solver is not capped.nlp.solver
+    assert capped.nlp.solver_for(9, relaxed=True) is not capped.nlp.solver_for(9)
     obs, _ = env.reset(seed=0)
     capped.reset(seed=0)
     capped.act(obs)
@@ -150,6 +150,45 @@ def test_exact_max_iter_caps_the_exact_nlp_only():
     assert capped.info["solver_status"] == "Solve_Succeeded"   # the relaxed solves succeeded
     with pytest.raises(ValueError, match="exact_max_iter"):
         TubeRDMPC(env, exact_max_iter=0)
+
+
+def test_neighbour_slots_follow_the_degree():
+    """Each satellite's NLP has the smallest built slot count that holds its neighbours; the
+    unused slots are inactive rows, so the optimum is that of the NLP with every slot."""
+    assert slot_sizes(10, 4) == (5, 8, 9) and slot_sizes(64, 4) == (5, 8, 16, 63)
+    assert slot_sizes(2, 4) == (1,) and slot_sizes(5, 0) == (1, 4)
+    env = parallel_env(max_steps=3)
+    pol = TubeRDMPC(env, horizon=15.0)
+    problems = []
+    solve = pol.nlp.solve
+
+    def recording(info, params, w0, relaxed, duals=None, copy=0):
+        problems.append((params.copy(), w0.copy(), relaxed))
+        return solve(info, params, w0, relaxed, duals, copy)
+
+    pol.nlp.solve = recording
+    obs, _ = env.reset(seed=0)
+    pol.reset(seed=0)
+    for _ in range(2):
+        obs, *_ = env.step(pol.act(obs))
+    pol.nlp.solve = solve
+    nlp, n = pol.nlp, pol.N
+    assert {nlp.slots(p) for p, _, _ in problems} < set(nlp.slot_sizes)
+    assert sum(nlp.slots(p) < nlp.K for p, _, _ in problems) >= 10
+    for params, w0, relaxed in problems:
+        k = nlp.slots(params)
+        if k == nlp.K:
+            continue
+        head, tail = params[:9], params[9 + k * nlp._per_slot:]
+        slots = params[9:9 + k * nlp._per_slot]
+        qn, rest = slots[:3 * (n + 1) * k], slots[3 * (n + 1) * k:]
+        pad = nlp.K - k                              # the same problem with every slot (far ones)
+        full = np.concatenate([head, qn, np.full(3 * (n + 1) * pad, 1.0e5), rest[:3 * k], np.zeros(3 * pad),
+                               rest[3 * k:], np.zeros(3 * pad), tail])
+        w_k, w_full = nlp.solve({}, params, w0, relaxed), nlp.solve({}, full, w0, relaxed)
+        assert (w_k is None) == (w_full is None)
+        if w_k is not None:
+            assert np.abs(w_k[:3] - w_full[:3]).max() <= 1e-6
 
 
 def test_options_are_validated():
