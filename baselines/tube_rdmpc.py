@@ -67,12 +67,17 @@ the exact worst case is ``sup ||ε|| = w̄ / (1 + k1)`` — the closed loop
 ``ε'' + (k1 + k2) ε' + (1 + k1) ε = w`` has a non-negative impulse response — which exceeds
 (15) for ``eta < (k1 / (1 + k1)^2) = 0.22``; ``benchmarks/repro_li2022.py`` measures it).
 
-Solver: CasADi + ipopt (MUMPS), one NLP built once per process and config (the structure is the
-same for every satellite; :func:`baselines.base.nlpsol_cached`) and warm-started per satellite
-from its shifted previous solution and (``warm_duals``, default) its previous multipliers: about
-6 ipopt iterations instead of 13, the same optimum (objective within 1e-10 relative on recorded
-li2022 problems; ``tests/test_fast_solvers.py``). ``solver="ipopt-jit"`` compiles its functions
-with gcc.
+Solver: CasADi + ipopt (MUMPS), NLPs built once per process and config
+(:func:`baselines.base.nlpsol_cached`), one per neighbour-slot count of :func:`slot_sizes`
+(``N_a + 1``, ``2 N_a``, ``4 N_a`` and ``M - 1`` for the symmetric ``N_a``-nearest graph): each
+satellite solves the smallest that holds its neighbours (the rows of an unused slot, parked at
+100 km, are inactive: the same optimum, first controls within 1e-6 of the all-slot NLP,
+``tests/test_tube_rdmpc.py``; 1.4x faster at li2022's 4-5 neighbours of 9, and a 64-satellite
+swarm solves 5-16-slot NLPs instead of 63). Warm-started per satellite from its shifted previous
+solution and (``warm_duals``, default) its previous multipliers: about 6 ipopt iterations instead
+of 13, the same optimum (objective within 1e-10 relative on recorded li2022 problems;
+``tests/test_fast_solvers.py``). ``solver="ipopt-jit"`` compiles its functions with gcc.
+``exact_max_iter`` caps the exact NLP's iterations (the relaxed one keeps ``max_iter``).
 """
 
 from __future__ import annotations

@@ -2,13 +2,13 @@
 
 ``python -m benchmarks.reproduce li2022 --out FILE.json [--plots DIR] [--case 1|2]
 [--variant ours|published|both]`` or ``python -m benchmarks.repro_li2022`` with the same options.
-Expected run time on 2 shared cores (measured at load 3-4, one solver thread): 2 min for our RDMPC
-episode (2000 s, 400 decisions of 10 NLPs, ~6 ipopt iterations each with ``warm_duals``), 13 min
-for the as-published one (1604 of its 4000 NLPs need the relaxed re-solve), 20 s per APF episode,
-about 3 min for the ``lyapunov_tolerance`` sensitivity and the tube experiment: about 18 min for
-one case with both variants, about twice that for both cases. The RDMPC solves its satellites'
-NLPs on two threads where two cores exist (``workers``; the same decisions). Progress lines go to
-stderr.
+Expected run time on 2 cores (measured 2026-11-30, two solver threads): 1-1.5 min for our RDMPC
+episode (2000 s, 400 decisions of 10 NLPs, ~6 ipopt iterations each with ``warm_duals``), 4 min
+for the as-published one (1605 of its 4000 NLPs need the relaxed re-solve; the failing exact
+solves stop at :data:`EXACT_MAX_ITER`), 12 s per APF episode, about 1 min for the
+``lyapunov_tolerance`` sensitivity and the tube experiment: about 6 min for one case with both
+variants, 12 min for both cases (was 18 min per case). The RDMPC solves its satellites' NLPs on
+two threads where two cores exist (``workers``; the same decisions). Progress lines go to stderr.
 
 Runs ``satenv.cluster_v0(preset="li2022-case<k>", terminate_on_collision=False)`` (so a safety
 violation is counted, not hidden by an early end) with ``baselines.TubeRDMPC`` and
@@ -84,7 +84,7 @@ SENSITIVITY_STEPS = 30
 """Decisions (150 s) of the accuracy-vs-``lyapunov_tolerance`` runs (started on the targets)."""
 
 
-RUN_TIME = "about 18 min per case with both variants (2 min ours, 13 min as published); --variant ours: about 5 min"
+RUN_TIME = "about 6 min per case with both variants (1-1.5 min ours, 4 min as published); --variant ours: about 2.5 min"
 
 
 def _progress(msg: str) -> None:
@@ -347,7 +347,7 @@ def run(case: int | None = None, out: str | Path | None = None, plots_dir: str |
             for v in (variants if ctrl == "tube_rdmpc" else ("ours",))]
     for k, (c, ctrl, v) in enumerate(jobs):
         _progress(f"episode {k + 1}/{len(jobs)}: case {c}, {label(ctrl, v)} "
-                  f"({('~13 min' if v == 'published' else '~2 min') if ctrl == 'tube_rdmpc' else '~20 s'}) ...")
+                  f"({('~4 min' if v == 'published' else '~1.5 min') if ctrl == 'tube_rdmpc' else '~15 s'}) ...")
         traj, env, pol, wall = run_controller(c, ctrl, seed=seed, max_steps=max_steps, variant=v,
                                               policy_options=(policy_options or {}).get(ctrl))
         rows.append(summarise(traj, env, pol, ctrl, c, wall, variant=v))

@@ -2,8 +2,9 @@
 
 ``python -m benchmarks.reproduce pereira2022-servicing --out FILE.json [--plots DIR]``
 (or ``python -m benchmarks.repro_servicing --out FILE.json --plots DIR``). Expected run time on 2
-shared cores: 2-5 min for the episode (2 x 1200 NLP solves) plus about 1 min for the attitude
-step responses; a progress line per phase goes to stderr.
+shared cores (measured at load 3, ipopt with the NMPC's default Gauss-Newton Hessian): 80 s for
+the episode (2 x 1200 NLP solves, 25 ms median) plus about 25 s for the attitude step responses;
+a progress line per phase goes to stderr.
 
 Runs ``satenv.servicing_v0(preset="pereira2022")`` (2 spacecraft, waypoints of eq. 50 switching at
 t = 40 s and 80 s, 120 s) under ``baselines.nmpc.NMPC`` (N = 30, eq. 39 weights of §5.2, ipopt;
@@ -47,7 +48,7 @@ COMMAND = "python -m benchmarks.reproduce pereira2022-servicing --out FILE.json 
 REACH_TOL = 0.5            # m
 POINTING_TOL_DEG = 5.0     # our threshold for "pointing achieved"
 SETTLE_WINDOW_S = 10.0     # last seconds of each phase
-RUN_TIME = "3-6 min (2 x 1200 NLP solves, then the attitude step responses: --no-diagnostics)"
+RUN_TIME = "about 2 min (80 s for 2 x 1200 NLP solves, 25 s for the attitude step responses: --no-diagnostics)"
 
 
 class PhaseProgress:

@@ -79,6 +79,7 @@ def test_compiled_cw_step_matches_the_model(batch):
     np.testing.assert_allclose(kernel.chief, chief_ref, rtol=1e-14, atol=1e-6)
     j2 = PlatoonCore(resolve_scenario("pereira2023", dynamics="j2"), method="kernel")
     assert kernel._cw_step is not None and j2._cw_step is None     # nonlinear models: numpy
+    assert _cores(4, batch=64)[0]._cw_step is None                  # large batches: BLAS
 
 
 def test_kernel_flags_the_copies_that_are_not_finite():
