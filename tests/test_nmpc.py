@@ -158,7 +158,7 @@ def test_attitude_reference_inside_the_nlp_matches_the_env():
 
 @pytest.mark.slow
 def test_full_pereira2022_run_meets_the_three_claims_per_phase():
-    """The whole §5.2 episode (120 s, 2-5 min): constraints, waypoints, and the pointing error
+    """The whole §5.2 episode (120 s, about 1.5 min): constraints, waypoints, and the pointing error
     <= 5 deg at the end of every phase of every spacecraft and over its last 10 s."""
     from benchmarks.repro_servicing import POINTING_TOL_DEG, analyse
 

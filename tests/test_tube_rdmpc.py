@@ -248,7 +248,7 @@ def test_li2022_claims_check_both_variants_against_the_tube_bound():
 @pytest.mark.slow
 @pytest.mark.parametrize("case", [1, 2])
 def test_full_li2022_reproduction_meets_the_claims(case):
-    """Our RDMPC's and the APF's whole 2000 s episodes (5-14 min per case on 2 cores)."""
+    """Our RDMPC's and the APF's whole 2000 s episodes (about 1.5 min per case on 2 cores)."""
     from benchmarks.repro_li2022 import run
 
     result = run(case=case, tube=False, variants=("ours",), sensitivity=False)
