@@ -20,7 +20,11 @@ Agent-steps per second (one agent advanced by one decision step) of
               ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
               on and off) and of the ``satenv.make_vec`` step at each batch size.
 
-Five more sections run only when named in ``--sections`` (they take minutes):
+Six more sections run only when named in ``--sections`` (they take minutes):
+
+* ``reproductions`` issue 17's wall times of ``reproduce li2022 --case 1`` (both variants) and
+              ``reproduce pereira2022-servicing`` (a subprocess each, plots off), against their
+              targets (60 s / 20 s);
 
 * ``fast_solvers`` (stored as ``solvers.fast_vs_ipopt``) the fast paths of tube-RDMPC (compiled
               ``solver="ipopt-jit"`` with ``warm_duals``; one gcc compile, about 1 min) and NMPC
@@ -67,7 +71,7 @@ from satenv.dynamics import R_EARTH, Orbit, RelativeModel
 AGENTS = 4
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard")
 """The default sections."""
-EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling")
+EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -628,8 +632,35 @@ def training_throughput(env_id: str = "platoon_v0", env_kwargs: dict | None = No
     return out
 
 
+REPRODUCTION_TARGETS_S: dict[str, tuple[list[str], float]] = {
+    "li2022 --case 1": (["li2022", "--case", "1"], 60.0),
+    "pereira2022-servicing": (["pereira2022-servicing"], 20.0),
+}
+"""Issue 17's reproduction commands (``benchmarks.reproduce`` arguments) and wall-time targets [s]."""
+
+
+def reproduction_times(log: Callable[[str], None] = print) -> dict[str, dict]:
+    """Wall time of each command of :data:`REPRODUCTION_TARGETS_S`, run as a subprocess (JSON to a
+    temporary folder; its exit status is recorded, a claim not met does not stop the section)."""
+    import subprocess
+    import tempfile
+
+    out = {}
+    for name, (args, target) in REPRODUCTION_TARGETS_S.items():
+        with tempfile.TemporaryDirectory() as tmp:
+            start = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "benchmarks.reproduce", *args, "--out",
+                                   os.path.join(tmp, "out.json")], capture_output=True, text=True)
+            wall = time.perf_counter() - start
+        out[name] = {"wall_s": wall, "target_s": target, "exit_status": proc.returncode}
+        log(f"reproduce {name}: {wall:.0f} s (target {target:.0f} s, exit status {proc.returncode})")
+    return out
+
+
 def _extra_sections(result: dict, sections: tuple[str, ...], scale: float, log: Callable[[str], None]) -> None:
     """The opt-in sections (:data:`EXTRA_SECTIONS`); ``scale`` shrinks their loops (smoke runs)."""
+    if "reproductions" in sections:
+        result["reproductions"] = reproduction_times(log)
     if "cgmres_ipopt" in sections:
         steps = max(2, int(1000 * scale))
         result["cgmres_ipopt"] = [cgmres_vs_ipopt(p, steps, max(1, min(10, steps - 1)))
@@ -782,6 +813,8 @@ def _ratios(result: dict) -> tuple[dict, list[dict]]:
         ratios[f"{key}_fast_vs_ipopt_speedup"] = row["speedup"]
         target(f"(e) {key} fast solver ms per agent decision", row["fast_ms_per_agent_decision_median"],
                row["target_ms"], op="<=")
+    for name, row in (result.get("reproductions") or {}).items():
+        target(f"(f) reproduce {name} wall time [s]", row["wall_s"], row["target_s"], op="<=")
     if "scaling" in result:
         from benchmarks.scaling import scaling_targets
 

@@ -60,6 +60,19 @@ def test_perf_guard_section_smoke():
     assert [r["batch"] for r in out["make_vec"]] == [1, 2] and isinstance(out["met"], bool)
 
 
+def test_perf_reproductions_section_smoke(tmp_path, monkeypatch):
+    """Issue 17's reproduction wall times, on the one-second pereira2023 reproduction: a row with
+    its time, target and exit status, and a target flag that can fail."""
+    monkeypatch.setattr(perf, "REPRODUCTION_TARGETS_S", {"pereira2023": (["pereira2023"], 1e-3)})
+    out = tmp_path / "perf.json"
+    perf.main(["--out", str(out), "--sections", "reproductions"])
+    data = json.loads(out.read_text())
+    row = data["reproductions"]["pereira2023"]
+    assert row["wall_s"] > 0 and row["target_s"] == 1e-3 and row["exit_status"] in (0, 1)   # 1: a claim not met
+    flag = [t for t in data["targets"] if t["name"] == "(f) reproduce pereira2023 wall time [s]"]
+    assert flag and flag[0]["met"] is False
+
+
 def test_perf_scaling_section_smoke(tmp_path, monkeypatch):
     """The swarm table of issue 19 at tiny sizes, through the command line: JSON, targets, plot."""
     from benchmarks import scaling
