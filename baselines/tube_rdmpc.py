@@ -144,9 +144,9 @@ class TubeRDMPCConfig:
         max_iter, tol: ipopt iteration limit and tolerance.
         exact_max_iter: a lower iteration limit for the exact NLP only (None: ``max_iter``). A
             failed exact solve is followed by the relaxed one, and most failures run to the
-            limit: li2022's as-published episodes spend 80 % of their time in them, while no
-            exact solve that succeeded took over 50 iterations (16 000 solves, both cases and
-            variants). Above that, the same decisions in less time.
+            limit: li2022's as-published episodes spend about 82 % of their time in them, while no
+            exact solve that succeeded took over 50 iterations (12 000 solves of three li2022
+            episodes). Above that, the same decisions in less time.
         warm_duals: also warm-start ipopt's multipliers (``warm_start_init_point``, ``mu_init``
             1e-4) from the satellite's previous exact solve; about half the iterations, the same
             optimum (``tests/test_fast_solvers.py``). False: the primal warm start only.
