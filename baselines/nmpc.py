@@ -295,9 +295,7 @@ class NMPCConfig:
         if self.hessian is not None:
             rules["hessian"] = partial(choice, choices=("exact", "gauss-newton"))
         validate(self, "NMPC", rules)
-        if self.hessian is None:
-            object.__setattr__(self, "hessian", "exact" if self.solver == "fatrop" else "gauss-newton")
-        elif self.hessian == "gauss-newton" and self.solver == "fatrop":
+        if self.hessian == "gauss-newton" and self.solver == "fatrop":
             raise BaselineError("NMPC option hessian='gauss-newton' needs an ipopt solver "
                                 "('ipopt' or 'ipopt-jit'), got solver='fatrop'")
         opts = self.solver_options
@@ -341,6 +339,7 @@ class NMPC(Baseline):
         self.rk4_steps = cfg.rk4_steps
         self.formulation = cfg.formulation
         self.terminal_attitude_weight = cfg.terminal_attitude_weight
+        self.hessian = cfg.hessian or ("exact" if cfg.solver == "fatrop" else "gauss-newton")
         self._f, self._F = build_model(sc, self.rk4_steps)
         self._a_cw = cw_continuous(sc.mean_motion)[0]
         self._j_f = np.array(sc.inertia)
@@ -461,7 +460,7 @@ class NMPC(Baseline):
         pth.append(row + np.arange(n_path))
         self._dyn_rows = np.array(dyn)            # (N, 13): x_{k+1} - F(x_k, u_k)
         self._path_rows = np.array(pth)           # (N, n_path): path constraints on x_1 .. x_N
-        if self.cfg.hessian == "gauss-newton":
+        if self.hessian == "gauss-newton":
             opts["hess_lag"] = self._gauss_newton_hessian(nlp, ca.vertcat(*res))
         opts.update(extra)
         key = ("nmpc", repr(sc), repr(dataclasses.replace(self.cfg, seed=None)), m)

@@ -309,7 +309,7 @@ def reproduce(plots: str | Path | None = None, seed: int = 0, diagnostics: bool 
         "paper": PAPER,
         "command": COMMAND,
         "setup": {"preset": "pereira2022", "steps": traj.steps, "dt_s": traj.dt,
-                  "horizon": policy.N, "solver": policy.solver, "order": policy.order,
+                  "horizon": policy.N, "solver": policy.solver, "hessian": policy.hessian, "order": policy.order,
                   "thrust_frame": env.scenario.thrust_frame, "dynamics": env.scenario.dynamics,
                   "pointing_reference": list(env.scenario.pointing_reference),
                   "terminal_attitude_weight": policy.cfg.terminal_attitude_weight,

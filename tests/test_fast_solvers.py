@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("casadi")
 
-from baselines.nmpc import NMPC  # noqa: E402
+from baselines.nmpc import NMPC, NMPCConfig  # noqa: E402
 from baselines.tube_rdmpc import TubeRDMPC  # noqa: E402
 from satenv.envs.cluster_v0 import parallel_env as cluster_env  # noqa: E402
 from satenv.envs.servicing_v0 import parallel_env as servicing_env  # noqa: E402
@@ -148,7 +148,10 @@ def test_solver_option_is_validated():
         TubeRDMPC(env, solver="snopt")
     with pytest.raises(ValueError, match="solver"):
         NMPC(servicing_env(preset="pereira2022"), solver="ipopt_jit")
-    assert NMPC(servicing_env(preset="pereira2022"), solver="fatrop", horizon=3).cfg.hessian == "exact"
+    env = servicing_env(preset="pereira2022")
+    assert NMPC(env, solver="fatrop", horizon=3).hessian == "exact"
+    assert NMPC(env, horizon=3).hessian == "gauss-newton"
+    assert NMPC(env, config=NMPCConfig(horizon=3), solver="fatrop").hessian == "exact"
     with pytest.raises(ValueError, match="hessian"):
         NMPC(servicing_env(preset="pereira2022"), solver="fatrop", hessian="gauss-newton")
     with pytest.raises(ValueError, match="hessian"):
