@@ -46,7 +46,8 @@ Solvers: ``"ipopt"`` (default, MUMPS) or ``"fatrop"`` (structure-exploiting; the
 in its stage-wise form). ipopt gets the Gauss-Newton matrix of the cost residuals (plus the path
 rows' curvature) as its Hessian (``hessian="gauss-newton"``, the default) instead of the exact
 Hessian of the Lagrangian (``"exact"``), whose second derivatives of the RK4 attitude step and of
-eq. 43-49 cost 20x the constraint evaluation: more iterations, each cheaper, the same optimum. Every solve goes through :func:`baselines.base.guarded_solve`: an
+eq. 43-49 cost 20x the constraint evaluation: more iterations, each cheaper, the same optimum.
+Every solve goes through :func:`baselines.base.guarded_solve`: an
 exception, a status other than success / acceptable, a wrong-shaped or non-finite point, a variable
 outside its bounds (input box, velocity bounds) or a constraint row violated by more than
 ``NLP_CONSTRAINT_TOL`` is a failure (``info["solver_status"]`` says which). A failed solve applies the
@@ -253,9 +254,9 @@ class NMPCConfig:
         hessian: ``"gauss-newton"`` (ipopt solvers only): ``2 J^T J`` of the cost residuals plus
             the path rows' exact curvature, without the dynamics' and the attitude reference's
             second derivatives; ``"exact"``: the solver's Hessian of the Lagrangian (the
-            reference); ``None`` (default): Gauss-Newton for ipopt, exact for fatrop. The same optimum (the Hessian shapes the steps, not
-            the KKT point: first controls within 4e-7 N at ``tol=1e-8`` on recorded §5.2 problems),
-            1.7-2.8x faster per solve.
+            reference); ``None`` (default): Gauss-Newton for ipopt, exact for fatrop. The same
+            optimum (the Hessian shapes the steps, not the KKT point: first controls within 4e-7 N
+            at ``tol=1e-8`` on recorded §5.2 problems), 1.5-1.9x faster per solve.
         solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
     """

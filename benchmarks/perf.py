@@ -437,13 +437,14 @@ def fast_vs_ipopt(decisions_scale: float = 1.0, policies: tuple[str, ...] | None
                              hook, max(1, int(decisions * decisions_scale)))
         start = time.perf_counter()
         pols = {"ipopt": ref, "fast": cls(ref.env, solver="ipopt-jit") if tube else cls(ref.env)}
+        slots = [ref.nlp.slots(args[1]) for args in calls] if tube else []
         if tube:   # build (compile) the NLPs of the recorded problems' slot counts before timing
-            pols["fast"].nlp.prepare([ref.nlp.slots(args[1]) for args in calls])
+            pols["fast"].nlp.prepare(slots)
         compile_s = time.perf_counter() - start
         if tube:
             pols["warm_duals"] = cls(ref.env, solver="ipopt")
             for pol in (ref, pols["warm_duals"]):
-                pol.nlp.prepare([ref.nlp.slots(args[1]) for args in calls])
+                pol.nlp.prepare(slots)
         times: dict[str, list[float]] = {label: [] for label in pols}
         duals = {label: [{} for _ in range(ref.m)] for label in pols}
         gap = 0.0
