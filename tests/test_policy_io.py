@@ -84,14 +84,22 @@ class _Boom:
 def test_a_crafted_policy_folder_runs_no_code(tmp_path):
     marker = tmp_path / "PWNED"
     payload = pickle.dumps(_Boom(marker))
-    # 1. weights.pt that is a malicious pickle
-    folder = _saved(tmp_path)
-    (folder / "weights.pt").write_bytes(payload)
     from training.policy import write_manifest
 
+    # 1. weights.safetensors that is a malicious pickle
+    folder = _saved(tmp_path)
+    (folder / "weights.safetensors").write_bytes(payload)
     write_manifest(folder)
-    with pytest.raises(PolicyLoadError, match="weights.pt|Weights only load failed|cannot read"):
+    with pytest.raises(PolicyLoadError, match="weights.safetensors"):
         training.load(folder)
+    # 1b. a legacy weights.pt that is one: refused, and even trusted=True reads it weights-only
+    (folder / "weights.safetensors").unlink()
+    (folder / "weights.pt").write_bytes(payload)
+    write_manifest(folder)
+    with pytest.raises(PolicyLoadError, match="weights.pt.*convert_weights_pt"):
+        training.load(folder)
+    with pytest.warns(UserWarning, match="trusted=True"), pytest.raises(PolicyLoadError, match="weights.pt"):
+        training.load(folder, trusted=True)
     # 2. an SB3 model.zip whose data would unpickle the payload
     sb3 = tmp_path / "sb3"
     sb3.mkdir()

@@ -3,20 +3,26 @@
 An artefact folder (written by ``python -m training.train``, e.g. ``runs/x/final/``, by the
 BenchMARL/RLlib exports, or shipped in ``training/policies/<name>/``) holds only data:
 
-* ``policy.json``    format tag and the actor architecture (:mod:`training.actor`);
-* ``weights.pt``     the actor's torch state dict, read with ``torch.load(weights_only=True)``;
-* ``obs_norm.json``  the observation normalisation (``mean``, ``var``, ``clip_obs``,
-                     ``epsilon``, or ``{"identity": true}``);
-* ``env.json``       env id, version, satenv version, train and eval env kwargs, spaces;
-* ``config.json``    the training config (replayable: ``python -m training.train --config``);
-* ``manifest.json``  sha256 of the files above; checked on load (required in shipped folders);
-* ``eval.json``      the evaluation summary (optional, not read by :func:`load`).
+* ``policy.json``          format tag and the actor architecture (:mod:`training.actor`);
+* ``weights.safetensors``  the actor's float32 tensors (safetensors: a JSON header of names,
+                           dtypes and shapes, then the raw bytes);
+* ``obs_norm.json``        the observation normalisation (``mean``, ``var``, ``clip_obs``,
+                           ``epsilon``, or ``{"identity": true}``);
+* ``env.json``             env id, version, satenv version, train and eval env kwargs, spaces;
+* ``config.json``          the training config (replayable: ``python -m training.train --config``);
+* ``manifest.json``        sha256 of the files above; required, checked on load;
+* ``eval.json``            the evaluation summary (optional, not read by :func:`load`).
 
-**What is safe to load.** :func:`load` never unpickles and never imports code named by the
-folder: JSON, and tensors through torch's restricted ``weights_only`` loader. A folder with only
-an SB3 ``model.zip`` (older runs) is refused unless ``trusted=True``: unpickling it runs any code
-the file contains, so only do that for files you made or trust. :func:`convert_sb3` turns such a
-folder into the safe format once.
+**A policy folder is untrusted data** (the rules are :mod:`training.trust`'s): :func:`load`
+never unpickles and never imports code named by the folder; it reads only regular files inside
+the folder (symbolic links are refused), checks each file's size before reading it and the
+tensors' names, dtypes and shapes from the safetensors header before anything is allocated
+(at most the actor ``policy.json`` describes, itself capped by ``training.actor.MAX_PARAMETERS``),
+checks every byte it uses against ``manifest.json``, and names the file in every error without
+echoing its content. ``trusted=True`` (folders you made) admits a folder without a manifest and
+the legacy formats — ``weights.pt`` (:func:`convert_weights_pt` converts it) and an SB3
+``model.zip``, whose unpickling runs any code it contains (:func:`convert_sb3`) — with a
+``UserWarning`` saying what was skipped.
 
 ``load(path)`` returns a :class:`LearnedPolicy` with ``reset(seed=None)`` and
 ``act(observations) -> actions`` (dicts keyed by agent, actions in ``[-1, 1]``), usable anywhere
@@ -26,8 +32,10 @@ a scripted baseline is (``satenv.rollout.rollout``, the scoreboard).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import math
+import os
 import warnings
 from os import PathLike
 from pathlib import Path
@@ -35,16 +43,43 @@ from typing import Any
 
 import numpy as np
 
+from satenv.errors import SatenvError
+from training.trust import (
+    MAX_HEADER_BYTES,
+    MAX_JSON_BYTES,
+    UntrustedDataError,
+    member,
+    parse_json,
+    read_json,
+    read_member,
+    safetensors_arrays,
+    sha256_file,
+)
+
 __all__ = ["LearnedPolicy", "PolicyLoadError", "load", "save_artifacts", "ObsNormalizer", "from_sb3",
-           "convert_sb3"]
+           "convert_sb3", "convert_weights_pt", "write_manifest"]
 
 FORMAT = "satenv-policy/1"
-POLICY_FILES = ("policy.json", "weights.pt", "obs_norm.json", "env.json", "config.json")
+WEIGHTS = "weights.safetensors"
+"""The actor's weights (float32 safetensors: a JSON header of names, dtypes and shapes first)."""
+LEGACY_WEIGHTS = "weights.pt"
+"""The former torch format (:func:`convert_weights_pt`); loaded only with ``trusted=True``."""
+POLICY_FILES = ("policy.json", WEIGHTS, "obs_norm.json", "env.json", "config.json")
 """The files :func:`load` reads (and the manifest covers)."""
 MANIFEST = "manifest.json"
+MAX_MANIFEST_BYTES = 2**16
+"""Cap on ``manifest.json``."""
 
 
-class PolicyLoadError(ValueError):
+def max_weights_bytes() -> int:
+    """Cap on a weights file: the largest actor :mod:`training.actor` allows (``MAX_PARAMETERS``
+    float32, ~201 MB with the header); a given ``policy.json``'s file may hold only its actor."""
+    from training.actor import MAX_PARAMETERS
+
+    return 8 + MAX_HEADER_BYTES + 4 * MAX_PARAMETERS
+
+
+class PolicyLoadError(SatenvError):
     """A learned policy cannot be loaded or does not fit the environment."""
 
 
@@ -97,7 +132,7 @@ class ObsNormalizer:
     @classmethod
     def from_json(cls, data: Any) -> ObsNormalizer:
         if not isinstance(data, dict) or not isinstance(data.get("identity"), bool):
-            raise ValueError(f"obs_norm.json must be an object with a bool 'identity', got {str(data)[:80]!r}")
+            raise ValueError("obs_norm.json must be an object with a bool 'identity'")
         if data["identity"]:
             return cls()
         unknown = set(data) - {"identity", "mean", "var", "clip_obs", "epsilon"}
@@ -251,61 +286,63 @@ def from_sb3(model: Any, normalizer: ObsNormalizer, *, obs_shape: tuple[int, ...
 
 
 # ----------------------------------------------------------------------------- load / save
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+def _manifest(root: Path) -> dict[str, str] | None:
+    """The ``{file: sha256}`` table of ``manifest.json`` (``None`` when the folder has none)."""
+    try:
+        member(root, MANIFEST, MAX_MANIFEST_BYTES)
+    except UntrustedDataError:
+        if not os.path.lexists(root / MANIFEST):
+            return None
+        raise
+    listed = read_json(root, MANIFEST, MAX_MANIFEST_BYTES)
+    table = listed.get("sha256") if isinstance(listed, dict) else None
+    if not (isinstance(table, dict) and all(isinstance(k, str) and isinstance(v, str) and len(v) == 64
+                                            for k, v in table.items())):
+        raise PolicyLoadError(f"{root / MANIFEST}: expected {{\"sha256\": {{file: 64 hex digits}}}}")
+    return table
 
 
-def _check_manifest(root: Path, required: bool) -> None:
-    path = root / MANIFEST
-    if not path.is_file():
-        if required:
-            raise PolicyLoadError(f"{str(root)!r} is a shipped policy folder but has no {MANIFEST}")
-        return
-    listed = json.loads(path.read_text()).get("sha256")
-    if not isinstance(listed, dict) or set(POLICY_FILES) - set(listed):
-        raise PolicyLoadError(f"{path}: expected {{\"sha256\": {{file: hex}}}} covering {list(POLICY_FILES)}")
-    bad = [name for name in POLICY_FILES if _sha256(root / name) != listed[name]]
+def _check_manifest(root: Path, table: dict[str, str], blobs: dict[str, bytes]) -> None:
+    """Raise unless every file read (``blobs``: name -> the bytes that will be parsed) is listed
+    in the manifest ``table`` with its sha256 (so what is checked is what is used)."""
+    missing = sorted(set(blobs) - set(table))
+    if missing:
+        raise PolicyLoadError(f"{root / MANIFEST}: does not list {missing}; re-save the folder "
+                              "(training.policy.write_manifest) if you made it")
+    bad = [name for name in blobs if hashlib.sha256(blobs[name]).hexdigest() != table[name]]
     if bad:
         raise PolicyLoadError(f"{str(root)!r}: {bad} do not match {MANIFEST} (changed after saving?); "
                               "re-save the folder or restore the files")
 
 
-def _is_shipped(root: Path) -> bool:
-    from training import POLICIES_DIR
-
-    return root.resolve().parent == POLICIES_DIR.resolve()
-
-
 def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> LearnedPolicy:
     """Load the policy in artefact folder ``path``; if ``env`` is given, check its spaces fit.
 
-    Never unpickles (module docstring), except an SB3 ``model.zip``-only folder with
-    ``trusted=True`` (a ``UserWarning`` says so). Every failure — missing or corrupt files, a
-    manifest mismatch, an invalid normaliser, a space mismatch — raises
-    :class:`PolicyLoadError` (a ``ValueError``).
+    The folder is untrusted data (module docstring, :mod:`training.trust`): nothing in it runs,
+    nothing outside it is read, sizes are capped before reading, and ``manifest.json`` must list
+    the sha256 of every file read. ``trusted=True`` (for folders you made) lifts only: the
+    requirement that a manifest exists (a present one is still checked), and the refusal of
+    the legacy formats — ``weights.pt`` (read with ``torch.load(weights_only=True)``, sizes not
+    checked before allocation) and an SB3 ``model.zip`` (unpickled: runs any code in it); a
+    ``UserWarning`` says what was skipped. Every failure raises :class:`PolicyLoadError` (a
+    ``ValueError``) naming the file.
     """
     if not isinstance(path, str | PathLike) or not isinstance(trusted, bool):
         raise PolicyLoadError(f"load(path, env=None, *, trusted=False): path must be a str or os.PathLike "
                               f"and trusted a bool, got path={path!r:.80}, trusted={trusted!r:.40}")
     root = Path(path)
     if not root.is_dir():
-        raise PolicyLoadError(f"learned policy path {str(path)!r} is not a directory; expected an artefact "
-                              f"folder with {list(POLICY_FILES)} (e.g. runs/<run>/final or "
+        raise PolicyLoadError(f"learned policy path {str(path)!r:.200} is not a directory; expected an "
+                              f"artefact folder with {list(POLICY_FILES)} (e.g. runs/<run>/final or "
                               "training/policies/<name>)")
-    if not (root / "weights.pt").is_file() and (root / "model.zip").is_file():
-        policy = _load_sb3_zip(root, trusted)
-    else:
-        missing = [f for f in POLICY_FILES if not (root / f).is_file()]
-        if missing:
-            raise PolicyLoadError(f"{str(root)!r} is not a complete policy folder: missing {missing}; "
-                                  "point to the 'final' or 'best' folder written by python -m training.train")
-        try:
-            policy = _load_safe(root)
-        except PolicyLoadError:
-            raise
-        except Exception as err:  # noqa: BLE001 - every failure of reading data is a load error
-            raise PolicyLoadError(f"cannot read the learned policy in {str(root)!r}: "
-                                  f"{type(err).__name__}: {err}") from None
+    try:
+        if not os.path.lexists(root / WEIGHTS) and not os.path.lexists(root / LEGACY_WEIGHTS) \
+                and os.path.lexists(root / "model.zip"):
+            policy = _load_sb3_zip(root, trusted)
+        else:
+            policy = _load_safe(root, trusted)
+    except UntrustedDataError as err:
+        raise PolicyLoadError(str(err)) from None
     if env is not None:
         if not (isinstance(getattr(env, "possible_agents", None), list | tuple)
                 and callable(getattr(env, "observation_space", None))):
@@ -315,46 +352,95 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> Learned
     return policy
 
 
-def _load_safe(root: Path) -> LearnedPolicy:
+def _parsed(root: Path, name: str, fn: Any, *args: Any) -> Any:
+    """``fn(*args)``; any failure becomes a :class:`PolicyLoadError` naming ``root / name``."""
+    try:
+        return fn(*args)
+    except (PolicyLoadError, UntrustedDataError):
+        raise
+    except Exception as err:  # noqa: BLE001 - every failure of reading data is a load error
+        raise PolicyLoadError(f"{root / name}: {type(err).__name__}: {str(err)[:200]}") from None
+
+
+def _load_safe(root: Path, trusted: bool) -> LearnedPolicy:
     import torch
 
     from training.actor import actor_from_spec
 
-    _check_manifest(root, required=_is_shipped(root))
-    spec = json.loads((root / "policy.json").read_text())
+    legacy = not os.path.lexists(root / WEIGHTS) and os.path.lexists(root / LEGACY_WEIGHTS)
+    missing = [f for f in POLICY_FILES if not os.path.lexists(root / f) and not (legacy and f == WEIGHTS)]
+    if missing:
+        raise PolicyLoadError(f"{str(root)!r} is not a complete policy folder: missing {missing}; "
+                              "point to the 'final' or 'best' folder written by python -m training.train")
+    if legacy and not trusted:
+        raise PolicyLoadError(
+            f"{root / LEGACY_WEIGHTS}: the legacy torch format, whose tensor sizes cannot be checked "
+            f"before they are allocated; convert the folder once with training.policy.convert_weights_pt"
+            f"(path) (for a folder you trust), or load it with trusted=True")
+    blobs = {name: read_member(root, name, MAX_JSON_BYTES) for name in POLICY_FILES if name != WEIGHTS}
+    table = _manifest(root)
+    if table is None and not trusted:
+        raise PolicyLoadError(f"{root / MANIFEST}: missing; every policy folder needs one (it detects "
+                              f"changed files). If you made this folder, write one with "
+                              f"training.policy.write_manifest(path), or load with trusted=True")
+    if table is None or legacy:
+        warnings.warn(f"loading {root} with trusted=True: " + (
+            f"{LEGACY_WEIGHTS} read with torch.load(weights_only=True), tensor sizes not checked first; "
+            if legacy else "") + ("no manifest.json: changed files are not detected; " if table is None
+                                  else "") + "nothing is run and nothing outside the folder is read",
+            UserWarning, stacklevel=3)
+    if table is not None:
+        _check_manifest(root, table, blobs)
+    spec = _parsed(root, "policy.json", parse_json, blobs["policy.json"], root / "policy.json")
     if not isinstance(spec, dict) or spec.get("format") != FORMAT:
-        raise PolicyLoadError(f"{root / 'policy.json'}: expected format {FORMAT!r}, got "
-                              f"{spec.get('format') if isinstance(spec, dict) else spec!r}")
-    meta = json.loads((root / "env.json").read_text())
-    config = json.loads((root / "config.json").read_text())
+        raise PolicyLoadError(f"{root / 'policy.json'}: expected a JSON object with format {FORMAT!r}")
+    meta = _parsed(root, "env.json", parse_json, blobs["env.json"], root / "env.json")
+    config = _parsed(root, "config.json", parse_json, blobs["config.json"], root / "config.json")
     if not isinstance(meta, dict) or not isinstance(config, dict):
         raise PolicyLoadError(f"{str(root)!r}: env.json and config.json must be JSON objects")
-    normalizer = ObsNormalizer.from_json(json.loads((root / "obs_norm.json").read_text()))
-    actor = actor_from_spec(spec.get("actor"))
-    state = torch.load(root / "weights.pt", map_location="cpu", weights_only=True)
-    actor.load_state_dict(state)
+    normalizer = _parsed(root, "obs_norm.json", lambda b: ObsNormalizer.from_json(
+        parse_json(b, root / "obs_norm.json")), blobs["obs_norm.json"])
+    with torch.device("meta"):  # validated and sized without allocating
+        actor = _parsed(root, "policy.json", actor_from_spec, spec.get("actor"))
+    shapes = {k: tuple(v.shape) for k, v in actor.state_dict().items()}
+    if legacy:
+        data = read_member(root, LEGACY_WEIGHTS, max_weights_bytes() + 2**24)
+        if table is not None:
+            _check_manifest(root, table, {LEGACY_WEIGHTS: data})
+        state = _parsed(root, LEGACY_WEIGHTS, lambda: torch.load(io.BytesIO(bytes(data)), map_location="cpu",
+                                                                  weights_only=True))
+    else:
+        cap = 8 + MAX_HEADER_BYTES + 4 * sum(math.prod(s) for s in shapes.values())
+        data = read_member(root, WEIGHTS, cap)
+        if table is not None:
+            _check_manifest(root, table, {WEIGHTS: data})
+        state = {k: torch.from_numpy(v) for k, v in safetensors_arrays(data, shapes, root / WEIGHTS).items()}
+    actor = actor.to_empty(device="cpu")
+    _parsed(root, WEIGHTS if not legacy else LEGACY_WEIGHTS, actor.load_state_dict, state)
+    del state
     if not all(torch.isfinite(t).all() for t in actor.state_dict().values()):
-        raise PolicyLoadError(f"{root / 'weights.pt'}: the weights contain NaN/inf")
+        raise PolicyLoadError(f"{root / (LEGACY_WEIGHTS if legacy else WEIGHTS)}: the weights contain NaN/inf")
     if normalizer.mean is not None and normalizer.mean.shape != (actor.spec["obs_dim"],):
         raise PolicyLoadError(f"{str(root)!r}: obs_norm.json has shape {normalizer.mean.shape} but the actor "
                               f"expects ({actor.spec['obs_dim']},); the folder mixes files of different runs")
-    features = features_from_config(config)
+    features = _parsed(root, "config.json", features_from_config, config)
     obs_shape = meta.get("observation_shape", [actor.spec["obs_dim"]])
     fits = (isinstance(obs_shape, list) and len(obs_shape) == 1 and isinstance(obs_shape[0], int)
-            and not isinstance(obs_shape[0], bool) and obs_shape[0] >= 1
+            and not isinstance(obs_shape[0], bool) and 1 <= obs_shape[0] <= 2**31
             and (features.out_dim(obs_shape[0]) if features else obs_shape[0]) == actor.spec["obs_dim"])
     if not fits:
-        raise PolicyLoadError(f"{str(root)!r}: env.json observation_shape {str(obs_shape)[:40]} does not fit "
-                              f"the actor's obs_dim {actor.spec['obs_dim']} (with the config's features)")
+        raise PolicyLoadError(f"{root / 'env.json'}: observation_shape does not fit the actor's obs_dim "
+                              f"{actor.spec['obs_dim']} (with the config's features)")
+    action_map = _parsed(root, "config.json", action_map_from_config, config)
     return LearnedPolicy(actor, normalizer, obs_shape=tuple(obs_shape), features=features,
-                         action_map=action_map_from_config(config), meta=meta)
+                         action_map=action_map, meta=meta)
 
 
 def _load_sb3_zip(root: Path, trusted: bool) -> LearnedPolicy:
     """An old-format folder (SB3 ``model.zip`` + ``obs_norm.npz``): unpickles, so ``trusted`` only."""
     if not trusted:
         raise PolicyLoadError(
-            f"{str(root)!r} holds an SB3 model.zip and no weights.pt: loading it would unpickle the file, "
+            f"{root / 'model.zip'}: an SB3 model with no {WEIGHTS}: loading it would unpickle the file, "
             "which runs any code it contains. Load it with training.load(path, trusted=True) only if you "
             "made it or trust its source, or convert it once with training.policy.convert_sb3(path)")
     warnings.warn(f"unpickling the SB3 model in {root} (trusted=True): only do this for files you trust",
@@ -362,32 +448,36 @@ def _load_sb3_zip(root: Path, trusted: bool) -> LearnedPolicy:
     try:
         from stable_baselines3 import PPO, SAC
 
-        meta = json.loads((root / "env.json").read_text())
-        config = json.loads((root / "config.json").read_text())
-        with np.load(root / "obs_norm.npz", allow_pickle=False) as d:
+        meta, config = read_json(root, "env.json"), read_json(root, "config.json")
+        with np.load(member(root, "obs_norm.npz", MAX_JSON_BYTES)[0], allow_pickle=False) as d:
             normalizer = ObsNormalizer() if bool(d["identity"]) else ObsNormalizer(
                 d["mean"], d["var"], float(d["clip_obs"]), float(d["epsilon"]))
-        model = {"ppo": PPO, "sac": SAC}[config["algo"]].load(root / "model.zip", device="cpu")
+        zip_path = member(root, "model.zip", max_weights_bytes() * 4)[0]
+        model = {"ppo": PPO, "sac": SAC}[config["algo"]].load(zip_path, device="cpu")
         return from_sb3(model, normalizer, obs_shape=tuple(meta["observation_shape"]),
                         features=features_from_config(config), action_map=action_map_from_config(config),
                         meta=meta)
-    except PolicyLoadError:
+    except (PolicyLoadError, UntrustedDataError):
         raise
     except Exception as err:  # noqa: BLE001
-        raise PolicyLoadError(f"cannot read the SB3 policy in {str(root)!r}: {type(err).__name__}: {err}") from None
+        raise PolicyLoadError(f"cannot read the SB3 policy in {str(root)!r}: {type(err).__name__}: "
+                              f"{str(err)[:200]}") from None
 
 
 def save_artifacts(folder: str | Path, policy: LearnedPolicy, *, env_meta: dict[str, Any],
                    config: dict[str, Any], evaluation: dict[str, Any] | None = None,
                    source: str = "") -> Path:
-    """Write an artefact folder in the safe format (module docstring); returns its path."""
-    import torch
+    """Write an artefact folder in the safe format with its manifest (module docstring); returns
+    its path. A legacy ``weights.pt`` left in the folder is removed (it is replaced)."""
+    from safetensors.torch import save_file
 
     root = Path(folder)
     root.mkdir(parents=True, exist_ok=True)
     spec = {"format": FORMAT, "actor": policy.actor.spec, "source": source}
     (root / "policy.json").write_text(json.dumps(spec, indent=2) + "\n")
-    torch.save({k: v.detach().cpu().clone() for k, v in policy.actor.state_dict().items()}, root / "weights.pt")
+    state = {k: v.detach().cpu().contiguous().clone() for k, v in policy.actor.state_dict().items()}
+    save_file(state, str(root / WEIGHTS))
+    (root / LEGACY_WEIGHTS).unlink(missing_ok=True)
     (root / "obs_norm.json").write_text(json.dumps(policy.normalizer.to_json()) + "\n")
     (root / "env.json").write_text(json.dumps(env_meta, indent=2) + "\n")
     (root / "config.json").write_text(json.dumps(config, indent=2) + "\n")
@@ -398,9 +488,12 @@ def save_artifacts(folder: str | Path, policy: LearnedPolicy, *, env_meta: dict[
 
 
 def write_manifest(root: str | Path) -> None:
-    """(Re)write ``manifest.json`` with the sha256 of :data:`POLICY_FILES`."""
+    """(Re)write ``manifest.json`` with the sha256 of :data:`POLICY_FILES` (``weights.pt`` in
+    place of ``weights.safetensors`` in a legacy folder), hashed in chunks; links are refused."""
     root = Path(root)
-    digests = {name: _sha256(root / name) for name in POLICY_FILES}
+    names = [LEGACY_WEIGHTS if n == WEIGHTS and not os.path.lexists(root / WEIGHTS)
+             and os.path.lexists(root / LEGACY_WEIGHTS) else n for n in POLICY_FILES]
+    digests = {name: sha256_file(member(root, name, 2**62)[0]) for name in names}
     (root / MANIFEST).write_text(json.dumps({"sha256": digests}, indent=2) + "\n")
 
 
@@ -414,9 +507,29 @@ def convert_sb3(folder: str | Path) -> Path:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         policy = _load_sb3_zip(root, trusted=True)
-    config = json.loads((root / "config.json").read_text())
+    config = read_json(root, "config.json")
     source = f"stable-baselines3 {str(config.get('algo', '')).upper()} (converted from model.zip)"
     return save_artifacts(root, policy, env_meta=policy.meta, config=config, source=source)
+
+
+def convert_weights_pt(folder: str | Path) -> Path:
+    """Convert a legacy folder (``weights.pt``) in place to ``weights.safetensors`` with a new
+    manifest; its manifest, if any, is checked first. Reads the torch file with
+    ``torch.load(weights_only=True)`` (no code, but sizes unchecked): folders you trust only.
+    Every other file is kept byte for byte. Returns the folder."""
+    from safetensors.torch import save_file
+
+    root = Path(folder)
+    if not os.path.lexists(root / LEGACY_WEIGHTS):
+        raise PolicyLoadError(f"{root / LEGACY_WEIGHTS}: missing; nothing to convert")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        policy = load(root, trusted=True)
+    state = {k: v.detach().cpu().contiguous().clone() for k, v in policy.actor.state_dict().items()}
+    save_file(state, str(root / WEIGHTS))
+    (root / LEGACY_WEIGHTS).unlink()
+    write_manifest(root)
+    return root
 
 
 def _jsonable(v: Any) -> Any:
