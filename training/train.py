@@ -1,7 +1,7 @@
 """Train a shared policy for a satenv scenario with stable-baselines3 (PPO or SAC).
 
     python -m training.train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
-        --algo ppo --total-timesteps 2000000 --n-copies 32 --out-dir runs/platoon_ppo
+        --algo ppo --total-timesteps 2000000 --num-envs 32 --out-dir runs/platoon_ppo
     python -m training.train --out-dir runs/platoon_ppo --resume [--total-timesteps 3000000]
     tensorboard --logdir runs/platoon_ppo/tb
 
@@ -36,14 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from training.config import (
-    TrainConfig,
-    build_parser,
-    config_from_json,
-    parse_args,
-    planned_timesteps,
-    round_timesteps,
-)
+from training.config import TrainConfig, parse_args, planned_timesteps, round_timesteps
 from training.envs import make_env, policy_env_meta
 from training.evaluate import cached_baselines, compare, evaluate, learning_curve, test_summary
 from training.policy import (
@@ -76,9 +69,9 @@ def env_meta(cfg: TrainConfig, env: Any) -> dict[str, Any]:
 def learning_rate(cfg: TrainConfig):
     """The learning rate or schedule (SB3 passes the remaining progress, 1 -> 0)."""
     if cfg.lr_schedule == "linear":
-        lr = cfg.learning_rate
+        lr = cfg.lr
         return lambda progress_remaining: lr * max(progress_remaining, 0.05)
-    return cfg.learning_rate
+    return cfg.lr
 
 
 def build_model(cfg: TrainConfig, venv):
@@ -257,7 +250,6 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     if not resume and latest_checkpoint(out) is not None:
         raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
 
     # 2. seeding
     torch.set_num_threads(cfg.torch_threads)
@@ -271,7 +263,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     shaping = RewardShaping.from_dict(cfg.reward_shaping)
     features = features_from_config(cfg.to_json())
     action_map = action_map_from_config(cfg.to_json())
-    vec = VecMonitor(SatVecEnv(env, cfg.n_copies, seed=cfg.seed + start_steps,
+    vec = VecMonitor(SatVecEnv(env, cfg.num_envs, seed=cfg.seed + start_steps,
                                reward_fn=shaping if shaping.active else None, obs_fn=features,
                                action_fn=action_map))
     venv = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, clip_obs=cfg.clip_obs,
@@ -291,11 +283,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     history = [h for h in json.loads(history_path.read_text()) if h["step"] <= start_steps] \
         if (resume and history_path.is_file()) else []
 
-    # 6. learn
+    # 6. learn (the budget actually run is the one saved)
     target = planned_timesteps(cfg, len(env.possible_agents))
     if target != cfg.total_timesteps:
         print(f"total_timesteps {cfg.total_timesteps} -> {target}: whole collection rounds of "
               f"{round_timesteps(cfg, len(env.possible_agents))} agent-steps", file=sys.stderr)
+        cfg = cfg.replace(total_timesteps=target)
+    (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     remaining = target - model.num_timesteps
     t0 = time.perf_counter()
     if remaining > 0:
@@ -321,7 +315,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         shutil.copyfile(out / "learning_curve.png", final / "learning_curve.png")
     print(f"final policy ({model.num_timesteps} steps, {wall / 60:.1f} min this session) on "
           f"{len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
-    if (out / "best" / "weights.pt").is_file():
+    if (out / "best" / "manifest.json").is_file():
         from training.policy import load
 
         best = load(out / "best")
@@ -344,22 +338,10 @@ def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str
 
 # --------------------------------------------------------------------------- CLI
 def main(argv: list[str] | None = None) -> Path:
-    parser = build_parser(__doc__.split("\n\n")[0])
-    parser.add_argument("--resume", action="store_true",
-                        help="continue from the last checkpoint in --out-dir (its config.json; flags given override it)")
-    argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        cfg, ns = parse_args(argv, parser)
-    except ValueError as err:
-        raise SystemExit(f"error: {err}") from None
-    if ns.resume:
-        saved = Path(cfg.out_dir) / "config.json"
-        if not saved.is_file():
-            raise SystemExit(f"--resume: {saved} not found; train first without --resume")
-        base = config_from_json(json.loads(saved.read_text()))
-        cfg, _ = parse_args(argv, parser, base=base)
-    try:
-        return train(cfg, resume=ns.resume)
+        cfg, opts = parse_args(argv, resume=True, prog="python -m training.train",
+                               description=__doc__.split("\n\n")[0])
+        return train(cfg, resume=opts.resume)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
 

@@ -9,7 +9,6 @@ Adding an env configuration or a baseline is one entry here::
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from pathlib import Path
@@ -133,8 +132,10 @@ FULL: dict[str, Any] = {
 
 def _folder_env_ids(path: Path) -> tuple[str, ...] | None:
     """The env id of a policy folder's ``env.json`` (``None`` when it has none)."""
+    from training.trust import read_json  # a folder's files are untrusted: no links, sizes capped
+
     try:
-        env_id = json.loads((path / "env.json").read_text()).get("env_id")
+        env_id = read_json(path, "env.json").get("env_id")
     except (OSError, ValueError, AttributeError):
         return None
     return (env_id,) if isinstance(env_id, str) and env_id else None
@@ -142,11 +143,13 @@ def _folder_env_ids(path: Path) -> tuple[str, ...] | None:
 
 def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
     """The scenario patterns of a policy folder's optional ``scoreboard.json``."""
+    from training.trust import read_json  # a folder's files are untrusted: no links, sizes capped
+
     meta = path / "scoreboard.json"
     if not meta.is_file():
         return None
     try:
-        return tuple(json.loads(meta.read_text())["scenarios"])
+        return tuple(read_json(path, "scoreboard.json")["scenarios"])
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ScoreboardError(f"{meta}: expected JSON {{\"scenarios\": [patterns]}}, got an "
                               f"unreadable file ({exc})") from None

@@ -210,13 +210,19 @@ def episode_metrics(traj, scenario: ScenarioSpec) -> dict[str, Any]:
 
 
 def _content_hash(path: Path) -> str:
-    """Hash of a checkpoint file, or of every file under a checkpoint directory."""
+    """Hash of a checkpoint file, or of a checkpoint directory: its ``manifest.json`` (which
+    lists the sha256 of every file ``training.load`` reads), else every regular file under it
+    (symbolic links not followed, read in chunks)."""
+    from training.trust import sha256_file
+
     h = hashlib.sha256()
-    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    manifest = path / "manifest.json"
+    files = [path] if not path.is_dir() else [manifest] if manifest.is_file() and not manifest.is_symlink() \
+        else sorted(p for p in path.rglob("*") if p.is_file() and not p.is_symlink())
     for p in files:
         h.update(str(p.relative_to(path) if path.is_dir() else p.name).encode())
         try:
-            h.update(p.read_bytes())
+            h.update(sha256_file(p).encode())
         except OSError:
             h.update(b"<unreadable>")
     return h.hexdigest()[:16]
