@@ -3,9 +3,13 @@
 The truth models (``"nonlinear"``, ``"j2"``, ``"j2_drag"``) integrate the chief's absolute
 ECI state together with the deputies' ECI states *relative to the chief* (so no precision is
 lost to large absolute positions), with RK4, and convert to the chief's LVLH frame at the
-step boundaries (the hot path runs on component-major arrays, :mod:`._soa`). The deputies'
-control accelerations are given in LVLH and held constant in that rotating frame over a step
-(zero-order hold), matching the discrete CW model.
+step boundaries. The deputies' control accelerations are given in LVLH and held constant in that
+rotating frame over a step (zero-order hold), matching the discrete CW model.
+
+Two implementations give the same numbers to rounding: the numpy reference on component-major
+arrays (:mod:`._soa`) and the compiled kernel (:mod:`._truth_kernel`, numba), which
+:class:`RelativeModel` uses by default for RK4 (``method``); :meth:`RelativeModel.propagate`
+runs many steps in one kernel call, converting frames once.
 """
 
 from __future__ import annotations
@@ -36,6 +40,9 @@ from .orbit import Orbit, _lvlh_to_eci_rel
 
 MODELS: tuple[str, ...] = ("cw", "nonlinear", "j2", "j2_drag")
 """Names accepted by :func:`simulate` and :class:`RelativeModel`."""
+
+METHODS: tuple[str, ...] = ("auto", "kernel", "numpy")
+"""Implementations of the truth models' step (:class:`RelativeModel` ``method``)."""
 
 MAX_SUBSTEP: float = 5.0
 """Default largest internal RK4 step of the truth models [s]."""
@@ -68,6 +75,9 @@ class RelativeModel:
         substeps: internal RK4 steps per ``dt`` for the truth models (default: steps of at
             most :data:`MAX_SUBSTEP` seconds).
         force: override the force model of a truth model (e.g. ballistic coefficients).
+        integrator: ``"rk4"`` (default) or ``"euler"`` (tests only; numpy).
+        method: the truth models' implementation: ``"numpy"`` (the reference), ``"kernel"`` (the
+            compiled kernel; needs numba and RK4) or ``"auto"`` (the kernel when it applies).
 
     States are LVLH ``(..., M, 6)``, inputs LVLH accelerations ``(..., M, 3)``; the chief is its
     ECI state ``(..., 6)``; under ``"cw"`` it only rotates on the circle of radius ``a`` at the
@@ -80,6 +90,7 @@ class RelativeModel:
     substeps: int | None = None
     force: ForceModel | None = None
     integrator: str = "rk4"
+    method: str = "auto"
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -112,6 +123,23 @@ class RelativeModel:
             # position and velocity rotate alike: one (6, 6) block-diagonal product per step
             self._cache["chief_rotT"] = np.kron(np.eye(2), rot).T.copy()
         self._cache["f"] = derivative_soa(self.force) if self.force else None
+        self._cache["kernel"] = self._kernel()
+
+    def _kernel(self):
+        """The compiled truth kernel and its force constants, or ``None`` (``method``)."""
+        if not isinstance(self.method, str) or self.method not in METHODS:
+            raise SatenvError(f"unknown method {self.method!r}; expected one of {list(METHODS)}")
+        if self.model == "cw" or self.method == "numpy" or (self.method == "auto" and self.integrator != "rk4"):
+            return None
+        if self.integrator != "rk4":
+            raise SatenvError(f"method='kernel' integrates with RK4 only, got integrator={self.integrator!r}")
+        try:
+            from . import _truth_kernel
+        except ImportError:
+            if self.method == "kernel":
+                raise SatenvError("method='kernel' needs numba (pip install numba)") from None
+            return None
+        return _truth_kernel.propagate, _truth_kernel.force_params(self.force)
 
     @property
     def ab(self) -> tuple[np.ndarray, np.ndarray]:
@@ -139,6 +167,8 @@ class RelativeModel:
         """
         if u is None:
             u = np.zeros((*x.shape[:-1], 3))
+        if self._cache["kernel"] is not None:
+            return self.propagate(x, u[None], chief)[:2]
         if self.model == "cw":
             a_t, b_t = self._cache["abT"]
             chief_next = np.asarray(chief, dtype=float) @ self._cache["chief_rotT"]
@@ -169,6 +199,38 @@ class RelativeModel:
         x_next = eci_rel_to_lvlh_soa(c_next, y[:, 1:], acc_c)
         return (np.ascontiguousarray(x_next.transpose(2, 1, 0)).reshape(x.shape),
                 np.ascontiguousarray(c_next.T).reshape((*lead, 6)))
+
+
+    def propagate(self, x: np.ndarray, u: np.ndarray, chief: np.ndarray,
+                  positions: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``len(u)`` steps at once: LVLH states ``x`` (..., M, 6) under the inputs ``u`` (S, ..., M, 3)
+        (``u[s]`` held over step ``s``); returns ``(x_next, chief_next, path)``, ``path`` the LVLH
+        positions after every step (S, ..., M, 3) when ``positions`` (else ``None``).
+
+        The same as ``S`` calls of :meth:`step`; the compiled kernel does it in one call with the
+        frame conversions at the ends only. No input validation (the hot path).
+        """
+        kernel = self._cache["kernel"]
+        n_steps = u.shape[0]
+        if kernel is None:
+            path = np.empty((n_steps, *x.shape[:-1], 3)) if positions else None
+            for s in range(n_steps):
+                x, chief = self.step(x, u[s], chief)
+                if positions:
+                    path[s] = x[..., :3]
+            return x, chief, path
+        run, params = kernel
+        lead, m = x.shape[:-2], x.shape[-2]
+        n = math.prod(lead)
+        xs = np.ascontiguousarray(x.reshape(n, m, 6), dtype=float)
+        cs = np.ascontiguousarray(np.broadcast_to(chief, (*lead, 6)).reshape(n, 6), dtype=float)
+        us = np.ascontiguousarray(np.broadcast_to(u, (n_steps, *lead, m, 3)).reshape(n_steps, n, m, 3),
+                                  dtype=float)
+        x_next, chief_next = np.empty_like(xs), np.empty_like(cs)
+        path = np.empty((n_steps if positions else 0, n, m, 3))
+        run(xs, cs, us, self.substeps, self.dt / self.substeps, params, x_next, chief_next, path)
+        return (x_next.reshape(x.shape), chief_next.reshape((*lead, 6)),
+                path.reshape((n_steps, *lead, m, 3)) if positions else None)
 
 
 def simulate(model: str, x0, *, orbit: Orbit, dt: float, steps: int, u=None,

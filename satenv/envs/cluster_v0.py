@@ -136,6 +136,15 @@ CANDIDATES = 4
 :class:`ClusterCore`)."""
 
 
+def _separations_kernel():
+    """:func:`satenv.envs._cluster_kernel.separations`, or ``None`` without numba."""
+    try:
+        from satenv.envs._cluster_kernel import separations
+    except ImportError:
+        return None
+    return separations
+
+
 class InnerLoop(Protocol):
     """A controller the env calls at every physics step (see the module docstring)."""
 
@@ -156,12 +165,17 @@ class ClusterCore(BatchedCore):
     first and the last candidate is at least 4 times the largest displacement in the copy over the
     decision (no other satellite can come closer); the copies where that fails are searched again
     at every physics step, so ``pair_distance`` and ``min_separation`` stay exact.
+
+    ``fused`` (default, with numba and no inner loop registered): a decision's physics steps run
+    in one call of the compiled truth kernel and the separation minima in one compiled pass
+    (:meth:`_step_fused`); ``fused=False`` is the physics-step loop, the reference.
     """
 
     state_dim = 6
     action_dim = 3
 
-    def __init__(self, scenario: ClusterScenario, batch: int = 1, method: str = "auto") -> None:
+    def __init__(self, scenario: ClusterScenario, batch: int = 1, method: str = "auto",
+                 fused: bool = True) -> None:
         super().__init__(scenario, batch)
         sc = scenario
         m = self.n_agents
@@ -183,6 +197,7 @@ class ClusterCore(BatchedCore):
         self._random = (BoundedRandomDisturbance(sc.disturbance_amplitude)
                         if sc.disturbance == "random" else None)
         self._own_rng = np.random.default_rng()
+        self._separations = _separations_kernel() if fused else None
 
     # ------------------------------------------------------------------ helpers
     def time(self) -> np.ndarray:
@@ -324,6 +339,8 @@ class ClusterCore(BatchedCore):
         return self._info(sel, np.zeros((k, self.n_agents, 3)), zeros, zeros.copy(), pair, obs, tgt)
 
     def step(self, accel, rng=None) -> StepResult:
+        if self.inner_loop is None and self._separations is not None:
+            return self._step_fused(np.asarray(accel, dtype=float), rng)
         sc = self.scenario
         accel = np.asarray(accel, dtype=float)
         h, n_sub = sc.physics_dt, sc.substeps
@@ -359,8 +376,37 @@ class ClusterCore(BatchedCore):
             np.minimum(tgt, g, out=tgt)
         if path is not None:
             pair = self._pair_minimum(path)
+        return self._finish(u_sum / n_sub, dv, peak, pair, obs, tgt)
+
+    def _step_fused(self, accel: np.ndarray, rng) -> StepResult:
+        """:meth:`step` without an inner loop: the command is constant over the decision, so the
+        physics steps run in one call of the compiled truth kernel (frames converted once) and the
+        separation minima in one call of :func:`satenv.envs._cluster_kernel.separations`. The same
+        numbers as the physics-step loop up to rounding (``tests/test_cluster_kernel.py``)."""
+        sc = self.scenario
+        h, n_sub = sc.physics_dt, sc.substeps
+        u = saturate_norm(accel, sc.u_max)
+        ts = self.time() + h * np.arange(n_sub)[:, None]                       # (S, B)
+        if sc.disturbance == "sinusoid":
+            u_steps = u + sinusoid_disturbance(ts, sc.disturbance_amplitude)[:, :, None, :]
+        elif sc.disturbance == "random":   # drawn step by step: the generator's stream as the loop's
+            u_steps = u + np.stack([self._disturbance(t, rng) for t in ts])
+        else:
+            u_steps = np.broadcast_to(u, (n_sub, *u.shape))
+        start = self.x[..., :3]
+        self.x, self.chief, path = self.model.propagate(self.x, u_steps, self.chief, positions=True)
+        pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
+        self._separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
+        if not self.dense:
+            pair = self._pair_minimum(np.concatenate([start[None], path]))
+        un = np.linalg.norm(u, axis=-1)
+        return self._finish(u, un * (h * n_sub), un, pair, obs, tgt)
+
+    def _finish(self, accel, dv, peak, pair, obs, tgt) -> StepResult:
+        """The end of a decision: step count, reallocation, infos, rewards, terminations."""
+        sc = self.scenario
         self.t += 1
-        self.accel = u_sum / n_sub
+        self.accel = accel
         if sc.reallocate_every > 0:
             due = self.t % sc.reallocate_every == 0
             if np.any(due):
