@@ -1,0 +1,718 @@
+"""Run-time assurance: a safety filter between any policy and any satenv env.
+
+The filter changes a proposed action only when it would lead to a violation, and records that it
+did. One core, three ways to use it::
+
+    from satenv.safety import SafetyFilter, shield
+    safe, record = SafetyFilter(env).filter(actions)     # (B, M, d) arrays, any env or make_vec batch
+    policy = shield(policy, env)                         # a policy wrapper (same reset / act / info)
+    env = satenv.make("cluster_v0", safety_filter=True)  # or make_vec / satenv.torchrl.make_env
+
+**Constraints** (from the scenario's own fields; each agent's state ``x_i = [p_i, v_i]`` in LVLH):
+
+* spheres ``||p_i - p_j|| >= D`` between agents (each takes half), and between an agent and a
+  body it alone must avoid (platoon leader, cluster obstacle and target spacecraft, servicing
+  keep-out sphere); the pereira2022 §5.1 keep-out sphere of each target–chaser pair;
+* half-spaces ``m^T (p_f - p_{f-1}) <= b`` (the pereira2022 §5.1 LOS cone, eq. 34);
+* velocity boxes (relative degree one): pereira2023 bound (40) on the velocity part of the
+  neighbourhood error ``E_f = (Lbar x)_f``, and the servicing ``|v_i| <= v_max``;
+* the thrust box: the filtered action stays in ``[-1, 1]^d`` (the inscribed cube
+  ``[-1/sqrt 3, 1/sqrt 3]^3`` of the thrust ball in ``thrust_mode="norm"``).
+
+**Prediction.** One decision ``dt`` of the exact discrete CW model (:func:`satenv.dynamics.cw_matrices`)
+``x^+ = A x + B u``; relative states of two agents obey it exactly, a body's motion is the env's
+own (fixed, or the obstacle's straight line). The truth models (nonlinear, J2, drag) differ from
+it; the repository has no J2 linearisation, so CW is the model for every ``dynamics``.
+
+**Barrier** (Wang, Ames, Egerstedt 2017, for double integrators with braking ``a``): for gap
+``s = ||r_p|| - D`` (or ``b - m^T r_p``) and rate ``rho = n^T r_v`` along the direction ``n`` in
+which the gap grows, ``h = rho + sqrt(2 a s)``: ``h >= 0`` iff braking at ``a`` along ``n`` stops
+before the gap closes. ``a`` is the braking authority of the pair (``a_i + a_j``, or ``a_i``
+against a body; ``a_i = sigma_min(S_i)`` of the action-to-acceleration map) minus a bound on the
+CW drift (``3 n^2 ||r_p|| + 2 n ||r_v||``) and on the scenario's disturbance.
+
+**Backup condition** (one decision, relative degree two): with ``n`` the direction of the coasting
+prediction ``rbar^+ = A r`` and ``Delta u`` the relative acceleration,
+
+    (C1)  sbar + n^T B_p Delta u >= 0                       the gap at the next decision (n^T r_p <= ||r_p||)
+    (C2)  n^T (rbar_v^+ + B_v Delta u) + phi(s^+) >= (1 - gamma) h(now)   still brakeable next decision
+
+with ``phi`` the chord of ``sqrt(2 a s)`` over the reachable gaps ``[sbar - delta, sbar + delta]``
+(a lower bound of the concave root there, so (C2) is linear and conservative). Both rows are
+linear in ``Delta u = S_i u_i - S_j u_j``; each agent keeps its share (half for a pair, all
+against a body): ``w^T S_i u_i >= -share * g``. Summed, the two shares give the pair's row.
+The margin (``margin * D``, ``los_margin``) inflates ``D`` but never beyond the current gap (a
+start on the boundary stays feasible).
+
+**QP** per agent: ``min ||u - u_ref||^2  s.t.  W u >= l,  |u| <= u_box`` (daqp), only for the
+agents whose proposal breaks a row; every other action passes unchanged (bit for bit). A QP that is
+infeasible or fails (any exception, a bad status, a non-finite point, a violated row) gives the
+backup action — full thrust along the row the proposal breaks most (maximum braking) — and the
+``infeasible`` flag; never an exception, never a NaN.
+
+Guarantee (for the CW double-integrator model, the scenario's disturbance bound and states whose
+rows are feasible): separation and half-space gaps stay >= 0 at every decision and the pair stays
+brakeable; the velocity boxes hold at the next decision. Not guaranteed: infeasible starts (a
+start inside the margin with closing speed), model mismatch (J2, drag, nonlinear terms beyond the
+drift bound), dips between decisions larger than the margin, constraints of other agents' QPs
+that fall back (their share is then missing), the attitude (servicing ``omega_max``) and the
+pereira2023 minimum-error constraint (41) (implied by separation for the PLF topology only).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from satenv.dynamics import attitude_step, cw_matrices, quat_to_matrix, thruster_matrices
+from satenv.errors import SatenvError, SatenvTypeError
+
+__all__ = ["CONSTRAINTS", "SafetyConfig", "SafetyError", "SafetyFilter", "SafetyModel", "SafetyRecord",
+           "SafetyTypeError", "Shield", "filter_actions", "filtered_env", "filtered_vec", "safety_model",
+           "shield", "solve_qp"]
+
+CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "keep-out", "los", "velocity",
+                                 "angular-velocity")
+"""Names of the constraint kinds (:attr:`SafetyRecord.active` indexes this tuple; -1: none)."""
+_KIND = {name: k for k, name in enumerate(CONSTRAINTS)}
+_BIG = 1e30
+_ROW_TOL = 1e-9       # a proposal within this (normalised units) of a row passes unchanged
+_QP_TOL = 1e-7        # a QP point may violate a row / the box by this much
+_FLOOR = 0.05         # braking authority never below this fraction of the nominal (drift-heavy pairs)
+
+
+class SafetyError(SatenvError):
+    """Bad input to the safety filter (a ``ValueError``): the message names the field."""
+
+
+class SafetyTypeError(SafetyError, SatenvTypeError):
+    """Input of the wrong type to the safety filter (a ``TypeError``)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# config and record
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SafetyConfig:
+    """The filter's settings (validated; unknown options are rejected by :meth:`from_options`).
+
+    Attributes:
+        margin: each separation distance ``D`` is inflated to ``(1 + margin) D`` (> 0).
+        los_margin: half-space (LOS cone) margin [m] (> 0).
+        velocity_margin: velocity bounds tightened to ``(1 - velocity_margin) V`` (in (0, 1)).
+        gamma: discrete barrier rate in (0, 1]: ``h^+ >= (1 - gamma) h`` (1: only keep brakeable).
+        penalty: reward penalty per unit ``|du|`` in the filtered envs (>= 0; 0: none).
+    """
+
+    margin: float = 0.02
+    los_margin: float = 0.05
+    velocity_margin: float = 0.02
+    gamma: float = 1.0
+    penalty: float = 0.0
+
+    def __post_init__(self) -> None:
+        limits = {"margin": (0.0, math.inf, False), "los_margin": (0.0, math.inf, False),
+                  "velocity_margin": (0.0, 1.0, False), "gamma": (0.0, 1.0, True),
+                  "penalty": (0.0, math.inf, None)}
+        for name, (low, high, high_ok) in limits.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise SafetyTypeError(f"SafetyConfig.{name} must be a real number, got {value!r}")
+            v = float(value)
+            ok = (math.isfinite(v) and (v >= low if high_ok is None else v > low)
+                  and (v <= high if high_ok else v < high))
+            if not ok:
+                rng = (f">= {low:g}" if high_ok is None else f"> {low:g}") + (
+                    "" if high == math.inf else f" and {'<=' if high_ok else '<'} {high:g}")
+                raise SafetyError(f"SafetyConfig.{name} must be finite and {rng}, got {value!r}")
+            object.__setattr__(self, name, v)
+
+    @classmethod
+    def from_options(cls, config: SafetyConfig | None = None, **options: Any) -> SafetyConfig:
+        """``config`` (default ``SafetyConfig()``) with ``options`` replaced; unknown keys rejected."""
+        if config is not None and not isinstance(config, SafetyConfig):
+            raise SafetyTypeError(f"config must be a SafetyConfig or None, got {type(config).__name__}")
+        known = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            raise SafetyError(f"safety filter: unknown option(s) {unknown}; accepted: {known}")
+        return dataclasses.replace(config or cls(), **options)
+
+
+@dataclass(frozen=True)
+class SafetyRecord:
+    """What the filter did, per copy and agent ``(B, M)``.
+
+    ``intervened`` (the action changed), ``delta`` ``|du|`` (Euclidean norm of the change of the
+    normalised action), ``infeasible`` (QP infeasible or failed: the backup action was applied),
+    ``active`` (index into :data:`CONSTRAINTS` of the binding constraint, -1 when none).
+    """
+
+    intervened: np.ndarray
+    delta: np.ndarray
+    infeasible: np.ndarray
+    active: np.ndarray
+
+    @property
+    def active_names(self) -> np.ndarray:
+        """:attr:`active` as names (``""`` when none), ``(B, M)`` object array."""
+        names = np.array(("",) + CONSTRAINTS, dtype=object)
+        return names[self.active + 1]
+
+    def infos(self) -> dict[str, np.ndarray]:
+        """The record as info arrays ``safety_intervened``, ``safety_delta``,
+        ``safety_infeasible``, ``safety_active`` (names)."""
+        return {"safety_intervened": self.intervened, "safety_delta": self.delta,
+                "safety_infeasible": self.infeasible, "safety_active": self.active_names}
+
+
+# ---------------------------------------------------------------------------------------------
+# the per-scenario model
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Body:
+    """A sphere of radius ``radius`` around ``center + velocity t`` that one agent must avoid."""
+
+    kind: str
+    center: np.ndarray
+    velocity: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True, eq=False)
+class SafetyModel:
+    """The constraints and the one-decision model of one scenario (:func:`safety_model`).
+
+    ``S`` maps a normalised action to an LVLH acceleration (``(3, d)``; rotated by the body
+    attitude when ``body_frame``); ``u_box`` bounds the QP's action; ``brake`` is ``a_i``.
+    """
+
+    env_id: str
+    n_agents: int
+    action_dim: int
+    dt: float
+    n: float
+    A: np.ndarray
+    B: np.ndarray
+    S: np.ndarray
+    u_box: float
+    norm_mode: bool
+    body_frame: bool
+    brake: float
+    reach: float                     # |n^T B_p du| <= reach per unit of ||du|| bound (delta)
+    accel_max: float                 # max ||S u|| over the action box
+    disturbance: float               # bound on a disturbance acceleration [m/s^2]
+    pair_distance: float = 0.0       # 0: no agent-agent constraint
+    bodies: tuple[Body, ...] = ()
+    chain_sphere: tuple[np.ndarray, float] | None = None       # (offset c, radius): p_f - p_{f-1} - c
+    chain_halfspaces: tuple[np.ndarray, np.ndarray] | None = None  # (normals (K, 3), bounds (K,))
+    lbar: np.ndarray | None = None   # platoon: velocity bound (40) on (Lbar x)_f
+    v_max: float = 0.0               # velocity bound (per axis); 0: none
+    attitude: tuple | None = None    # servicing: (j_f, j_l, omega_l, omega_max, G (3, d), substeps)
+    kinds: tuple[int, ...] = ()
+
+    def state_dim_ok(self, width: int) -> bool:
+        return width >= (13 if self.body_frame or self.attitude is not None else 6)
+
+
+def safety_model(target: Any) -> SafetyModel:
+    """The :class:`SafetyModel` of an env, a ``make_vec`` batch or a batched core."""
+    core = _core_of(target)
+    name = type(core).__name__
+    sc = core.scenario
+    builders = {"PlatoonCore": _platoon, "ClusterCore": _cluster, "ServicingCore": _servicing,
+                "FormationCore": _formation, "FormationFlyingCore": _formation}
+    if name not in builders:
+        raise SafetyTypeError(f"the safety filter knows the satenv cores {sorted(builders)}, got {name}")
+    fields = builders[name](core, sc)
+    n = float(core.model.orbit.n)
+    a, b = cw_matrices(n, float(sc.dt))
+    s = fields.pop("S")
+    norm_mode = getattr(sc, "thrust_mode", "box") == "norm"
+    u_box = 1.0 / math.sqrt(3.0) if norm_mode else 1.0
+    sv = np.linalg.svd(s, compute_uv=False)
+    fields.update(
+        n_agents=core.n_agents, action_dim=s.shape[1], dt=float(sc.dt), n=n, A=a, B=b, S=s,
+        u_box=u_box, norm_mode=norm_mode, brake=float(sv.min()) * u_box,
+        reach=float(np.linalg.norm(b[:3], 2)),
+        accel_max=float(sv.max()) * u_box * math.sqrt(s.shape[1]))
+    model = SafetyModel(**fields)
+    return dataclasses.replace(model, kinds=_row_kinds(model))
+
+
+def _u_scale(sc: Any, d: int) -> np.ndarray:
+    return np.broadcast_to(np.asarray(sc.u_max, dtype=float), (d,)).copy()
+
+
+def _platoon(core: Any, sc: Any) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "env_id": "platoon_v0", "S": np.diag(_u_scale(sc, 3)), "body_frame": False, "disturbance": 0.0,
+        "pair_distance": 2.0 * sc.follower_radius,
+        "bodies": (Body("leader", np.zeros(3), np.zeros(3), sc.leader_radius + sc.follower_radius),),
+        "lbar": np.asarray(core.lbar, dtype=float), "v_max": float(sc.v_max)}
+    if sc.keepout_radius > 0:
+        out["chain_sphere"] = (np.asarray(sc.keepout_center, dtype=float), float(sc.keepout_radius))
+    if sc.los_slopes is not None:   # eq. 34: p_y <= -y_r, c_x |p_x| + p_y <= c_x x_r, c_z |p_z| + p_y <= c_z z_r
+        cx, cz = sc.los_slopes
+        xr, yr, zr = sc.port
+        m = np.array([[0, 1, 0], [cx, 1, 0], [-cx, 1, 0], [0, 1, cz], [0, 1, -cz]], dtype=float)
+        bnd = np.array([-yr, cx * xr, cx * xr, cz * zr, cz * zr], dtype=float)
+        norm = np.linalg.norm(m, axis=1)
+        out["chain_halfspaces"] = (m / norm[:, None], bnd / norm)
+    return out
+
+
+def _cluster(core: Any, sc: Any) -> dict[str, Any]:
+    bodies = [Body("obstacle", np.asarray(sc.obstacle_position, float), np.asarray(sc.obstacle_velocity, float),
+                   float(sc.obstacle_distance))]
+    if sc.target_distance > 0:
+        bodies.append(Body("target", np.asarray(sc.target_spacecraft, float), np.zeros(3), float(sc.target_distance)))
+    return {"env_id": "cluster_v0", "S": float(sc.u_max) * np.eye(3), "body_frame": False,
+            "disturbance": float(sc.disturbance_amplitude), "pair_distance": float(sc.pair_distance),
+            "bodies": tuple(bodies)}
+
+
+def _servicing(core: Any, sc: Any) -> dict[str, Any]:
+    f_t, f_r = thruster_matrices(sc.dimensions)
+    u = _u_scale(sc, 6)
+    gain = sc.dt * np.linalg.solve(np.asarray(core.j_f, float), f_r * u)   # d omega^+ / d u (first order)
+    return {"env_id": "servicing_v0", "S": f_t * u, "body_frame": sc.thrust_frame == "body",
+            "attitude": (core.j_f, core.j_l, core.omega_l, float(sc.omega_max), gain, int(sc.substeps)),
+            "disturbance": 0.0, "pair_distance": float(sc.separation_radius),
+            "bodies": (Body("keep-out", np.zeros(3), np.zeros(3), float(sc.keepout_radius)),),
+            "v_max": float(sc.v_max)}
+
+
+def _formation(core: Any, sc: Any) -> dict[str, Any]:
+    return {"env_id": "formation_v0", "S": np.diag(_u_scale(sc, 3)), "body_frame": False,
+            "disturbance": 0.0, "pair_distance": float(sc.collision_distance)}
+
+
+def _row_kinds(m: SafetyModel) -> tuple[int, ...]:
+    """The constraint kind of every row slot (the same for every agent and copy)."""
+    kinds: list[int] = []
+    if m.pair_distance > 0:
+        kinds += [_KIND["separation"]] * (2 * m.n_agents)
+    for body in m.bodies:
+        kinds += [_KIND[body.kind]] * 2
+    if m.chain_sphere is not None:
+        kinds += [_KIND["keep-out"]] * 4
+    if m.chain_halfspaces is not None:
+        kinds += [_KIND["los"]] * (4 * len(m.chain_halfspaces[1]))
+    if m.v_max > 0:
+        kinds += [_KIND["velocity"]] * 6
+    if m.attitude is not None:
+        kinds += [_KIND["angular-velocity"]] * 6
+    return tuple(kinds)
+
+
+def _core_of(target: Any) -> Any:
+    core = getattr(target, "core", target)
+    if not (hasattr(core, "scenario") and hasattr(core, "x") and hasattr(core, "model")):
+        raise SafetyTypeError("the safety filter needs a satenv env (satenv.make), a make_vec batch or "
+                              f"a batched core, got {type(target).__name__}")
+    return core
+
+
+# ---------------------------------------------------------------------------------------------
+# constraint rows
+# ---------------------------------------------------------------------------------------------
+def _barrier(m: SafetyModel, cfg: SafetyConfig, gap0, rate0, gap_bar, dirn, vel_bar, brake, span):
+    """Rows (C1), (C2) of the module docstring in acceleration space: ``w^T du >= -g``.
+
+    ``gap0, rate0``: the gap and its rate now; ``gap_bar, dirn, vel_bar``: the coasting gap, the
+    direction ``n`` and relative velocity at the next decision; ``brake`` the pair's ``a``;
+    ``span`` the bound ``delta`` on ``|n^T B_p du|``. Returns ``(w1, g1, w2, g2)``.
+    """
+    bp, bv = m.B[:3], m.B[3:]
+    w1 = dirn @ bp
+    s_lo = np.maximum(gap_bar - span, 0.0)
+    s_hi = np.maximum(gap_bar + span, s_lo + 1e-12)
+    slope = (np.sqrt(s_hi) - np.sqrt(s_lo)) / (s_hi - s_lo)
+    c = np.sqrt(2.0 * brake)
+    w2 = dirn @ bv + (c * slope)[..., None] * w1
+    h0 = rate0 + c * np.sqrt(np.maximum(gap0, 0.0))
+    g2 = (np.sum(dirn * vel_bar, axis=-1) + c * (np.sqrt(s_lo) + slope * (gap_bar - s_lo))
+          - (1.0 - cfg.gamma) * h0)
+    return w1, gap_bar, w2, g2
+
+
+def _sphere_rows(m, cfg, r, r_bar, radius, shared, drift_state):
+    """Rows for relative states ``r`` (now) and ``r_bar`` (coasting, next decision), ``(..., 6)``;
+    ``shared`` (bool, broadcast over the leading axes): two agents share the row, else one."""
+    d0 = np.linalg.norm(r[..., :3], axis=-1)
+    d_m = radius + np.minimum(cfg.margin * radius, np.maximum(d0 - radius, 0.0))
+    d_bar = np.linalg.norm(r_bar[..., :3], axis=-1)
+    dirn = r_bar[..., :3] / np.maximum(d_bar, 1e-12)[..., None]
+    rate0 = np.sum(r[..., :3] * r[..., 3:], axis=-1) / np.maximum(d0, 1e-12)
+    return _shared(m, cfg, shared, drift_state, d0 - d_m, rate0, d_bar - d_m, dirn, r_bar[..., 3:])
+
+
+def _halfspace_rows(m, cfg, r, r_bar, normal, bound, shared, drift_state):
+    """Rows for ``normal^T r_p <= bound`` (the gap grows along ``-normal``)."""
+    gap0 = bound - r[..., :3] @ normal
+    b_m = bound - np.minimum(cfg.los_margin, np.maximum(gap0, 0.0))
+    dirn = np.broadcast_to(-normal, r_bar[..., :3].shape)
+    return _shared(m, cfg, shared, drift_state, b_m - r[..., :3] @ normal, -(r[..., 3:] @ normal),
+                   b_m - r_bar[..., :3] @ normal, dirn, r_bar[..., 3:])
+
+
+def _shared(m, cfg, shared, drift_state, gap0, rate0, gap_bar, dirn, vel_bar):
+    """:func:`_barrier` with the pair's authority, and each agent's share of the rows.
+
+    ``a = (1 + shared) a_i`` minus the CW drift bound ``3 n^2 ||r_p|| + 2 n ||r_v||`` at
+    ``drift_state`` and the disturbance of each agent (floored at ``_FLOOR`` of the nominal:
+    there the barrier is no longer a guarantee); ``delta = ||B_p|| (1 + shared) max ||S u||``.
+    """
+    k = 1.0 + np.asarray(shared, dtype=float)
+    drift = (3.0 * m.n**2 * np.linalg.norm(drift_state[..., :3], axis=-1)
+             + 2.0 * m.n * np.linalg.norm(drift_state[..., 3:6], axis=-1))
+    brake = np.maximum(k * (m.brake - m.disturbance) - drift, _FLOOR * k * m.brake)
+    w1, g1, w2, g2 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, k * m.reach * m.accel_max)
+    return w1, -g1 / k, w2, -g2 / k
+
+
+def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every agent's rows ``w^T (S_i u_i) >= l`` in acceleration space: ``w (B, M, K, 3)``,
+    ``l (B, M, K)`` (``l = -1e30``: an unused slot); ``K = len(m.kinds)``."""
+    x6 = x[..., :6]
+    xb = x6 @ m.A.T                                       # coasting prediction of every agent
+    bsz, na = x6.shape[:2]
+    ws: list[np.ndarray] = []
+    ls: list[np.ndarray] = []
+    if m.pair_distance > 0:
+        r = x6[:, :, None] - x6[:, None]                  # (B, M, M, 6): agent i minus agent j
+        rb = xb[:, :, None] - xb[:, None]
+        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, m.pair_distance, True, r)
+        eye = np.eye(na, dtype=bool)
+        ws.extend([w1, w2])
+        ls.extend([np.where(eye, -_BIG, l1), np.where(eye, -_BIG, l2)])
+    for body in m.bodies:
+        c = body.center + t[:, None] * body.velocity      # (B, 3) now, then at the next decision
+        vel = np.broadcast_to(body.velocity, c.shape)
+        r = x6 - np.concatenate([c, vel], -1)[:, None]
+        rb = xb - np.concatenate([c + m.dt * body.velocity, vel], -1)[:, None]
+        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, body.radius, False, x6)
+        ws.extend([w1[:, :, None], w2[:, :, None]])
+        ls.extend([l1[:, :, None], l2[:, :, None]])
+    if m.chain_sphere is not None or m.chain_halfspaces is not None:
+        _chain_rows(m, cfg, x6, xb, ws, ls)
+    if m.v_max > 0:
+        _velocity_rows(m, cfg, x6, xb, ws, ls)
+    w = np.concatenate([v.reshape(bsz, na, -1, 3) for v in ws], axis=2)
+    lo = np.concatenate([v.reshape(bsz, na, -1) for v in ls], axis=2)
+    return w, lo
+
+
+def _chain_rows(m, cfg, x6, xb, ws, ls) -> None:
+    """Platoon target-chaser pairs ``(f - 1, f)`` (follower 1's target is the passive leader):
+    rows for the chaser ``f`` and, negated, for its target ``f - 1`` when that is a follower."""
+    zero = np.zeros_like(x6[:, :1])
+    r = x6 - np.concatenate([zero, x6[:, :-1]], axis=1)
+    rb = xb - np.concatenate([zero, xb[:, :-1]], axis=1)
+    shared = np.arange(x6.shape[1]) > 0
+    blocks = []
+    if m.chain_sphere is not None:
+        off = np.r_[m.chain_sphere[0], np.zeros(3)]
+        blocks.append(_sphere_rows(m, cfg, r - off, rb - off, m.chain_sphere[1], shared, r))
+    if m.chain_halfspaces is not None:
+        blocks += [_halfspace_rows(m, cfg, r, rb, nrm, bnd, shared, r)
+                   for nrm, bnd in zip(*m.chain_halfspaces, strict=True)]
+    for w1, l1, w2, l2 in blocks:
+        ws.extend([w1, w2, _up(-w1, 0.0), _up(-w2, 0.0)])
+        ls.extend([l1, l2, _up(l1, -_BIG), _up(l2, -_BIG)])
+
+
+def _up(v: np.ndarray, fill: float) -> np.ndarray:
+    """``v`` of agent ``f`` moved to agent ``f - 1`` (the last agent gets ``fill``)."""
+    out = np.full_like(v, fill)
+    out[:, :-1] = v[:, 1:]
+    return out
+
+
+def _velocity_rows(m, cfg, x6, xb, ws, ls) -> None:
+    """Velocity boxes (relative degree one): ``|e_k^+| <= V`` per axis, two rows each, for
+    ``e = (Lbar x)_f`` (platoon: bound (40), ``V = (g_f + d_f) v_max``; the neighbours' inputs
+    taken at their worst, ``beta = d_f ||(B_v S)_k||_1 u_box``) or ``e = v_i`` (servicing)."""
+    bv = m.B[3:]
+    if m.lbar is not None:
+        gd = np.diag(m.lbar)
+        e_now = np.einsum("ij,bjk->bik", m.lbar, x6[..., 3:])
+        e_bar = np.einsum("ij,bjk->bik", m.lbar, xb[..., 3:])
+        heard = -(m.lbar - np.diag(gd)).sum(axis=1)
+        beta = heard[:, None] * (np.abs(bv @ m.S).sum(axis=1) * m.u_box)[None, :]
+        v_lim = np.broadcast_to(gd[:, None] * m.v_max, e_now.shape[1:])
+        gain = gd[:, None, None] * bv[None]
+    else:
+        e_now, e_bar = x6[..., 3:], xb[..., 3:]
+        beta = 0.0
+        v_lim = m.v_max
+        gain = bv[None]
+    lim = np.minimum(v_lim, np.maximum(v_lim * (1.0 - cfg.velocity_margin), np.abs(e_now)))
+    g = np.broadcast_to(gain, (*x6.shape[:2], 3, 3))
+    ws.extend([g, -g])
+    ls.extend([-lim - e_bar + beta, -lim + e_bar + beta])
+
+
+def _omega_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Servicing ``|omega_k^+| <= omega_max`` (relative degree one) in action space: the coasting
+    ``omega^+`` of the env's attitude step, plus ``dt J_f^-1 F_r diag(u_max) u`` (first order)."""
+    j_f, j_l, omega_l, w_max, gain, sub = m.attitude
+    w_now = x[..., 10:13]
+    _, w_bar = attitude_step(x[..., 6:10], w_now, np.zeros_like(w_now), m.dt, j_f, j_l, omega_l, sub)
+    lim = np.minimum(w_max, np.maximum(w_max * (1.0 - cfg.velocity_margin), np.abs(w_now)))
+    g = np.broadcast_to(gain, (*x.shape[:2], *gain.shape))
+    return np.concatenate([g, -g], axis=2), np.concatenate([-lim - w_bar, -lim + w_bar], axis=2)
+
+
+# ---------------------------------------------------------------------------------------------
+# the filter
+# ---------------------------------------------------------------------------------------------
+def solve_qp(u_ref: np.ndarray, rows: np.ndarray, lower: np.ndarray, box: float) -> tuple[np.ndarray, int]:
+    """``min ||u - u_ref||^2  s.t.  rows u >= lower,  |u| <= box`` with daqp: ``(u, exitflag)``."""
+    import daqp
+
+    d = u_ref.shape[0]
+    bu = np.concatenate([np.full(d, box), np.full(len(lower), _BIG)])
+    bl = np.concatenate([np.full(d, -box), lower])
+    x, _, flag, _ = daqp.solve(np.eye(d), -u_ref, np.ascontiguousarray(rows), bu, bl,
+                               np.zeros(d + len(lower), dtype=np.int32))
+    return np.asarray(x, dtype=float), int(flag)
+
+
+def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarray,
+                   actions: np.ndarray) -> tuple[np.ndarray, SafetyRecord]:
+    """Safe actions ``(B, M, d)`` and the :class:`SafetyRecord` for states ``x (B, M, >= 6)``
+    at times ``t (B,)`` [s] and proposed normalised actions ``(B, M, d)`` (module docstring).
+
+    Pure: reads only its arguments. Inputs are validated (:class:`SafetyError` names the field).
+    """
+    x, t, a = _check_inputs(m, x, t, actions)
+    s = m.S if not m.body_frame else np.einsum("bmij,jk->bmik", quat_to_matrix(x[..., 6:10]), m.S)
+    w, lo = constraint_rows(m, cfg, x, t)
+    rows = np.einsum("bmki,ij->bmkj", w, s) if s.ndim == 2 else np.einsum("bmki,bmij->bmkj", w, s)
+    if m.attitude is not None:
+        w_om, lo_om = _omega_rows(m, cfg, x)
+        rows, lo = np.concatenate([rows, w_om], axis=2), np.concatenate([lo, lo_om], axis=2)
+    scale = np.linalg.norm(rows, axis=-1)
+    tiny = scale < 1e-12
+    lo = np.where(tiny, np.where(lo <= 0.0, -_BIG, _BIG), lo / np.where(tiny, 1.0, scale))
+    rows = np.where(tiny[..., None], 0.0, rows / np.where(tiny, 1.0, scale)[..., None])
+    ref = _effective(m, a)
+    slack = np.einsum("bmkj,bmj->bmk", rows, ref) - lo
+    safe = slack.min(axis=-1, initial=np.inf) >= -_ROW_TOL
+    out = a.copy()
+    bsz, na = a.shape[:2]
+    infeasible = np.zeros((bsz, na), dtype=bool)
+    active = np.full((bsz, na), -1, dtype=np.int64)
+    kinds = np.asarray(m.kinds, dtype=np.int64)
+    for b, i in zip(*np.nonzero(~safe), strict=True):
+        keep = lo[b, i] > -m.u_box * math.sqrt(m.action_dim) - 1e-9   # rows that can bind
+        u = _guarded_qp(ref[b, i], rows[b, i][keep], lo[b, i][keep], m.u_box)
+        if u is None:
+            k = int(np.argmin(slack[b, i]))
+            u = _backup(m, rows[b, i, k])
+            infeasible[b, i] = True
+            active[b, i] = kinds[k]
+        else:
+            active[b, i] = kinds[int(np.argmin(rows[b, i] @ u - lo[b, i]))]
+        out[b, i] = u
+    delta = np.linalg.norm(out - a, axis=-1)
+    return out, SafetyRecord(~safe, delta, infeasible, active)
+
+
+def _effective(m: SafetyModel, a: np.ndarray) -> np.ndarray:
+    """The action the env applies: clipped to the box (``"norm"``: then into the unit ball)."""
+    ref = np.clip(a, -1.0, 1.0)
+    if m.norm_mode:
+        ref = ref / np.maximum(1.0, np.linalg.norm(ref, axis=-1, keepdims=True))
+    return ref
+
+
+def _guarded_qp(ref: np.ndarray, rows: np.ndarray, lower: np.ndarray, box: float) -> np.ndarray | None:
+    """The QP's point, or ``None`` when it must not be used (any failure of :func:`solve_qp`)."""
+    try:
+        u, flag = solve_qp(ref, rows, lower, box)
+    except Exception:  # noqa: BLE001 - any solver fault gives the backup, never a crash
+        return None
+    if (flag not in (1, 2) or u.shape != ref.shape or not np.all(np.isfinite(u))
+            or np.any(np.abs(u) > box + _QP_TOL) or (len(lower) and np.min(rows @ u - lower) < -_QP_TOL)):
+        return None
+    return np.clip(u, -box, box)
+
+
+def _backup(m: SafetyModel, row: np.ndarray) -> np.ndarray:
+    """Maximum braking: full thrust along the row the proposal breaks most (``argmax row^T u``)."""
+    if m.norm_mode:
+        nrm = np.linalg.norm(row)
+        return row / nrm if nrm > 0 else np.zeros_like(row)
+    return np.sign(row) * m.u_box
+
+
+def _check_inputs(m: SafetyModel, x: Any, t: Any, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    arrays = []
+    for name, value, ndim in (("state", x, 3), ("t", t, 1), ("actions", actions, 3)):
+        if isinstance(value, (str, bytes)) or np.ma.isMaskedArray(value):
+            raise SafetyTypeError(f"safety filter: {name} must be a real array, got {type(value).__name__}")
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise SafetyTypeError(f"safety filter: {name} must be a real array, got {type(value).__name__}") from None
+        if arr.ndim != ndim:
+            raise SafetyError(f"safety filter: {name} must have {ndim} dimensions, got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise SafetyError(f"safety filter: {name} has non-finite entries (NaN or inf)")
+        arrays.append(arr)
+    x, t, a = arrays
+    b, na = a.shape[:2]
+    if a.shape != (b, m.n_agents, m.action_dim):
+        raise SafetyError(f"safety filter: actions must have shape (copies, {m.n_agents}, {m.action_dim}), "
+                          f"got {a.shape}")
+    if x.shape[:2] != (b, m.n_agents) or not m.state_dim_ok(x.shape[2]):
+        raise SafetyError(f"safety filter: state must have shape ({b}, {m.n_agents}, >= 6), got {x.shape}")
+    if t.shape != (b,):
+        raise SafetyError(f"safety filter: t must have shape ({b},), got {t.shape}")
+    return x, t, a
+
+
+class SafetyFilter:
+    """The filter bound to an env, a ``make_vec`` batch or a batched core: :meth:`filter` reads
+    its current state.
+
+    Args:
+        target: ``satenv.make(...)`` env, ``satenv.make_vec(...)`` batch or a ``BatchedCore``.
+        config: a :class:`SafetyConfig`; ``options`` replace its fields (unknown ones raise).
+    """
+
+    def __init__(self, target: Any, config: SafetyConfig | None = None, **options: Any) -> None:
+        self.config = SafetyConfig.from_options(config, **options)
+        self.core = _core_of(target)
+        self.model = safety_model(self.core)
+
+    def filter(self, actions: Any) -> tuple[np.ndarray, SafetyRecord]:
+        """Safe actions ``(B, M, d)`` (or ``(M, d)`` for ``(M, d)`` input) and the record."""
+        a = np.asarray(actions, dtype=float) if not isinstance(actions, (str, bytes)) else actions
+        single = getattr(a, "ndim", 0) == 2
+        x = self.core.x
+        t = self.core.t * float(self.core.scenario.dt)
+        out, rec = filter_actions(self.model, self.config, x, t, a[None] if single else a)
+        return (out[0], rec) if single else (out, rec)
+
+
+class Shield:
+    """A policy filtered by :class:`SafetyFilter` for the env it acts on (same ``reset`` /
+    ``act`` / ``info`` as any policy). It reads the env's true state (privileged, like the
+    scripted baselines). An action that is safe is returned as the policy gave it (the same
+    object); ``info`` adds ``safety_interventions``, ``safety_delta`` (sum of ``|du|``),
+    ``safety_infeasible`` (agent-steps) and ``safety_steps`` since :meth:`reset`, and
+    ``safety_record`` (the last :class:`SafetyRecord`).
+    """
+
+    name = "shield"
+
+    def __init__(self, env: Any, policy: Any, config: SafetyConfig | None = None, **options: Any) -> None:
+        if not (callable(getattr(policy, "act", None)) and callable(getattr(policy, "reset", None))):
+            raise SafetyTypeError(f"shield: policy must have reset() and act(observations), got {type(policy).__name__}")
+        self.filter = SafetyFilter(env, config, **options)
+        self.env = env
+        self.policy = policy
+        self.agents = list(env.possible_agents)
+        self._counts = _zero_counts()
+
+    @property
+    def info(self) -> dict[str, Any]:
+        return {**getattr(self.policy, "info", {}), **self._counts}
+
+    def reset(self, seed: int | None = None) -> None:
+        self.policy.reset(seed)
+        self._counts = _zero_counts()
+
+    def act(self, observations: dict[str, Any]) -> dict[str, Any]:
+        proposed = self.policy.act(observations)
+        live = [a for a in self.agents if a in proposed]
+        if len(live) != len(self.agents):   # an ended episode: nothing to filter
+            return proposed
+        safe, rec = self.filter.filter(np.stack([np.asarray(proposed[a], dtype=float) for a in live]))
+        c = self._counts
+        c["safety_interventions"] += int(rec.intervened.sum())
+        c["safety_delta"] += float(rec.delta.sum())
+        c["safety_infeasible"] += int(rec.infeasible.sum())
+        c["safety_steps"] += 1
+        c["safety_record"] = rec
+        return {a: (safe[i].astype(np.float32) if rec.intervened[0, i] else proposed[a])
+                for i, a in enumerate(live)}
+
+
+def _zero_counts() -> dict[str, Any]:
+    return {"safety_interventions": 0, "safety_delta": 0.0, "safety_infeasible": 0, "safety_steps": 0,
+            "safety_record": None}
+
+
+def shield(policy: Any, env: Any, config: SafetyConfig | None = None, **options: Any) -> Shield:
+    """``policy`` filtered for ``env``: a :class:`Shield`."""
+    return Shield(env, policy, config, **options)
+
+
+# ---------------------------------------------------------------------------------------------
+# filtered envs (safety_filter=True on satenv.make / make_vec / satenv.torchrl.make_env)
+# ---------------------------------------------------------------------------------------------
+class _FilteredStep:
+    """Mixin of a filtered PettingZoo env: ``step`` filters the actions first; per-agent infos
+    get the record (``safety_*``), rewards ``- penalty * |du|``."""
+
+    safety: SafetyFilter
+
+    def step(self, actions):
+        if not self.agents:
+            return super().step(actions)
+        a = self._action_array(actions)
+        safe, rec = self.safety.filter(a)
+        obs, rewards, terms, truncs, infos = super().step(dict(zip(self.possible_agents, safe, strict=True)))
+        pen = self.safety.config.penalty
+        extra = rec.infos()
+        for i, agent in enumerate(self.possible_agents):
+            infos[agent].update({k: v[0, i].item() if hasattr(v[0, i], "item") else v[0, i]
+                                 for k, v in extra.items()})
+            if pen:
+                rewards[agent] -= pen * float(rec.delta[0, i])
+        return obs, rewards, terms, truncs, infos
+
+
+_FILTERED: dict[type, type] = {}
+
+
+def filtered_env(env: Any, config: SafetyConfig | None = None, **options: Any) -> Any:
+    """``env`` (a ``satenv.make`` env) with its actions filtered at every ``step`` (the same
+    object, its class a filtered subclass: every attribute and check of the env still holds)."""
+    cls = type(env)
+    if cls not in _FILTERED:
+        _FILTERED[cls] = type(f"Filtered{cls.__name__}", (_FilteredStep, cls), {})
+    filt = SafetyFilter(env, config, **options)
+    env.__class__ = _FILTERED[cls]
+    env.safety = filt
+    return env
+
+
+def filtered_vec(env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
+                 config: SafetyConfig | None = None, **options: Any) -> Any:
+    """A :class:`satenv.vector.SatVectorEnv` whose ``step`` filters the actions first (infos get
+    the record arrays ``safety_*`` ``(B, M)``; rewards ``- penalty * |du|``)."""
+    from satenv.vector import SatVectorEnv
+
+    class FilteredVectorEnv(SatVectorEnv):
+        def step(self, actions):
+            a = self._check_actions(actions)
+            safe, rec = self.safety.filter(a)
+            obs, rewards, terms, truncs, infos = super().step(safe)
+            infos.update(rec.infos())
+            if self.safety.config.penalty:
+                rewards = rewards - self.safety.config.penalty * rec.delta
+            return obs, rewards, terms, truncs, infos
+
+    vec = FilteredVectorEnv(env, num_envs, seed=seed, autoreset=autoreset)
+    vec.safety = SafetyFilter(vec, config, **options)
+    return vec
