@@ -47,7 +47,7 @@ from training.policy import (
     save_artifacts,
 )
 from training.shaping import RewardShaping
-from training.trust import CODE_FLAG, check_replayed_config
+from training.trust import CODE_FLAG, MAX_CHECKPOINT_BYTES, check_replayed_config, member, read_json
 
 __all__ = ["main", "train", "latest_checkpoint"]
 
@@ -201,7 +201,8 @@ def load_checkpoint(model, folder: Path) -> None:
     import torch
     from stable_baselines3.common.save_util import recursive_getattr
 
-    state = torch.load(folder / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
+    state = torch.load(member(folder, CHECKPOINT_STATE, MAX_CHECKPOINT_BYTES)[0], map_location="cpu",
+                       weights_only=True)  # member: no link, size capped (training.trust)
     model.set_parameters(state["state_dicts"], exact_match=True, device="cpu")
     for name, value in state["tensors"].items():
         recursive_getattr(model, name).data.copy_(value)
@@ -210,7 +211,7 @@ def load_checkpoint(model, folder: Path) -> None:
     buffer_path = folder / "replay_buffer.npz"
     if buffer_path.is_file() and getattr(model, "replay_buffer", None) is not None:
         buffer = model.replay_buffer
-        with np.load(buffer_path, allow_pickle=False) as d:
+        with np.load(member(folder, "replay_buffer.npz", MAX_CHECKPOINT_BYTES)[0], allow_pickle=False) as d:
             for k in _BUFFER_ARRAYS:
                 if k in d:
                     getattr(buffer, k)[...] = d[k]
@@ -270,7 +271,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     venv = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, clip_obs=cfg.clip_obs,
                         gamma=cfg.gamma)
     if ckpt:
-        restore_vecnormalize(venv, json.loads((ckpt[1] / "vecnormalize.json").read_text()))
+        restore_vecnormalize(venv, read_json(ckpt[1], "vecnormalize.json"))
 
     # 4. scripted baselines on the evaluation seeds (cached)
     baseline_eval = _cached_baselines(out / "baselines_eval.json", eval_env, cfg, cfg.eval_seeds)

@@ -34,7 +34,7 @@ import numpy as np
 
 from satenv.errors import SatenvError
 
-__all__ = ["MAX_HEADER_BYTES", "MAX_JSON_BYTES", "UntrustedDataError", "check_replayed_config",
+__all__ = ["CODE_FLAG", "MAX_CHECKPOINT_BYTES", "MAX_HEADER_BYTES", "MAX_JSON_BYTES", "UntrustedDataError", "check_replayed_config",
            "member", "read_json", "read_member", "safetensors_arrays", "sha256_file"]
 
 MAX_JSON_BYTES = 2 * 2**20
@@ -42,6 +42,8 @@ MAX_JSON_BYTES = 2 * 2**20
 ``manifest.json``, a replayed ``config.json``): 2 MiB; parsed, it holds at most ~20x that."""
 MAX_HEADER_BYTES = 2**20
 """Cap on a safetensors header (the JSON that lists the tensors): 1 MiB."""
+MAX_CHECKPOINT_BYTES = 2**33
+"""Cap on one file of a run's checkpoint (``--resume``): 8 GiB (a SAC replay buffer can be large)."""
 CHUNK = 2**20
 """Bytes read (and hashed) at a time."""
 
