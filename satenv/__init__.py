@@ -36,13 +36,21 @@ GYM_IDS: dict[str, str] = {
 """Gymnasium id -> satenv env id of the centralised single-agent view (registered on import)."""
 
 
-def make(env_id: str, **kwargs: Any):
-    """Build an environment by id, e.g. ``satenv.make("platoon_v0", topology="BDL")``."""
+def make(env_id: str, *, safety_filter: Any = False, **kwargs: Any):
+    """Build an environment by id, e.g. ``satenv.make("platoon_v0", topology="BDL")``.
+
+    ``safety_filter=True`` (or a ``satenv.safety.SafetyConfig``) filters every step's actions
+    (:func:`satenv.safety.filtered_env`)."""
     if env_id not in _MODULES:
         raise ValueError(f"unknown env id {env_id!r}; expected one of {list(ENV_IDS)}")
     import importlib
 
-    return importlib.import_module(_MODULES[env_id]).parallel_env(**kwargs)
+    env = importlib.import_module(_MODULES[env_id]).parallel_env(**kwargs)
+    if safety_filter is False:
+        return env
+    from satenv.safety import filtered_env, safety_config
+
+    return filtered_env(env, safety_config(safety_filter))
 
 
 def platoon_v0(**kwargs: Any):
@@ -65,8 +73,13 @@ def formation_v0(**kwargs: Any):
     return make("formation_v0", **kwargs)
 
 
-def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, **kwargs: Any):
-    """``num_envs`` batched copies of ``make(env_id, **kwargs)`` (numpy); see ``satenv.vector``."""
+def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, safety_filter: Any = False, **kwargs: Any):
+    """``num_envs`` batched copies of ``make(env_id, **kwargs)`` (numpy); see ``satenv.vector``.
+    ``safety_filter``: as in :func:`make` (:func:`satenv.safety.filtered_vec`)."""
+    if safety_filter is not False:
+        from satenv.safety import filtered_vec, safety_config
+
+        return filtered_vec(make(env_id, **kwargs), num_envs, seed=seed, config=safety_config(safety_filter))
     from satenv.vector import make_vec as _make_vec
 
     return _make_vec(env_id, num_envs, seed=seed, **kwargs)

@@ -70,9 +70,11 @@ import numpy as np
 
 from satenv.dynamics import attitude_step, cw_matrices, quat_to_matrix, thruster_matrices
 from satenv.errors import SatenvError, SatenvTypeError
+from satenv.vector import SatVectorEnv
 
 __all__ = ["CONSTRAINTS", "SafetyConfig", "SafetyError", "SafetyFilter", "SafetyModel", "SafetyRecord",
-           "SafetyTypeError", "Shield", "filter_actions", "filtered_env", "filtered_vec", "safety_model",
+           "SafetyTypeError", "Shield", "FilteredVectorEnv", "filter_actions", "filtered_env", "filtered_vec",
+           "safety_config", "safety_model",
            "shield", "solve_qp"]
 
 CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "keep-out", "los", "velocity",
@@ -660,26 +662,27 @@ def shield(policy: Any, env: Any, config: SafetyConfig | None = None, **options:
 # ---------------------------------------------------------------------------------------------
 # filtered envs (safety_filter=True on satenv.make / make_vec / satenv.torchrl.make_env)
 # ---------------------------------------------------------------------------------------------
-class _FilteredStep:
-    """Mixin of a filtered PettingZoo env: ``step`` filters the actions first; per-agent infos
-    get the record (``safety_*``), rewards ``- penalty * |du|``."""
-
-    safety: SafetyFilter
+def _filtered_class(cls: type) -> type:
+    """The subclass of a satenv env class whose ``step`` filters the actions first: per-agent
+    infos get the record (``safety_*``), rewards ``- penalty * |du|``."""
 
     def step(self, actions):
         if not self.agents:
-            return super().step(actions)
-        a = self._action_array(actions)
-        safe, rec = self.safety.filter(a)
-        obs, rewards, terms, truncs, infos = super().step(dict(zip(self.possible_agents, safe, strict=True)))
+            return cls.step(self, actions)
+        safe, rec = self.safety.filter(self._action_array(actions))
+        obs, rewards, terms, truncs, infos = cls.step(self, dict(zip(self.possible_agents, safe, strict=True)))
         pen = self.safety.config.penalty
-        extra = rec.infos()
+        extra = {k: v[0].tolist() for k, v in rec.infos().items()}
         for i, agent in enumerate(self.possible_agents):
-            infos[agent].update({k: v[0, i].item() if hasattr(v[0, i], "item") else v[0, i]
-                                 for k, v in extra.items()})
+            infos[agent].update({k: v[i] for k, v in extra.items()})
             if pen:
-                rewards[agent] -= pen * float(rec.delta[0, i])
+                rewards[agent] -= pen * extra["safety_delta"][i]
         return obs, rewards, terms, truncs, infos
+
+    if cls not in _FILTERED:
+        _FILTERED[cls] = type(f"Filtered{cls.__name__}", (cls,), {"step": step, "__doc__": cls.__doc__,
+                                                                  "__module__": __name__})
+    return _FILTERED[cls]
 
 
 _FILTERED: dict[type, type] = {}
@@ -688,31 +691,40 @@ _FILTERED: dict[type, type] = {}
 def filtered_env(env: Any, config: SafetyConfig | None = None, **options: Any) -> Any:
     """``env`` (a ``satenv.make`` env) with its actions filtered at every ``step`` (the same
     object, its class a filtered subclass: every attribute and check of the env still holds)."""
-    cls = type(env)
-    if cls not in _FILTERED:
-        _FILTERED[cls] = type(f"Filtered{cls.__name__}", (_FilteredStep, cls), {})
     filt = SafetyFilter(env, config, **options)
-    env.__class__ = _FILTERED[cls]
+    env.__class__ = _filtered_class(type(env))
     env.safety = filt
     return env
 
 
 def filtered_vec(env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
                  config: SafetyConfig | None = None, **options: Any) -> Any:
-    """A :class:`satenv.vector.SatVectorEnv` whose ``step`` filters the actions first (infos get
-    the record arrays ``safety_*`` ``(B, M)``; rewards ``- penalty * |du|``)."""
-    from satenv.vector import SatVectorEnv
-
-    class FilteredVectorEnv(SatVectorEnv):
-        def step(self, actions):
-            a = self._check_actions(actions)
-            safe, rec = self.safety.filter(a)
-            obs, rewards, terms, truncs, infos = super().step(safe)
-            infos.update(rec.infos())
-            if self.safety.config.penalty:
-                rewards = rewards - self.safety.config.penalty * rec.delta
-            return obs, rewards, terms, truncs, infos
-
+    """A :class:`satenv.vector.SatVectorEnv` over ``env``'s scenario whose ``step`` filters the
+    actions first (infos get the record arrays ``safety_*`` ``(B, M)``; rewards
+    ``- penalty * |du|``)."""
     vec = FilteredVectorEnv(env, num_envs, seed=seed, autoreset=autoreset)
     vec.safety = SafetyFilter(vec, config, **options)
     return vec
+
+
+class FilteredVectorEnv(SatVectorEnv):
+    """:class:`satenv.vector.SatVectorEnv` with the filter in ``step`` (:func:`filtered_vec`)."""
+
+    safety: SafetyFilter
+
+    def step(self, actions):
+        safe, rec = self.safety.filter(self._check_actions(actions))
+        obs, rewards, terms, truncs, infos = super().step(safe)
+        infos.update(rec.infos())
+        if self.safety.config.penalty:
+            rewards = rewards - self.safety.config.penalty * rec.delta
+        return obs, rewards, terms, truncs, infos
+
+
+def safety_config(value: Any) -> SafetyConfig:
+    """The config of a ``safety_filter=`` argument: ``True`` (defaults) or a :class:`SafetyConfig`."""
+    if value is True:
+        return SafetyConfig()
+    if isinstance(value, SafetyConfig):
+        return value
+    raise SafetyTypeError(f"safety_filter must be True, False or a satenv.safety.SafetyConfig, got {value!r}")
