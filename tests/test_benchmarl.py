@@ -17,11 +17,13 @@ def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
     out = tmp_path / "mappo"
     main(["--algorithm", "mappo", "--env-id", "platoon_v0", "--env-kwargs", '{"max_steps": 20}',
           "--max-frames", "400", "--frames-per-batch", "200", "--num-envs", "4", "--minibatch-size", "100",
-          "--minibatch-iters", "1", "--net-arch", "16", "--eval-seeds", "1", "--out-dir", str(out)])
+          "--minibatch-iters", "1", "--net-arch", "16", "--test-seeds", "1", "--out-dir", str(out)])
     assert list((out / "benchmarl").rglob("*.csv")), "no BenchMARL logs"
     assert list((out / "benchmarl").rglob("checkpoint_*.pt")), "no BenchMARL checkpoint"
-    policy = training.load(out)
-    assert policy.actor.spec["hidden"] == [16] and json.loads((out / "env.json").read_text())["step"] == 400
+    policy = training.load(out / "final")
+    assert policy.actor.spec["hidden"] == [16] and json.loads((out / "final" / "env.json").read_text())["step"] == 400
+    ev = json.loads((out / "final" / "eval.json").read_text())
+    assert ev["test_seeds"] == [1] and {"learned", "zero", "dmpc"} <= set(ev["aggregate"])
     import satenv
 
     env = satenv.make("platoon_v0", max_steps=20)
@@ -30,9 +32,16 @@ def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
     from benchmarks.scoreboard import main as scoreboard
 
     board = tmp_path / "board"
-    scoreboard(["--scenarios", "platoon-PLF-cw", "--policies", "zero", "--policy", str(out), "--seeds", "0",
+    scoreboard(["--scenarios", "platoon-PLF-cw", "--policies", "zero", "--policy", str(out / "final"), "--seeds", "0",
                 "--out", str(board), "--no-plots", "--no-progress", "--workers", "1"])
     assert "user:mappo" in (board / "scoreboard.md").read_text()
+
+
+def test_budget_is_rounded_visibly_and_saved():
+    cfg = BenchMARLConfig(max_frames=3000, frames_per_batch=6000, num_envs=7)
+    planned = cfg.planned()  # one batch of whole env steps of 7 copies: 3003 frames, not 6000
+    assert (planned.frames_per_batch, planned.max_frames) == (3003, 3003)
+    assert BenchMARLConfig(max_frames=400, frames_per_batch=200, num_envs=4).planned().max_frames == 400
 
 
 def test_config_errors(tmp_path):

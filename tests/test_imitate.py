@@ -15,7 +15,7 @@ from training.imitate import ImitationConfig, collect_episode, main
 SHORT = {"preset": "pereira2022", "randomize": True, "max_steps": 12}
 
 
-def test_config_validation_names_the_field():
+def test_config_validation_names_the_field(capsys):
     with pytest.raises(ValueError, match="beta"):
         ImitationConfig(beta=1.5)
     with pytest.raises(ValueError, match="rounds"):
@@ -24,8 +24,9 @@ def test_config_validation_names_the_field():
         ImitationConfig(activation="sigmoid")
     with pytest.raises(ValueError, match="expert_options"):
         ImitationConfig(expert_options=[1])
-    with pytest.raises(SystemExit, match="expert-options"):
+    with pytest.raises(SystemExit):
         main(["--expert-options", "[1]"])
+    assert "--expert-options" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="unknown ImitationConfig field"):
         main(["--config", "tests/../training/policies/platoon_tplf_ppo/config.json"])
 
@@ -48,7 +49,7 @@ def test_tiny_run_writes_a_loadable_policy_and_resumes(tmp_path):
     out = tmp_path / "run"
     flags = ["--env-kwargs", json.dumps(SHORT), "--rounds", "2", "--episodes-per-round", "1",
              "--epochs", "2", "--net-arch", "16", "--eval-seeds", "7", "--test-seeds", "8,9",
-             "--out-dir", str(out), "--progress", "false"]
+             "--out-dir", str(out), "--progress", "false", "--lr", "0.001"]
     final = main(flags)
     policy = training.load(final, env=satenv.make("platoon_v0", **SHORT))
     ev = json.loads((final / "eval.json").read_text())

@@ -1,6 +1,7 @@
 """training: config, smoke PPO/SAC runs, artefacts, load -> act, resume, gym view, RLlib smoke."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ TOY = "test_env_base:ToyEnv"
 
 
 def _cfg(tmp_path, **kw):
-    base = dict(env_id=TOY, env_kwargs={"max_steps": 10}, n_copies=2, total_timesteps=192, n_steps=16,
+    base = dict(env_id=TOY, env_kwargs={"max_steps": 10}, num_envs=2, total_timesteps=192, n_steps=16,
                 batch_size=48, n_epochs=1, net_arch=(16, 16), eval_every=96, checkpoint_every=96,
                 eval_seeds=(1, 2), test_seeds=(3, 4, 5), eval_baselines=("zero",),
                 out_dir=str(tmp_path / "run"), progress=False)
@@ -24,33 +25,57 @@ def _cfg(tmp_path, **kw):
     return TrainConfig(**base)
 
 
+def _text(boxed: str) -> str:
+    """tyro's boxed help or error as one line of words."""
+    return " ".join(re.sub("[│╭╮╰╯─]", " ", boxed).split())
+
+
 def test_config_validation_and_json_round_trip():
     cfg = TrainConfig(net_arch=[32, 32], eval_seeds=range(3))
     assert cfg.net_arch == (32, 32) and cfg.eval_seeds == (0, 1, 2)
     assert config_from_json(json.loads(json.dumps(cfg.to_json()))) == cfg
-    for bad, match in [({"algo": "dqn"}, "algo"), ({"n_copies": 0}, "n_copies"),
+    for bad, match in [({"algo": "dqn"}, "algo"), ({"num_envs": 0}, "num_envs"),
                        ({"net_arch": ()}, "net_arch"), ({"gamma": 1.5}, "gamma"),
                        ({"env_kwargs": {"x": object()}}, "JSON"), ({"total_timesteps": 1.5}, "total_timesteps")]:
         with pytest.raises(ValueError, match=match):
             TrainConfig(**bad)
     with pytest.raises(ValueError, match="unknown TrainConfig"):
         config_from_json({"nope": 1})
+    # a config.json written before the common grammar still replays (old keys mapped)
+    assert config_from_json({"n_copies": 3, "learning_rate": 0.1}) == TrainConfig(num_envs=3, lr=0.1)
+    with pytest.raises(ValueError, match="eval_seeds.*cap"):
+        TrainConfig(eval_seeds=range(100_001))
 
 
-def test_cli_flags_parse_into_the_config():
+def test_one_seeds_grammar_with_a_cap():
+    from training.config import MAX_SEEDS, parse_seeds
+
+    assert parse_seeds("0-4") == (0, 1, 2, 3, 4) and parse_seeds("7,3,7") == (7, 3)
+    assert parse_seeds(["0-1", "9"]) == (0, 1, 9) and parse_seeds("5:8") == (5, 6, 7)
+    assert len(parse_seeds(f"0-{MAX_SEEDS - 1}")) == MAX_SEEDS
+    for bad in ("4-2", "-1", "x", "", f"0-{MAX_SEEDS}", "0-10000000000000"):
+        with pytest.raises(ValueError, match="seeds"):
+            parse_seeds(bad)
+
+
+def test_cli_flags_parse_into_the_config(capsys):
     cfg, _ = parse_args(["--algo", "sac", "--net-arch", "32,32", "--env-kwargs", '{"randomize": true}',
-                         "--eval-seeds", "5:8", "--progress", "false", "--gamma", "0.98"])
-    assert (cfg.algo, cfg.net_arch, cfg.env_kwargs, cfg.eval_seeds, cfg.progress, cfg.gamma) == \
-        ("sac", (32, 32), {"randomize": True}, (5, 6, 7), False, 0.98)
-    with pytest.raises(ValueError, match="--env-kwargs.*JSON object"):
-        parse_args(["--env-kwargs", "randomize"])
-    with pytest.raises(ValueError, match="--n-copies"):
-        parse_args(["--n-copies", "many"])
+                         "--eval-seeds", "5-7", "--progress", "false", "--gamma", "0.98", "--lr", "0.01",
+                         "--num-envs", "4"])
+    assert (cfg.algo, cfg.net_arch, cfg.env_kwargs, cfg.eval_seeds, cfg.progress, cfg.gamma, cfg.lr,
+            cfg.num_envs) == ("sac", (32, 32), {"randomize": True}, (5, 6, 7), False, 0.98, 0.01, 4)
+    # the old spellings are deprecated aliases
+    old, _ = parse_args(["--n-copies", "4", "--learning-rate", "0.01", "--eval-seeds", "5:8"])
+    assert (old.num_envs, old.lr, old.eval_seeds) == (4, 0.01, (5, 6, 7))
+    for argv, match in [(["--env-kwargs", "randomize"], "JSON object"), (["--num-envs", "many"], "num-envs"),
+                        (["--algo", "dqn"], "ppo"), (["--num-envs", "0"], "num_envs must be an int >= 1"),
+                        (["--test-seeds", "0-999999999"], "more than 100000 seeds")]:
+        with pytest.raises(SystemExit):
+            parse_args(argv)
+        assert match in _text(capsys.readouterr().err)
 
 
 def test_cli_config_replay_and_readable_help(tmp_path, capsys):
-    from training.config import build_parser
-
     cfg = _cfg(tmp_path, seed=5, env_kwargs={"max_steps": 7})
     path = tmp_path / "config.json"
     path.write_text(json.dumps(cfg.to_json()))
@@ -59,10 +84,11 @@ def test_cli_config_replay_and_readable_help(tmp_path, capsys):
     with pytest.raises(ValueError, match="--config"):
         parse_args(["--config", str(tmp_path / "nope.json")])
     with pytest.raises(SystemExit):
-        build_parser().parse_args(["--help"])
-    out = capsys.readouterr().out
-    assert out.count("(default: 32)") == 1 and out.count("platoon_v0") == 1
-    assert "(default: 20000:20050)" in out and "default: None" not in out
+        parse_args(["--help"], resume=True)
+    out = _text(capsys.readouterr().out)
+    assert out.count("(default: 32)") == 1 and "--resume" in out and "--config FILE" in out
+    assert "(default: 20000-20019)" in out and "{ppo,sac}" in out and "{constant,linear}" in out
+    assert "Scenario copies stepped together" in out  # the field's docstring is its help
 
 
 def test_total_timesteps_round_up_to_whole_rollouts(tmp_path, capsys):
@@ -73,15 +99,16 @@ def test_total_timesteps_round_up_to_whole_rollouts(tmp_path, capsys):
     final = train(cfg)
     assert json.loads((final / "env.json").read_text())["step"] == 192
     assert "total_timesteps 100 -> 192" in capsys.readouterr().err
+    # the budget actually run is the one saved (replaying the run trains as long)
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["total_timesteps"] == 192
     assert planned_timesteps(cfg.replace(algo="sac"), 3) == 102  # SAC: env steps of 6 rows
 
 
 def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     cfg = _cfg(tmp_path)
     final = train(cfg)
-    assert {p.name for p in final.iterdir()} == {"policy.json", "weights.pt", "obs_norm.json", "env.json",
-                                                  "config.json", "manifest.json", "eval.json",
-                                                  "learning_curve.png"}
+    assert {p.name for p in final.iterdir()} - {"weights.pt", "weights.safetensors"} == {
+        "policy.json", "obs_norm.json", "env.json", "config.json", "manifest.json", "eval.json", "learning_curve.png"}
     assert (final / "learning_curve.png").read_bytes().startswith(b"\x89PNG")
     meta = json.loads((final / "env.json").read_text())
     assert meta["env_id"] == TOY and meta["env_kwargs"] == {"max_steps": 10} and meta["observation_shape"] == [6]
@@ -93,7 +120,7 @@ def test_ppo_smoke_artefacts_and_load_act_round_trip(tmp_path):
     assert list((run / "tb").rglob("events.out.tfevents.*")), "no TensorBoard log"
     history = json.loads((run / "eval_history.json").read_text())
     assert [h["step"] for h in history] == [96, 192]
-    assert (run / "best" / "weights.pt").is_file()
+    assert (run / "best" / "manifest.json").is_file()
     assert not list(run.rglob("*.pkl")) and not list(run.rglob("*.zip")), "nothing pickled is written"
 
     # load -> act reproduces the in-memory model with the saved normalisation
@@ -267,12 +294,15 @@ def test_rllib_one_iteration(tmp_path):
     from training.rllib_train import RLlibConfig, run
 
     cfg = RLlibConfig(env_id=TOY, env_kwargs={"max_steps": 10}, iterations=1, train_batch_size=200,
-                      minibatch_size=100, num_epochs=1, net_arch=(16,), out_dir=str(tmp_path / "rl"))
+                      minibatch_size=100, num_epochs=1, net_arch=(16,), out_dir=str(tmp_path / "rl"),
+                      test_seeds=(1, 2))
     progress = run(cfg, verbose=False)
     assert len(progress) == 1 and progress[0]["env_steps"] >= 200
     assert (tmp_path / "rl" / "checkpoint").is_dir()
     assert list((tmp_path / "rl" / "tb").rglob("events.out.tfevents.*")), "no TensorBoard log"
-    policy = training.load(tmp_path / "rl", env=ToyEnv(max_steps=10))  # the exported actor
+    policy = training.load(tmp_path / "rl" / "final", env=ToyEnv(max_steps=10))  # the exported actor
+    ev = json.loads((tmp_path / "rl" / "final" / "eval.json").read_text())
+    assert set(ev["aggregate"]) == {"learned", "zero"} and ev["aggregate"]["learned"]["episodes"] == 2
     assert policy.actor.spec["hidden"] == [16]
     assert rollout(ToyEnv(max_steps=10), policy, seed=0).steps == 10
 
@@ -351,3 +381,29 @@ def test_shipped_policy_reproduces_its_eval_json(name):
     res = evaluate(env, training.load(folder, env=env), saved["test_seeds"])["aggregate"]
     for key in ("success_rate", "collision_episodes", "rmse", "delta_v"):
         assert res[key] == pytest.approx(saved["aggregate"]["learned"][key], rel=1e-6), key
+
+
+def test_every_training_command_in_the_docs_parses():
+    """The shell examples of README.md, docs/ and the shipped policies' READMEs use valid flags."""
+    import shlex
+    from pathlib import Path
+
+    from training.benchmarl_train import BenchMARLConfig
+    from training.imitate import ImitationConfig
+    from training.rllib_train import RLlibConfig
+
+    classes = {"train": TrainConfig, "imitate": ImitationConfig, "benchmarl_train": BenchMARLConfig,
+               "rllib_train": RLlibConfig}
+    root = Path(__file__).parents[1]
+    pages = [root / "README.md", *root.glob("docs/**/*.md"), *root.glob("training/policies/*/README.md")]
+    found = 0
+    for page in pages:
+        text = page.read_text().replace("\\\n", " ")
+        for m in re.finditer(r"python -m training\.(train|imitate|benchmarl_train|rllib_train)\b([^\n#`|]*)", text):
+            argv = [a for a in shlex.split(m.group(2)) if a not in ("--resume", "--help")]
+            assert "..." not in argv, f"{page.name}: an incomplete example: {m.group(0)}"
+            if "--config" in argv and argv[argv.index("--config") + 1].startswith("runs/"):
+                continue  # a run of the reader's own
+            parse_args(argv, cls=classes[m.group(1)])
+            found += 1
+    assert found >= 8

@@ -2,17 +2,18 @@
 
     python -m training.benchmarl_train --algorithm mappo --env-id platoon_v0 \\
         --env-kwargs '{"randomize": true}' --max-frames 3000000 --out-dir runs/platoon_mappo
-    python -m benchmarks.scoreboard --policy runs/platoon_mappo      # rank it
+    python -m benchmarks.scoreboard --policy runs/platoon_mappo/final      # rank it
 
 Needs the ``marl`` extra (``pip install -c constraints.txt -e ".[marl]"``). The env is the native
 TorchRL env (:mod:`satenv.torchrl`, batched numpy core) as the BenchMARL task
 :class:`training.benchmarl_task.SatenvTask`; frames count env steps of one copy (all agents at
 once), BenchMARL's convention. One actor shared by every agent (``share_policy_params``).
 
-``--out-dir`` holds the exported policy (the safe format of :mod:`training.policy`:
-``policy.json``, ``weights.pt``, ``obs_norm.json`` (identity: BenchMARL does not normalise),
-``env.json``, ``config.json``, ``manifest.json``, ``eval.json`` on ``--eval-seeds``), so
-``training.load(DIR)`` and ``benchmarks.scoreboard --policy DIR`` take it; and ``benchmarl/``:
+``--out-dir`` holds ``config.json`` (the run's config, with the frame budget actually run),
+``final/``: the exported policy (the safe format of :mod:`training.policy`: ``policy.json``,
+``weights.pt``, ``obs_norm.json`` (identity: BenchMARL does not normalise), ``env.json``,
+``config.json``, ``manifest.json``, ``eval.json`` on ``--test-seeds`` beside the baselines), so
+``training.load(DIR/final)`` and ``benchmarks.scoreboard --policy DIR/final`` take it; and ``benchmarl/``:
 BenchMARL's experiment folder (CSV logs under ``scalars/``, checkpoints every
 ``--checkpoint-every`` frames and at the end; those are BenchMARL's own pickled files, for
 resuming with BenchMARL, not for sharing).
@@ -20,14 +21,13 @@ resuming with BenchMARL, not for sharing).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-from training.config import check_int, check_net_arch
+from training.config import RunConfig, check_int, check_number, parse_args
 
 __all__ = ["BenchMARLConfig", "run", "main", "export_actor", "ALGORITHMS"]
 
@@ -36,44 +36,53 @@ ALGORITHMS = ("mappo", "ippo", "masac", "isac", "maddpg", "iddpg")
 
 
 @dataclass(frozen=True)
-class BenchMARLConfig:
-    """One BenchMARL run (every field is a ``--flag``; frames are env steps of one copy)."""
+class BenchMARLConfig(RunConfig):
+    """One BenchMARL run (``python -m training.benchmarl_train``; frames are env steps of one copy)."""
 
-    algorithm: str = "mappo"
-    env_id: str = "platoon_v0"
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    algorithm: Literal["mappo", "ippo", "masac", "isac", "maddpg", "iddpg"] = "mappo"
+    """BenchMARL algorithm (continuous actions)."""
     max_frames: int = 1_000_000
+    """Frames to collect, rounded up to whole batches (the rounded figure is printed and saved)."""
     frames_per_batch: int = 6000
+    """Frames per collection batch (capped at ``max_frames``, rounded up to a multiple of ``num_envs``)."""
     num_envs: int = 10
+    """Env copies per collector (one batched core)."""
     minibatch_size: int = 400
+    """Minibatch size (on-policy) or train batch size (off-policy)."""
     minibatch_iters: int = 45
-    net_arch: tuple[int, ...] = (64, 64)
+    """Minibatch iterations (on-policy) or optimiser steps (off-policy) per batch."""
     lr: float = 5e-5
+    """Learning rate."""
     gamma: float = 0.99
-    seed: int = 0
+    """Discount factor."""
     checkpoint_every: int = 0
-    eval_seeds: tuple[int, ...] = (10000, 10001, 10002)
+    """BenchMARL checkpoint every this many frames (0: only at the end)."""
     out_dir: str = "runs/benchmarl"
+    """Run folder: ``config.json``, ``benchmarl/`` (BenchMARL's own), ``final/`` (the policy with ``eval.json``)."""
     init_actor: str = ""
+    """Start the actor from this policy folder (``python -m training.imitate --squash true``, same
+    ``--net-arch``) instead of at random."""
     init_std: float = 0.2
+    """The seeded actor's initial action standard deviation."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS} (continuous actions), got {self.algorithm!r}")
-        if not isinstance(self.env_kwargs, dict):
-            raise ValueError(f"env_kwargs must be a dict (JSON object), got {self.env_kwargs!r}")
         for name in ("max_frames", "frames_per_batch", "num_envs", "minibatch_size", "minibatch_iters"):
             check_int(name, getattr(self, name), minimum=1)
-        for name in ("seed", "checkpoint_every"):
-            check_int(name, getattr(self, name), minimum=0)
-        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
-        object.__setattr__(self, "eval_seeds", tuple(int(s) for s in self.eval_seeds))
+        check_int("checkpoint_every", self.checkpoint_every, minimum=0)
         if not isinstance(self.init_actor, str):
             raise ValueError(f"init_actor must be a policy folder path or '', got {self.init_actor!r}")
         if not (isinstance(self.init_std, (int, float)) and 0 < self.init_std < 10):
             raise ValueError(f"init_std must be a number in (0, 10), got {self.init_std!r}")
-        if not (self.lr > 0 and 0 < self.gamma <= 1):
-            raise ValueError(f"lr must be > 0 and gamma in (0, 1], got lr={self.lr!r}, gamma={self.gamma!r}")
+        check_number("gamma", self.gamma, 0.0, 1.0)
+
+    def planned(self) -> BenchMARLConfig:
+        """The config actually run: ``frames_per_batch`` capped at ``max_frames`` and rounded up to
+        whole env steps of ``num_envs`` copies; ``max_frames`` rounded up to whole batches."""
+        per_batch = -(-min(self.frames_per_batch, self.max_frames) // self.num_envs) * self.num_envs
+        return self.replace(frames_per_batch=per_batch, max_frames=-(-self.max_frames // per_batch) * per_batch)
 
 
 def build_experiment(cfg: BenchMARLConfig):
@@ -196,7 +205,7 @@ def seed_actor(policy: Any, folder: str, init_std: float, n_agents: int) -> None
 
 
 def _relative(path: Path, root: Path) -> str:
-    """``path`` relative to the run folder ``root`` where it lies inside it (folders move)."""
+    """``path`` relative to the run folder ``root`` (the parent of ``final/``) where it lies inside it."""
     try:
         return str(path.resolve().relative_to(root.resolve()))
     except ValueError:
@@ -204,14 +213,20 @@ def _relative(path: Path, root: Path) -> str:
 
 
 def run(cfg: BenchMARLConfig) -> Path:
-    """Train, export the actor to ``out_dir`` and evaluate it; returns ``out_dir``."""
+    """Train, export the actor to ``out_dir/final`` and evaluate it there; returns ``out_dir/final``."""
     import satenv
     from training.envs import policy_env_meta
-    from training.evaluate import evaluate
+    from training.evaluate import run_summary
     from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
 
     out = Path(cfg.out_dir)
+    planned = cfg.planned()
+    if planned != cfg:
+        print(f"max_frames {cfg.max_frames} -> {planned.max_frames}, frames_per_batch {cfg.frames_per_batch} -> "
+              f"{planned.frames_per_batch} (whole batches of whole env steps)", file=sys.stderr)
+        cfg = planned
     experiment = build_experiment(cfg)
+    (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     env = satenv.make(cfg.env_id, **cfg.env_kwargs)
     if cfg.init_actor:
         seed_actor(experiment.policy, cfg.init_actor, cfg.init_std, len(env.possible_agents))
@@ -219,51 +234,19 @@ def run(cfg: BenchMARLConfig) -> Path:
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
     actor = export_actor(experiment.policy, obs_dim, act_dim, len(env.possible_agents))
-    meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.env_kwargs),
-            "step": int(experiment.total_frames), "benchmarl_folder": _relative(Path(experiment.folder_name), out)}
+    meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs),
+            "step": int(experiment.total_frames),
+            "benchmarl_folder": _relative(Path(experiment.folder_name), out)}
     policy = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(obs_dim,), meta=meta)
-    config = {**asdict(cfg), "net_arch": list(cfg.net_arch), "eval_seeds": list(cfg.eval_seeds)}
-    evaluation = evaluate(env, policy, cfg.eval_seeds) if cfg.eval_seeds else None
-    save_artifacts(out, policy, env_meta=meta, config=config, source=f"BenchMARL {cfg.algorithm.upper()}",
-                   evaluation=None if evaluation is None else {"eval_seeds": list(cfg.eval_seeds),
-                                                               "learned": evaluation["aggregate"]})
-    return out
-
-
-def parse_args(argv: list[str] | None = None) -> BenchMARLConfig:
-    d = BenchMARLConfig()
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--algorithm", default=d.algorithm, choices=ALGORITHMS, help=f"(default: {d.algorithm})")
-    p.add_argument("--env-id", default=d.env_id, help=f"(default: {d.env_id})")
-    p.add_argument("--env-kwargs", default="{}", metavar="JSON", help="env keyword arguments (default: {})")
-    for name in ("max_frames", "frames_per_batch", "num_envs", "minibatch_size", "minibatch_iters", "seed",
-                 "checkpoint_every"):
-        p.add_argument(f"--{name.replace('_', '-')}", type=int, default=getattr(d, name),
-                       help=f"(default: {getattr(d, name)})")
-    p.add_argument("--lr", type=float, default=d.lr, help=f"(default: {d.lr})")
-    p.add_argument("--gamma", type=float, default=d.gamma, help=f"(default: {d.gamma})")
-    p.add_argument("--net-arch", default="64,64", help="hidden sizes of actor and critic (default: 64,64)")
-    p.add_argument("--eval-seeds", default="10000,10001,10002", help="seeds of eval.json ('' for none)")
-    p.add_argument("--out-dir", default=d.out_dir, help=f"(default: {d.out_dir})")
-    p.add_argument("--init-actor", default="", metavar="FOLDER",
-                   help="start the actor from this policy folder (python -m training.imitate --squash true; "
-                        "same --net-arch) instead of at random")
-    p.add_argument("--init-std", type=float, default=d.init_std,
-                   help=f"the seeded actor's initial action standard deviation (default: {d.init_std})")
-    ns = p.parse_args(argv)
-    try:
-        env_kwargs = json.loads(ns.env_kwargs)
-        arch = tuple(int(x) for x in ns.net_arch.split(",") if x)
-        seeds = tuple(int(x) for x in ns.eval_seeds.split(",") if x)
-    except ValueError as err:
-        p.error(f"--env-kwargs must be a JSON object, --net-arch and --eval-seeds comma-separated ints ({err})")
-    kw = {k: v for k, v in vars(ns).items() if k not in ("env_kwargs", "net_arch", "eval_seeds")}
-    return BenchMARLConfig(env_kwargs=env_kwargs, net_arch=arch, eval_seeds=seeds, **kw)
+    summary = run_summary(cfg, policy, steps=int(experiment.total_frames))
+    return save_artifacts(out / "final", policy, env_meta=meta, config=cfg.to_json(),
+                          source=f"BenchMARL {cfg.algorithm.upper()}", evaluation=summary)
 
 
 def main(argv: list[str] | None = None) -> Path:
     try:
-        cfg = parse_args(argv)
+        cfg, _ = parse_args(argv, cls=BenchMARLConfig, prog="python -m training.benchmarl_train",
+                            description=__doc__.split("\n\n")[0])
         import benchmarl  # noqa: F401
     except ImportError as err:
         raise SystemExit(f"error: training.benchmarl_train needs the marl extra ({err}): "
@@ -271,11 +254,11 @@ def main(argv: list[str] | None = None) -> Path:
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
     try:
-        out = run(cfg)
+        final = run(cfg)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
-    print(f"exported the trained actor to {out} (training.load / benchmarks.scoreboard --policy)")
-    return out
+    print(f"exported the trained actor to {final} (training.load / benchmarks.scoreboard --policy)")
+    return final
 
 
 if __name__ == "__main__":

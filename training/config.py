@@ -1,129 +1,264 @@
-"""The training configuration: one frozen, validated dataclass (CleanRL style).
+"""Run configs of every training CLI and their one command-line grammar.
 
-Every field is a command-line flag of ``python -m training.train`` (``--total-timesteps 200000``,
-``--env-kwargs '{"randomize": true}'``, ``--net-arch 64,64``); see :func:`parse_args`.
+Each CLI (``training.train``, ``training.imitate``, ``training.benchmarl_train``,
+``training.rllib_train``) is a frozen, validated dataclass whose fields are its flags: the
+shared ones (:class:`RunConfig`: ``--env-id``, ``--env-kwargs``, ``--lr``, ``--eval-seeds``,
+``--test-seeds``, ``--out-dir``, ...) have the same name, type and meaning everywhere. The
+command line is parsed by `tyro <https://brentyi.github.io/tyro/>`_ (:func:`parse_args`), so
+``--help`` shows each field's description (its docstring below), type, default and choices.
+
+Grammar: JSON objects for kwargs (``--env-kwargs '{"randomize": true}'``), comma or space
+separated lists (``--net-arch 64,64``), seeds as ``A-B`` (inclusive) or lists (``--test-seeds
+0-49``, ``1,5,9``; at most :data:`MAX_SEEDS`), booleans as ``true``/``false``.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import types
 import typing
-from dataclasses import MISSING, asdict, dataclass, field, fields
-from typing import Any
+from dataclasses import asdict, dataclass, field, fields
+from typing import Annotated, Any, Literal
 
-__all__ = ["TrainConfig", "parse_args", "config_from_json", "load_config", "planned_timesteps"]
+import tyro
+from tyro.constructors import PrimitiveConstructorSpec
+
+__all__ = ["RunConfig", "TrainConfig", "parse_args", "parse_seeds", "config_from_json", "load_config",
+           "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
 
+MAX_SEEDS = 100_000
+"""The most seeds one ``--*-seeds`` flag may name (a typo such as ``0-10000000`` is an error,
+not hours of evaluation)."""
+
+RENAMED = {"n_copies": "num_envs", "learning_rate": "lr", "num_envs_per_env_runner": "num_envs"}
+"""Old config keys (``config.json`` written before the common grammar) -> current field names."""
+
+
+def parse_seeds(text: str | typing.Iterable[str]) -> tuple[int, ...]:
+    """``"0-9"`` (inclusive), ``"0,3,7"``, ``"0-4,10"`` or several such strings -> the seeds in
+    the order given, duplicates dropped; at least one (``ValueError`` naming what is expected otherwise).
+    ``"a:b"`` (Python's half-open range, the old grammar) is accepted too."""
+    parts = [p.strip() for t in ([text] if isinstance(text, str) else text) for p in t.split(",")]
+    seeds: dict[int, None] = {}
+    try:
+        for part in filter(None, parts):
+            sep = ":" if ":" in part else ("-" if "-" in part[1:] else None)
+            if sep is None:
+                lo, hi = int(part), int(part) + 1
+            else:
+                a, b = part.split(sep, 1)
+                lo, hi = int(a), int(b) + (sep == "-")
+            if lo < 0 or hi <= lo:
+                raise ValueError
+            if len(seeds) + hi - lo > MAX_SEEDS:
+                raise OverflowError
+            seeds.update(dict.fromkeys(range(lo, hi)))
+        if not seeds:
+            raise ValueError
+    except OverflowError:
+        raise ValueError(f"seeds: {text!r} names more than {MAX_SEEDS} seeds") from None
+    except ValueError:
+        raise ValueError(f"seeds must be non-negative integers or ranges like '0-9' (inclusive) or "
+                         f"'0,3,7', got {text!r}") from None
+    return tuple(seeds)
+
+
+def _bool(args: list[str]) -> bool:
+    low = args[0].lower()
+    if low not in ("true", "false", "1", "0", "yes", "no"):
+        raise ValueError(f"expected true or false, got {args[0]!r}")
+    return low in ("true", "1", "yes")
+
+
+def _json_object(args: list[str]) -> dict[str, Any]:
+    try:
+        value = json.loads(args[0])
+    except json.JSONDecodeError:
+        value = None
+    if not isinstance(value, dict):
+        raise ValueError(f"expected a JSON object, e.g. '{{\"randomize\": true}}', got {args[0]!r}")
+    return value
+
+
+def _ints(args: list[str]) -> tuple[int, ...]:
+    return tuple(int(p) for a in args for p in a.split(",") if p.strip())
+
+
+JsonDict = Annotated[dict[str, Any], PrimitiveConstructorSpec(
+    nargs=1, metavar="JSON", instance_from_str=_json_object, is_instance=lambda x: isinstance(x, dict),
+    str_from_instance=lambda x: [json.dumps(x)])]
+Ints = Annotated[tuple[int, ...], PrimitiveConstructorSpec(
+    nargs="*", metavar="INT,...", instance_from_str=_ints, is_instance=lambda x: isinstance(x, tuple),
+    str_from_instance=lambda x: [",".join(map(str, x))])]
+Names = Annotated[tuple[str, ...], PrimitiveConstructorSpec(
+    nargs="*", metavar="NAME,...", instance_from_str=lambda a: tuple(p.strip() for s in a for p in s.split(",") if p.strip()),
+    is_instance=lambda x: isinstance(x, tuple), str_from_instance=lambda x: [",".join(x)])]
+Seeds = Annotated[tuple[int, ...], PrimitiveConstructorSpec(
+    nargs="+", metavar="A-B|A,B,...", instance_from_str=parse_seeds, is_instance=lambda x: isinstance(x, tuple),
+    str_from_instance=lambda x: [show_seeds(x)])]
+Flag = Annotated[bool, PrimitiveConstructorSpec(
+    nargs=1, metavar="{true,false}", instance_from_str=_bool, is_instance=lambda x: isinstance(x, bool),
+    str_from_instance=lambda x: [str(x).lower()])]
+
+
+def show_seeds(seeds: tuple[int, ...]) -> str:
+    """``A-B`` for a run of consecutive seeds (the flag's range syntax), else comma-separated."""
+    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
+
+
+def check_number(name: str, v: Any, lo: float, hi: float) -> None:
+    """Raise ``ValueError`` unless ``v`` is a real number in ``(lo, hi]``."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo < v <= hi):
+        raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {v!r}")
+
 
 @dataclass(frozen=True)
-class TrainConfig:
-    """One training run. Timesteps count agent-steps (SB3 rows: ``n_copies * n_agents`` per env step).
-
-    Environment:
-        env_id: satenv env name (``"platoon_v0"``) or ``"package.module:callable"``.
-        env_kwargs: keyword arguments of the env used for training (JSON object).
-        eval_env_kwargs: overrides applied on top of ``env_kwargs`` for evaluation (e.g. train
-            without termination at a collision, evaluate with it).
-        n_copies: scenario copies stepped together in one batched core (``SatVecEnv``).
-    Algorithm:
-        algo: ``"ppo"`` or ``"sac"``; seed. total_timesteps: agent-steps to train for, rounded
-            up to whole collection rounds: PPO rollouts of ``n_steps * n_copies * n_agents``
-            agent-steps, SAC env steps of ``n_copies * n_agents`` (:func:`planned_timesteps`).
-        net_arch: hidden layer sizes of the policy and value/Q networks.
-        learning_rate, gamma: shared; lr_schedule: ``"constant"`` or ``"linear"`` (decays to 5 %
-            of ``learning_rate`` at ``total_timesteps``). PPO: n_steps (rollout length per row), batch_size,
-            n_epochs, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, log_std_init.
-            SAC: buffer_size, learning_starts, sac_batch_size, train_freq, gradient_steps, tau.
-        norm_obs / norm_reward / clip_obs: ``VecNormalize`` (statistics saved with the model).
-        reward_shaping: training-only shaping terms (``training.shaping.RewardShaping`` fields,
-            e.g. ``{"precision": 1.0, "proximity": 1.0}``); evaluation uses the env's metrics.
-        obs_symlog_scale / obs_symlog_dims: appended symlog features of the first observation
-            entries (``training.shaping.ObsFeatures``; 0 disables), re-applied at inference.
-        obs_drop_dims: observation entries zeroed before the policy sees them (e.g. platoon_v0's
-            entry 14, the fraction of the episode remaining), re-applied at inference.
-        action_power: env action = ``sign(y)|y|^action_power`` of the network's ``y``
-            (``training.shaping.ActionMap``; 1 = identity), re-applied at inference.
-    Evaluation and artefacts:
-        eval_every: evaluate every this many agent-steps (0: only at the end) on ``eval_seeds``
-            with the PettingZoo env and ``satenv.rollout`` (the scoreboard's path), logged to
-            TensorBoard next to the scripted ``eval_baselines`` (names of
-            ``baselines.BASELINES``; ``"auto"``, the default, is ``zero`` and the scripted
-            controllers without a per-decision NLP that support the env (dmpc, apf), so the
-            evaluation stays cheap: the NLP baselines nmpc, tube_rdmpc, cgmres cost 0.5-16 min
-            per episode; name them to include them; unsupported names are skipped with a warning).
-        test_seeds: held-out seeds of the final evaluation summary (not used for selection).
-        checkpoint_every: save model + normalisation every this many agent-steps (0: never).
-        out_dir: run directory (``tb/``, ``checkpoints/``, ``best/``, ``final/``).
-        torch_threads: ``torch.set_num_threads``; progress: show a tqdm bar.
-    """
+class RunConfig:
+    """The fields every training CLI shares (same flag, same meaning, same grammar)."""
 
     env_id: str = "platoon_v0"
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
-    n_copies: int = 32
-    algo: str = "ppo"
-    total_timesteps: int = 1_000_000
+    """satenv env name (``platoon_v0``, ``cluster_v0``, ``servicing_v0``, ``formation_v0``) or
+    ``package.module:callable``."""
+    env_kwargs: JsonDict = field(default_factory=dict)
+    """Keyword arguments of the training env, a JSON object (e.g. ``'{"randomize": true}'``)."""
+    eval_env_kwargs: JsonDict = field(default_factory=dict)
+    """Overrides applied on top of ``env_kwargs`` for evaluation (JSON object)."""
     seed: int = 0
-    net_arch: tuple[int, ...] = (64, 64)
-    learning_rate: float = 3e-4
-    lr_schedule: str = "constant"
-    gamma: float = 0.99
-    n_steps: int = 64
-    batch_size: int = 1024
-    n_epochs: int = 5
-    gae_lambda: float = 0.95
-    clip_range: float = 0.2
-    ent_coef: float = 0.0
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
-    log_std_init: float = 0.0
-    buffer_size: int = 200_000
-    learning_starts: int = 2_000
-    sac_batch_size: int = 256
-    train_freq: int = 1
-    gradient_steps: int = 1
-    tau: float = 0.005
-    norm_obs: bool = True
-    norm_reward: bool = True
-    clip_obs: float = 10.0
-    reward_shaping: dict[str, Any] = field(default_factory=dict)
-    obs_symlog_scale: float = 0.0
-    obs_symlog_dims: int = 6
-    obs_drop_dims: tuple[int, ...] = ()
-    action_power: float = 1.0
-    eval_every: int = 100_000
-    eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_010))
-    test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
-    eval_baselines: tuple[str, ...] = ("auto",)
-    checkpoint_every: int = 100_000
+    """Seed of the networks, the optimiser and the training env copies."""
+    net_arch: Ints = (64, 64)
+    """Hidden layer sizes of the networks (``64,64`` or ``64 64``)."""
+    lr: Annotated[float, tyro.conf.arg(aliases=("--learning-rate",))] = 3e-4
+    """Learning rate (``--learning-rate`` is a deprecated alias)."""
+    eval_seeds: Seeds = tuple(range(10_000, 10_005))
+    """Seeds of the evaluations during training (``A-B`` inclusive, or a list ``1,5,9``)."""
+    test_seeds: Seeds = tuple(range(20_000, 20_020))
+    """Held-out seeds of the final ``eval.json`` (never used for selection)."""
+    eval_baselines: Names = ("auto",)
+    """Scripted baselines evaluated beside the learned policy (names of ``baselines.BASELINES``;
+    ``auto``: ``zero`` and the cheap controllers that support the env; the NLP controllers
+    nmpc, tube_rdmpc, cgmres run only when named)."""
     out_dir: str = "runs/train"
+    """Run folder: ``config.json`` (replayable, the budget actually run), ``final/`` (the policy
+    with ``eval.json``; what ``training.load`` and ``benchmarks.scoreboard --policy`` take)."""
     torch_threads: int = 1
-    progress: bool = True
+    """``torch.set_num_threads``."""
+    progress: Flag = True
+    """Show progress bars (training and every evaluation)."""
+    workers: int = 0
+    """Processes for evaluation episodes (0: one per core, at most 2; 1: in this process)."""
 
     def __post_init__(self) -> None:
-        s = object.__setattr__
-        check_run_fields(self, ("env_kwargs", "eval_env_kwargs", "reward_shaping"))
+        check_run_fields(self, ("env_kwargs", "eval_env_kwargs"))
+        check_int("seed", self.seed, minimum=0)
+        check_int("torch_threads", self.torch_threads, minimum=1)
+        check_int("workers", self.workers, minimum=0)
+        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
+        check_number("lr", self.lr, 0.0, math.inf)
+        if not isinstance(self.progress, bool):
+            raise ValueError(f"progress must be a bool, got {self.progress!r}")
+
+    @property
+    def resolved_eval_env_kwargs(self) -> dict[str, Any]:
+        """The evaluation env's kwargs: ``env_kwargs`` updated with ``eval_env_kwargs``."""
+        return {**self.env_kwargs, **self.eval_env_kwargs}
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    def replace(self, **changes: Any) -> Any:
+        return config_from_json({**self.to_json(), **changes}, type(self))
+
+
+@dataclass(frozen=True)
+class TrainConfig(RunConfig):
+    """One stable-baselines3 run (``python -m training.train``). Timesteps count agent-steps
+    (SB3 rows: ``num_envs * n_agents`` per env step)."""
+
+    num_envs: Annotated[int, tyro.conf.arg(aliases=("--n-copies",))] = 32
+    """Scenario copies stepped together in one batched core (``--n-copies`` is a deprecated alias)."""
+    algo: Literal["ppo", "sac"] = "ppo"
+    """The algorithm."""
+    total_timesteps: int = 1_000_000
+    """Agent-steps to train for, rounded up to whole collection rounds (PPO: ``n_steps *
+    num_envs * n_agents``; SAC: ``num_envs * n_agents``); the rounded figure is printed and saved."""
+    lr_schedule: Literal["constant", "linear"] = "constant"
+    """``linear`` decays to 5 % of ``lr`` at ``total_timesteps``."""
+    gamma: float = 0.99
+    """Discount factor."""
+    n_steps: int = 64
+    """PPO: rollout length per row."""
+    batch_size: int = 1024
+    """PPO: minibatch size."""
+    n_epochs: int = 5
+    """PPO: epochs per rollout."""
+    gae_lambda: float = 0.95
+    """PPO: GAE lambda."""
+    clip_range: float = 0.2
+    """PPO: clip range."""
+    ent_coef: float = 0.0
+    """PPO: entropy coefficient."""
+    vf_coef: float = 0.5
+    """PPO: value-loss coefficient."""
+    max_grad_norm: float = 0.5
+    """PPO: gradient-norm clip."""
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian policy."""
+    buffer_size: int = 200_000
+    """SAC: replay buffer size."""
+    learning_starts: int = 2_000
+    """SAC: agent-steps before learning starts."""
+    sac_batch_size: int = 256
+    """SAC: minibatch size."""
+    train_freq: int = 1
+    """SAC: env steps between updates."""
+    gradient_steps: int = 1
+    """SAC: gradient steps per update."""
+    tau: float = 0.005
+    """SAC: target smoothing coefficient."""
+    norm_obs: Flag = True
+    """``VecNormalize`` observations (statistics saved with the model)."""
+    norm_reward: Flag = True
+    """``VecNormalize`` rewards."""
+    clip_obs: float = 10.0
+    """``VecNormalize`` observation clip."""
+    reward_shaping: JsonDict = field(default_factory=dict)
+    """Training-only shaping terms (``training.shaping.RewardShaping`` fields, JSON object, e.g.
+    ``'{"precision": 1.0}'``); evaluation uses the env's metrics."""
+    obs_symlog_scale: float = 0.0
+    """Scale of appended symlog features of the first observation entries (0 disables)."""
+    obs_symlog_dims: int = 6
+    """How many observation entries get symlog features."""
+    obs_drop_dims: Ints = ()
+    """Observation entries zeroed before the policy sees them (re-applied at inference)."""
+    action_power: float = 1.0
+    """Env action = ``sign(y)|y|^action_power`` of the network's ``y`` (1 = identity)."""
+    eval_every: int = 100_000
+    """Evaluate on ``eval_seeds`` every this many agent-steps (0: only at the end); the best
+    model by (success rate, -RMSE) is kept in ``best/``."""
+    checkpoint_every: int = 100_000
+    """Save model + normalisation every this many agent-steps (0: never)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_run_fields(self, ("reward_shaping",))
         if self.lr_schedule not in ("constant", "linear"):
             raise ValueError(f"lr_schedule must be 'constant' or 'linear', got {self.lr_schedule!r}")
         if self.algo not in ALGOS:
             raise ValueError(f"algo must be one of {ALGOS}, got {self.algo!r}")
-        for name in ("n_copies", "total_timesteps", "n_steps", "batch_size", "n_epochs",
-                     "buffer_size", "sac_batch_size", "train_freq", "gradient_steps", "torch_threads"):
+        for name in ("num_envs", "total_timesteps", "n_steps", "batch_size", "n_epochs",
+                     "buffer_size", "sac_batch_size", "train_freq", "gradient_steps"):
             check_int(name, getattr(self, name), minimum=1)
-        for name in ("seed", "learning_starts", "eval_every", "checkpoint_every"):
+        for name in ("learning_starts", "eval_every", "checkpoint_every"):
             check_int(name, getattr(self, name), minimum=0)
-        s(self, "net_arch", check_net_arch(self.net_arch))
-        for name, lo, hi in (("learning_rate", 0.0, math.inf), ("gamma", 0.0, 1.0),
+        for name, lo, hi in (("gamma", 0.0, 1.0),
                              ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
                              ("tau", 0.0, 1.0), ("clip_obs", 0.0, math.inf),
                              ("max_grad_norm", 0.0, math.inf)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo < v <= hi):
-                raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {v!r}")
+            check_number(name, getattr(self, name), lo, hi)
         for name in ("ent_coef", "vf_coef"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
@@ -136,25 +271,10 @@ class TrainConfig:
         RewardShaping.from_dict(self.reward_shaping)
         ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims, self.obs_drop_dims)
 
-    @property
-    def resolved_eval_env_kwargs(self) -> dict[str, Any]:
-        """The evaluation env's kwargs: ``env_kwargs`` updated with ``eval_env_kwargs``."""
-        return {**self.env_kwargs, **self.eval_env_kwargs}
-
-    def to_json(self) -> dict[str, Any]:
-        d = asdict(self)
-        for k, v in d.items():
-            if isinstance(v, tuple):
-                d[k] = list(v)
-        return d
-
-    def replace(self, **changes: Any) -> TrainConfig:
-        return config_from_json({**self.to_json(), **changes})
-
 
 def round_timesteps(cfg: TrainConfig, n_agents: int) -> int:
     """Agent-steps of one collection round: a PPO rollout, or one SAC env step of every row."""
-    return cfg.n_copies * n_agents * (cfg.n_steps if cfg.algo == "ppo" else 1)
+    return cfg.num_envs * n_agents * (cfg.n_steps if cfg.algo == "ppo" else 1)
 
 
 def planned_timesteps(cfg: TrainConfig, n_agents: int) -> int:
@@ -179,6 +299,8 @@ def check_run_fields(cfg: Any, dict_fields: tuple[str, ...]) -> None:
             raise ValueError(f"{name} must be JSON-serialisable (it is saved with the model), got {value!r}") from None
     for name in ("eval_seeds", "test_seeds"):
         seeds = tuple(getattr(cfg, name))
+        if len(seeds) > MAX_SEEDS:
+            raise ValueError(f"{name}: {len(seeds)} seeds, more than the cap of {MAX_SEEDS}")
         for v in seeds:
             check_int(name, v, minimum=0)
         object.__setattr__(cfg, name, seeds)
@@ -202,19 +324,21 @@ def check_net_arch(value: Any) -> tuple[int, ...]:
 
 
 def config_from_json(data: dict[str, Any], cls: type = TrainConfig) -> Any:
-    """Rebuild a config dataclass ``cls`` (:class:`TrainConfig`, or another frozen run config such
-    as :class:`training.imitate.ImitationConfig`) from its ``to_json`` output (unknown keys rejected)."""
+    """Rebuild a config dataclass ``cls`` (a :class:`RunConfig` subclass) from its ``to_json``
+    output: old key names (:data:`RENAMED`) are mapped, unknown keys rejected."""
     known = {f.name for f in fields(cls)}
+    data = {RENAMED.get(k, k) if k not in known and RENAMED.get(k) in known else k: v for k, v in data.items()}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ValueError(f"unknown {cls.__name__} field(s) {unknown}; known: {sorted(known)}")
     hints = typing.get_type_hints(cls)
-    kwargs = {}
-    for k, v in data.items():
-        if _is_tuple(hints[k]) and isinstance(v, list):
-            v = tuple(v)
-        kwargs[k] = v
+    kwargs = {k: tuple(v) if typing.get_origin(_bare(hints[k])) is tuple and isinstance(v, list) else v
+              for k, v in data.items()}
     return cls(**kwargs)
+
+
+def _bare(tp: Any) -> Any:
+    return typing.get_args(tp)[0] if typing.get_origin(tp) is Annotated else tp
 
 
 def load_config(path: str, cls: type = TrainConfig) -> Any:
@@ -229,96 +353,56 @@ def load_config(path: str, cls: type = TrainConfig) -> Any:
     return config_from_json(data, cls)
 
 
-def _is_tuple(tp: Any) -> bool:
-    return typing.get_origin(tp) is tuple
+class CliOptions(typing.NamedTuple):
+    """The options outside the config dataclass."""
+
+    config: str | None
+    resume: bool
 
 
-def _parse_value(tp: Any, text: str, name: str) -> Any:
-    origin = typing.get_origin(tp)
-    try:
-        if tp is bool:
-            low = text.lower()
-            if low not in ("true", "false", "1", "0", "yes", "no"):
-                raise ValueError
-            return low in ("true", "1", "yes")
-        if tp is int:
-            return int(text)
-        if tp is float:
-            return float(text)
-        if tp is str:
-            return text
-        if origin is tuple:
-            (elem, _) = typing.get_args(tp)
-            parts = [p for p in text.replace(" ", "").split(",") if p]
-            if len(parts) == 1 and ":" in parts[0]:  # "a:b" -> range(a, b)
-                lo, hi = parts[0].split(":")
-                return tuple(range(int(lo), int(hi)))
-            return tuple(elem(p) for p in parts)
-        if origin is dict or tp is dict:
-            value = json.loads(text)
-            if not isinstance(value, dict):
-                raise ValueError
-            return value
-    except (ValueError, json.JSONDecodeError):
-        pass
-    else:
-        raise TypeError(f"unsupported config field type {tp!r} for {name}")  # pragma: no cover
-    raise ValueError(f"--{name.replace('_', '-')}: cannot parse {text!r} as {getattr(tp, '__name__', tp)}"
-                     + (" (a JSON object, e.g. '{\"randomize\": true}')" if origin is dict else "")
-                     + (" (comma-separated, or 'a:b' for a range)" if origin is tuple else ""))
+def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: Any = None,
+               description: str | None = None, resume: bool = False,
+               prog: str | None = None) -> tuple[Any, CliOptions]:
+    """Parse ``argv`` into a ``cls`` config with tyro: flags override ``base``, else ``--config
+    FILE`` (a saved ``config.json`` to replay), else, with ``--resume`` (when ``resume`` is
+    offered), the run folder's saved ``config.json``, else the field defaults.
+
+    A bad flag or value exits (``SystemExit(2)``) with the flag's help; a bad ``--config`` file
+    raises ``ValueError``.
+    """
+    import sys
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    argv, opts = _split_options(argv, resume)
+    if base is None and opts.config is not None:
+        base = load_config(opts.config, cls)
+    extra = ("--config FILE replays a run (its config.json; flags given override it)."
+             + ("\n--resume continues the run in --out-dir from its saved config.json and last "
+                "checkpoint (flags given override it)." if resume else ""))
+    text = "\n\n".join(filter(None, [description or (cls.__doc__ or "").strip(), extra]))
+    opts_ = {"description": text, "prog": prog, "config": (tyro.conf.FlagConversionOff,)}
+    cfg = tyro.cli(cls, args=argv, default=base or cls(), **opts_)
+    if opts.resume and base is None:
+        saved = f"{cfg.out_dir}/config.json"
+        try:
+            saved_cfg = load_config(saved, cls)
+        except ValueError:
+            raise ValueError(f"--resume: {saved} not found or unreadable; run first without --resume") from None
+        cfg = tyro.cli(cls, args=argv, default=saved_cfg, **opts_)
+    return cfg, opts
 
 
-def build_parser(description: str = "", cls: type = TrainConfig) -> argparse.ArgumentParser:
-    """An argparse parser with ``--config FILE`` and one ``--flag`` per field of the config
-    dataclass ``cls`` (each default shown once)."""
-    parser = argparse.ArgumentParser(
-        description=description,
-        epilog="Flags given override --config (or, with --resume, the run's saved config.json). "
-               f"The fields are documented in {cls.__module__}.{cls.__name__}.")
-    parser.add_argument("--config", metavar="FILE", default=None,
-                        help="replay a run: start from this config.json (e.g. runs/x/config.json or "
-                             "training/policies/<name>/config.json)")
-    hints = typing.get_type_hints(cls)
-    for f in fields(cls):
-        default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
-        shown = json.dumps(default) if isinstance(default, dict) else (
-            _show_tuple(default) if isinstance(default, tuple) else default)
-        parser.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, default=None, metavar=_metavar(hints[f.name]),
-                            help=f"(default: {shown})")
-    return parser
-
-
-def _show_tuple(values: tuple) -> str:
-    """``a:b`` for a run of consecutive ints (the flag's range syntax), else comma-separated."""
-    if len(values) > 2 and all(isinstance(v, int) for v in values) and \
-            list(values) == list(range(values[0], values[0] + len(values))):
-        return f"{values[0]}:{values[0] + len(values)}"
-    return ",".join(map(str, values))
-
-
-def _metavar(tp: Any) -> str:
-    origin = typing.get_origin(tp)
-    if origin is tuple:
-        return "A,B,..."
-    if origin is dict:
-        return "JSON"
-    return getattr(tp, "__name__", "X").upper() if not isinstance(tp, types.UnionType) else "X"
-
-
-def parse_args(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None,
-               base: Any = None, cls: type = TrainConfig) -> tuple[Any, argparse.Namespace]:
-    """Parse ``argv`` into a ``cls`` config (:class:`TrainConfig` by default; flags given override
-    ``base``, else ``--config FILE``, else the defaults); returns also the namespace."""
-    parser = parser or build_parser(cls=cls)
-    ns = parser.parse_args(argv)
-    if base is None and ns.config is not None:
-        base = load_config(ns.config, cls)
-    hints = typing.get_type_hints(cls)
-    changes = {}
-    for f in fields(cls):
-        text = getattr(ns, f.name)
-        if text is not None:
-            changes[f.name] = _parse_value(hints[f.name], text, f.name)
-    base = base or cls()
-    cfg = config_from_json({**base.to_json(), **changes}, cls) if changes else base
-    return cfg, ns
+def _split_options(argv: list[str], resume: bool) -> tuple[list[str], CliOptions]:
+    """``argv`` without ``--config FILE`` / ``--resume``, and their values."""
+    rest, config, resumed = [], None, False
+    it = iter(argv)
+    for arg in it:
+        if arg == "--config" or arg.startswith("--config="):
+            config = arg.split("=", 1)[1] if "=" in arg else next(it, None)
+            if not config:
+                raise SystemExit("error: --config needs a FILE (a run's config.json)")
+        elif arg == "--resume" and resume:
+            resumed = True
+        else:
+            rest.append(arg)
+    return rest, CliOptions(config, resumed)

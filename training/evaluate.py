@@ -20,7 +20,7 @@ from satenv import metrics
 from satenv.rollout import rollout
 
 __all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table",
-           "evaluate_baselines", "cached_baselines", "test_summary", "learning_curve"]
+           "evaluate_baselines", "cached_baselines", "test_summary", "run_summary", "learning_curve"]
 
 AUTO = "auto"
 """``eval_baselines`` entry meaning: ``zero`` plus the cheap scripted controllers that support
@@ -183,6 +183,19 @@ def test_summary(eval_env: Any, policy: Any, baselines: dict[str, Any], seeds: I
         "table": format_table(results),
         "learned_episodes": learned["episodes"],
     }
+
+
+def run_summary(cfg: Any, policy: Any, *, reference: str = "dmpc", **extra: Any) -> dict[str, Any]:
+    """The ``eval.json`` of a run config ``cfg`` (a :class:`training.config.RunConfig`):
+    :func:`test_summary` of ``policy`` on ``cfg.test_seeds`` with the evaluation env, beside
+    ``cfg.eval_baselines`` (cached, :func:`cached_baselines`) — the same for every stack."""
+    from training.envs import make_env
+
+    eval_env = make_env(cfg.env_id, **cfg.resolved_eval_env_kwargs)
+    key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs}
+    found = cached_baselines(Path(cfg.out_dir) / "baselines_test.json", eval_env, cfg.eval_baselines,
+                             cfg.test_seeds, key)
+    return test_summary(eval_env, policy, found, cfg.test_seeds, reference=reference, **extra)
 
 
 def learning_curve(history: list[dict[str, Any]], expert: dict[str, Any] | None, expert_name: str,

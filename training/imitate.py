@@ -28,18 +28,22 @@ import math
 import sys
 import time
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+import tyro
 
 from training.config import (
-    build_parser,
+    Flag,
+    Ints,
+    JsonDict,
+    Names,
+    RunConfig,
     check_int,
-    check_net_arch,
+    check_number,
     check_run_fields,
-    config_from_json,
     parse_args,
 )
 from training.envs import make_env, policy_env_meta
@@ -50,83 +54,66 @@ __all__ = ["ImitationConfig", "imitate", "collect_episode", "fit", "main"]
 
 
 @dataclass(frozen=True)
-class ImitationConfig:
-    """One imitation (DAgger) run.
+class ImitationConfig(RunConfig):
+    """One imitation (DAgger) run (``python -m training.imitate``)."""
 
-    env_id, env_kwargs, eval_env_kwargs: as :class:`training.config.TrainConfig`.
-    expert: the scripted controller imitated (a name of ``baselines.BASELINES``) and
-        expert_options its config options (``baselines.make(expert, env, **expert_options)``).
-    rounds: DAgger rounds (round 0 is the expert's own flights); episodes_per_round: episodes
-        per round, on seeds ``train_seed + episode index`` (disjoint from the evaluation seeds);
-        beta: the probability that the expert's action is flown in round k is ``beta ** k``.
-    net_arch, activation, squash: the MLP (``squash``: ``tanh`` on the output, as BenchMARL's
-        policies, so the network can seed a BenchMARL fine-tune); epochs, batch_size, learning_rate, weight_decay: the
-        regression (mean squared error on the normalised actions, Adam) after each round,
-        warm-started from the previous round's network; clip_obs: observation normaliser clip
-        (mean and variance from round 0's data).
-    eval_seeds: seeds of the per-round evaluation (the learning curve); test_seeds: held-out
-        seeds of the final ``eval.json``; eval_baselines: scripted baselines evaluated there
-        besides the expert (every reference runs at its default config: ``expert_options``
-        shape the labels only); baseline_seeds: how many of the test seeds (the first ones) the
-        expert and baselines run on (0: all; for an expert of minutes per episode).
-    """
-
-    env_id: str = "platoon_v0"
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
     expert: str = "dmpc"
-    expert_options: dict[str, Any] = field(default_factory=dict)
+    """The scripted controller imitated (a name of ``baselines.BASELINES``)."""
+    expert_options: JsonDict = field(default_factory=dict)
+    """Its config options, a JSON object (``baselines.make(expert, env, **expert_options)``)."""
     rounds: int = 8
+    """DAgger rounds (round 0 is the expert's own flights)."""
     episodes_per_round: int = 8
+    """Episodes per round, on seeds ``train_seed + episode index``."""
     beta: float = 0.5
+    """The expert's action is flown in round k with probability ``beta ** k``."""
     train_seed: int = 100_000
-    seed: int = 0
-    net_arch: tuple[int, ...] = (256, 256)
-    activation: str = "tanh"
-    squash: bool = False
+    """First seed of the training episodes (disjoint from the evaluation seeds)."""
+    net_arch: Ints = (256, 256)
+    """Hidden layer sizes of the MLP."""
+    activation: Literal["tanh", "relu", "elu", "silu"] = "tanh"
+    """The MLP's activation."""
+    squash: Flag = False
+    """``tanh`` on the output, as BenchMARL's policies (so the network can seed a BenchMARL
+    fine-tune: ``training.benchmarl_train --init-actor``)."""
     epochs: int = 20
+    """Regression epochs (mean squared error on the actions, Adam) after each round, warm-started."""
     batch_size: int = 512
-    learning_rate: float = 1e-3
+    """Regression minibatch size."""
+    lr: Annotated[float, tyro.conf.arg(aliases=("--learning-rate",))] = 1e-3
+    """Learning rate of the regression (``--learning-rate`` is a deprecated alias)."""
     weight_decay: float = 0.0
+    """Adam weight decay."""
     clip_obs: float = 10.0
-    eval_seeds: tuple[int, ...] = tuple(range(10_000, 10_005))
-    test_seeds: tuple[int, ...] = tuple(range(20_000, 20_050))
-    eval_baselines: tuple[str, ...] = ("zero",)
+    """Observation normaliser clip (mean and variance from round 0's data)."""
+    eval_baselines: Names = ("zero",)
+    """Scripted baselines evaluated beside the learned policy and the expert on the test seeds
+    (every reference runs at its default config: ``expert_options`` shape the labels only)."""
     baseline_seeds: int = 0
+    """How many of the test seeds (the first ones) the expert and baselines run on (0: all)."""
     out_dir: str = "runs/imitate"
-    torch_threads: int = 1
-    progress: bool = True
+    """Run folder: ``config.json``, ``rounds/<k>/``, ``final/`` (the policy with ``eval.json``)."""
 
     def __post_init__(self) -> None:
-        check_run_fields(self, ("env_kwargs", "eval_env_kwargs", "expert_options"))
+        super().__post_init__()
+        check_run_fields(self, ("expert_options",))
         if not isinstance(self.expert, str) or not self.expert:
             raise ValueError(f"expert must be a baseline name such as 'dmpc', got {self.expert!r}")
-        for name in ("rounds", "episodes_per_round", "epochs", "batch_size", "torch_threads"):
+        for name in ("rounds", "episodes_per_round", "epochs", "batch_size"):
             check_int(name, getattr(self, name), minimum=1)
-        for name in ("train_seed", "seed", "baseline_seeds"):
+        for name in ("train_seed", "baseline_seeds"):
             check_int(name, getattr(self, name), minimum=0)
-        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
         if isinstance(self.beta, bool) or not isinstance(self.beta, (int, float)) or not 0 <= self.beta <= 1:
             raise ValueError(f"beta must be a number in [0, 1], got {self.beta!r}")
-        for name in ("learning_rate", "clip_obs"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
-                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        check_number("clip_obs", self.clip_obs, 0.0, math.inf)
         if not (isinstance(self.weight_decay, (int, float)) and 0 <= self.weight_decay < math.inf):
             raise ValueError(f"weight_decay must be a finite number >= 0, got {self.weight_decay!r}")
         from training.actor import ACTIVATIONS
 
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
-        if not isinstance(self.squash, bool) or not isinstance(self.progress, bool):
-            raise ValueError(f"squash and progress must be bools, got {self.squash!r}, {self.progress!r}")
-
-    @property
-    def resolved_eval_env_kwargs(self) -> dict[str, Any]:
-        return {**self.env_kwargs, **self.eval_env_kwargs}
-
-    def to_json(self) -> dict[str, Any]:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        if not isinstance(self.squash, bool):
+            raise ValueError(f"squash must be a bool, got {self.squash!r}")
 
 
 # --------------------------------------------------------------------------- data
@@ -154,7 +141,7 @@ def fit(actor: Any, normalizer: ObsNormalizer, x: np.ndarray, y: np.ndarray, cfg
     import torch
 
     xt, yt = torch.as_tensor(normalizer(x)), torch.as_tensor(y, dtype=torch.float32)
-    opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate, weight_decay=cfg.weight_decay)
+    opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     actor.train()
     loss_sum = 0.0
     for _ in range(cfg.epochs):
@@ -276,19 +263,10 @@ def _restore(out: Path, done: int, actor: Any):
 
 # --------------------------------------------------------------------------- CLI
 def main(argv: list[str] | None = None) -> Path:
-    parser = build_parser(__doc__.split("\n\n")[0], cls=ImitationConfig)
-    parser.add_argument("--resume", action="store_true",
-                        help="continue after the last finished round in --out-dir (its config.json; flags override)")
-    argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        cfg, ns = parse_args(argv, parser, cls=ImitationConfig)
-        if ns.resume:
-            saved = Path(cfg.out_dir) / "config.json"
-            if not saved.is_file():
-                raise ValueError(f"--resume: {saved} not found; run first without --resume")
-            base = config_from_json(json.loads(saved.read_text()), ImitationConfig)
-            cfg, _ = parse_args(argv, parser, base=base, cls=ImitationConfig)
-        return imitate(cfg, resume=ns.resume)
+        cfg, opts = parse_args(argv, cls=ImitationConfig, resume=True, prog="python -m training.imitate",
+                               description=__doc__.split("\n\n")[0])
+        return imitate(cfg, resume=opts.resume)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
 

@@ -2,6 +2,7 @@
 
     python -m training.rllib_train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
         --iterations 50 --num-env-runners 2 --out-dir runs/rllib_platoon
+    python -m benchmarks.scoreboard --policy runs/rllib_platoon/final      # rank it
     # on an existing Ray cluster (started with `ray start --head` on the head node and
     # `ray start --address=<head>:6379` on the workers):
     python -m training.rllib_train --address <head>:6379 --num-env-runners 32 ...
@@ -18,23 +19,25 @@ with a clear message.
 Output (``--out-dir``): ``checkpoint/`` (``Algorithm.save_to_path``; RLlib's own pickled files,
 for resuming with RLlib), ``tb/`` (TensorBoard: episode return and length, env steps, learner
 losses per iteration), ``progress.json`` (per iteration: env steps, mean episode return, wall
-time), ``config.json`` (these arguments) and the trained actor exported to the safe policy format
-of :mod:`training.policy` (``policy.json``, ``weights.pt``, ``obs_norm.json`` (identity),
-``env.json``, ``manifest.json``), so ``training.load(out_dir)`` and
-``benchmarks.scoreboard --policy out_dir`` take the run folder itself.
+time), ``config.json`` (these arguments) and ``final/``: the trained actor exported to the safe
+policy format of :mod:`training.policy` (``policy.json``, ``weights.pt``, ``obs_norm.json``
+(identity), ``env.json``, ``manifest.json``, ``eval.json`` on ``--test-seeds`` beside the
+baselines), so ``training.load(out_dir/final)`` and ``benchmarks.scoreboard --policy
+out_dir/final`` take it.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from training.config import check_int, check_net_arch
+import tyro
+
+from training.config import RunConfig, check_int, check_number, parse_args
 
 __all__ = ["RLlibConfig", "run", "main", "require_ray"]
 
@@ -57,34 +60,37 @@ def require_ray():
 
 
 @dataclass(frozen=True)
-class RLlibConfig:
-    """Arguments of an RLlib run (every field is a ``--flag``)."""
+class RLlibConfig(RunConfig):
+    """One RLlib run (``python -m training.rllib_train``)."""
 
-    env_id: str = "platoon_v0"
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
     iterations: int = 20
-    seed: int = 0
-    net_arch: tuple[int, ...] = (64, 64)
-    lr: float = 3e-4
+    """``Algorithm.train()`` iterations (each about ``train_batch_size`` env steps)."""
     gamma: float = 0.99
+    """Discount factor."""
     train_batch_size: int = 4000
+    """Env steps per iteration (per learner)."""
     minibatch_size: int = 500
+    """PPO minibatch size (<= ``train_batch_size``)."""
     num_epochs: int = 5
+    """PPO epochs per iteration."""
     num_env_runners: int = 0
-    num_envs_per_env_runner: int = 1
+    """Remote env runners (0: sample in the driver)."""
+    num_envs: Annotated[int, tyro.conf.arg(aliases=("--num-envs-per-env-runner",))] = 1
+    """Env copies per env runner (``--num-envs-per-env-runner`` is a deprecated alias)."""
     num_cpus: int = 2
-    address: str | None = None
+    """CPUs of the local Ray instance (ignored with ``--address``)."""
+    address: Annotated[str | None, tyro.conf.arg(aliases=("--ray-address",))] = None
+    """An existing Ray cluster, e.g. ``10.0.0.1:6379`` (default: start Ray locally)."""
     out_dir: str = "runs/rllib"
+    """Run folder: ``config.json``, ``checkpoint/``, ``tb/``, ``progress.json``, ``final/``
+    (the policy with ``eval.json``)."""
 
     def __post_init__(self) -> None:
-        for name in ("iterations", "train_batch_size", "minibatch_size", "num_epochs",
-                     "num_envs_per_env_runner", "num_cpus"):
+        super().__post_init__()
+        for name in ("iterations", "train_batch_size", "minibatch_size", "num_epochs", "num_envs", "num_cpus"):
             check_int(name, getattr(self, name), minimum=1)
-        for name in ("seed", "num_env_runners"):
-            check_int(name, getattr(self, name), minimum=0)
-        if not isinstance(self.env_kwargs, dict):
-            raise ValueError(f"env_kwargs must be a dict (JSON object), got {self.env_kwargs!r}")
-        object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
+        check_int("num_env_runners", self.num_env_runners, minimum=0)
+        check_number("gamma", self.gamma, 0.0, 1.0)
         if self.minibatch_size > self.train_batch_size:
             raise ValueError(f"minibatch_size ({self.minibatch_size}) must be <= train_batch_size "
                              f"({self.train_batch_size})")
@@ -113,7 +119,7 @@ def build_algo_config(cfg: RLlibConfig):
         .environment(name)
         .framework("torch")
         .multi_agent(policies={"shared"}, policy_mapping_fn=lambda agent_id, *args, **kwargs: "shared")
-        .env_runners(num_env_runners=cfg.num_env_runners, num_envs_per_env_runner=cfg.num_envs_per_env_runner)
+        .env_runners(num_env_runners=cfg.num_env_runners, num_envs_per_env_runner=cfg.num_envs)
         .training(lr=cfg.lr, gamma=cfg.gamma, train_batch_size_per_learner=cfg.train_batch_size,
                   minibatch_size=cfg.minibatch_size, num_epochs=cfg.num_epochs)
         .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=list(cfg.net_arch)))
@@ -126,7 +132,7 @@ def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
     ray = require_ray()
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps({**asdict(cfg), "net_arch": list(cfg.net_arch)}, indent=2) + "\n")
+    (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     started = False
     if not ray.is_initialized():
         if cfg.address:
@@ -177,8 +183,8 @@ def _log_tensorboard(writer, result: dict[str, Any], step: int) -> None:
 
 
 def export_policy(module: Any, cfg: RLlibConfig, steps: int = 0) -> Path:
-    """Write the RLModule's deterministic actor (the action mean) into ``cfg.out_dir`` in the
-    safe policy format; checks it reproduces the module on random observations."""
+    """Write the RLModule's deterministic actor (the action mean) into ``cfg.out_dir/final`` in the
+    safe policy format with its ``eval.json``; checks it reproduces the module on random observations."""
     import torch
     from torch import nn
 
@@ -205,10 +211,12 @@ def export_policy(module: Any, cfg: RLlibConfig, steps: int = 0) -> Path:
         expected = module.forward_inference({"obs": obs})["action_dist_inputs"][:, :act_dim]
         if not torch.allclose(actor(obs), expected, atol=1e-5):
             raise ValueError("the exported actor does not reproduce the RLlib module's action means")
-    meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.env_kwargs), "step": int(steps)}
+    meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs), "step": int(steps)}
     policy = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(obs_dim,), meta=meta)
-    config = {**asdict(cfg), "net_arch": list(cfg.net_arch)}
-    return save_artifacts(cfg.out_dir, policy, env_meta=meta, config=config, source="RLlib PPO")
+    from training.evaluate import run_summary
+
+    return save_artifacts(Path(cfg.out_dir) / "final", policy, env_meta=meta, config=cfg.to_json(),
+                          source="RLlib PPO", evaluation=run_summary(cfg, policy, steps=int(steps)))
 
 
 def _float(v: Any) -> float | None:
@@ -218,33 +226,10 @@ def _float(v: Any) -> float | None:
         return None
 
 
-def parse_args(argv: list[str] | None = None) -> RLlibConfig:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    d = RLlibConfig()
-    p.add_argument("--env-id", default=d.env_id)
-    p.add_argument("--env-kwargs", default="{}", help="JSON object of env keyword arguments")
-    for name in ("iterations", "seed", "train_batch_size", "minibatch_size", "num_epochs",
-                 "num_env_runners", "num_envs_per_env_runner", "num_cpus"):
-        p.add_argument(f"--{name.replace('_', '-')}", type=int, default=getattr(d, name))
-    p.add_argument("--lr", type=float, default=d.lr)
-    p.add_argument("--gamma", type=float, default=d.gamma)
-    p.add_argument("--net-arch", default="64,64", help="hidden sizes, comma-separated")
-    p.add_argument("--address", default=None, help="existing Ray cluster, e.g. 10.0.0.1:6379 (default: local)")
-    p.add_argument("--out-dir", default=d.out_dir)
-    ns = p.parse_args(argv)
-    try:
-        env_kwargs = json.loads(ns.env_kwargs)
-        arch = tuple(int(x) for x in ns.net_arch.split(",") if x)
-    except ValueError as err:
-        p.error(f"--env-kwargs must be a JSON object and --net-arch comma-separated ints ({err})")
-    kw = {k: v for k, v in vars(ns).items() if k not in ("env_kwargs", "net_arch")}
-    return RLlibConfig(env_kwargs=env_kwargs, net_arch=arch, **kw)
-
-
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     try:
-        cfg = parse_args(argv)
+        cfg, _ = parse_args(argv, cls=RLlibConfig, prog="python -m training.rllib_train",
+                            description=__doc__.split("\n\n")[0])
         return run(cfg)
     except (RayNotInstalledError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
