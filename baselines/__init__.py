@@ -20,6 +20,7 @@ _LAZY = {
     "APF": "baselines.apf", "APFConfig": "baselines.apf",
     "NMPC": "baselines.nmpc", "NMPCConfig": "baselines.nmpc",
     "CGMRES": "baselines.cgmres", "CGMRESConfig": "baselines.cgmres",
+    "Shield": "baselines.shield",
 }
 
 
@@ -31,4 +32,4 @@ def __getattr__(name: str) -> Any:
 
 __all__ = ["APF", "APFConfig", "BASELINES", "BaselineError", "BaselineTypeError", "CGMRES",
            "CGMRESConfig", "DMPC", "DMPCConfig", "NMPC", "NMPCConfig", "Policy", "RandomPolicy",
-           "TubeRDMPC", "TubeRDMPCConfig", "ZeroPolicy", "get", "make", "supporting"]
+           "Shield", "TubeRDMPC", "TubeRDMPCConfig", "ZeroPolicy", "get", "make", "supporting"]

@@ -13,7 +13,7 @@ from typing import Any
 
 from baselines.base import BaselineError, is_satenv_env
 
-__all__ = ["BASELINES", "get", "make", "supporting"]
+__all__ = ["BASELINES", "WRAPPERS", "get", "make", "supporting"]
 
 BASELINES: dict[str, str] = {
     "zero": "baselines.base:ZeroPolicy",
@@ -26,12 +26,18 @@ BASELINES: dict[str, str] = {
 }
 """Every scripted baseline by name."""
 
+WRAPPERS: dict[str, str] = {"shield": "baselines.shield:Shield"}
+"""Policy wrappers by name: ``make(name, env, policy=...)`` wraps another policy (not baselines on
+their own: :func:`supporting` never lists them)."""
+
 
 def get(name: str) -> type:
     """The class registered as ``name`` (imports its module on first use)."""
-    if not isinstance(name, str) or name not in BASELINES:
-        raise BaselineError(f"unknown baseline {name!r}; expected one of {sorted(BASELINES)}")
-    module, _, attr = BASELINES[name].partition(":")
+    table = {**BASELINES, **WRAPPERS}
+    if not isinstance(name, str) or name not in table:
+        raise BaselineError(f"unknown baseline {name!r}; expected one of {sorted(BASELINES)} "
+                            f"(or a wrapper: {sorted(WRAPPERS)})")
+    module, _, attr = table[name].partition(":")
     return getattr(importlib.import_module(module), attr)
 
 
