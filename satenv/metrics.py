@@ -11,65 +11,151 @@ Success (:func:`success`, the one rule the scoreboard and the training evaluatio
 agent's final position error is within the scenario's ``success_tol`` and, where the scenario's
 ``collision_voids_success`` says so, no collision flag was raised (both are copied onto the
 :class:`~satenv.rollout.Trajectory` by :func:`satenv.rollout.rollout`).
+
+Every function validates what it reads and raises :class:`satenv.errors.SatenvError` (or its
+``SatenvTypeError``) naming the field: ``info[key]`` a real array ``(T + 1, M, ...)`` of finite
+values with at least one step (``T >= 1``: an empty or reset-only trajectory has no metric), as
+many rows as ``t`` and columns as ``agents`` where the trajectory has them; ``dt`` and the
+tolerances finite and > 0; ``t`` finite and non-decreasing; ``collision_voids_success`` a bool.
+No metric returns NaN silently: the one documented ``nan`` is :func:`time_to_converge` of an
+agent that has not converged.
 """
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from satenv.errors import SatenvError, SatenvTypeError
+
+
+def _info(traj, key: str) -> np.ndarray:
+    """``traj.info[key]`` as a finite real array ``(T + 1, M, ...)`` with ``T >= 1`` (validated)."""
+    info = getattr(traj, "info", None)
+    if not isinstance(info, Mapping):
+        raise SatenvTypeError(f"trajectory.info must be a dict of arrays (a satenv.rollout.Trajectory), "
+                              f"got {type(info).__name__}")
+    if key not in info:
+        raise SatenvError(f"trajectory.info[{key!r}] is missing; the metric needs it (recorded by "
+                          "satenv.rollout.rollout from the env's infos)")
+    field = f"trajectory.info[{key!r}]"
+    try:
+        a = np.asarray(info[key])
+    except (TypeError, ValueError) as err:
+        raise SatenvTypeError(f"{field} must be a numeric array, got {type(info[key]).__name__} ({err})") from None
+    if a.dtype.kind not in "biuf" or np.ma.isMaskedArray(info[key]):
+        raise SatenvTypeError(f"{field} must be a real numeric array, got dtype {a.dtype}")
+    if a.ndim < 2:
+        raise SatenvError(f"{field} must have shape (T + 1, M, ...), got {a.shape}")
+    if a.shape[0] < 2:
+        raise SatenvError(f"{field} has {a.shape[0]} entries: the trajectory has no step (an empty or "
+                          "reset-only episode); the metrics need at least one step (T >= 1)")
+    t = getattr(traj, "t", None)
+    if t is not None and np.shape(t) != (a.shape[0],):
+        raise SatenvError(f"{field} has {a.shape[0]} entries but trajectory.t has shape {np.shape(t)}; "
+                          "expected T + 1 of each")
+    agents = getattr(traj, "agents", None)
+    if agents is not None and a.shape[1] != len(agents):
+        raise SatenvError(f"{field} has {a.shape[1]} agent columns but trajectory.agents lists "
+                          f"{len(agents)}")
+    if a.dtype.kind == "f" and not np.isfinite(a).all():
+        bad = np.argwhere(~np.isfinite(a))[0]
+        raise SatenvError(f"{field} holds NaN/inf (first at index {tuple(int(i) for i in bad)}); the "
+                          "metrics of a corrupt trajectory would be NaN")
+    return a
+
+
+def _positive(name: str, value: Any) -> float:
+    """``value`` as a finite float > 0 (a real number, not a bool), else the typed error."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
+        raise SatenvTypeError(f"{name} must be a real number > 0, got {value!r:.60}")
+    v = float(value)
+    if not (np.isfinite(v) and v > 0):
+        raise SatenvError(f"{name} must be finite and > 0, got {value!r:.60}")
+    return v
+
+
+def _times(traj) -> np.ndarray:
+    """``traj.t`` validated: finite, non-decreasing (and ``traj.dt`` > 0 when present)."""
+    if getattr(traj, "dt", None) is not None:
+        _positive("trajectory.dt", traj.dt)
+    try:
+        t = np.asarray(traj.t, dtype=float)
+    except (AttributeError, TypeError, ValueError):
+        raise SatenvTypeError("trajectory.t must be a 1-D array of times [s]") from None
+    if t.ndim != 1 or not np.isfinite(t).all() or (np.diff(t) < 0).any():
+        raise SatenvError(f"trajectory.t must be a finite, non-decreasing 1-D array of times [s], got "
+                          f"shape {t.shape}")
+    return t
+
+
+def _finite(value: Any, key: str) -> Any:
+    """``value`` unless it overflowed to inf (finite inputs of magnitude near the float range)."""
+    if not np.isfinite(value).all():
+        raise SatenvError(f"trajectory.info[{key!r}] is too large: the metric overflows float64 "
+                          "(entries near 1e154 or beyond); check the recorded episode")
+    return value
+
 
 def rmse(traj) -> np.ndarray:
     """Root-mean-square tracking error over ``k = 0 .. n_k - 1`` per agent."""
-    e = traj.info["tracking_error"][:-1]
-    return np.sqrt(np.mean(np.sum(e.reshape(e.shape[0], e.shape[1], -1) ** 2, axis=-1), axis=0))
+    e = _info(traj, "tracking_error")[:-1]
+    return _finite(np.sqrt(np.mean(np.sum(e.reshape(e.shape[0], e.shape[1], -1) ** 2, axis=-1), axis=0)),
+                   "tracking_error")
 
 
 def rmsee(traj) -> np.ndarray:
     """Root-mean-square applied acceleration [m/s^2] per agent (the paper's 'energy expended')."""
-    u = traj.info["accel"][1:]
-    return np.sqrt(np.mean(np.sum(u**2, axis=-1), axis=0))
+    u = _info(traj, "accel")[1:]
+    return _finite(np.sqrt(np.mean(np.sum(u.reshape(u.shape[0], u.shape[1], -1) ** 2, axis=-1), axis=0)), "accel")
 
 
 def foe(traj) -> np.ndarray:
     """Final output error ``||e(n_k)||`` per agent."""
-    e = traj.info["tracking_error"][-1]
-    return np.linalg.norm(e.reshape(e.shape[0], -1), axis=-1)
+    e = _info(traj, "tracking_error")[-1]
+    return _finite(np.linalg.norm(e.reshape(e.shape[0], -1), axis=-1), "tracking_error")
 
 
 def final_position_error(traj) -> np.ndarray:
     """Norm of the position part (first 3 entries) of the final tracking error, per agent [m]."""
-    return np.linalg.norm(traj.info["tracking_error"][-1][..., :3], axis=-1)
+    e = _info(traj, "tracking_error")
+    if e.ndim != 3:
+        raise SatenvError(f"trajectory.info['tracking_error'] must have shape (T + 1, M, k), got {e.shape}")
+    return _finite(np.linalg.norm(e[-1][..., :3], axis=-1), "tracking_error")
 
 
 def delta_v_total(traj) -> np.ndarray:
     """Total delta-v spent per agent [m/s]."""
-    return np.sum(traj.info["delta_v"][1:], axis=0)
+    return _finite(np.sum(_info(traj, "delta_v")[1:], axis=0), "delta_v")
 
 
 def min_separation(traj) -> float:
     """Smallest distance between any agent and any other body over the episode [m]."""
-    return float(np.min(traj.info["min_separation"]))
+    return float(np.min(_info(traj, "min_separation")))
 
 
 def collisions(traj) -> int:
     """Number of (step, agent) collision flags raised."""
-    return int(np.sum(traj.info["collision"]))
+    return int(np.sum(_info(traj, "collision") != 0))
 
 
 def violations(traj) -> int:
     """Total constraint violations counted by the environment."""
-    return int(np.sum(traj.info["violations"]))
+    return int(np.sum(_info(traj, "violations"), dtype=float))
 
 
 def safety_cost(traj) -> float:
     """Sum of the environment's safety cost over the episode."""
-    return float(np.sum(traj.info["cost"]))
+    return float(_finite(np.sum(_info(traj, "cost")), "cost"))
 
 
 def _tol(traj, tol: float | None) -> float:
-    return float(traj.success_tol if tol is None else tol)
+    if tol is None:
+        return _positive("trajectory.success_tol", getattr(traj, "success_tol", None))
+    return _positive("tol", tol)
 
 
 def time_to_converge(traj, tol: float | None = None) -> np.ndarray:
@@ -79,14 +165,19 @@ def time_to_converge(traj, tol: float | None = None) -> np.ndarray:
     ``nan`` for an agent that is not within ``tol`` at the end.
     """
     tol = _tol(traj, tol)
-    err = np.linalg.norm(traj.info["tracking_error"][..., :3], axis=-1)   # (T+1, M)
+    e = _info(traj, "tracking_error")
+    t = _times(traj)
+    if e.ndim != 3 or t.shape != (e.shape[0],):
+        raise SatenvError(f"trajectory.info['tracking_error'] must have shape (T + 1, M, k) with T + 1 = "
+                          f"len(trajectory.t); got {e.shape} and {t.shape}")
+    err = _finite(np.linalg.norm(e[..., :3], axis=-1), "tracking_error")   # (T+1, M)
     out = np.full(err.shape[1], np.nan)
     for i in range(err.shape[1]):
         outside = np.nonzero(err[:, i] > tol)[0]
         if outside.size == 0:
-            out[i] = traj.t[0]
+            out[i] = t[0]
         elif outside[-1] < len(err) - 1:
-            out[i] = traj.t[outside[-1] + 1]
+            out[i] = t[outside[-1] + 1]
     return out
 
 
@@ -94,7 +185,10 @@ def success(traj, tol: float | None = None) -> bool:
     """Every agent within ``tol`` m (default ``traj.success_tol``) of its target at the end and,
     if ``traj.collision_voids_success``, no collision flag during the episode."""
     reached = bool(np.all(final_position_error(traj) <= _tol(traj, tol)))
-    return reached and not (traj.collision_voids_success and collisions(traj) > 0)
+    voids = getattr(traj, "collision_voids_success", True)
+    if not isinstance(voids, bool | np.bool_):
+        raise SatenvTypeError(f"trajectory.collision_voids_success must be a bool, got {voids!r:.40}")
+    return reached and not (voids and collisions(traj) > 0)
 
 
 def summary(traj, tol: float | None = None) -> dict[str, Any]:
@@ -102,6 +196,16 @@ def summary(traj, tol: float | None = None) -> dict[str, Any]:
     ``tol`` defaults to ``traj.success_tol``."""
     ttc = time_to_converge(traj, tol)
     pinfo = traj.policy_info
+    if not isinstance(pinfo, Mapping):
+        raise SatenvTypeError(f"trajectory.policy_info must be a dict, got {type(pinfo).__name__}")
+    fallbacks = pinfo.get("fallbacks", 0)
+    if isinstance(fallbacks, bool) or not isinstance(fallbacks, numbers.Integral) or fallbacks < 0:
+        raise SatenvError(f"trajectory.policy_info['fallbacks'] must be an int >= 0, got {fallbacks!r:.40}")
+    compute = np.asarray(traj.compute_time)
+    if compute.dtype.kind not in "biuf" or compute.ndim != 1 or not np.isfinite(compute).all() \
+            or (compute < 0).any():
+        raise SatenvError(f"trajectory.compute_time must be a 1-D array of finite seconds >= 0, got "
+                          f"shape {compute.shape}, dtype {compute.dtype}")
     return {
         "success": success(traj, tol),
         "rmse": float(np.mean(rmse(traj))),
@@ -114,8 +218,8 @@ def summary(traj, tol: float | None = None) -> dict[str, Any]:
         "collisions": collisions(traj),
         "violations": violations(traj),
         "safety_cost": safety_cost(traj),
-        "fallbacks": int(pinfo.get("fallbacks", 0)),
-        "compute_ms_per_decision": float(np.mean(traj.compute_time) * 1e3) if traj.compute_time.size else 0.0,
+        "fallbacks": int(fallbacks),
+        "compute_ms_per_decision": float(np.mean(compute) * 1e3) if compute.size else 0.0,
         "steps": traj.steps,
         "terminated": bool(traj.terminated),
     }
