@@ -161,14 +161,20 @@ class SatVectorEnv:
     def _reset_some(self, indices: Any) -> tuple[np.ndarray, dict[str, Any]]:
         if self._rngs is None:
             return self.reset()
-        idx = np.asarray(indices)
+        try:
+            idx = np.asarray(indices)
+        except (TypeError, ValueError):
+            idx = np.asarray(None)
+        if idx.size and idx.dtype.kind not in "biu":  # e.g. [0.5] must not become copy 0
+            raise SatenvTypeError(f"reset(indices=...) must be int copy indices or a bool mask of shape "
+                                  f"({self.num_envs},), got {type(indices).__name__} of dtype {idx.dtype}")
         if idx.dtype == bool:
             if idx.shape != (self.num_envs,):
                 raise SatenvError(f"reset(indices=mask): the mask must have shape ({self.num_envs},), got {idx.shape}")
             idx = np.flatnonzero(idx)
         idx = idx.astype(np.int64, copy=False).reshape(-1)
         if idx.size and (idx.min() < 0 or idx.max() >= self.num_envs):
-            raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), got {idx.tolist()}")
+            raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), got {str(idx.tolist())[:80]}")
         info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)) if idx.size else {}
         self._ended[idx] = False
         obs = self.core.observe()
