@@ -41,8 +41,11 @@ def make(env_id: str, *, safety_filter: Any = False, **kwargs: Any):
 
     ``safety_filter=True`` (or a ``satenv.safety.SafetyConfig``) filters every step's actions
     (:func:`satenv.safety.filtered_env`)."""
-    if env_id not in _MODULES:
-        raise ValueError(f"unknown env id {env_id!r}; expected one of {list(ENV_IDS)}")
+    if not isinstance(env_id, str) or env_id not in _MODULES:
+        from satenv.errors import SatenvError, SatenvTypeError
+
+        err = SatenvError if isinstance(env_id, str) else SatenvTypeError
+        raise err(f"unknown env id {env_id!r:.80}; expected one of {list(ENV_IDS)}")
     import importlib
 
     env = importlib.import_module(_MODULES[env_id]).parallel_env(**kwargs)
