@@ -154,12 +154,26 @@ def attitude_derivative(y: np.ndarray, torque: np.ndarray, j_f: np.ndarray, j_l:
                            relative_angular_acceleration(q, w, torque, j_f, j_l, omega_l)], axis=-1)
 
 
+ATTITUDE_METHODS: tuple[str, ...] = ("auto", "kernel", "numpy")
+"""Implementations of :func:`attitude_step`: ``"numpy"`` (the reference), ``"kernel"`` (compiled,
+:mod:`._attitude_kernel`; needs numba and a constant leader rate ``omega_l`` (3,)), ``"auto"``."""
+
+
 def attitude_step(q: np.ndarray, omega: np.ndarray, torque: np.ndarray, dt: float, j_f: np.ndarray,
-                  j_l: np.ndarray, omega_l: np.ndarray, substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                  j_l: np.ndarray, omega_l: np.ndarray, substeps: int = 1,
+                  method: str = "auto") -> tuple[np.ndarray, np.ndarray]:
     """Advance ``(q, omega)`` by ``dt`` under a constant body torque: RK4, then renormalise ``q``.
 
     ``substeps`` RK4 steps of ``dt / substeps``; ``q`` is projected back to unit norm after each.
+    ``method`` (:data:`ATTITUDE_METHODS`): the compiled kernel gives the numpy reference's
+    answers to rounding (1e-12, ``tests/test_attitude_kernel.py``).
     """
+    if method not in ATTITUDE_METHODS:
+        raise ValueError(f"unknown attitude method {method!r}; expected one of {list(ATTITUDE_METHODS)}")
+    kernel = None if method == "numpy" else _attitude_kernel(method, omega_l)
+    if kernel is not None:
+        return compiled_attitude_step(kernel, q, omega, torque, dt, substeps,
+                                      attitude_constants(j_f, j_l, omega_l))
     y = np.concatenate([q, omega], axis=-1)
     h = dt / substeps
     f = lambda _t, yy: attitude_derivative(yy, torque, j_f, j_l, omega_l)  # noqa: E731
@@ -167,6 +181,46 @@ def attitude_step(q: np.ndarray, omega: np.ndarray, torque: np.ndarray, dt: floa
         y = rk4_step(f, 0.0, y, h)
         y = np.concatenate([quat_normalize(y[..., :4]), y[..., 4:]], axis=-1)
     return y[..., :4], y[..., 4:]
+
+
+def _attitude_kernel(method: str, omega_l):
+    """The compiled step, or ``None`` when it does not apply (``method="auto"``)."""
+    if np.shape(omega_l) != (3,):
+        if method == "kernel":
+            raise ValueError(f"method='kernel' needs a constant leader rate omega_l of shape (3,), "
+                             f"got shape {np.shape(omega_l)}")
+        return None
+    try:
+        from ._attitude_kernel import attitude_steps
+    except ImportError:
+        if method == "kernel":
+            raise ValueError("method='kernel' needs numba (pip install numba)") from None
+        return None
+    return attitude_steps
+
+
+def attitude_constants(j_f, j_l, omega_l) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(J_f, J_f^-1, omega_l, J_l^-1 (omega_l x J_l omega_l))``: the compiled step's constants."""
+    j_f = np.ascontiguousarray(j_f, dtype=float)
+    j_l = np.asarray(j_l, dtype=float)
+    wl = np.ascontiguousarray(omega_l, dtype=float)
+    lead_acc = _mv(np.linalg.inv(j_l), np.cross(wl, _mv(j_l, wl)))
+    return j_f, np.linalg.inv(j_f), wl, np.ascontiguousarray(lead_acc)
+
+
+def compiled_attitude_step(kernel, q, omega, torque, dt: float, substeps: int,
+                           constants) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`attitude_step` by the compiled ``kernel`` with :func:`attitude_constants`."""
+    shape = np.broadcast_shapes(np.shape(q)[:-1], np.shape(omega)[:-1], np.shape(torque)[:-1])
+    qs = np.ascontiguousarray(np.broadcast_to(q, (*shape, 4)).reshape(-1, 4), dtype=float)
+    ws = np.ascontiguousarray(np.broadcast_to(omega, (*shape, 3)).reshape(-1, 3), dtype=float)
+    ts = np.ascontiguousarray(np.broadcast_to(torque, (*shape, 3)).reshape(-1, 3), dtype=float)
+    q_out, w_out = np.empty_like(qs), np.empty_like(ws)
+    kernel(qs, ws, ts, dt / substeps, substeps, *constants, q_out, w_out)
+    if np.isnan(q_out).any() and np.isfinite(qs).all() and np.isfinite(ws).all() and np.isfinite(ts).all():
+        raise ValueError("cannot normalise a zero quaternion; a unit quaternion [eta, ex, ey, ez] "
+                         "is needed (the attitude step reached a zero-norm quaternion)")
+    return q_out.reshape(*shape, 4), w_out.reshape(*shape, 3)
 
 
 def thruster_matrices(dimensions) -> tuple[np.ndarray, np.ndarray]:

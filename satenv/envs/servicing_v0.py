@@ -112,7 +112,10 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v, saturate_box
 from satenv.dynamics.attitude import (
+    _attitude_kernel,
+    attitude_constants,
     attitude_step,
+    compiled_attitude_step,
     desired_angular_velocity,
     matrix_to_quat,
     pointing_error,
@@ -173,6 +176,23 @@ def stage_cost(scenario: ServicingScenario, e_p, e_v, q_err, e_w, u) -> np.ndarr
             + np.sum(np.asarray(scenario.input_weight) * u**2, -1))
 
 
+POINTING_MIN_SINE = 0.1
+"""``min_sine`` of :func:`satenv.dynamics.attitude.pointing_frame` as the servicing core uses it
+(its default)."""
+
+
+def _reference_kernel(scenario: ServicingScenario):
+    """:func:`satenv.envs._servicing_kernel.attitude_features`, or ``None`` (no numba, or eq. 44's
+    ``a = p`` roll reference, which the kernel does not implement)."""
+    if scenario.pointing_reference is None:
+        return None
+    try:
+        from satenv.envs._servicing_kernel import attitude_features
+    except ImportError:
+        return None
+    return attitude_features
+
+
 class ServicingCore(BatchedCore):
     """Batched servicing physics and task logic (``B`` copies, ``M`` spacecraft)."""
 
@@ -191,6 +211,12 @@ class ServicingCore(BatchedCore):
         self.j_f = np.array(sc.inertia)
         self.j_l = np.array(sc.object_inertia)
         self.omega_l = np.array([0.0, 0.0, sc.mean_motion])
+        self._att_kernel = _attitude_kernel("auto", self.omega_l)   # compiled step (None: numpy)
+        self._att_constants = attitude_constants(self.j_f, self.j_l, self.omega_l)
+        self._ref_kernel = _reference_kernel(sc)          # compiled attitude reference (None: numpy)
+        self._pointing = (np.asarray(sc.pointing_target, dtype=float),
+                          np.asarray(sc.pointing_reference if sc.pointing_reference is not None else (0, 0, 0),
+                                     dtype=float))
         self.waypoints = sc.waypoint_array()
         self.u_max = np.asarray(sc.u_max)
         self.scale_p = sc.keepout_radius
@@ -233,7 +259,10 @@ class ServicingCore(BatchedCore):
             a = force if sc.thrust_frame == "lvlh" else np.einsum("...ij,...j->...i", quat_to_matrix(q), force)
             acc_sum += a
             x6, self.chief = self.model.step(x6, a, self.chief)
-            q, w = attitude_step(q, w, torque, self.h, self.j_f, self.j_l, self.omega_l)
+            if self._att_kernel is not None:
+                q, w = compiled_attitude_step(self._att_kernel, q, w, torque, self.h, 1, self._att_constants)
+            else:
+                q, w = attitude_step(q, w, torque, self.h, self.j_f, self.j_l, self.omega_l)
         self.x = np.concatenate([x6, q, w], axis=-1)
         self.t += 1
         self._feat = self._features(self.x, self.t)
@@ -253,8 +282,12 @@ class ServicingCore(BatchedCore):
         sc = self.scenario
         p, v, q, w = x[..., :3], x[..., 3:6], x[..., 6:10], x[..., 10:]
         wp = self.waypoints[sc.phase(t)]                                  # (B, M, 3)
-        _, q_d, w_d = attitude_reference(sc, p, v, q)
-        q_err = quat_error(q, q_d)
+        if self._ref_kernel is not None:
+            q_d, w_d, q_err, pointing = self._attitude_features(x)
+        else:
+            _, q_d, w_d = attitude_reference(sc, p, v, q)
+            q_err = quat_error(q, q_d)
+            pointing = pointing_error(q, p, sc.pointing_target)
         d_obj = np.linalg.norm(p, axis=-1)
         m = self.n_agents
         dist = np.linalg.norm(p[:, :, None] - p[:, None], axis=-1)
@@ -262,7 +295,22 @@ class ServicingCore(BatchedCore):
         return {"waypoint": wp, "phase": np.broadcast_to(sc.phase(t)[:, None], d_obj.shape),
                 "e_p": p - wp, "e_v": v - np.asarray(sc.desired_velocity), "q_d": q_d,
                 "q_err": q_err, "w_d": w_d, "e_w": w - w_d, "d_obj": d_obj, "dist": dist,
-                "pointing": pointing_error(q, p, sc.pointing_target)}
+                "pointing": pointing}
+
+    def _attitude_features(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``(q_d, w_d, q_err, pointing error)`` by the compiled kernel (the numpy functions of
+        :func:`_features` are the reference, ``tests/test_servicing_kernel.py``)."""
+        sc = self.scenario
+        lead = x.shape[:-1]
+        q_d, q_err = np.empty((*lead, 4)), np.empty((*lead, 4))
+        w_d, pointing = np.empty((*lead, 3)), np.empty(lead)
+        xs = np.ascontiguousarray(x, dtype=float)
+        bad = self._ref_kernel(xs, self._pointing[0], self._pointing[1], sc.mean_motion, POINTING_MIN_SINE,
+                               q_d, w_d, q_err, pointing)
+        if bad:
+            raise ValueError("pointing_frame: the spacecraft position coincides with the target point; "
+                             "the pointing direction is undefined")
+        return q_d, w_d, q_err, pointing
 
     def _info(self, f: dict[str, np.ndarray], x: np.ndarray, u: np.ndarray,
               accel: np.ndarray) -> dict[str, np.ndarray]:
