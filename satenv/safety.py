@@ -15,7 +15,8 @@ did. One core, three ways to use it::
   keep-out sphere); the pereira2022 §5.1 keep-out sphere of each target–chaser pair;
 * half-spaces ``m^T (p_f - p_{f-1}) <= b`` (the pereira2022 §5.1 LOS cone, eq. 34);
 * velocity boxes (relative degree one): pereira2023 bound (40) on the velocity part of the
-  neighbourhood error ``E_f = (Lbar x)_f``, and the servicing ``|v_i| <= v_max``;
+  neighbourhood error ``E_f = (Lbar x)_f``, the servicing ``|v_i| <= v_max`` and
+  ``|omega_i| <= omega_max`` (first-order torque effect on the env's own coasting attitude step);
 * the thrust box: the filtered action stays in ``[-1, 1]^d`` (the inscribed cube
   ``[-1/sqrt 3, 1/sqrt 3]^3`` of the thrust ball in ``thrust_mode="norm"``).
 
@@ -40,14 +41,17 @@ prediction ``rbar^+ = A r`` and ``Delta u`` the relative acceleration,
 with ``phi`` the chord of ``sqrt(2 a s)`` over the reachable gaps ``[sbar - delta, sbar + delta]``
 (a lower bound of the concave root there, so (C2) is linear and conservative). Both rows are
 linear in ``Delta u = S_i u_i - S_j u_j``; each agent keeps its share (half for a pair, all
-against a body): ``w^T S_i u_i >= -share * g``. Summed, the two shares give the pair's row.
+against a body): ``w^T S_i u_i >= -share * g``. Summed, the two shares give the pair's row. A
+platoon follower that is both a chaser and a target budgets half its authority to each of its
+two LOS / keep-out pairs (otherwise the two pairs can ask it to brake both ways at once).
 The margin (``margin * D``, ``los_margin``) inflates ``D`` but never beyond the current gap (a
 start on the boundary stays feasible).
 
 **QP** per agent: ``min ||u - u_ref||^2  s.t.  W u >= l,  |u| <= u_box`` (daqp), only for the
 agents whose proposal breaks a row; every other action passes unchanged (bit for bit). A QP that is
 infeasible or fails (any exception, a bad status, a non-finite point, a violated row) gives the
-backup action — full thrust along the row the proposal breaks most (maximum braking) — and the
+backup action — maximum braking: the action in the box that maximises the smallest row slack
+(or, if that solve fails too, full thrust along the row the proposal breaks most) — and the
 ``infeasible`` flag; never an exception, never a NaN.
 
 Guarantee (for the CW double-integrator model, the scenario's disturbance bound and states whose
@@ -55,7 +59,8 @@ rows are feasible): separation and half-space gaps stay >= 0 at every decision a
 brakeable; the velocity boxes hold at the next decision. Not guaranteed: infeasible starts (a
 start inside the margin with closing speed), model mismatch (J2, drag, nonlinear terms beyond the
 drift bound), dips between decisions larger than the margin, constraints of other agents' QPs
-that fall back (their share is then missing), the attitude (servicing ``omega_max``) and the
+that fall back (their share is then missing), an agent squeezed between several pairs at once
+(each pair assumes its full authority), the allowed region (``max_distance``) and the
 pereira2023 minimum-error constraint (41) (implied by separation for the PLF topology only).
 """
 
@@ -343,39 +348,44 @@ def _barrier(m: SafetyModel, cfg: SafetyConfig, gap0, rate0, gap_bar, dirn, vel_
     return w1, gap_bar, w2, g2
 
 
-def _sphere_rows(m, cfg, r, r_bar, radius, shared, drift_state):
+def _sphere_rows(m, cfg, r, r_bar, radius, budget, drift_state):
     """Rows for relative states ``r`` (now) and ``r_bar`` (coasting, next decision), ``(..., 6)``;
-    ``shared`` (bool, broadcast over the leading axes): two agents share the row, else one."""
+    ``budget = (own, other)``: the fractions of each agent's braking authority the pair may use
+    (``other = 0``: a body, or the passive leader)."""
     d0 = np.linalg.norm(r[..., :3], axis=-1)
     d_m = radius + np.minimum(cfg.margin * radius, np.maximum(d0 - radius, 0.0))
     d_bar = np.linalg.norm(r_bar[..., :3], axis=-1)
     dirn = r_bar[..., :3] / np.maximum(d_bar, 1e-12)[..., None]
     rate0 = np.sum(r[..., :3] * r[..., 3:], axis=-1) / np.maximum(d0, 1e-12)
-    return _shared(m, cfg, shared, drift_state, d0 - d_m, rate0, d_bar - d_m, dirn, r_bar[..., 3:])
+    return _shared(m, cfg, budget, drift_state, d0 - d_m, rate0, d_bar - d_m, dirn, r_bar[..., 3:])
 
 
-def _halfspace_rows(m, cfg, r, r_bar, normal, bound, shared, drift_state):
+def _halfspace_rows(m, cfg, r, r_bar, normal, bound, budget, drift_state):
     """Rows for ``normal^T r_p <= bound`` (the gap grows along ``-normal``)."""
     gap0 = bound - r[..., :3] @ normal
     b_m = bound - np.minimum(cfg.los_margin, np.maximum(gap0, 0.0))
     dirn = np.broadcast_to(-normal, r_bar[..., :3].shape)
-    return _shared(m, cfg, shared, drift_state, b_m - r[..., :3] @ normal, -(r[..., 3:] @ normal),
+    return _shared(m, cfg, budget, drift_state, b_m - r[..., :3] @ normal, -(r[..., 3:] @ normal),
                    b_m - r_bar[..., :3] @ normal, dirn, r_bar[..., 3:])
 
 
-def _shared(m, cfg, shared, drift_state, gap0, rate0, gap_bar, dirn, vel_bar):
-    """:func:`_barrier` with the pair's authority, and each agent's share of the rows.
+def _shared(m, cfg, budget, drift_state, gap0, rate0, gap_bar, dirn, vel_bar):
+    """:func:`_barrier` with the pair's authority, and this agent's share of the rows.
 
-    ``a = (1 + shared) a_i`` minus the CW drift bound ``3 n^2 ||r_p|| + 2 n ||r_v||`` at
-    ``drift_state`` and the disturbance of each agent (floored at ``_FLOOR`` of the nominal:
-    there the barrier is no longer a guarantee); ``delta = ||B_p|| (1 + shared) max ||S u||``.
+    ``budget = (own, other)`` (arrays broadcast over the leading axes; ``other = 0``: the other
+    body is passive): ``a = (own + other) a_i`` minus the CW drift bound
+    ``3 n^2 ||r_p|| + 2 n ||r_v||`` at ``drift_state`` and the disturbance of each moving agent
+    (floored at ``_FLOOR`` of the nominal: there the barrier is no longer a guarantee);
+    ``delta = ||B_p|| max ||S u||`` per moving agent; this agent's share ``own / (own + other)``.
     """
-    k = 1.0 + np.asarray(shared, dtype=float)
+    own, other = (np.asarray(v, dtype=float) for v in budget)
+    units, movers = own + other, 1.0 + (other > 0)
     drift = (3.0 * m.n**2 * np.linalg.norm(drift_state[..., :3], axis=-1)
              + 2.0 * m.n * np.linalg.norm(drift_state[..., 3:6], axis=-1))
-    brake = np.maximum(k * (m.brake - m.disturbance) - drift, _FLOOR * k * m.brake)
-    w1, g1, w2, g2 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, k * m.reach * m.accel_max)
-    return w1, -g1 / k, w2, -g2 / k
+    brake = np.maximum(units * m.brake - movers * m.disturbance - drift, _FLOOR * units * m.brake)
+    w1, g1, w2, g2 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, movers * m.reach * m.accel_max)
+    share = own / units
+    return w1, -share * g1, w2, -share * g2
 
 
 def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -389,7 +399,7 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
     if m.pair_distance > 0:
         r = x6[:, :, None] - x6[:, None]                  # (B, M, M, 6): agent i minus agent j
         rb = xb[:, :, None] - xb[:, None]
-        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, m.pair_distance, True, r)
+        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, m.pair_distance, (1.0, 1.0), r)
         eye = np.eye(na, dtype=bool)
         ws.extend([w1, w2])
         ls.extend([np.where(eye, -_BIG, l1), np.where(eye, -_BIG, l2)])
@@ -398,7 +408,7 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
         vel = np.broadcast_to(body.velocity, c.shape)
         r = x6 - np.concatenate([c, vel], -1)[:, None]
         rb = xb - np.concatenate([c + m.dt * body.velocity, vel], -1)[:, None]
-        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, body.radius, False, x6)
+        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, body.radius, (1.0, 0.0), x6)
         ws.extend([w1[:, :, None], w2[:, :, None]])
         ls.extend([l1[:, :, None], l2[:, :, None]])
     if m.chain_sphere is not None or m.chain_halfspaces is not None:
@@ -412,21 +422,27 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
 
 def _chain_rows(m, cfg, x6, xb, ws, ls) -> None:
     """Platoon target-chaser pairs ``(f - 1, f)`` (follower 1's target is the passive leader):
-    rows for the chaser ``f`` and, negated, for its target ``f - 1`` when that is a follower."""
+    rows for the chaser ``f`` and, negated, for its target ``f - 1`` when that is a follower.
+
+    A follower between a target and a chaser budgets half its braking authority to each pair
+    (else the two pairs may ask it to brake both ways at once); the last chaser all of it."""
     zero = np.zeros_like(x6[:, :1])
     r = x6 - np.concatenate([zero, x6[:, :-1]], axis=1)
     rb = xb - np.concatenate([zero, xb[:, :-1]], axis=1)
-    shared = np.arange(x6.shape[1]) > 0
+    na = x6.shape[1]
+    own = np.where(np.arange(na) < na - 1, 0.5, 1.0)     # the chaser's budget for its target
+    other = np.where(np.arange(na) > 0, 0.5, 0.0)        # the target's budget for its chaser
     blocks = []
     if m.chain_sphere is not None:
         off = np.r_[m.chain_sphere[0], np.zeros(3)]
-        blocks.append(_sphere_rows(m, cfg, r - off, rb - off, m.chain_sphere[1], shared, r))
+        blocks.append(_sphere_rows(m, cfg, r - off, rb - off, m.chain_sphere[1], (own, other), r))
     if m.chain_halfspaces is not None:
-        blocks += [_halfspace_rows(m, cfg, r, rb, nrm, bnd, shared, r)
+        blocks += [_halfspace_rows(m, cfg, r, rb, nrm, bnd, (own, other), r)
                    for nrm, bnd in zip(*m.chain_halfspaces, strict=True)]
+    ratio = np.where(other > 0, other / np.maximum(own, 1e-12), 0.0)[None, :]   # target / chaser share
     for w1, l1, w2, l2 in blocks:
         ws.extend([w1, w2, _up(-w1, 0.0), _up(-w2, 0.0)])
-        ls.extend([l1, l2, _up(l1, -_BIG), _up(l2, -_BIG)])
+        ls.extend([l1, l2, _up(l1 * ratio, -_BIG), _up(l2 * ratio, -_BIG)])
 
 
 def _up(v: np.ndarray, fill: float) -> np.ndarray:
@@ -516,10 +532,9 @@ def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarr
         keep = lo[b, i] > -m.u_box * math.sqrt(m.action_dim) - 1e-9   # rows that can bind
         u = _guarded_qp(ref[b, i], rows[b, i][keep], lo[b, i][keep], m.u_box)
         if u is None:
-            k = int(np.argmin(slack[b, i]))
-            u = _backup(m, rows[b, i, k])
+            u, k = _backup(m, rows[b, i][keep], lo[b, i][keep], slack[b, i][keep])
             infeasible[b, i] = True
-            active[b, i] = kinds[k]
+            active[b, i] = kinds[keep][k]
         else:
             active[b, i] = kinds[int(np.argmin(rows[b, i] @ u - lo[b, i]))]
         out[b, i] = u
@@ -547,12 +562,34 @@ def _guarded_qp(ref: np.ndarray, rows: np.ndarray, lower: np.ndarray, box: float
     return np.clip(u, -box, box)
 
 
-def _backup(m: SafetyModel, row: np.ndarray) -> np.ndarray:
-    """Maximum braking: full thrust along the row the proposal breaks most (``argmax row^T u``)."""
+def _backup(m: SafetyModel, rows: np.ndarray, lower: np.ndarray, slack: np.ndarray) -> tuple[np.ndarray, int]:
+    """Maximum braking when the QP fails: the action that maximises the smallest row slack,
+    ``argmax_u min_k (rows_k u - lower_k)`` over the action box (a daqp QP in ``(u, t)``), or, if
+    that fails too, full thrust along the row the proposal breaks most. Returns the action and
+    the index of the row it brakes for (the least satisfied one)."""
+    d = rows.shape[1]
+    k = int(np.argmin(slack))
+    try:
+        import daqp
+
+        a = np.hstack([rows, -np.ones((len(rows), 1))])
+        bu = np.r_[np.full(d, m.u_box), _BIG, np.full(len(rows), _BIG)]
+        bl = np.r_[np.full(d, -m.u_box), -_BIG, lower]
+        h = np.eye(d + 1) * 1e-6
+        z, _, flag, _ = daqp.solve(h, np.r_[np.zeros(d), -1.0], a, bu, bl, np.zeros(len(bu), dtype=np.int32))
+        u = np.asarray(z, dtype=float)[:d]
+        if flag in (1, 2) and np.all(np.isfinite(u)):
+            u = np.clip(u, -m.u_box, m.u_box)
+            if m.norm_mode:
+                u = u / max(1.0, float(np.linalg.norm(u)))
+            return u, int(np.argmin(rows @ u - lower))
+    except Exception:  # noqa: BLE001 - the backup never raises
+        pass
+    row = rows[k]
     if m.norm_mode:
-        nrm = np.linalg.norm(row)
-        return row / nrm if nrm > 0 else np.zeros_like(row)
-    return np.sign(row) * m.u_box
+        nrm = float(np.linalg.norm(row))
+        return (row / nrm if nrm > 0 else np.zeros_like(row)), k
+    return np.sign(row) * m.u_box, k
 
 
 def _check_inputs(m: SafetyModel, x: Any, t: Any, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
