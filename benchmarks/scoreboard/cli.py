@@ -9,6 +9,7 @@ Importing this module changes no environment variable.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from benchmarks._env import single_thread_blas
@@ -115,6 +116,9 @@ def main(argv: list[str] | None = None) -> int:
 
     out = args.out or ("results/scoreboard/quick" if args.quick else "results/scoreboard")
     try:
+        if os.path.lexists(out) and not os.path.isdir(out):
+            raise ScoreboardError(f"--out {out}: exists and is not a directory; the board is written "
+                                  "to a folder (give a new or an earlier --out folder)")
         board = run_scoreboard(out, scenarios=args.scenarios, policies=args.policies, seeds=args.seeds,
                                checkpoints=args.policy, quick=args.quick, workers=args.workers,
                                backend=args.backend, ray_address=args.ray_address, resume=args.resume,
@@ -122,6 +126,9 @@ def main(argv: list[str] | None = None) -> int:
                                progress=not args.no_progress, argv=args_list)
     except ScoreboardError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # --out unwritable (permissions, a file on the way, ...)
+        print(f"error: --out {out}: cannot write there ({exc.strerror or exc})", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished episodes are in {out}/{EPISODES_FILE}; "
