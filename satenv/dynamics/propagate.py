@@ -211,6 +211,7 @@ class RelativeModel:
         frame conversions at the ends only. No input validation (the hot path).
         """
         kernel = self._cache["kernel"]
+        u, chief = np.asarray(u), np.asarray(chief)
         n_steps = u.shape[0]
         if kernel is None:
             path = np.empty((n_steps, *x.shape[:-1], 3)) if positions else None
@@ -223,9 +224,12 @@ class RelativeModel:
         lead, m = x.shape[:-2], x.shape[-2]
         n = math.prod(lead)
         xs = np.ascontiguousarray(x.reshape(n, m, 6), dtype=float)
-        cs = np.ascontiguousarray(np.broadcast_to(chief, (*lead, 6)).reshape(n, 6), dtype=float)
-        us = np.ascontiguousarray(np.broadcast_to(u, (n_steps, *lead, m, 3)).reshape(n_steps, n, m, 3),
-                                  dtype=float)
+        if chief.shape != (*lead, 6):
+            chief = np.broadcast_to(chief, (*lead, 6))
+        cs = np.ascontiguousarray(chief.reshape(n, 6), dtype=float)
+        if u.shape != (n_steps, *lead, m, 3):
+            u = np.broadcast_to(u, (n_steps, *lead, m, 3))
+        us = np.ascontiguousarray(u.reshape(n_steps, n, m, 3), dtype=float)
         x_next, chief_next = np.empty_like(xs), np.empty_like(cs)
         path = np.empty((n_steps if positions else 0, n, m, 3))
         run(xs, cs, us, self.substeps, self.dt / self.substeps, params, x_next, chief_next, path)

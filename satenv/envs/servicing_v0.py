@@ -218,6 +218,7 @@ class ServicingCore(BatchedCore):
                           np.asarray(sc.pointing_reference if sc.pointing_reference is not None else (0, 0, 0),
                                      dtype=float))
         self.waypoints = sc.waypoint_array()
+        self._switch_steps = sc.switch_steps
         self.u_max = np.asarray(sc.u_max)
         self.scale_p = sc.keepout_radius
         others = [[j for j in range(m) if j != i] for i in range(m)]
@@ -281,7 +282,8 @@ class ServicingCore(BatchedCore):
     def _features(self, x: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray]:
         sc = self.scenario
         p, v, q, w = x[..., :3], x[..., 3:6], x[..., 6:10], x[..., 10:]
-        wp = self.waypoints[sc.phase(t)]                                  # (B, M, 3)
+        phase = (t[..., None] > self._switch_steps).sum(axis=-1)           # sc.phase(t)
+        wp = self.waypoints[phase]                                        # (B, M, 3)
         if self._ref_kernel is not None:
             q_d, w_d, q_err, pointing = self._attitude_features(x)
         else:
@@ -292,7 +294,7 @@ class ServicingCore(BatchedCore):
         m = self.n_agents
         dist = np.linalg.norm(p[:, :, None] - p[:, None], axis=-1)
         dist[:, np.arange(m), np.arange(m)] = np.inf
-        return {"waypoint": wp, "phase": np.broadcast_to(sc.phase(t)[:, None], d_obj.shape),
+        return {"waypoint": wp, "phase": np.broadcast_to(phase[:, None], d_obj.shape),
                 "e_p": p - wp, "e_v": v - np.asarray(sc.desired_velocity), "q_d": q_d,
                 "q_err": q_err, "w_d": w_d, "e_w": w - w_d, "d_obj": d_obj, "dist": dist,
                 "pointing": pointing}
