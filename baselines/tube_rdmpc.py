@@ -45,8 +45,9 @@ Choices and deviations (documented; each is an option):
 * ``safety_margin = 5 m`` is added to every keep-out distance: the Jacobi exchange plans against
   the neighbours' *previous* predictions while they re-plan at the same time.
 * :meth:`TubeRDMPCConfig.published` drops the two additions above (``v_max=None``,
-  ``terminal_braking=False``); with the env's ``reallocate_every=1`` (Step 4) it is li2022 as
-  published (``benchmarks/repro_li2022.py`` reports both).
+  ``terminal_braking=False``); li2022 as published also drops ``safety_margin``,
+  ``lyapunov_tolerance`` and the relaxed NLP and re-allocates at every decision (Step 4, the env's
+  ``reallocate_every=1``): ``benchmarks/reproductions/li2022.py`` runs it beside ours.
 * Infeasibility: every ipopt solve goes through :func:`baselines.base.guarded_solve` (an
   exception, a failed status, a wrong-shaped or non-finite point, a variable outside its bounds or
   a constraint row violated by more than ``NLP_CONSTRAINT_TOL`` is a failure; why:
@@ -65,7 +66,7 @@ Tube radius (15): ``ε̄ = sqrt(eta / k1) w̄`` with ``w̄ = sup ||w|| + model_e
 ``eta = 1`` by default (Theorem 1 allows any ``eta >= 1 / (4 k2)``; note that for the κ of (13)
 the exact worst case is ``sup ||ε|| = w̄ / (1 + k1)`` — the closed loop
 ``ε'' + (k1 + k2) ε' + (1 + k1) ε = w`` has a non-negative impulse response — which exceeds
-(15) for ``eta < (k1 / (1 + k1)^2) = 0.22``; ``benchmarks/repro_li2022.py`` measures it).
+(15) for ``eta < (k1 / (1 + k1)^2) = 0.22``; ``benchmarks/reproductions/li2022.py`` measures it).
 
 Solver: CasADi + ipopt (MUMPS), NLPs built once per process and config
 (:func:`baselines.base.nlpsol_cached`), one per neighbour-slot count of :func:`slot_sizes`

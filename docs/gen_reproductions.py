@@ -1,18 +1,22 @@
 """Regenerate the reproduction results the site shows (committed under docs/assets/reproductions/).
 
-Usage:  python docs/gen_reproductions.py [--slow] [--only pereira2023,kannan2022]
+Usage:  python docs/gen_reproductions.py [--slow] [--only pereira2023,kannan2022] [--render-only]
 
-For each paper, runs ``python -m benchmarks.reproduce <paper> --out <paper>.json --plots <paper>/``
-and keeps the printed table as ``<paper>.txt``. The reproduction pages render these files at build
-time (``docs/hooks.py``: the per-claim ``paper`` / ``measured`` / ``met`` fields of the JSON, the
-text table and every figure), so nothing on them is pasted. By default only the fast papers run
-(seconds); ``--slow`` adds the ones that take minutes. A paper's exit status 1 (a claim not met)
-is recorded in its JSON (``pass``) and shown on its page, not treated as an error here.
+For each paper, runs ``python -m benchmarks.reproduce <paper> --out <paper>.json --plots <paper>/``,
+keeps the printed table as ``<paper>.txt`` and renders the JSON into ``<paper>.md`` (:func:`render`:
+the departures table, the claims with the paper's sentence, value, rule and our measurement, the
+as-published / ablation / analysis tables). The reproduction pages include these files at build
+time (``docs/hooks.py``), so nothing on them is typed in: the JSON is the one source.
+``--render-only`` re-renders the ``.md`` files from the committed JSONs (after a run made by hand,
+e.g. ``reproduce li2022 --case 1``). By default only the fast papers run (seconds); ``--slow`` adds
+the ones that take minutes. A paper's exit status 1 (a paper-valued claim of our run not met) is
+recorded in its JSON (``pass``) and shown on its page, not treated as an error here.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import subprocess
 import sys
@@ -22,6 +26,9 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 OUT = DOCS / "assets" / "reproductions"
+
+sys.path.insert(0, str(ROOT))
+from benchmarks.claims import count, markdown_claims, markdown_departures  # noqa: E402
 
 PAPERS: dict[str, bool] = {
     "pereira2023": False,
@@ -46,14 +53,79 @@ def reproduce(paper: str) -> int:
         raise SystemExit(f"{' '.join(cmd[1:])} failed with status {out.returncode}")
     table = "\n".join(line for line in out.stdout.splitlines() if not line.startswith("wrote "))
     (OUT / f"{paper}.txt").write_text(table.rstrip() + "\n")
+    write_page(paper)
     print(f"{paper}: status {out.returncode}, {time.perf_counter() - start:.0f} s")
     return out.returncode
+
+
+def _value(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, list):
+        return "; ".join(_value(x) for x in v) if v else "-"
+    return "-" if v is None else str(v).replace("|", "\\|")
+
+
+def table(rows: list[dict], keys: list[str] | None = None) -> str:
+    """A Markdown table of a list of flat dicts (``keys``: the columns, default every key)."""
+    keys = keys or list(dict.fromkeys(k for r in rows for k in r))
+    out = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    return "\n".join(out + ["| " + " | ".join(_value(r.get(k)) for k in keys) + " |" for r in rows])
+
+
+def render(result: dict) -> str:
+    """The page body of one reproduction result: verdict, departures, claims, analyses."""
+    n = count(result.get("claims", []))
+    verdict = "met" if result.get("pass") else "**not met**"
+    parts = [f"**Verdict:** the paper-valued claims of our run: {n['gating_met']}/{n['gating']} {verdict}. "
+             f"All rows (our run, as published, ablations): {n['met']} met, {n['not met']} not met, "
+             f"{n['paper gives no value']} where the paper gives no value (reported, never counted as met). "
+             "A claim's rule comes from the paper's sentence it quotes: a value is judged as a +-10 % band "
+             "around it, a stated limit or fact as stated."]
+    if result.get("departures"):
+        parts += ["### Departures from the paper",
+                  "Every setting where our run differs from the paper, with its measured effect on the claims.",
+                  markdown_departures(result["departures"])]
+    parts += ["### Claims", markdown_claims(result.get("claims", []))]
+    if result.get("ablation"):
+        parts += ["### Ablation: ours minus each addition (case 1)",
+                  table(result["ablation"], ["variant", "removed", "convergence_time_s", "satellites_within_1m_at_end",
+                                             "final_error_m", "max_rise_m", "collisions", "failed_solves",
+                                             "relaxed_solves", "fallbacks", "changed_claims"])]
+    if result.get("sensitivity"):
+        parts += ["### Accuracy against our Lyapunov tolerance (case 1, started on the targets)",
+                  table(result["sensitivity"], ["lyapunov_tolerance", "floor_m", "final_error_m",
+                                                "max_error_last_10_m", "nominal_residual_m", "max_tube_error_m",
+                                                "relaxed_solves", "fallbacks"])]
+    if result.get("foe_analysis"):
+        parts += ["### FOE analysis",
+                  "Offset per cell: the `foe_ratio` (ours / Table II) and `steps_behind` columns of the command's "
+                  "table below. What was varied, one setting at a time, and what moved the FOE:",
+                  table(result["foe_analysis"])]
+    notes = result.get("notes")
+    if isinstance(notes, dict):
+        parts += ["### Notes"] + [f"**{k}.** {v}" for k, v in notes.items()]
+        if "plf_tplf_followers_1_2_max_state_difference" in result:
+            parts.append("Measured: the largest difference between the PLF and TPLF states of followers 1-2 is "
+                         f"{result['plf_tplf_followers_1_2_max_state_difference']:.3g}.")
+    elif isinstance(notes, list) and notes:
+        parts += ["### Notes"] + notes
+    return "\n\n".join(parts) + "\n"
+
+
+def write_page(paper: str) -> Path:
+    """Render ``OUT/<paper>.json`` into ``OUT/<paper>.md``."""
+    path = OUT / f"{paper}.md"
+    path.write_text(render(json.loads((OUT / f"{paper}.json").read_text())))
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--slow", action="store_true", help="also run the slow reproductions")
     parser.add_argument("--only", default=None, help="comma-separated papers (overrides --slow)")
+    parser.add_argument("--render-only", action="store_true",
+                        help="re-render <paper>.md from the committed JSONs, run nothing")
     args = parser.parse_args(argv)
     papers = args.only.split(",") if args.only else [p for p, slow in PAPERS.items() if args.slow or not slow]
     unknown = sorted(set(papers) - set(PAPERS))
@@ -61,7 +133,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--only: unknown papers {unknown}; known: {sorted(PAPERS)}")
     OUT.mkdir(parents=True, exist_ok=True)
     for paper in papers:
-        reproduce(paper)
+        if args.render_only:
+            print(f"rendered {write_page(paper)}")
+        else:
+            reproduce(paper)
     return 0
 
 

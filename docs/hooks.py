@@ -8,9 +8,9 @@ host), each alone on a line:
 ``<!-- env-figure: platoon_v0 -->``
     the env's picture and caption from ``assets/envs/figures.json`` (``docs/gen_figures.py``);
 ``<!-- reproduction: pereira2023 -->``
-    status, per-claim table (``paper`` / ``measured`` / ``met`` and whatever else each claim
-    carries), the command's printed table and every figure of ``assets/reproductions/<paper>``
-    (``docs/gen_reproductions.py``);
+    status, the rendered ``assets/reproductions/<paper>.md`` (departures, claims with the paper's
+    sentence, as-published and analysis tables), the command's printed table and every figure of
+    ``assets/reproductions/<paper>`` (all written by ``docs/gen_reproductions.py``);
 ``<!-- include: benchmarks/published/scoreboard.md -->``, ``<!-- include: README.md#quick-start -->``
     a repository file's Markdown (path from the repository root), or the section under one
     heading (its slug), headings shifted one level down; its relative links to ``docs/`` pages
@@ -178,10 +178,14 @@ def reproduction(paper: str, page_src: str) -> str:
         return (f"!!! note \"Not generated yet\"\n    `{json_path.relative_to(ROOT)}` is not in this "
                 f"checkout: run `python docs/gen_reproductions.py --only {paper}` (or `{command}`).")
     result = json.loads(json_path.read_text(encoding="utf-8"))
-    status = "every claim met" if result.get("pass") else "**not every claim met**"
+    status = ("every paper-valued claim of our run met" if result.get("pass")
+              else "**not every paper-valued claim of our run met**")
     parts = [f"Result of `{command}` (`{json_path.relative_to(ROOT)}`): {status}"
              + (f", wall time {result['wall_time_s']:.0f} s." if "wall_time_s" in result else ".")]
-    if result.get("claims"):
+    page = base / f"{paper}.md"             # departures, claims, analyses (docs/gen_reproductions.py)
+    if page.exists():
+        parts.append(page.read_text(encoding="utf-8"))
+    elif result.get("claims"):
         parts += ["### Claims", claims_table(result["claims"])]
     text = base / f"{paper}.txt"
     if text.exists():

@@ -1,5 +1,7 @@
-"""benchmarks.claims: the shared claim records and the reproduce exit code."""
+"""benchmarks.claims: claim and departure records, the exit-code rule, and every reproduction's
+departures against its paper-valued config."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -7,46 +9,133 @@ import pytest
 
 from benchmarks import claims, reproduce
 
-
-def test_claim_record_is_json_ready():
-    rec = claims.claim("FOE PLF follower 1", 3.262e-6, np.float64(6.9e-6), np.bool_(False),
-                       target="<= 1.5x paper", topology="PLF", follower=np.int64(1))
-    assert rec == {"claim": "FOE PLF follower 1", "paper": 3.262e-6, "measured": 6.9e-6,
-                   "met": False, "target": "<= 1.5x paper", "topology": "PLF", "follower": 1}
-    json.dumps(rec)
+SRC = "The convergence time of the distributed RDMPC controller is 1000 s."
 
 
-def test_verdicts():
-    ok, bad = claims.claim("a", 1, 1, True), claims.claim("b", 1, 2, False)
-    assert claims.all_met([ok]) and not claims.all_met([ok, bad]) and not claims.all_met([])
-    assert claims.passed({"pass": True, "claims": [ok]})
-    assert not claims.passed({"pass": True, "claims": [ok, bad]})
-    assert not claims.passed({"pass": False, "claims": [ok]})
-    assert claims.within(2.0, 1.5, 1.5) and not claims.within(3.0, 1.5, 1.5)
-    assert claims.within(1.0, 1.5, 1.5) and not claims.within(0.0, 1.5, 1.5)
-    with pytest.raises(ValueError, match="factor"):
-        claims.within(1.0, 1.0, 0.5)
+def test_band_is_around_the_paper_value_and_can_fail():
+    ok = claims.band("t", SRC, 1000.0, np.float64(1055.0), unit="s")
+    assert ok["status"] == "met" and ok["met"] and ok["gating"] and ok["measured"] == 1055.0
+    assert "[900, 1100] s" in ok["rule"] and ok["source"] == SRC
+    for bad in (1101.0, 899.0, None, float("nan")):
+        assert claims.band("t", SRC, 1000.0, bad)["status"] == "not met"
+    assert claims.band("t", SRC, 1000.0, 1400.0, tol=0.5)["met"]
+    vec = claims.band("p", SRC, [0.0, -10.0, 0.0], [0.5, -10.5, 0.5])
+    assert vec["met"] and "distance <= 1" in vec["rule"]
+    assert not claims.band("p", SRC, [0.0, -10.0, 0.0], [1.0, -10.0, 0.5])["met"]
+    with pytest.raises(ValueError, match="tol"):
+        claims.band("t", SRC, 1.0, 1.0, tol=1.5)
+    with pytest.raises(TypeError, match="source"):
+        claims.band("t", "", 1.0, 1.0)
     with pytest.raises(TypeError, match="claim name"):
-        claims.claim("", 1, 1, True)
+        claims.band("", SRC, 1.0, 1.0)
 
 
-def test_format_and_markdown(tmp_path, capsys):
-    result = {"paper": "x2020", "claims": [claims.claim("a", 1.0, 1.25, True, target="+-30%"),
-                                           claims.claim("b", "stated", None, False)]}
-    text = claims.format_claims(result["claims"])
-    assert "NOT MET" in text and "claims met: 1/2 -> FAIL" in text
-    rows = claims.markdown_rows(result)
-    assert rows[0] == "| x2020 | a | 1 | 1.25 | +-30% | met |"
-    assert "**not met**" in rows[1]
+def test_bound_statement_and_no_value():
+    assert claims.bound("u", SRC, 1.0, 0.99)["met"] and not claims.bound("u", SRC, 1.0, 1.01)["met"]
+    assert claims.bound("d", SRC, 10.0, 10.0, op=">=")["met"]
+    assert not claims.bound("d", SRC, 10.0, 9.9, op=">=")["met"]
+    with pytest.raises(ValueError, match="op"):
+        claims.bound("d", SRC, 10.0, 9.9, op="<")
+    st = claims.statement("c", SRC, 0, 3, False, rule="0 collisions", case=np.int64(1))
+    assert st["status"] == "not met" and st["case"] == 1
+    nv = claims.no_value("x", SRC, 12.5, ours="<= 5 deg: not met")
+    assert nv["status"] == claims.NO_VALUE and not nv["met"] and not nv["gating"] and nv["paper"] is None
+    assert "our test" in nv["rule"]
+    json.dumps([st, nv])
+
+
+def test_exit_rule_counts_only_paper_valued_claims_of_our_run():
+    ok = claims.band("a", SRC, 1.0, 1.0)
+    bad_pub = claims.band("a", SRC, 1.0, 5.0, variant="as published")
+    nv = claims.no_value("b", SRC, 3.0)
+    assert claims.passed({"claims": [ok, bad_pub, nv]})
+    assert not claims.passed({"claims": [ok, claims.band("c", SRC, 1.0, 2.0)]})
+    assert not claims.passed({"claims": [nv]}) and not claims.passed({"claims": []})
+    n = claims.count([ok, bad_pub, nv])
+    assert n == {"met": 1, "not met": 1, claims.NO_VALUE: 1, "gating": 1, "gating_met": 1}
+    assert claims.changed_claims([ok], [bad_pub]) == ["a"]
+
+
+def test_departure_record_and_tables(tmp_path, capsys):
+    d = claims.departure("speed bound", claims.NOT_STATED, "2.5 m/s", "why", "effect", fields=["v_max"])
+    assert d["fields"] == ["v_max"] and d["paper"] == "not stated"
+    with pytest.raises(TypeError, match="effect"):
+        claims.departure("x", 1, 2, "why", "")
+    table = claims.markdown_departures([d])
+    assert table.splitlines()[2] == "| speed bound | not stated | 2.5 m/s | why | effect |"
+    rows = [claims.band("a | b", SRC, 1.0, 1.25), claims.no_value("c", SRC, None)]
+    md = claims.markdown_claims(rows)
+    assert "a \\| b" in md and "**not met**" in md and "*paper gives no value*" in md and SRC in md
+    text = claims.format_claims(rows)
+    assert "NOT MET" in text and "met: 0/1 -> FAIL" in text
     path = tmp_path / "r.json"
-    path.write_text(json.dumps(result))
+    path.write_text(json.dumps({"paper": "x2020", "claims": rows}))
     assert claims.main([str(path)]) == 0
-    assert "| x2020 | b |" in capsys.readouterr().out
+    assert "| x2020 | c |" in capsys.readouterr().out
 
 
-def test_reproduce_help_lists_run_times(capsys):
+def test_reproduce_help_lists_run_times_and_rejects_other_names(capsys):
     with pytest.raises(SystemExit):
         reproduce.main(["--help"])
     out = capsys.readouterr().out
     for paper in reproduce.PAPERS:
         assert paper in out
+    for bad in ("smith1999", "../../etc/passwd", "claims", "li2022.py"):
+        with pytest.raises(ValueError, match="no reproduction for paper"):
+            reproduce.load(bad)
+
+
+# --- departures: every config field that differs from the paper is in the table -----------------
+
+def _differing(ours, paper) -> set[str]:
+    a, b = dataclasses.asdict(ours), dataclasses.asdict(paper)
+    return {k for k in a if a[k] != b[k]}
+
+
+def _covered(departures) -> set[str]:
+    return {f for d in departures for f in d["fields"]}
+
+
+def test_li2022_departures_cover_every_field_ours_changes():
+    from baselines.tube_rdmpc import TubeRDMPCConfig
+    from benchmarks.reproductions import li2022
+
+    paper = li2022.paper_config()
+    diff = _differing(TubeRDMPCConfig(), paper) | set(li2022.PAPER_ENV)
+    assert diff >= {"v_max", "terminal_braking", "safety_margin", "relax_on_failure", "lyapunov_tolerance"}
+    assert diff <= _covered(li2022.departures())
+    assert not _differing(paper, TubeRDMPCConfig.published(safety_margin=0.0, lyapunov_tolerance=0.0,
+                                                           relax_on_failure=False))
+    for addition, values in li2022.ADDITIONS.items():       # each ablation removes exactly one addition
+        assert set(values) == _differing(TubeRDMPCConfig(), TubeRDMPCConfig(**values)), addition
+
+
+def test_servicing_departures_cover_the_terminal_attitude_weight():
+    from baselines.nmpc import NMPCConfig
+    from benchmarks.reproductions import pereira2022_servicing as serv
+
+    paper = NMPCConfig(**serv.VARIANTS["as published"])
+    assert _differing(NMPCConfig(), paper) <= _covered(serv.departures({}))
+
+
+def test_platoon_departures_cover_the_config_fields():
+    from baselines.dmpc import PAPER_CONFIGS
+    from benchmarks.reproductions import pereira2022_platoon as plat
+    from benchmarks.reproductions import pereira2023 as p23
+
+    p23_paper = dataclasses.replace(PAPER_CONFIGS["pereira2023"], velocity_margin=0.0)
+    assert _differing(PAPER_CONFIGS["pereira2023"], p23_paper) <= _covered(p23.departures())
+    assert "min_error_constraint" in _covered(p23.departures())           # the scenario's (41)-(42)
+    own = dataclasses.replace(PAPER_CONFIGS["pereira2022"], coupled_constraints=False)
+    eq29 = dataclasses.replace(own, coupled_constraints=True)
+    assert _differing(own, eq29) <= _covered(plat.departures({}))
+
+
+def test_kannan_departures_cover_the_preset_choices():
+    """kannan2022 gives no weights, horizon, sampling time, duration, range or input unit: every
+    scenario field that holds one of those choices is in the table."""
+    from benchmarks.reproductions import kannan2022
+
+    ours = {"offset_weight", "u_max", "dt", "max_steps", "position_weight", "input_weight", "length_scale",
+            "connection_range"}
+    assert ours <= _covered(kannan2022.departures())

@@ -216,41 +216,4 @@ def test_published_configuration_drops_our_two_additions():
         TubeRDMPCConfig.published(vmax=1.0)
 
 
-def test_li2022_claims_check_both_variants_against_the_tube_bound():
-    """Claim records per variant; the accuracy bound is sqrt(eta / k1) * 0.1 (li2022's 0.071 m)."""
-    from benchmarks.repro_li2022 import accuracy_bound, check_claims, variant_setup
-
-    assert accuracy_bound(TubeRDMPCConfig()) == pytest.approx(0.0707, abs=1e-4)
-    env_v, pol_v = variant_setup("published")
-    assert env_v == {"reallocate_every": 1} and pol_v["config"] == TubeRDMPCConfig.published()
-    with pytest.raises(ValueError, match="variant"):
-        variant_setup("paper")
-    base = {"case": 1, "controller": "tube_rdmpc", "satellites_within_1m_at_end": 10, "relaxed_solves": 0,
-            "fallbacks": 0, "final_nominal_error_m": 0.02, "max_tube_error_m": 0.001,
-            "lyapunov_floor_m": 0.022, "collisions": 0, "max_thrust_N": 0.97}
-    rows = [{**base, "variant": "ours", "convergence_time_s": 1055.0, "final_error_m": 0.023},
-            {**base, "variant": "published", "convergence_time_s": None, "final_error_m": 57.0,
-             "satellites_within_1m_at_end": 8},
-            {**base, "controller": "apf", "variant": "ours", "convergence_time_s": 1605.0,
-             "final_error_m": 0.27}]
-    claims = check_claims(rows)
-    assert all({"claim", "paper", "measured", "met"} <= set(c) for c in claims)
-    assert len({c["claim"] for c in claims}) == len(claims)
-    met = {c["claim"].split(" (")[0]: c["met"] for c in claims}
-    assert met["case 1 RDMPC ours: converges in about 1000 s"]
-    assert met["case 1 RDMPC ours: accuracy about 0.071 m"]
-    assert not met["case 1 RDMPC published: converges in about 1000 s"]
-    assert not met["case 1 RDMPC published: accuracy about 0.071 m"]
-    assert not met["case 1 APF: slower than RDMPC published [s]"]
-    assert met["case 1 APF: slower than RDMPC ours [s]"]
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("case", [1, 2])
-def test_full_li2022_reproduction_meets_the_claims(case):
-    """Our RDMPC's and the APF's whole 2000 s episodes (about 1.5 min per case on 2 cores)."""
-    from benchmarks.repro_li2022 import run
-
-    result = run(case=case, tube=False, variants=("ours",), sensitivity=False)
-    failed = [c for c in result["claims"] if not c["met"]]
-    assert not failed, failed
+# The li2022 reproduction's claims and full run: tests/test_reproduce_li2022.py

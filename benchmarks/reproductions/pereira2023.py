@@ -1,0 +1,322 @@
+"""Reproduce pereira2023 Table II: the 1-hop DMPC on the Table I platoon, PLF / BDL / TPLF.
+
+Runs ``satenv.platoon_v0(preset="pereira2023", topology=T, terminate_on_collision=False)`` with
+``baselines.dmpc.DMPC`` (defaults: DAQP, sigma = 0.5, seeded random initial sequence, shifted
+warm start) through ``satenv.rollout`` and measures RMSE / RMSEE / FOE with ``satenv.metrics``
+(the tracking error is ``E_f - (g_f + d_f) E_d``, eq. 15). The formation of Table I brings bodies
+closer than ``2 r_f`` (see ``satenv.envs.platoon_v0``), hence ``terminate_on_collision=False``;
+the collision flags are reported, not hidden.
+
+Claims (``result["claims"]``, :mod:`benchmarks.claims`), each quoting its Table II cell: every
+RMSE, RMSEE and FOE within +-10 % of the paper's value, and per topology the constraints
+respected (§IV: "while respecting the constraints"; 0 violations). Whether the error converges
+has no value of its own in the paper beyond the FOE cells ("paper gives no value"). The FOE
+analysis (:func:`foe_analysis`: per cell the ratio to Table II and the tail delay; each setting
+varied and how much it moved the FOE) and :data:`PLF_TPLF_NOTE` (why followers 1-2 are identical
+in PLF and TPLF, measured as the largest state difference) are on the page; the departures
+(:func:`departures`) include the velocity margin, whose effect is measured in the same run.
+Also reported per row: ``rmse_unscaled_ed``, the RMSE of ``E_f - E_d`` (E_d not multiplied by
+``g_f + d_f``), the other reading of the paper's metric.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks._io import progress
+from benchmarks.claims import (
+    NOT_STATED,
+    band,
+    departure,
+    format_claims,
+    no_value,
+    passed,
+    statement,
+)
+
+PAPER = "pereira2023"
+TOPOLOGIES = ("PLF", "BDL", "TPLF")
+
+# Table II of pereira2023: (RMSE, RMSEE [m/s^2], FOE) per follower and network.
+TABLE_II: dict[str, list[tuple[float, float, float]]] = {
+    "PLF": [(19.781, 4.930, 3.262e-6), (36.932, 4.807, 4.873e-6),
+            (40.557, 4.884, 6.726e-6), (31.953, 3.985, 4.670e-6)],
+    "BDL": [(41.506, 4.697, 7.180e-6), (44.486, 4.682, 5.385e-6),
+            (50.787, 4.346, 1.035e-5), (33.542, 4.836, 7.941e-6)],
+    "TPLF": [(19.980, 5.064, 3.783e-6), (36.829, 4.840, 4.727e-6),
+             (71.448, 4.665, 1.419e-5), (58.155, 4.214, 8.990e-6)],
+}
+SOURCE_TABLE = "TABLE II: Simulation performance of the DMPC for spacecraft platooning"
+SOURCE_CONSTRAINTS = ("In all scenarios the proposed strategy manages to successfully converge the error to the "
+                      "desired values, while respecting the constraints that were imposed for each topology and "
+                      "with a behavior that goes according to the considered penalties.")
+VARIATIONS: dict[str, dict[str, Any]] = {
+    "stopping rule 'all'": {"stopping": "all"},
+    "sigma 1e-6": {"sigma": 1e-6},
+    "warm start 'previous'": {"warm_start": "previous"},
+    "initial sequence zeros": {"initial": "zeros"},
+    "seed 1 (random initial sequence)": {"seed": 1},
+    "minimum-error constraint (41)-(42) on (the paper's)": {"min_error_constraint": True},
+    "velocity margin 0 (the paper's box (40))": {"velocity_margin": 0.0},
+    "horizon N = 40": {"horizon": 40},
+    "unconstrained": {"constrained": False},
+}
+"""FOE analysis: DMPC settings varied one at a time (``DMPCConfig`` fields) against our default."""
+RUN_TIME = "about 10-40 s (1-4 s for Table II, the rest for the FOE analysis)"
+
+FOE_NOTE = (
+    "FOE is the tail of a mode that decays by the measured rate per step (the slow closed-loop pole "
+    "of Q = 13 I, W = 0.1 I) over the whole episode, so it is the slow-mode amplitude times ~e^-18: "
+    "'steps_behind' = ln(FOE / paper) / ln(1 / rate) is the delay of our tail behind the paper's. "
+    "The FOE analysis varies one DMPC setting at a time and reports the range of FOE / Table II over "
+    "the 12 cells and the largest change of a cell's FOE against our default.")
+PLF_TPLF_NOTE = (
+    "Followers 1 and 2 hear the same agents (leader; leader and follower 1) with the same g+d in "
+    "PLF and TPLF and nothing flows back from followers 3-4, so under Algorithm 1 (per-agent "
+    "stopping) their problems, states and inputs are identical in both topologies; the paper's "
+    "different numbers (19.781 vs 19.980, 36.932 vs 36.829) cannot come from the stated "
+    "algorithm and data (follower 1's QP involves no other agent's plan, so neither the random "
+    "initial sequence nor the stopping rule can change it).")
+
+
+def run_topology(topology: str, seed: int = 0, **dmpc_options):
+    """One Table I episode under ``topology``; returns ``(trajectory, env, policy)``."""
+    import satenv
+    from baselines.dmpc import DMPC
+    from satenv.rollout import rollout
+
+    env = satenv.make("platoon_v0", preset=PAPER, topology=topology, terminate_on_collision=False)
+    policy = DMPC(env, seed=seed, **dmpc_options)
+    traj = rollout(env, policy, seed=seed)
+    return traj, env, policy
+
+
+def _foe(seed: int, **dmpc_options) -> tuple[dict[tuple[str, int], float], int]:
+    """FOE per (topology, follower) of one run of the three topologies, and its violations."""
+    from satenv import metrics
+
+    out, violations, rmse_err = {}, 0, 0.0
+    for topo in TOPOLOGIES:
+        traj, _env, _pol = run_topology(topo, seed=seed, **dmpc_options)
+        out.update({(topo, f + 1): float(v) for f, v in enumerate(metrics.foe(traj))})
+        violations += metrics.violations(traj)
+        rmse_err = max([rmse_err] + [abs(v / TABLE_II[topo][f][0] - 1) for f, v in enumerate(metrics.rmse(traj))])
+    return out, violations, rmse_err
+
+
+def foe_analysis(rows: list[dict], seed: int = 0) -> list[dict[str, Any]]:
+    """Each :data:`VARIATIONS` entry: FOE / Table II over the 12 cells (min, max) and the largest
+    relative change of a cell's FOE against our default (what moved it)."""
+    base = {(r["topology"], r["follower"]): r["foe"] for r in rows}
+    paper = {(r["topology"], r["follower"]): r["paper_foe"] for r in rows}
+    out = [{"setting": "our default (Table I, sigma = 0.5, per-agent stopping, shift warm start)",
+            "foe_ratio_min": min(base[k] / paper[k] for k in base), "foe_ratio_max": max(base[k] / paper[k] for k in base),
+            "max_change_vs_default": 0.0, "cells_within_10pct": sum(abs(base[k] / paper[k] - 1) <= 0.1 for k in base),
+            "violations": None, "rmse_worst_rel_err": max(abs(r["rmse_rel_err"]) for r in rows)}]
+    for name, opts in VARIATIONS.items():
+        progress(f"pereira2023: FOE analysis, {name} ...")
+        seed_v = opts.get("seed", seed)
+        foe, violations, rmse_err = _foe(seed_v, **{k: v for k, v in opts.items() if k != "seed"})
+        out.append({"setting": name, "foe_ratio_min": min(foe[k] / paper[k] for k in foe),
+                    "foe_ratio_max": max(foe[k] / paper[k] for k in foe),
+                    "max_change_vs_default": max(abs(foe[k] / base[k] - 1) for k in foe),
+                    "cells_within_10pct": sum(abs(foe[k] / paper[k] - 1) <= 0.1 for k in foe),
+                    "violations": violations, "rmse_worst_rel_err": rmse_err})
+    return out
+
+
+def reproduce(plots: str | Path | None = None, seed: int = 0, analysis: bool = True) -> dict[str, Any]:
+    """Run the three topologies, compare with Table II; the FOE analysis (``analysis``) and
+    optionally the figures (``plots``)."""
+    from satenv import metrics
+
+    start = time.perf_counter()
+    rows, runs, per_topology = [], {}, {}
+    for topo in TOPOLOGIES:
+        progress(f"pereira2023: {topo} ...")
+        traj, env, policy = run_topology(topo, seed=seed)
+        runs[topo] = (traj, env)
+        rmse, rmsee, foe = metrics.rmse(traj), metrics.rmsee(traj), metrics.foe(traj)
+        e_d = np.asarray(env.scenario.desired_error)
+        unscaled = traj.info["neighbourhood_error"][:-1] - e_d
+        rmse_unscaled = np.sqrt(np.mean(np.sum(unscaled**2, axis=-1), axis=0))
+        err = np.linalg.norm(traj.info["tracking_error"], axis=-1)
+        rate = err[-1] / err[-2]
+        for f in range(env.scenario.n_followers):
+            p_rmse, p_rmsee, p_foe = TABLE_II[topo][f]
+            rows.append({
+                "topology": topo, "follower": f + 1,
+                "rmse": float(rmse[f]), "rmsee": float(rmsee[f]), "foe": float(foe[f]),
+                "paper_rmse": p_rmse, "paper_rmsee": p_rmsee, "paper_foe": p_foe,
+                "rmse_rel_err": float(rmse[f] / p_rmse - 1.0),
+                "rmsee_rel_err": float(rmsee[f] / p_rmsee - 1.0),
+                "foe_ratio": float(foe[f] / p_foe),
+                "tail_rate": float(rate[f]),
+                "steps_behind": float(np.log(foe[f] / p_foe) / np.log(1.0 / rate[f])),
+                "rmse_unscaled_ed": float(rmse_unscaled[f]),
+            })
+        qp_ms = np.asarray(policy.info["qp_ms"])
+        per_topology[topo] = {
+            "collision_steps": metrics.collisions(traj),
+            "min_separation_m": metrics.min_separation(traj),
+            "violations": metrics.violations(traj),
+            "fallbacks": int(policy.info["fallbacks"]),
+            "not_converged": int(policy.info["not_converged"]),
+            "mean_jacobi_iterations": float(np.mean(policy.info["iterations"])),
+            "median_qp_ms": float(np.median(qp_ms)) if qp_ms.size else 0.0,
+            "median_decision_ms": float(np.median(policy.info["solve_ms"])),
+            "steps": traj.steps,
+        }
+    plf, tplf = runs["PLF"][0].states, runs["TPLF"][0].states
+    checks = check_claims(rows, per_topology)
+    foe_rows = foe_analysis(rows, seed=seed) if analysis else []
+    result = {
+        "paper": PAPER, "rows": rows, "claims": checks, "per_topology": per_topology, "seed": seed,
+        "notes": {"foe": FOE_NOTE, "plf_tplf_followers_1_2": PLF_TPLF_NOTE},
+        "plf_tplf_followers_1_2_max_state_difference": float(np.abs(plf[:, :2] - tplf[:, :2]).max()),
+        "foe_analysis": foe_rows,
+        "departures": departures(foe_rows),
+        "settings": {"env": "platoon_v0(preset='pereira2023', terminate_on_collision=False)",
+                     "policy": "baselines.dmpc.DMPC (one_hop, daqp, sigma=0.5, per-agent stopping, "
+                               "warm_start='shift')",
+                     "metric": "tracking error E_f - (g_f + d_f) E_d (eq. 15)"},
+    }
+    result["pass"] = passed(result)
+    if plots is not None:
+        result["figures"] = [str(p) for p in save_figures(runs, Path(plots))]
+    result["wall_time_s"] = time.perf_counter() - start
+    return result
+
+
+def _cell(r: dict, metric: str) -> str:
+    i = {"rmse": 0, "rmsee": 1, "foe": 2}[metric]
+    return (f"{SOURCE_TABLE}: f = {r['follower']}, {r['topology']}, {metric.upper()} = "
+            f"{TABLE_II[r['topology']][r['follower'] - 1][i]:g}")
+
+
+def check_claims(rows: list[dict], per_topology: dict[str, dict]) -> list[dict[str, Any]]:
+    """Table II per cell (RMSE, RMSEE, FOE within +-10 %), and per topology the constraints
+    respected (§IV) and the error converged (no value of its own)."""
+    out = []
+    for r in rows:
+        cell = {"topology": r["topology"], "follower": r["follower"]}
+        label = f"{r['topology']} follower {r['follower']}"
+        out.append(band(f"RMSE {label}", _cell(r, "rmse"), r["paper_rmse"], r["rmse"], **cell))
+        out.append(band(f"RMSEE {label} [m/s^2]", _cell(r, "rmsee"), r["paper_rmsee"], r["rmsee"], **cell))
+        out.append(band(f"FOE {label}", _cell(r, "foe"), r["paper_foe"], r["foe"],
+                        note="see the FOE analysis", foe_ratio=r["foe_ratio"], **cell))
+    for topo, d in per_topology.items():
+        worst = max(r["foe"] for r in rows if r["topology"] == topo)
+        out.append(no_value(f"{topo} error converges (max FOE)", SOURCE_CONSTRAINTS, worst,
+                            ours=f"max FOE <= 1e-4: {'met' if worst <= 1e-4 else 'not met'}", topology=topo))
+        out.append(statement(f"{topo} constraints (39)-(40) respected (violations)", SOURCE_CONSTRAINTS,
+                             0, d["violations"], d["violations"] == 0, rule="0 violations",
+                             fallbacks=d["fallbacks"], topology=topo))
+    return out
+
+
+def departures(foe_rows: list[dict] | None = None) -> list[dict[str, Any]]:
+    """Where our run differs from Table I / §IV, with the effect measured in the FOE analysis."""
+    margin = next((r for r in foe_rows or [] if r["setting"].startswith("velocity margin")), None)
+    effect = ("not measured in this result" if margin is None else
+              f"without it (FOE analysis): FOE / Table II {margin['foe_ratio_min']:.2f}-{margin['foe_ratio_max']:.2f}, "
+              f"largest FOE change {100 * margin['max_change_vs_default']:.2g} %, "
+              f"{margin['cells_within_10pct']}/12 FOE cells within 10 %, velocity-bound violations "
+              f"{margin['violations']} (ours: 0)")
+    min_err = next((r for r in foe_rows or [] if r["setting"].startswith("minimum-error")), None)
+    min_effect = ("not measured in this result" if min_err is None else
+                  f"with it (FOE analysis): FOE / Table II {min_err['foe_ratio_min']:.2f}-{min_err['foe_ratio_max']:.2f}, "
+                  f"largest FOE change {100 * min_err['max_change_vs_default']:.2g} %, worst RMSE error "
+                  f"{100 * min_err['rmse_worst_rel_err']:.1f} %, violations {min_err['violations']}")
+    return [
+        departure("minimum tracking-error constraint (41)-(42)", "imposed (Fig. 8: 'also satisfied')", "off "
+                  "(the preset's min_error_constraint=False)", "the platoon scenario's default (the preset does not turn it on); no "
+                  "reason is recorded: its measured effect is beside", min_effect, fields=["min_error_constraint"]),
+        departure("velocity box (40) margin", "(g+d) v_max", "(g+d) v_max - 1e-4 m/s",
+                  "the applied velocity also depends on the neighbours' final Jacobi iterates; without the margin "
+                  "the bound was exceeded by 1e-8 m/s on 2-3 steps", effect, fields=["velocity_margin"]),
+        departure("QP solver", "CasADi solver(.) in MATLAB R2019A", "DAQP (exact active set)",
+                  "exact optimum; OSQP at its default tolerance differed by up to 1.5 in U",
+                  "not measured separately"),
+        departure("random initial sequence of Algorithm 1", NOT_STATED, "seeded (seed 0)",
+                  "the paper gives none", "FOE analysis: 'seed 1' and 'initial sequence zeros' rows"),
+        departure("tracking error of the metrics", "E_f - E_d (FOE formula) with E_d of eq. 15",
+                  "E_f - (g_f + d_f) E_d (eq. 15)", "the paper's two readings differ; rows also report the "
+                  "unscaled RMSE (rmse_unscaled_ed)", "RMSE of the other reading: rmse_unscaled_ed per row"),
+    ]
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """The reproduced table beside Table II (plain text), the FOE analysis and the claims."""
+    lines = [f"{'f':>2} {'net':>5} | {'RMSE':>8} {'paper':>8} {'err':>7} | {'RMSEE':>6} "
+             f"{'paper':>6} {'err':>7} | {'FOE':>9} {'paper':>9} {'x':>5} {'behind':>6}"]
+    lines.append("-" * len(lines[0]))
+    for r in sorted(result["rows"], key=lambda r: (r["follower"], TOPOLOGIES.index(r["topology"]))):
+        lines.append(
+            f"{r['follower']:>2} {r['topology']:>5} | {r['rmse']:8.3f} {r['paper_rmse']:8.3f} "
+            f"{100 * r['rmse_rel_err']:+6.1f}% | {r['rmsee']:6.3f} {r['paper_rmsee']:6.3f} "
+            f"{100 * r['rmsee_rel_err']:+6.1f}% | {r['foe']:9.2e} {r['paper_foe']:9.2e} "
+            f"{r['foe_ratio']:5.2f} {r['steps_behind']:6.1f}")
+    for topo, d in result["per_topology"].items():
+        lines.append(f"{topo}: min separation {d['min_separation_m']:.2f} m, collision flags "
+                     f"{d['collision_steps']}, violations {d['violations']}, fallbacks "
+                     f"{d['fallbacks']}, mean Jacobi iterations {d['mean_jacobi_iterations']:.2f}")
+    if result.get("foe_analysis"):
+        lines.append("FOE analysis (one setting varied at a time): FOE / Table II min-max, largest change vs default, "
+                     "cells within 10 %")
+        for a in result["foe_analysis"]:
+            lines.append(f"  {a['setting']:<60} {a['foe_ratio_min']:6.2f}-{a['foe_ratio_max']:<6.2f} "
+                         f"{100 * a['max_change_vs_default']:8.1f} % {a['cells_within_10pct']:>3}/12")
+    lines.append(f"PLF vs TPLF, followers 1-2: largest state difference "
+                 f"{result['plf_tplf_followers_1_2_max_state_difference']:.3g}")
+    lines.append(format_claims(result["claims"]) + f" (wall time {result['wall_time_s']:.1f} s)")
+    return "\n".join(lines)
+
+
+def save_figures(runs: dict, out: Path) -> list[Path]:
+    """Analogues of pereira2023 Fig. 4-7 (one PNG per follower: position error, velocity error
+    and input per axis, the three topologies overlaid) and a 3-D trajectory plot per topology."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from satenv.render import plot_trajectory
+
+    out.mkdir(parents=True, exist_ok=True)
+    paths: list[Path] = []
+    n = next(iter(runs.values()))[1].scenario.n_followers
+    axes_names = ("x", "y", "z")
+    for f in range(n):
+        fig, axs = plt.subplots(3, 3, figsize=(11, 8), sharex=True)
+        for topo, (traj, _env) in runs.items():
+            e = traj.info["tracking_error"][:, f]
+            u = traj.info["accel"][1:, f]
+            for c in range(3):
+                axs[0, c].plot(traj.t, e[:, c], label=topo)
+                axs[1, c].plot(traj.t, e[:, 3 + c], label=topo)
+                axs[2, c].step(traj.t[:-1], u[:, c], where="post", label=topo)
+        for c in range(3):
+            axs[0, c].set_title(f"{axes_names[c]}")
+            axs[2, c].set_xlabel("t [s]")
+        axs[0, 0].set_ylabel("position error [m]")
+        axs[1, 0].set_ylabel("velocity error [m/s]")
+        axs[2, 0].set_ylabel("input u [m/s$^2$]")
+        axs[0, 0].legend()
+        for a in axs.ravel():
+            a.grid(alpha=0.3)
+        fig.suptitle(f"pereira2023 Fig. {4 + f} analogue: follower {f + 1} "
+                     "(tracking error E_f - (g+d)E_d, input)")
+        fig.tight_layout()
+        path = out / f"pereira2023_follower{f + 1}.png"
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        paths.append(path)
+    for topo, (traj, _env) in runs.items():
+        paths.append(plot_trajectory(traj, out / f"pereira2023_{topo}_trajectory.png",
+                                     title=f"pereira2023 {topo}: DMPC trajectories (LVLH)"))
+    return paths

@@ -1,0 +1,39 @@
+"""pereira2022 §5.2 reproduction: claim records on a short episode (fast), the departures, and the
+full run with its as-published row behind ``slow``."""
+
+import pytest
+
+import satenv
+from baselines.nmpc import NMPC
+from benchmarks.claims import NO_VALUE
+from benchmarks.reproductions import pereira2022_servicing as serv
+from satenv.rollout import rollout
+
+
+def test_claims_of_a_short_episode_quote_the_paper_and_can_fail():
+    env = satenv.make("servicing_v0", preset="pereira2022", max_steps=20)
+    policy = NMPC(env)
+    traj = rollout(env, policy, seed=0)
+    claims = serv.claims_of(serv.analyse(traj, env, policy), "as published")
+    assert all(c["source"] == serv.SOURCE for c in claims)
+    positions = [c for c in claims if "position at the phase end" in c["claim"]]
+    assert positions and not any(c["met"] for c in positions)        # 2 s is too short to reach 15 m away
+    point = claims[-1]
+    assert point["status"] == NO_VALUE and "our test" in point["rule"] and not point["gating"]
+    assert not any(c["gating"] for c in claims)                       # as-published rows never gate
+
+
+def test_departures_without_runs_say_not_measured():
+    deps = {d["name"]: d for d in serv.departures({})}
+    assert deps["terminal attitude cost"]["effect"] == "not measured in this result"
+    assert deps["terminal attitude cost"]["fields"] == ["terminal_attitude_weight"]
+
+
+@pytest.mark.slow
+def test_full_reproduction_reports_both_runs():
+    result = serv.reproduce(diagnostics=False)
+    assert set(result["runs"]) == {"ours", "as published"}
+    assert result["runs"]["as published"]["terminal_attitude_weight"] == 0.0
+    gating = [c for c in result["claims"] if c["gating"]]
+    assert gating and all(c["met"] for c in gating), gating
+    assert "with eq. 39's cost" in result["departures"][0]["effect"]
