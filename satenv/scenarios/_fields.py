@@ -17,15 +17,15 @@ from satenv.dynamics._checks import (
     MAX_STEPS,
     MAX_SUBSTEPS,
     derived,
-    integer,
     numeric,
     positive,
-    real,
     show,
 )
+from satenv.dynamics._checks import integer as _integer
+from satenv.dynamics._checks import real as _real
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["MAX_AGENTS", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "SatenvError", "array",
+__all__ = ["MAX_AGENTS", "MAX_INT", "MAX_MAGNITUDE", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "SatenvError", "array",
            "at_most", "derived", "flag", "from_preset", "integer", "nested", "number", "real",
            "orbit_step", "spreads_in_region", "states_in_region", "steps", "vector"]
 
@@ -39,9 +39,43 @@ MAX_RELATIVE_SPEED: float = 2 * 11.2e3
 than twice the escape speed at the surface (11.2 km/s) relative to each other."""
 
 
+MAX_MAGNITUDE: float = 1e30
+"""Cap on the magnitude of every real scenario field (SI): far above any physical quantity of a
+scenario (mu = 4e14 m^3/s^2), and low enough that products of a few such stay far from the
+float64 range (1.8e308), so a field whose derived quantities would overflow is rejected by its
+own name (e.g. ``desired_error=[0, -8e300, ...]``), not by the env's first-step probe."""
+
+MAX_INT: int = 2**31 - 1
+"""Cap on every integer scenario field without a tighter one (counts, sizes)."""
+
+
+def _bounded(arr: np.ndarray, name: str, value: Any) -> None:
+    if arr.size and not float(np.abs(arr).max()) <= MAX_MAGNITUDE:
+        raise SatenvError(f"{name} must have magnitude <= MAX_MAGNITUDE = {MAX_MAGNITUDE:g} (physically "
+                          f"sized SI values), got {show(value)}")
+
+
+def integer(value: Any, name: str, *, minimum: int = 1, maximum: int | None = None, why: str = "",
+            allow_float: bool = False) -> int:
+    """An int in ``[minimum, maximum]`` (``maximum`` defaults to :data:`MAX_INT`); bools rejected."""
+    if maximum is None:
+        maximum, why = MAX_INT, why or "the cap on scenario integers, satenv.scenarios._fields.MAX_INT"
+    return _integer(value, name, minimum=minimum, maximum=maximum, why=why, allow_float=allow_float)
+
+
+def real(value: Any, name: str, expected: str = "a finite real number") -> float:
+    """A finite float of magnitude at most :data:`MAX_MAGNITUDE` (bools, complex, text rejected)."""
+    v = _real(value, name, expected)
+    _bounded(np.asarray(v), name, value)
+    return v
+
+
 def number(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    """A finite float ``> 0`` (``>= 0`` with ``allow_zero``); booleans are rejected."""
-    return positive(value, name, allow_zero=allow_zero)
+    """A finite float ``> 0`` (``>= 0`` with ``allow_zero``) of magnitude at most
+    :data:`MAX_MAGNITUDE`; booleans are rejected."""
+    v = positive(value, name, allow_zero=allow_zero)
+    _bounded(np.asarray(v), name, value)
+    return v
 
 
 def flag(value: Any, name: str) -> bool:
@@ -58,8 +92,10 @@ def steps(value: Any, name: str) -> int:
 
 
 def array(value: Any, name: str, shape: tuple[int, ...] | None = None, ndim: int | None = None) -> np.ndarray:
-    """A finite float array, optionally of an exact ``shape`` or number of dimensions."""
+    """A finite float array (entries of magnitude at most :data:`MAX_MAGNITUDE`), optionally of
+    an exact ``shape`` or number of dimensions."""
     arr = numeric(value, name)
+    _bounded(arr, name, value)
     if shape is not None and arr.shape != shape:
         raise SatenvError(f"{name} must have shape {shape}, got {arr.shape}: {show(value)}")
     if ndim is not None and arr.ndim != ndim:
@@ -68,8 +104,10 @@ def array(value: Any, name: str, shape: tuple[int, ...] | None = None, ndim: int
 
 
 def vector(value: Any, name: str, length: int | None = None) -> tuple[float, ...]:
-    """A flat tuple of finite floats (of ``length`` entries when given)."""
+    """A flat tuple of finite floats of magnitude at most :data:`MAX_MAGNITUDE` (of ``length``
+    entries when given)."""
     arr = numeric(value, name).ravel()
+    _bounded(arr, name, value)
     if length is not None and arr.shape != (length,):
         raise SatenvError(f"{name} must have {length} entries, got {arr.size}: {show(value)}")
     return tuple(float(v) for v in arr)
