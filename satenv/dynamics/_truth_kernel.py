@@ -2,8 +2,8 @@
 ``j2_drag`` models over many steps in one call.
 
 The numpy path (:mod:`._soa`, :func:`.forces.acceleration_soa`, :func:`.integrators.rk4_step`)
-is the reference; this kernel evaluates the same formulas in the same order, per copy and per
-body, with no temporaries. The LVLH <-> ECI conversions are hoisted out of the step loop: a call
+is the reference; this kernel evaluates the same formulas (in the same order but for the
+reciprocal of ``|r|^2``), per copy and per body, with no temporaries. The LVLH <-> ECI conversions are hoisted out of the step loop: a call
 converts the LVLH states to ECI once, integrates ``n`` steps of ``substeps`` RK4 sub-steps (the
 LVLH inputs of step ``s`` held in the rotating frame, as the reference: they are rotated by the
 chief's current LVLH axes at every stage) and converts back once. Converting back and forth at
@@ -24,7 +24,7 @@ from .forces import ForceModel
 
 __all__ = ["force_params", "propagate"]
 
-_jit = numba.njit(cache=True, nogil=True)
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # IEEE division, no zero checks
 
 N_PARAMS = 11
 
@@ -41,13 +41,16 @@ def force_params(force: ForceModel) -> np.ndarray:
 
 @_jit
 def _accel(x, y, z, vx, vy, vz, p, ballistic):
-    """:func:`satenv.dynamics.forces.acceleration_soa` of one body (same operation order)."""
+    """:func:`satenv.dynamics.forces.acceleration_soa` of one body (its formulas; the divisions by
+    ``|r|^2`` as products with one reciprocal)."""
     rn2 = x * x + y * y + z * z
-    inv_r3 = 1.0 / (rn2 * np.sqrt(rn2))
+    inv2 = 1.0 / rn2                     # one division, multiplied (the reference divides thrice)
+    rn = np.sqrt(rn2)
+    inv_r3 = inv2 / rn
     mu = p[0]
     if p[9] != 0.0:
-        k = p[2] / rn2
-        z2 = 5.0 * z * z / rn2
+        k = p[2] * inv2
+        z2 = 5.0 * z * z * inv2
         kxy = -mu * inv_r3 * (1.0 + k * (z2 - 1.0))
         kz = -mu * inv_r3 * (1.0 + k * (z2 - 3.0))
         a0, a1, a2 = kxy * x, kxy * y, kz * z
@@ -57,7 +60,7 @@ def _accel(x, y, z, vx, vy, vz, p, ballistic):
     if p[10] != 0.0:
         w = p[3]
         vr0, vr1, vr2 = vx + w * y, vy - w * x, vz
-        h = np.sqrt(rn2) - p[1]
+        h = rn - p[1]
         rho = p[4] * math.exp(-(h - p[5]) / p[6])
         kd = -0.5 * (rho * ballistic * np.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2))
         a0 += kd * vr0
