@@ -30,6 +30,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from satenv.errors import SatenvError
 from satenv.vector import SatVectorEnv
 
 __all__ = ["SatTorchRLEnv", "make_env"]
@@ -50,6 +51,13 @@ class SatTorchRLEnv(EnvBase):
     def __init__(self, vec: SatVectorEnv, *, device: str | torch.device = "cpu") -> None:
         if not isinstance(vec, SatVectorEnv) or vec.autoreset:
             raise TypeError("SatTorchRLEnv needs a SatVectorEnv built with autoreset=False; use make_env(...)")
+        given = device
+        try:  # a device this torch build has, named in the error otherwise (e.g. 'cuda:7' on CPU)
+            device = torch.device(device)
+            torch.empty(0, device=device)
+        except (AssertionError, RuntimeError, TypeError, ValueError) as exc:
+            raise SatenvError(f"device must be a torch device available here (e.g. 'cpu'), got {given!r:.40} "
+                              f"({type(exc).__name__}: {str(exc).splitlines()[0][:80]})") from None
         super().__init__(device=device, batch_size=torch.Size([vec.num_envs]))
         self.vec = vec
         self.group_map = {"agents": list(vec.agents)}
