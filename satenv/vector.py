@@ -214,7 +214,11 @@ class SatVectorEnv:
             for k, v in reset_info.items():
                 infos[k][idx] = v
             infos.update(final_observation=obs, final_info=res.info, _final=done)
-            obs = self.core.observe()
+            if 2 * idx.size <= self.num_envs:   # observe only the copies that reset
+                obs = obs.copy()
+                obs[idx] = self.core.observe_copies(idx)
+            else:
+                obs = self.core.observe()
             self._guard(idx, obs[idx], reset_info["state"])
         m = self.n_agents
         return (obs, rewards, np.repeat(terminated[:, None], m, axis=1),

@@ -142,3 +142,23 @@ def test_one_batched_core_step_per_step(monkeypatch):
                         lambda accel, rng=None: calls.append(accel.shape) or original(accel, rng))
     vec.step(np.zeros(vec.action_shape))
     assert calls == [(8, 4, 3)]
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), [
+    ("platoon_v0", {}), ("platoon_v0", {"dynamics": "j2", "inclination": 0.9}),
+    ("cluster_v0", {}), ("cluster_v0", {"method": "sparse"}), ("servicing_v0", {}), ("formation_v0", {})])
+def test_observe_copies_are_the_rows_of_observe(env_id, kwargs):
+    """What the auto-reset observes (only the copies that reset) equals the full observation's rows,
+    bit for bit, with copies at different steps."""
+    kwargs = dict(kwargs)
+    method = kwargs.pop("method", None)
+    vec = satenv.make_vec(env_id, 6, seed=0, **kwargs)
+    if method is not None:   # the cluster core's sparse neighbour path
+        vec.core = type(vec.core)(vec.scenario, batch=6, method=method)
+    vec.reset()
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        vec.step(rng.uniform(-1, 1, vec.action_shape))
+        vec.reset(indices=[k])
+    idx = np.array([4, 0, 2])
+    np.testing.assert_array_equal(vec.core.observe_copies(idx), vec.core.observe()[idx])

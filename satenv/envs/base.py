@@ -120,6 +120,11 @@ class BatchedCore(ABC):
     def observe(self) -> np.ndarray:
         """Normalised observations ``(B, M, obs_dim)`` float32."""
 
+    def observe_copies(self, idx: np.ndarray) -> np.ndarray:
+        """Observations of copies ``idx`` only ``(len(idx), M, obs_dim)`` (what ``make_vec`` needs
+        after an auto-reset); the default observes every copy and takes the rows."""
+        return self.observe()[idx]
+
     def step_observe(self, accel: np.ndarray, rng: np.random.Generator | None = None) -> tuple[StepResult, np.ndarray]:
         """:meth:`step` then :meth:`observe` (a core may do both in one pass)."""
         res = self.step(accel, rng)

@@ -423,18 +423,25 @@ class ClusterCore(BatchedCore):
 
     # ------------------------------------------------------------------ observations
     def observe(self) -> np.ndarray:
+        return self._observe(slice(None))
+
+    def observe_copies(self, idx: np.ndarray) -> np.ndarray:
+        return self._observe(idx)
+
+    def _observe(self, sel) -> np.ndarray:
+        """Observations of the copies ``sel`` (a slice or indices)."""
         sc = self.scenario
-        b, m = self.batch, self.n_agents
-        x = self.x
+        x, t = self.x[sel], self.t[sel]
+        b, m = x.shape[0], self.n_agents
         q, p = x[..., :3], x[..., 3:]
         obs = np.zeros((b, m, self.obs_dim))
-        obs[..., 0:3] = (q - self.targets()) / POS_SCALE
+        obs[..., 0:3] = (q - self.targets()[sel]) / POS_SCALE
         obs[..., 3:6] = p / VEL_SCALE
         obs[..., 6:9] = q / POS_SCALE
-        obs[..., 9:12] = (self.obstacle()[:, None, :] - q) / POS_SCALE
+        obs[..., 9:12] = (self.scenario.obstacle_at(t * sc.dt)[:, None, :] - q) / POS_SCALE
         obs[..., 12:15] = (self.p_obs - p) / VEL_SCALE
         obs[..., 15:18] = (self.q_r - q) / POS_SCALE
-        obs[..., 18] = 1.0 - self.t[:, None] / sc.max_steps
+        obs[..., 18] = 1.0 - t[:, None] / sc.max_steps
         k = self.n_slots
         if k > 0 and not self.dense:  # the graph's nearest neighbours are the in-range k-nearest
             order = in_range_nearest(q, sc.n_neighbours, sc.comm_range)[1]
@@ -444,7 +451,7 @@ class ClusterCore(BatchedCore):
             slots = np.concatenate([np.ones(valid.shape + (1,)), rel], axis=-1) * valid[..., None]
             obs[..., N_FIXED_OBS:] = slots.reshape(b, m, 7 * k)
         elif k > 0:
-            adj = self.graph()
+            adj = nearest_neighbour_graph(q, sc.n_neighbours, sc.comm_range)
             d = pairwise_distances(q)
             d = np.where(adj, d, np.inf)
             order = np.argsort(d, axis=-1, kind="stable")[..., :k]          # (B, M, K)

@@ -320,17 +320,20 @@ class PlatoonCore(BatchedCore):
         }
         return info, stage, lead > sc.max_distance
 
-    def _evaluate_kernel(self, x: np.ndarray, accel: np.ndarray, observe: bool = False) -> tuple:
+    def _evaluate_kernel(self, x: np.ndarray, accel: np.ndarray, observe: bool = False,
+                         t: np.ndarray | None = None) -> tuple:
         """:meth:`_evaluate` and the rewards of :meth:`step` by the compiled kernel: the info
         arrays, rewards ``(B, N)``, terminations ``(B,)``, if ``observe`` the observations (all
         new arrays but the state info, which is ``x``: the core never writes into it) and which
-        copies are all finite ``(B,)`` (:attr:`StepResult.finite`)."""
+        copies are all finite ``(B,)`` (:attr:`StepResult.finite`); ``t`` the copies' step counts
+        (default: every copy's)."""
         b, n = x.shape[:2]
         out = (np.empty((b, n, 6)), np.empty((b, n, 6)), np.empty((b, n)), np.empty((b, n), bool),
                np.empty((b, n), np.int64), np.empty((b, n)), np.empty((b, n)), np.empty((b, n)),
                np.empty(b, bool), np.empty(b, bool))
         obs = np.empty((b, n, self.obs_dim) if observe else (0, 0, 0), np.float32)
-        self._kernel.evaluate(x, accel, self._table, self._nbr, self._params, out, self.t, self._obs_offset,
+        self._kernel.evaluate(x, accel, self._table, self._nbr, self._params, out,
+                              self.t if t is None else t, self._obs_offset,
                               self._slot_src, obs)
         err_raw, err, min_sep, collision, viol, cost, dv, rewards, terminated, finite = out
         finite = finite if self._params[23] else None
@@ -385,6 +388,11 @@ class PlatoonCore(BatchedCore):
                       & (cz * np.abs(p[..., 2]) + p[..., 1] <= cz * zr))
             viol += ~inside
         return viol
+
+    def observe_copies(self, idx: np.ndarray) -> np.ndarray:
+        if self._kernel is None:
+            return self.observe()[idx]
+        return self._evaluate_kernel(self.x[idx], self.accel[idx], observe=True, t=self.t[idx])[3]
 
     def observe(self) -> np.ndarray:
         b, n = self.batch, self.n_agents
