@@ -26,7 +26,7 @@ def _pair(method="auto", batch=3, decisions=12, **overrides):
     fused = ClusterCore(sc, batch=batch, method=method)
     ref = ClusterCore(sc, batch=batch, method=method, fused=False)
     ref.model = RelativeModel(sc.dynamics, sc.orbit, sc.physics_dt, method="numpy")
-    assert fused._separations is not None and fused.model._cache["kernel"] is not None
+    assert fused._kernel is not None and fused.model._cache["kernel"] is not None
     return sc, fused, ref, decisions
 
 
@@ -49,6 +49,7 @@ def _run(sc, fused, ref, decisions, seed=0):
         np.testing.assert_array_equal(rf.terminated, rr.terminated)
         np.testing.assert_allclose(fused.chief, ref.chief, rtol=RTOL, atol=0)
         np.testing.assert_allclose(fused.observe(), ref.observe(), rtol=1e-6, atol=1e-6)
+        np.testing.assert_array_equal(fused.observe()[..., 19::7], ref.observe()[..., 19::7])  # slots
     assert g1.random() == g2.random()   # the same draws from the generator
     return rf.info
 
@@ -66,6 +67,28 @@ def test_fused_step_matches_the_loop_on_both_separation_paths(method):
     sc, fused, ref, n = _pair(method, initial_positions=pos, dynamics="nonlinear")
     info = _run(sc, fused, ref, n, seed=1)
     assert (info["pair_distance"] < sc.pair_distance).any()
+
+
+def test_compiled_graph_and_observation_match_the_reference_bitwise():
+    """Same states in both cores: the compiled observation and degrees equal the numpy ones, with
+    satellites out of range and tied distances (a lattice) included."""
+    grid = np.stack(np.meshgrid([0.0, 300.0], [0.0, 300.0, 600.0], [0.0, 2500.0], indexing="ij"), -1)
+    pos = grid.reshape(-1, 3)[:10]
+    for n_nb in (2, 4, 9):
+        sc, fused, ref, _ = _pair(batch=4, initial_positions=pos, n_neighbours=n_nb)
+        rng = np.random.default_rng(n_nb)
+        x0 = np.zeros((4, 10, 6))
+        x0[..., :3] = pos
+        x0[1:, :, :3] += rng.normal(size=(3, 10, 3)) * 200.0
+        x0[..., 3:] = rng.normal(size=(4, 10, 3))
+        for core in (fused, ref):
+            core.reset(x0)
+            core.t[:] = [0, 5, 17, 399]
+        np.testing.assert_array_equal(fused.observe(), ref.observe())
+        np.testing.assert_array_equal(fused._degrees(fused.x[..., :3]), ref._degrees(ref.x[..., :3]))
+        np.testing.assert_array_equal(fused.observe_copies(np.array([3, 1])), ref.observe()[[3, 1]])
+        empty = (ref.observe()[..., 19::7] == 0).any()
+    assert empty   # out-of-range satellites leave empty slots (n_neighbours = 9)
 
 
 def test_inner_loop_takes_the_physics_step_loop():

@@ -136,13 +136,13 @@ CANDIDATES = 4
 :class:`ClusterCore`)."""
 
 
-def _separations_kernel():
-    """:func:`satenv.envs._cluster_kernel.separations`, or ``None`` without numba."""
+def _kernel_module():
+    """:mod:`satenv.envs._cluster_kernel`, or ``None`` without numba."""
     try:
-        from satenv.envs._cluster_kernel import separations
+        from satenv.envs import _cluster_kernel
     except ImportError:
         return None
-    return separations
+    return _cluster_kernel
 
 
 class InnerLoop(Protocol):
@@ -166,9 +166,10 @@ class ClusterCore(BatchedCore):
     decision (no other satellite can come closer); the copies where that fails are searched again
     at every physics step, so ``pair_distance`` and ``min_separation`` stay exact.
 
-    ``fused`` (default, with numba and no inner loop registered): a decision's physics steps run
-    in one call of the compiled truth kernel and the separation minima in one compiled pass
-    (:meth:`_step_fused`); ``fused=False`` is the physics-step loop, the reference.
+    ``fused`` (default, with numba): a decision's physics steps run in one call of the compiled
+    truth kernel and the separation minima in one compiled pass (:meth:`_step_fused`, when no
+    inner loop is registered), and the dense path's graph and observation are compiled
+    (:mod:`satenv.envs._cluster_kernel`); ``fused=False`` is the numpy reference.
     """
 
     state_dim = 6
@@ -197,7 +198,7 @@ class ClusterCore(BatchedCore):
         self._random = (BoundedRandomDisturbance(sc.disturbance_amplitude)
                         if sc.disturbance == "random" else None)
         self._own_rng = np.random.default_rng()
-        self._separations = _separations_kernel() if fused else None
+        self._kernel = _kernel_module() if fused else None
 
     # ------------------------------------------------------------------ helpers
     def time(self) -> np.ndarray:
@@ -304,6 +305,8 @@ class ClusterCore(BatchedCore):
         """Graph degree of every satellite ``(B, M)`` int (``out + in - mutual`` links of the
         k-nearest lists on the sparse path)."""
         sc = self.scenario
+        if self.dense and self._kernel is not None:
+            return self._neighbours(pos)[1]
         if self.dense:
             adj = nearest_neighbour_graph(pos, sc.n_neighbours, sc.comm_range)
             return adj.sum(axis=-1).astype(np.int64)
@@ -339,7 +342,7 @@ class ClusterCore(BatchedCore):
         return self._info(sel, np.zeros((k, self.n_agents, 3)), zeros, zeros.copy(), pair, obs, tgt)
 
     def step(self, accel, rng=None) -> StepResult:
-        if self.inner_loop is None and self._separations is not None:
+        if self.inner_loop is None and self._kernel is not None:
             return self._step_fused(np.asarray(accel, dtype=float), rng)
         sc = self.scenario
         accel = np.asarray(accel, dtype=float)
@@ -396,7 +399,7 @@ class ClusterCore(BatchedCore):
         start = self.x[..., :3]
         self.x, self.chief, path = self.model.propagate(self.x, u_steps, self.chief, positions=True)
         pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
-        self._separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
+        self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
         if not self.dense:
             pair = self._pair_minimum(np.concatenate([start[None], path]))
         un = np.linalg.norm(u, axis=-1)
@@ -428,11 +431,26 @@ class ClusterCore(BatchedCore):
     def observe_copies(self, idx: np.ndarray) -> np.ndarray:
         return self._observe(idx)
 
+    def _neighbours(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Compiled dense graph: neighbour slots ``(B, M, K)`` (nearest first, ``-1`` empty) and
+        degrees ``(B, M)`` (:func:`satenv.envs._cluster_kernel.neighbours`)."""
+        b, m = pos.shape[:2]
+        order, degree = np.empty((b, m, self.n_slots), np.int64), np.empty((b, m), np.int64)
+        self._kernel.neighbours(np.ascontiguousarray(pos), self.n_slots, float(self.scenario.comm_range),
+                                order, degree)
+        return order, degree
+
     def _observe(self, sel) -> np.ndarray:
         """Observations of the copies ``sel`` (a slice or indices)."""
         sc = self.scenario
         x, t = self.x[sel], self.t[sel]
         b, m = x.shape[0], self.n_agents
+        if self.dense and self._kernel is not None:
+            obs = np.empty((b, m, self.obs_dim), np.float32)
+            self._kernel.observe(np.ascontiguousarray(x), np.ascontiguousarray(self.targets()[sel]),
+                                 sc.obstacle_at(t * sc.dt), self.p_obs, self.q_r, 1.0 - t / sc.max_steps,
+                                 self._neighbours(x[..., :3])[0], POS_SCALE, VEL_SCALE, obs)
+            return obs
         q, p = x[..., :3], x[..., 3:]
         obs = np.zeros((b, m, self.obs_dim))
         obs[..., 0:3] = (q - self.targets()[sel]) / POS_SCALE
