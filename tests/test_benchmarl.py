@@ -13,6 +13,12 @@ pytestmark = pytest.mark.skipif(find_spec("benchmarl") is None,
                                 reason="benchmarl not installed (pip install -c constraints.txt -e '.[marl]')")
 
 
+@pytest.fixture(autouse=True)
+def _private_baseline_cache(tmp_path_factory, monkeypatch):
+    """Baseline results are cached on disk (training.evaluate.cache_dir): one cache per test session."""
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "satenv_cache"))
+
+
 def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
     out = tmp_path / "mappo"
     main(["--algorithm", "mappo", "--env-id", "platoon_v0", "--env-kwargs", '{"max_steps": 20}',

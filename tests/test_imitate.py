@@ -15,6 +15,12 @@ from training.imitate import ImitationConfig, collect_episode, main
 SHORT = {"preset": "pereira2022", "randomize": True, "max_steps": 12}
 
 
+@pytest.fixture(autouse=True)
+def _private_baseline_cache(tmp_path_factory, monkeypatch):
+    """Baseline results are cached on disk (training.evaluate.cache_dir): one cache per test session."""
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "satenv_cache"))
+
+
 def test_config_validation_names_the_field(capsys):
     with pytest.raises(ValueError, match="beta"):
         ImitationConfig(beta=1.5)

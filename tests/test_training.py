@@ -16,6 +16,12 @@ from training.train import latest_checkpoint, main, train
 TOY = "test_env_base:ToyEnv"
 
 
+@pytest.fixture(autouse=True)
+def _private_baseline_cache(tmp_path_factory, monkeypatch):
+    """Baseline results are cached on disk (training.evaluate.cache_dir): one cache per test session."""
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "satenv_cache"))
+
+
 def _cfg(tmp_path, **kw):
     base = dict(env_id=TOY, env_kwargs={"max_steps": 10}, num_envs=2, total_timesteps=192, n_steps=16,
                 batch_size=48, n_epochs=1, net_arch=(16, 16), eval_every=96, checkpoint_every=96,
@@ -407,3 +413,27 @@ def test_every_training_command_in_the_docs_parses():
             parse_args(argv, cls=classes[m.group(1)])
             found += 1
     assert found >= 8
+
+
+def test_evaluation_is_the_same_in_worker_processes_and_baselines_are_cached(tmp_path, monkeypatch, capsys):
+    import baselines
+    from training.evaluate import cache_dir, evaluate, evaluate_baselines
+
+    env = ToyEnv(max_steps=6)
+    one = evaluate(env, baselines.make("random", env), [3, 1, 2], workers=1, progress=False)
+    two = evaluate(env, baselines.make("random", env), [3, 1, 2], workers=2, desc="x", progress=True)
+    def strip(res):  # as JSON: NaN (no convergence) compares equal to itself
+        return json.dumps([{k: v for k, v in e.items() if k != "compute_ms_per_decision"} for e in res["episodes"]])
+
+    assert strip(one) == strip(two)
+    assert [e["seed"] for e in two["episodes"]] == [3, 1, 2]
+    assert "x:   0%|          | 0/3" in capsys.readouterr().err  # a progress bar (an ETA as it runs)
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path))
+    first = evaluate_baselines(env, ["zero"], [0, 1], progress=False)
+    assert len(list(cache_dir().glob("*.json"))) == 1
+    calls = []
+    monkeypatch.setattr("training.evaluate.evaluate", lambda *a, **k: calls.append(a))
+    assert evaluate_baselines(env, ["zero"], [0, 1], progress=False) == json.loads(json.dumps(first))
+    assert not calls, "a cached baseline was evaluated again"
+    evaluate_baselines(env, ["zero"], [0, 2], progress=False)  # other seeds: another entry
+    assert len(calls) == 1

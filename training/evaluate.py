@@ -3,11 +3,22 @@
 The same path the scoreboard uses: ``rollout(env, policy, seed=s)`` then
 ``satenv.metrics.summary``. :func:`compare` adds the learned-vs-reference ratios of the issue's
 targets (tracking RMSE and total delta-v relative to the DMPC on the same seeds).
+
+Every evaluation shows a progress bar with an ETA (tqdm, on stderr; ``progress=False`` hides
+it) and runs its episodes in ``workers`` forked processes when there are several (each episode
+is independent and seeded, so the results do not depend on the worker count). The scripted
+baselines' results are cached on disk once per (scenario, seeds, baseline config, code) in
+:func:`cache_dir` and shared by every run.
 """
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import json
+import multiprocessing
+import os
+import sys
 import warnings
 from collections.abc import Iterable
 from pathlib import Path
@@ -20,7 +31,8 @@ from satenv import metrics
 from satenv.rollout import rollout
 
 __all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table",
-           "evaluate_baselines", "cached_baselines", "test_summary", "run_summary", "learning_curve"]
+           "evaluate_baselines", "cached_baselines", "test_summary", "run_summary", "learning_curve",
+           "cache_dir", "resolve_workers"]
 
 AUTO = "auto"
 """``eval_baselines`` entry meaning: ``zero`` plus the cheap scripted controllers that support
@@ -45,24 +57,76 @@ def baseline_names(env: Any, names: Iterable[str]) -> list[str]:
     return list(dict.fromkeys(out))
 
 
-def evaluate(env: Any, policy: Any, seeds: Iterable[int]) -> dict[str, Any]:
+def evaluate(env: Any, policy: Any, seeds: Iterable[int], *, desc: str = "evaluation", progress: bool = True,
+             workers: int = 1) -> dict[str, Any]:
     """Roll ``policy`` out once per seed; returns per-episode summaries and their aggregate.
 
     Success is the scenario's rule (``satenv.metrics.summary``: ``success_tol``,
-    ``collision_voids_success`` of ``env.scenario``).
+    ``collision_voids_success`` of ``env.scenario``). ``desc`` labels the progress bar;
+    ``workers`` > 1 runs the episodes in that many forked processes (:func:`resolve_workers`).
 
     Aggregate keys: ``success_rate``, ``collision_episodes`` (episodes with >= 1 collision
     flag), ``rmse``/``delta_v``/``final_error_m``/``violations``/``min_separation_m``/
     ``compute_ms_per_decision`` (means over episodes; ``min_separation_m`` is the minimum),
     ``terminated_rate``, ``episodes``.
     """
+    seeds = [int(s) for s in seeds]
+    bar = progress_bar(len(seeds), desc, progress)
     episodes = []
-    for seed in seeds:
-        traj = rollout(env, policy, seed=int(seed))
-        s = metrics.summary(traj)
-        s["seed"] = int(seed)
-        episodes.append(s)
+    n = min(resolve_workers(workers), len(seeds))
+    if n > 1 and "fork" in multiprocessing.get_all_start_methods():
+        global _WORK
+        _WORK = (env, policy)  # inherited by the forked workers, never pickled
+        try:
+            with multiprocessing.get_context("fork").Pool(n, initializer=_init_worker) as pool:
+                for s in pool.imap(_episode_in_worker, seeds):
+                    episodes.append(s)
+                    bar.update(1)
+        finally:
+            _WORK = None
+    else:
+        for seed in seeds:
+            episodes.append(_episode(env, policy, seed))
+            bar.update(1)
+    bar.close()
     return {"aggregate": aggregate(episodes), "episodes": episodes}
+
+
+def _episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
+    s = metrics.summary(rollout(env, policy, seed=seed))
+    s["seed"] = seed
+    return s
+
+
+_WORK: tuple[Any, Any] | None = None
+"""The (env, policy) of the running :func:`evaluate`, for its forked workers."""
+
+
+def _init_worker() -> None:
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover - torch is optional for scripted baselines
+        pass
+
+
+def _episode_in_worker(seed: int) -> dict[str, Any]:
+    env, policy = _WORK
+    return _episode(env, policy, seed)
+
+
+def resolve_workers(workers: int) -> int:
+    """``workers`` processes for evaluation episodes; 0 means one per core, at most 2."""
+    return workers if workers > 0 else max(1, min(2, os.cpu_count() or 1))
+
+
+def progress_bar(total: int, desc: str, enabled: bool = True):
+    """A tqdm bar with an ETA on stderr (a no-op when ``enabled`` is false)."""
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit="episode", disable=not enabled, file=sys.stderr,
+                dynamic_ncols=True, leave=False)
 
 
 def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
@@ -129,13 +193,15 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int]) -> dict[str, Any]:
-    """Evaluate the named registered baselines (``"auto"``: :func:`baseline_names`).
+def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int], *, progress: bool = True,
+                       workers: int = 1) -> dict[str, Any]:
+    """Evaluate the named registered baselines (``"auto"``: :func:`baseline_names`), each from the
+    shared on-disk cache when it holds the same (scenario, seeds, baseline config, code).
 
     A named baseline that cannot control ``env`` (``supports(env)`` False) is skipped with a
     warning; an unknown name raises :class:`baselines.BaselineError`.
     """
-    seeds = list(seeds)
+    seeds = [int(s) for s in seeds]
     out = {}
     for name in baseline_names(env, names):
         cls = baselines.get(name)
@@ -143,35 +209,70 @@ def evaluate_baselines(env: Any, names: Iterable[str], seeds: Iterable[int]) -> 
             warnings.warn(f"baseline {name!r} cannot control this env (it supports "
                           f"{cls.supported()}); skipped", stacklevel=2)
             continue
-        out[name] = evaluate(env, baselines.make(name, env), seeds)
+        policy = baselines.make(name, env)
+        path = cache_dir() / f"{_baseline_key(env, name, policy, seeds)}.json"
+        try:
+            out[name] = json.loads(path.read_text())
+            continue
+        except (OSError, json.JSONDecodeError):
+            pass
+        out[name] = evaluate(env, policy, seeds, desc=f"baseline {name}", progress=progress, workers=workers)
+        _write_atomic(path, json.dumps(out[name], default=float))
     return out
 
 
+def cache_dir() -> Path:
+    """Where the baselines' results are cached: ``$SATENV_CACHE_DIR/baselines``, else
+    ``$XDG_CACHE_HOME/satenv/baselines`` (``~/.cache/satenv/baselines``). Delete it to re-run them."""
+    root = os.environ.get("SATENV_CACHE_DIR")
+    base = Path(root) if root else Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "satenv"
+    return base / "baselines"
+
+
+def _baseline_key(env: Any, name: str, policy: Any, seeds: list[int]) -> str:
+    """A hash of everything a baseline's evaluation depends on: the env's class and scenario, the
+    baseline's name and config, the seeds, and the source of the env, baseline, rollout and metrics."""
+    files = {inspect.getfile(type(env)), inspect.getfile(type(policy)), inspect.getfile(rollout),
+             inspect.getfile(metrics.summary), inspect.getfile(type(env.scenario))}
+    h = hashlib.sha256()
+    for part in (type(env).__qualname__, repr(env.scenario), name, repr(getattr(policy, "config", None)),
+                 json.dumps(seeds), *(Path(f).read_bytes() for f in sorted(files))):
+        h.update(part if isinstance(part, bytes) else part.encode())
+    return f"{env.metadata.get('name', type(env).__name__)}-{name}-{h.hexdigest()[:20]}"
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(text)
+        tmp.replace(path)
+    except OSError as err:  # a read-only cache only costs time
+        warnings.warn(f"cannot write the baseline cache {path} ({err})", stacklevel=3)
+
+
 def cached_baselines(path: Path, eval_env: Any, names: Iterable[str], seeds: Iterable[int],
-                     key: dict[str, Any]) -> dict[str, Any]:
-    """:func:`evaluate_baselines`, cached in the JSON file ``path`` under ``key`` (plus the
-    names, seeds and the scenario's success rule): a run that resumes does not re-run them."""
+                     key: dict[str, Any], *, progress: bool = True, workers: int = 1) -> dict[str, Any]:
+    """:func:`evaluate_baselines` (from the shared cache where it can), recorded in the run's JSON
+    file ``path`` under ``key`` (plus the names, seeds and the scenario's success rule)."""
     names, seeds = list(names), [int(s) for s in seeds]
     full_key = {**key, "seeds": seeds, "baselines": names, "tol": eval_env.scenario.success_tol,
                 "collision_voids_success": eval_env.scenario.collision_voids_success}
-    if path.is_file():
-        cached = json.loads(path.read_text())
-        if cached.get("key") == full_key:
-            return cached["results"]
     with warnings.catch_warnings():
         warnings.simplefilter("always")
-        results = evaluate_baselines(eval_env, names, seeds)
+        results = evaluate_baselines(eval_env, names, seeds, progress=progress, workers=workers)
     path.write_text(json.dumps({"key": full_key, "results": results}, indent=1, default=float) + "\n")
     return results
 
 
 def test_summary(eval_env: Any, policy: Any, baselines: dict[str, Any], seeds: Iterable[int], *,
-                 reference: str = "dmpc", **extra: Any) -> dict[str, Any]:
+                 reference: str = "dmpc", progress: bool = True, workers: int = 1, **extra: Any) -> dict[str, Any]:
     """The ``eval.json`` of a policy folder: ``policy`` evaluated on the held-out ``seeds`` beside
     the ``baselines`` results on the same seeds, the ratios against ``reference``
     (:func:`compare`; saved as ``vs_<REFERENCE>``), a Markdown table and ``extra`` fields."""
     seeds = [int(s) for s in seeds]
-    learned = evaluate(eval_env, policy, seeds)
+    learned = evaluate(eval_env, policy, seeds, desc="learned policy, test seeds", progress=progress,
+                       workers=workers)
     results = {"learned": learned, **baselines}
     return {
         "test_seeds": seeds,
@@ -194,8 +295,9 @@ def run_summary(cfg: Any, policy: Any, *, reference: str = "dmpc", **extra: Any)
     eval_env = make_env(cfg.env_id, **cfg.resolved_eval_env_kwargs)
     key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs}
     found = cached_baselines(Path(cfg.out_dir) / "baselines_test.json", eval_env, cfg.eval_baselines,
-                             cfg.test_seeds, key)
-    return test_summary(eval_env, policy, found, cfg.test_seeds, reference=reference, **extra)
+                             cfg.test_seeds, key, progress=cfg.progress, workers=cfg.workers)
+    return test_summary(eval_env, policy, found, cfg.test_seeds, reference=reference, progress=cfg.progress,
+                        workers=cfg.workers, **extra)
 
 
 def learning_curve(history: list[dict[str, Any]], expert: dict[str, Any] | None, expert_name: str,

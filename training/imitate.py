@@ -184,7 +184,8 @@ def imitate(cfg: ImitationConfig, resume: bool = False) -> Path:
     actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     names = list(dict.fromkeys([cfg.expert, *cfg.eval_baselines]))
     key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs}  # baselines at their defaults
-    expert_eval = cached_baselines(out / "baselines_eval.json", eval_env, [cfg.expert], cfg.eval_seeds, key)
+    opts = {"progress": cfg.progress, "workers": cfg.workers}
+    expert_eval = cached_baselines(out / "baselines_eval.json", eval_env, [cfg.expert], cfg.eval_seeds, key, **opts)
 
     data, normalizer, history = _restore(out, done, actor) if done else ({"x": [], "y": []}, None, [])
     bar = _bar(cfg, done)
@@ -202,7 +203,7 @@ def imitate(cfg: ImitationConfig, resume: bool = False) -> Path:
             normalizer = ObsNormalizer(x_all.mean(0), x_all.var(0), cfg.clip_obs)
         loss = fit(actor, normalizer, x_all, y_all, cfg, generator)
         policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), meta=meta)
-        agg = evaluate(eval_env, policy, cfg.eval_seeds)["aggregate"]
+        agg = evaluate(eval_env, policy, cfg.eval_seeds, desc=f"evaluation, round {k}", **opts)["aggregate"]
         history.append({"round": k, "labels": int(len(x_all)), "loss": loss, "beta": cfg.beta ** k,
                         "wall_s": round(time.perf_counter() - t0, 1), "aggregate": agg})
         bar.set_postfix(round=k, loss=f"{loss:.4f}", success=f"{agg['success_rate']:.2f}",
@@ -213,8 +214,8 @@ def imitate(cfg: ImitationConfig, resume: bool = False) -> Path:
 
     policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), meta=meta)
     base_seeds = cfg.test_seeds[:cfg.baseline_seeds] if cfg.baseline_seeds else cfg.test_seeds
-    test_baselines = cached_baselines(out / "baselines_test.json", eval_env, names, base_seeds, key)
-    summary = test_summary(eval_env, policy, test_baselines, cfg.test_seeds, reference=cfg.expert,
+    test_baselines = cached_baselines(out / "baselines_test.json", eval_env, names, base_seeds, key, **opts)
+    summary = test_summary(eval_env, policy, test_baselines, cfg.test_seeds, reference=cfg.expert, **opts,
                            labels=int(sum(len(x) for x in data["x"])), rounds=cfg.rounds,
                            train_wall_s_this_session=round(time.perf_counter() - t0, 1))
     final = save_artifacts(out / "final", policy, env_meta={**meta, "rounds": cfg.rounds},

@@ -133,7 +133,8 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
         def evaluate_now(self) -> None:
             n = self.model.num_timesteps
             policy = export_policy(self.model, venv, meta, maps)
-            res = evaluate(eval_env, policy, cfg.eval_seeds)
+            res = evaluate(eval_env, policy, cfg.eval_seeds, desc=f"evaluation at {n} steps",
+                           progress=cfg.progress, workers=cfg.workers)
             agg = res["aggregate"]
             for key in ("success_rate", "rmse", "delta_v", "final_error_m", "collision_episodes",
                         "violations", "min_separation_m", "terminated_rate"):
@@ -330,12 +331,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
 def _summary(cfg: TrainConfig, eval_env, policy, baselines: dict[str, Any], steps, wall: float) -> dict[str, Any]:
     return test_summary(eval_env, policy, baselines, cfg.test_seeds, reference="dmpc", steps=steps,
-                        train_wall_s_this_session=round(wall, 1))
+                        train_wall_s_this_session=round(wall, 1), progress=cfg.progress, workers=cfg.workers)
 
 
 def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str, Any]:
     return cached_baselines(path, eval_env, cfg.eval_baselines, seeds,
-                            {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs})
+                            {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs},
+                            progress=cfg.progress, workers=cfg.workers)
 
 
 # --------------------------------------------------------------------------- CLI
