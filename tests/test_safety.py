@@ -217,3 +217,18 @@ def test_bad_input_names_the_field():
         baselines.make("shield", env)
     out, _ = filt.filter(good)                          # a rejected call leaves the filter usable
     assert np.array_equal(out, good)
+
+
+# ------------------------------------------------------------------------ scoreboard
+def test_scoreboard_ranks_a_policy_beside_its_shielded_twin(tmp_path):
+    from benchmarks.scoreboard import run_scoreboard
+    from benchmarks.scoreboard.cli import with_shield
+
+    assert with_shield("random,dmpc", False) == "random,dmpc,random+shield,dmpc+shield"
+    board = run_scoreboard(tmp_path, scenarios="platoon-chain-cw", policies=with_shield("random", False),
+                           seeds="0", plots=False, progress=False)
+    agg = board.aggregates["platoon-chain-cw"]
+    assert set(agg) == {"random", "random+shield"}
+    assert agg["random+shield"]["interventions"]["n"] == 1 and agg["random"]["interventions"]["n"] == 0
+    assert agg["random+shield"]["collisions"]["mean"] == 0
+    assert "interventions" in board.markdown and "mean ‖Δu‖" in board.markdown

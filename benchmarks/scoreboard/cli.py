@@ -20,9 +20,9 @@ from benchmarks.scoreboard.registry import (
     SCENARIOS,
     discover_trained_policies,
 )
-from benchmarks.scoreboard.specs import ScoreboardError, Unavailable
+from benchmarks.scoreboard.specs import SHIELD_SUFFIX, ScoreboardError, Unavailable
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "with_shield"]
 
 
 def _status(spec) -> str:
@@ -84,8 +84,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="address of an existing Ray cluster (default: start a local one)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots and trajectories")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--shield", action="store_true",
+                   help="rank every selected policy also behind the safety filter (satenv.safety), as "
+                        "<name>+shield beside it; a policy name ending in +shield selects one alone")
     p.add_argument("--list", action="store_true", help="list scenarios and policies, then exit")
     return p
+
+
+def with_shield(policies: str | None, quick: bool) -> str:
+    """``--shield``: each requested policy pattern and its ``+shield`` twin (default: every policy,
+    or the quick board's)."""
+    names = policies.split(",") if policies else (list(QUICK["policies"]) if quick else ["*"])
+    names = [n.strip() for n in names if n.strip()]
+    return ",".join(names + [n + SHIELD_SUFFIX for n in names if not n.endswith(SHIELD_SUFFIX)])
 
 
 def _report(board, plots: bool) -> int:
@@ -119,7 +130,8 @@ def main(argv: list[str] | None = None) -> int:
         if os.path.lexists(out) and not os.path.isdir(out):
             raise ScoreboardError(f"--out {out}: exists and is not a directory; the board is written "
                                   "to a folder (give a new or an earlier --out folder)")
-        board = run_scoreboard(out, scenarios=args.scenarios, policies=args.policies, seeds=args.seeds,
+        policies = with_shield(args.policies, args.quick) if args.shield else args.policies
+        board = run_scoreboard(out, scenarios=args.scenarios, policies=policies, seeds=args.seeds,
                                checkpoints=args.policy, quick=args.quick, workers=args.workers,
                                backend=args.backend, ray_address=args.ray_address, resume=args.resume,
                                overwrite=args.overwrite, plots=not args.no_plots,

@@ -18,11 +18,13 @@ import numpy as np
 
 from benchmarks.scoreboard.registry import FULL, QUICK
 from benchmarks.scoreboard.specs import (
+    SHIELD_SUFFIX,
     PolicySpec,
     ScenarioSpec,
     ScoreboardError,
     Unavailable,
     policy_fits,
+    shielded,
 )
 
 __all__ = ["Plan", "Selection", "board_seeds", "parse_seeds", "preflight", "select", "split_names"]
@@ -113,10 +115,13 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
     """Available registry names matching ``requested`` (names or globs; all when ``None``).
 
     With ``strict`` (the user typed the selection) an unknown name, or an unavailable one named
-    exactly, is an error; otherwise it is skipped with a note.
+    exactly, is an error; otherwise it is skipped with a note. A policy pattern ending in
+    ``+shield`` selects the matching policies behind the safety filter (added to ``registry``).
     """
     sel = Selection()
     for pat in requested if requested is not None else ["*"]:
+        if pat.endswith(SHIELD_SUFFIX) and kind == "policy":
+            _add_shielded(pat[:-len(SHIELD_SUFFIX)], registry)
         matches = [n for n in registry if fnmatch.fnmatchcase(n, pat)]
         if not matches and strict:
             raise _unknown(pat, registry, kind)
@@ -125,6 +130,13 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
         for name in (n for n in matches if n not in sel.names):
             _add(sel, name, registry[name], strict and pat == name, kind, notes)
     return sel
+
+
+def _add_shielded(base: str, registry: Any) -> None:
+    """Register ``<name>+shield`` (:func:`~benchmarks.scoreboard.specs.shielded`) for every policy
+    matching ``base`` (a name or glob), in ``registry`` (the board's dict of policies)."""
+    for name in [n for n in registry if fnmatch.fnmatchcase(n, base) and not n.endswith(SHIELD_SUFFIX)]:
+        registry.setdefault(name + SHIELD_SUFFIX, shielded(registry[name]))
 
 
 def _check_actions(actions: Any, env) -> None:

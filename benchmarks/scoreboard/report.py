@@ -27,9 +27,11 @@ KEY = ("scenario", "policy", "seed")
 METRICS: tuple[str, ...] = (
     "success", "rmse", "rmsee", "foe", "final_error_m", "delta_v", "time_to_converge_s",
     "min_separation_m", "collisions", "violations", "safety_cost", "fallbacks",
-    "compute_ms_per_decision", "episode_return", "steps",
+    "compute_ms_per_decision", "episode_return", "steps", "interventions", "mean_du", "infeasible_steps",
 )
-"""Aggregated per (scenario, policy): ``satenv.metrics.summary`` plus ``episode_return``."""
+"""Aggregated per (scenario, policy): ``satenv.metrics.summary`` plus ``episode_return``, and for
+a shielded policy the safety filter's ``interventions``, ``mean_du``, ``infeasible_steps``
+(:func:`benchmarks.scoreboard.specs.episode_metrics`)."""
 TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "wall_s")
 """Measured wall times: the only record fields that differ between two runs of the same key."""
 
@@ -39,6 +41,9 @@ _TABLE = [  # (metric, column header) of the markdown table
     ("min_separation_m", "min sep [m]"), ("collisions", "collisions"), ("violations", "violations"),
     ("safety_cost", "cost"), ("fallbacks", "fallbacks"), ("compute_ms_per_decision", "ms/decision"),
 ]
+_SHIELD_TABLE = [("interventions", "interventions"), ("mean_du", "mean ‖Δu‖"),
+                 ("infeasible_steps", "infeasible")]
+"""Columns of a scenario with a shielded policy (``+shield``): per episode, agent-steps."""
 _PLOTS = ("success", "rmse", "rmsee", "foe", "delta_v", "time_to_converge_s", "min_separation_m",
           "collisions", "violations", "compute_ms_per_decision")
 
@@ -188,12 +193,14 @@ def _scenario_section(board: Board, scen: str) -> list[str]:
             + (" and no collision" if info.get("collision_free_success", True) else ""))
     desc = info.get("description", "")
     lines = [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
-    cols = ["#", "policy", "n"] + [c for _, c in _TABLE] + ["errors"]
+    table = _TABLE + (_SHIELD_TABLE if any(e.get("interventions", {}).get("n")
+                                           for e in board.aggregates[scen].values()) else [])
+    cols = ["#", "policy", "n"] + [c for _, c in table] + ["errors"]
     lines.append("| " + " | ".join(cols) + " |")
     lines.append("|" + "|".join("---" if i < 2 else "--:" for i in range(len(cols))) + "|")
     for i, pol in enumerate(board.ranking[scen], 1):
         e = board.aggregates[scen][pol]
-        row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in _TABLE] + [str(e["errors"])]
+        row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in table] + [str(e["errors"])]
         lines.append("| " + " | ".join(row) + " |")
     return lines + [""]
 

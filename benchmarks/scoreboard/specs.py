@@ -20,8 +20,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["PolicySpec", "ScenarioSpec", "ScoreboardError", "Unavailable", "checkpoint_policy",
-           "episode_metrics", "policy_fits", "resolve"]
+__all__ = ["SHIELD_SUFFIX", "PolicySpec", "ScenarioSpec", "ScoreboardError", "Unavailable", "checkpoint_policy",
+           "episode_metrics", "policy_fits", "resolve", "shielded"]
+
+SHIELD_SUFFIX = "+shield"
+"""A policy name ending in this is the policy filtered by :mod:`satenv.safety` (:func:`shielded`)."""
 
 
 class ScoreboardError(ValueError):
@@ -136,6 +139,8 @@ class PolicySpec:
         learned: a trained network (its observation space is checked against the env's).
         baseline: the ``baselines.BASELINES`` name of a scripted policy: where it applies is its
             class's ``supports(env)`` (then ``env_ids`` is not used).
+        shield: the policy runs behind the safety filter (``baselines.make("shield", env,
+            policy=...)``; :func:`shielded`).
     """
 
     name: str
@@ -149,6 +154,7 @@ class PolicySpec:
     dry_run: bool = True
     learned: bool = False
     baseline: str | None = None
+    shield: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -177,14 +183,32 @@ class PolicySpec:
         """A fresh policy for ``env``."""
         fn = self.factory()
         if self.checkpoint is not None:
-            return checkpoint_policy(fn, self.checkpoint, env)
-        return fn(env, **dict(self.kwargs))
+            policy = checkpoint_policy(fn, self.checkpoint, env)
+        else:
+            policy = fn(env, **dict(self.kwargs))
+        if self.shield:
+            import baselines
+
+            return baselines.make("shield", env, policy=policy)
+        return policy
 
     def fingerprint(self) -> str:
         payload: dict[str, Any] = {"targets": [self.target], "kwargs": dict(self.kwargs)}
         if self.checkpoint is not None:
             payload["checkpoint"] = _content_hash(Path(self.checkpoint))
+        if self.shield:
+            payload["shield"] = True
         return _fingerprint(payload)
+
+
+def shielded(spec: PolicySpec) -> PolicySpec:
+    """``spec`` behind the safety filter, named ``<name>+shield`` (ranked beside ``spec``)."""
+    from dataclasses import replace
+
+    if spec.shield:
+        return spec
+    return replace(spec, name=spec.name + SHIELD_SUFFIX, shield=True,
+                   description=(spec.description + " " if spec.description else "") + "+ safety filter")
 
 
 def policy_fits(spec: PolicySpec, env) -> bool:
@@ -203,10 +227,18 @@ def policy_fits(spec: PolicySpec, env) -> bool:
 
 def episode_metrics(traj, scenario: ScenarioSpec) -> dict[str, Any]:
     """The metrics of one episode: ``satenv.metrics.summary``, whose success is the env
-    scenario's own rule (the same answer as ``metrics.summary`` and the training evaluation)."""
+    scenario's own rule (the same answer as ``metrics.summary`` and the training evaluation),
+    and for a shielded policy the filter's: ``interventions`` (agent-steps it changed),
+    ``mean_du`` (mean ``|du|`` of those changes; ``None`` without any) and ``infeasible_steps``
+    (agent-steps it applied the backup); ``None`` for a policy without the filter."""
     from satenv import metrics
 
-    return metrics.summary(traj)
+    out = metrics.summary(traj)
+    info = traj.policy_info
+    n = int(info["safety_interventions"]) if "safety_steps" in info else None
+    out.update(interventions=n, mean_du=float(info["safety_delta"]) / n if n else None,
+               infeasible_steps=int(info["safety_infeasible"]) if n is not None else None)
+    return out
 
 
 def _content_hash(path: Path) -> str:
