@@ -41,7 +41,7 @@ from typing import Any
 
 __all__ = ["BAND", "NO_VALUE", "NOT_STATED", "band", "bound", "statement", "no_value", "departure",
            "gating", "passed", "count", "format_claims", "markdown_claims", "markdown_departures",
-           "markdown_rows", "changed_claims"]
+           "markdown_rows", "summary_rows", "changed_claims"]
 
 BAND = 0.10
 """Default half-width of the band around a paper value (relative)."""
@@ -242,16 +242,38 @@ def markdown_rows(result: dict[str, Any]) -> list[str]:
             f"{_cell(c['measured'])} | {_cell(c['rule'])} | {_status(c)} |" for c in result.get("claims", [])]
 
 
+def summary_rows(result: dict[str, Any]) -> list[str]:
+    """README summary rows, one per run: ``| paper | run | paper-valued met | not met | no paper value |``;
+    the not-met claims with measured and paper values."""
+    rows = []
+    for run in dict.fromkeys(c["variant"] for c in result.get("claims", [])):
+        mine = [c for c in result["claims"] if c["variant"] == run]
+        valued = [c for c in mine if c["status"] != NO_VALUE]
+        bad = "; ".join(f"{c['claim']}: {_fmt(c['measured'])} (paper {_fmt(c['paper'])})"
+                        for c in valued if not c["met"]) or "-"
+        rows.append(f"| {result.get('paper', '?')} | {run}{' (gating)' if run == OURS else ''} | "
+                    f"{sum(c['met'] for c in valued)}/{len(valued)} | {_cell(bad)} | "
+                    f"{sum(c['status'] == NO_VALUE for c in mine)} |")
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Print the README table rows of reproduction JSON files."""
-    paths = sys.argv[1:] if argv is None else argv
+    """Print the README table rows of reproduction JSON files (``--summary``: one row per run)."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    summary = "--summary" in args
+    paths = [a for a in args if a != "--summary"]
     if not paths:
-        print("usage: python -m benchmarks.claims RESULT.json [...]", file=sys.stderr)
+        print("usage: python -m benchmarks.claims [--summary] RESULT.json [...]", file=sys.stderr)
         return 2
-    print("| paper | claim | run | paper value | measured | rule | status |")
-    print("|---|---|---|---|---|---|---|")
+    if summary:
+        print("| paper | run | paper-valued claims met | not met: measured (paper) | no paper value |")
+        print("|---|---|---|---|---|")
+    else:
+        print("| paper | claim | run | paper value | measured | rule | status |")
+        print("|---|---|---|---|---|---|---|")
     for p in paths:
-        for row in markdown_rows(json.loads(Path(p).read_text())):
+        result = json.loads(Path(p).read_text())
+        for row in (summary_rows(result) if summary else markdown_rows(result)):
             print(row)
     return 0
 

@@ -139,3 +139,15 @@ def test_kannan_departures_cover_the_preset_choices():
     ours = {"offset_weight", "u_max", "dt", "max_steps", "position_weight", "input_weight", "length_scale",
             "connection_range"}
     assert ours <= _covered(kannan2022.departures())
+
+
+def test_summary_rows_one_per_run(tmp_path, capsys):
+    rows = [claims.band("a", SRC, 1.0, 1.0), claims.band("b", SRC, 1.0, 2.0),
+            claims.no_value("c", SRC, 3.0), claims.band("a", SRC, 1.0, 9.0, variant="as published")]
+    out = claims.summary_rows({"paper": "x", "claims": rows})
+    assert out[0] == "| x | ours (gating) | 1/2 | b: 2 (paper 1) | 1 |"
+    assert out[1] == "| x | as published | 0/1 | a: 9 (paper 1) | 0 |"
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps({"paper": "x", "claims": rows}))
+    assert claims.main(["--summary", str(path)]) == 0
+    assert "| x | ours (gating) |" in capsys.readouterr().out

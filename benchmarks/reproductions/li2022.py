@@ -459,27 +459,53 @@ def departures(abl: list[dict] | None = None, rows: list[dict] | None = None) ->
     ]
 
 
+def _key(row: dict[str, Any]) -> tuple:
+    return row["case"], row["controller"], row["variant"]
+
+
 def run(case: int | None = None, out: str | Path | None = None, plots_dir: str | Path | None = None,
         seed: int = 0, max_steps: int | None = None, controllers=CONTROLLERS,
         policy_options: dict[str, dict] | None = None, tube: bool = True,
         variants=("ours", "published"), sensitivity: bool = True, ablate: bool = True,
         earlier: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run the reproduction for ``case`` (1, 2, or ``None`` for both); write JSON / figures.
-    ``ablate`` adds ours minus each addition on case 1; APF runs on case 1 (§4.3) only.
-    ``earlier``: a previous result whose rows of the cases not run now (and, if not run now, its
-    sensitivity and tube experiment) are kept, so the cases can run one at a time."""
+
+    Order: per case our RDMPC and the as-published one (and the APF on case 1, §4.3), the tube
+    experiment and the sensitivity, the figures, then the case-1 ablation. ``out`` is rewritten
+    after every episode (a partial result is a valid result). ``earlier``: a previous result whose
+    rows are kept and whose episodes (and sensitivity, tube experiment) are not run again, so a run
+    can be resumed or split by case.
+    """
     cases = CASES if case is None else (int(case),)
     for c in cases:
         _preset(c)
     for v in variants:
         variant_setup(v)
     start = time.perf_counter()
-    rows, episodes = [], {}
-    jobs = [(c, "tube_rdmpc", v) for c in cases for v in variants if "tube_rdmpc" in controllers]
-    jobs += [(1, "apf", "ours")] if 1 in cases and "apf" in controllers else []
-    jobs += [(1, "tube_rdmpc", f"ours-no-{a}") for a in ADDITIONS] if ablate and 1 in cases else []
-    for k, (c, ctrl, v) in enumerate(jobs):
-        _progress(f"episode {k + 1}/{len(jobs)}: case {c}, {label(ctrl, v)} ...")
+    rows = list((earlier or {}).get("rows", []))
+    state: dict[str, Any] = {"tube": (earlier or {}).get("tube_experiment"),
+                             "sensitivity": (earlier or {}).get("sensitivity"), "figures": []}
+    main = [(c, "tube_rdmpc", v) for c in cases for v in variants if "tube_rdmpc" in controllers]
+    main += [(1, "apf", "ours")] if 1 in cases and "apf" in controllers else []
+    abl = [(1, "tube_rdmpc", f"ours-no-{a}") for a in ADDITIONS] if ablate and 1 in cases else []
+    done = {_key(r) for r in rows}
+    todo = [j for j in main + abl if j not in done]
+    opts = {"seed": seed, "policy_options": policy_options, "controllers": controllers}
+
+    def write() -> dict[str, Any]:
+        result = _assemble(rows, state, opts, variants, time.perf_counter() - start)
+        if out is not None:
+            write_json(Path(out), result)
+        return result
+
+    episodes: dict = {}
+    first_ablation = next((j for j in todo if j in abl), None)
+    for k, (c, ctrl, v) in enumerate(todo):
+        if (c, ctrl, v) == first_ablation:
+            _extras(state, tube, sensitivity and "tube_rdmpc" in controllers, seed, plots_dir, episodes)
+            episodes = {}
+            write()
+        _progress(f"episode {k + 1}/{len(todo)}: case {c}, {label(ctrl, v)} ...")
         traj, env, pol, wall = run_controller(c, ctrl, seed=seed, max_steps=max_steps, variant=v,
                                               policy_options=(policy_options or {}).get(ctrl))
         rows.append(summarise(traj, env, pol, ctrl, c, wall, variant=v))
@@ -487,22 +513,31 @@ def run(case: int | None = None, out: str | Path | None = None, plots_dir: str |
             episodes[(c, label(ctrl, v))] = (traj, env, pol)
         _progress(f"  done in {wall:.0f} s: t_conv {rows[-1]['convergence_time_s']}, "
                   f"final error {rows[-1]['final_error_m']:.4f} m")
-    tube_res = tube_experiment() if tube else None
-    sens = accuracy_sensitivity(seed=seed) if sensitivity and "tube_rdmpc" in controllers else None
-    tube_json = None
-    if tube_res is not None:
-        tube_json = {k: v for k, v in tube_res.items() if k != "runs"}
-        tube_json["runs"] = [{k: v for k, v in r.items() if not k.startswith("sat1_")} for r in tube_res["runs"]]
-    if earlier is not None:
-        rows = [r for r in earlier["rows"] if r["case"] not in cases] + rows
-        cases = tuple(sorted({r["case"] for r in rows}))
-        tube_json = tube_json or earlier.get("tube_experiment")
-        sens = sens or earlier.get("sensitivity")
-    checks = check_claims(rows, tube_json)
+        write()
+    _extras(state, tube, sensitivity and "tube_rdmpc" in controllers, seed, plots_dir, episodes)
+    return write()
+
+
+def _extras(state: dict, tube: bool, sensitivity: bool, seed: int, plots_dir, episodes: dict) -> None:
+    """The tube experiment, the sensitivity and the figures, each once (kept from ``state``)."""
+    tube_res = None
+    if tube and state["tube"] is None:
+        tube_res = tube_experiment()
+        state["tube"] = {k: v for k, v in tube_res.items() if k != "runs"}
+        state["tube"]["runs"] = [{k: v for k, v in r.items() if not k.startswith("sat1_")} for r in tube_res["runs"]]
+    if sensitivity and state["sensitivity"] is None:
+        state["sensitivity"] = accuracy_sensitivity(seed=seed)
+    if plots_dir is not None and (episodes or tube_res is not None):
+        state["figures"] += [str(p) for p in save_figures(episodes, tube_res, Path(plots_dir))]
+
+
+def _assemble(rows: list[dict], state: dict, opts: dict, variants, wall: float) -> dict[str, Any]:
+    """The result of the rows run so far."""
+    checks = check_claims(rows, state["tube"])
     abl = ablation(rows, checks)
     result: dict[str, Any] = {
-        "paper": PAPER, "cases": list(cases), "variants": list(variants), "rows": rows,
-        "claims": checks, "departures": departures(abl, rows), "ablation": abl, "seed": seed,
+        "paper": PAPER, "cases": sorted({r["case"] for r in rows}), "variants": list(variants), "rows": rows,
+        "claims": checks, "departures": departures(abl, rows), "ablation": abl, "seed": opts["seed"],
         "settings": {
             "env": "cluster_v0(preset='li2022-case<k>', terminate_on_collision=False): J2 + drag "
                    "truth, 500 km / 45 deg chief, w_bar = 0.1 N on 50 kg (0.002 m/s^2), dt 5 s, "
@@ -510,19 +545,17 @@ def run(case: int | None = None, out: str | Path | None = None, plots_dir: str |
             "tube_rdmpc_exact_max_iter": EXACT_MAX_ITER,
             "configs": {v: _config_dict(v) for v in sorted({r["variant"] for r in rows
                                                            if r["controller"] == "tube_rdmpc"})},
-            "policies": {c: dict((policy_options or {}).get(c) or {}) for c in controllers},
+            "policies": {c: dict((opts["policy_options"] or {}).get(c) or {}) for c in opts["controllers"]},
         },
     }
     result["pass"] = passed(result)
-    if sens is not None:
-        result["sensitivity"] = sens
-    if tube_json is not None:
-        result["tube_experiment"] = tube_json
-    if plots_dir is not None:
-        result["figures"] = [str(p) for p in save_figures(episodes, tube_res, Path(plots_dir))]
-    result["wall_time_s"] = time.perf_counter() - start
-    if out is not None:
-        write_json(Path(out), result)
+    if state["sensitivity"] is not None:
+        result["sensitivity"] = state["sensitivity"]
+    if state["tube"] is not None:
+        result["tube_experiment"] = state["tube"]
+    if state["figures"]:
+        result["figures"] = state["figures"]
+    result["wall_time_s"] = wall
     return result
 
 
@@ -534,11 +567,12 @@ def _config_dict(variant: str) -> dict[str, Any]:
 
 
 def reproduce(plots: str | Path | None = None, seed: int = 0, case: int | None = None,
-              variant: str = "both", ablate: bool = True, earlier: Path | None = None) -> dict[str, Any]:
+              variant: str = "both", ablate: bool = True, earlier: Path | None = None,
+              partial: Path | None = None) -> dict[str, Any]:
     """The ``benchmarks.reproduce`` entry point (both cases unless ``case`` is given; ``earlier``:
-    a result JSON whose other cases are kept)."""
+    a result JSON whose rows are kept and not run again; ``partial``: rewritten after every episode)."""
     prev = json.loads(Path(earlier).read_text()) if earlier is not None else None
-    return run(case=case, plots_dir=plots, seed=seed, ablate=ablate, earlier=prev,
+    return run(case=case, plots_dir=plots, seed=seed, ablate=ablate, earlier=prev, out=partial,
                variants=("ours", "published") if variant == "both" else (variant,))
 
 
@@ -768,6 +802,8 @@ def add_arguments(parser) -> None:
     group.add_argument("--variant", choices=("ours", "published", "both"), default="both",
                        help="RDMPC run: ours, published (li2022 as published) or both (default)")
     group.add_argument("--with", dest="earlier", type=Path, default=None, metavar="RESULT.json",
-                       help="keep the rows of this earlier li2022 result for the cases not run now")
+                       help="keep the rows of this earlier li2022 result and do not run them again (resume)")
+    group.add_argument("--partial", type=Path, default=None, metavar="FILE.json",
+                       help="rewrite the result so far to this file after every episode")
     group.add_argument("--no-ablation", dest="ablate", action="store_false",
                        help="skip the case-1 ablation (ours minus each of our five additions)")
