@@ -47,6 +47,7 @@ from baselines.base import (
     guarded_solve,
     new_info,
     number,
+    time_limit,
     validate,
 )
 from satenv.cluster_graph import nearest_neighbour_graph, neighbour_lists
@@ -70,6 +71,8 @@ class APFConfig:
         rho_brake [m]: range (clearance) within which the closing-speed braking term acts.
         c_min [m]: smallest clearance used in the repulsion.
         cw_compensation: cancel the CW natural dynamics (feed-forward).
+        solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
+            flagged failure like any other (``baselines.base.guarded_solve``): a stall guard, the law takes microseconds.
     """
 
     k_att: float = 4e-3
@@ -86,13 +89,15 @@ class APFConfig:
     rho_brake: float = 400.0
     c_min: float = 1.0
     cw_compensation: bool = True
+    solve_time_limit: float | None = 1.0
 
     def __post_init__(self) -> None:
         nonneg = ("k_close", "k_swirl", "k_damp", "k_rep")
         rules = {f.name: partial(number, zero_ok=f.name in nonneg) for f in fields(self)
-                 if f.name != "cw_compensation"}
+                 if f.name not in ("cw_compensation", "solve_time_limit")}
         rules["att_fraction"] = rules["brake_fraction"] = partial(number, high=1.0)
         rules["cw_compensation"] = flag
+        rules["solve_time_limit"] = time_limit
         validate(self, "APF", rules)
 
 
@@ -155,7 +160,8 @@ class APF(Baseline):
     def accelerations(self) -> np.ndarray:
         """The APF accelerations (M, 3) [m/s^2] for the env's current state (saturated; zero
         thrust when the law is not finite)."""
-        u = guarded_solve(self.info, lambda: (self._law(), True, "ok"), shape=(self.m, 3))
+        u = guarded_solve(self.info, lambda: (self._law(), True, "ok"), shape=(self.m, 3),
+                          time_limit=self.cfg.solve_time_limit)
         return np.zeros((self.m, 3)) if u is None else saturate_norm(u, self.sc.u_max)
 
     def _law(self) -> np.ndarray:

@@ -9,7 +9,9 @@ A scripted baseline class declares ``name``, ``env_ids`` (the satenv env ids it 
 and a classmethod ``supports(env)``; it is built as ``Baseline(env, config=None, **options)``
 with one frozen config dataclass (:func:`config_from_options`). :func:`check_env` gives the one
 error for a non-env (:class:`BaselineTypeError`) or an env the baseline cannot control
-(:class:`BaselineError`). Every solver call goes through :func:`guarded_solve`.
+(:class:`BaselineError`). Every solver call goes through :func:`guarded_solve`, which also
+enforces the baseline's per-solve time limit (each config's ``solve_time_limit`` [s],
+validated by :func:`time_limit`).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import math
 import numbers
 import os
 import tempfile
+import time
 from collections.abc import Callable
 from dataclasses import fields
 from typing import Any, Protocol, TypeVar, runtime_checkable
@@ -38,6 +41,8 @@ MAX_HORIZON = 200
 """Cap on every prediction horizon (steps) of a baseline config: bounded work per decision (the
 papers use 30-50; at 200 a DMPC QP builds in ~2 s and an NMPC / tube-RDMPC NLP takes 10-15 s for
 its first solve, at 1000 they took minutes and GBs)."""
+MAX_SOLVE_TIME = 3600.0
+"""Largest accepted per-solve time limit [s] (``solve_time_limit`` of every baseline config)."""
 MAX_ITERATIONS = 100_000
 """Cap on every iteration count (solver iterations, Jacobi / convex-step / GMRES iterations)."""
 
@@ -150,6 +155,11 @@ def integer(owner: str, name: str, value: Any, *, low: int = 1, high: int = MAX_
     return int(value)
 
 
+def time_limit(owner: str, name: str, value: Any) -> float | None:
+    """A per-solve time limit [s]: ``None`` (no limit) or a number in ``(0, MAX_SOLVE_TIME]``."""
+    return None if value is None else number(owner, name, value, high=MAX_SOLVE_TIME)
+
+
 def flag(owner: str, name: str, value: Any) -> bool:
     if not isinstance(value, bool | np.bool_):
         raise BaselineError(f"{owner} option {name} must be True or False, got {show(value)}")
@@ -222,25 +232,32 @@ def record_fallback(info: dict[str, Any], status: str) -> None:
 def guarded_solve(info: dict[str, Any], solve: Callable[[], tuple[Any, bool, str]], *,
                   shape: tuple[int, ...], lower: Any = None, upper: Any = None,
                   violation: Callable[[np.ndarray], float] | None = None, tol: float = 1e-6,
-                  violation_tol: float = 1e-6, fallback: bool = True) -> np.ndarray | None:
+                  violation_tol: float = 1e-6, fallback: bool = True,
+                  time_limit: float | None = None) -> np.ndarray | None:
     """Run one solver call; return its point, or ``None`` when it must not be used.
 
     ``solve()`` returns ``(x, ok, status)`` with ``ok`` the solver's own success report. The call
     fails on any exception, ``ok`` False, a point of another ``shape``, a non-finite entry, a
     violation of ``lower <= x <= upper`` by more than ``tol`` (scaled by ``max(1, |bound|)``), or
-    ``violation(x) > violation_tol`` (a cheap check of the solver's constraints, e.g. ``A x`` rows).
+    ``violation(x) > violation_tol`` (a cheap check of the solver's constraints, e.g. ``A x`` rows),
+    or a solve that took longer than ``time_limit`` seconds of wall time (a stall: its late point
+    is not used; the solver's own time option, where it has one, stops it near the limit).
     ``info["solver_status"]`` gets the status; a failure with ``fallback=True`` also counts one
     ``info["fallbacks"]`` (the caller then applies its documented safe action); with
     ``fallback=False`` (the caller retries another way) it is counted in
     ``info["solver_failures"]`` only.
     """
+    start = time.perf_counter()
     try:
         raw, ok, status = solve()
         x = np.asarray(raw, dtype=float) if raw is not None else None
         status = str(status)
     except Exception as exc:  # noqa: BLE001 - any solver fault is a failure, never a crash
         x, ok, status = None, False, f"error: {type(exc).__name__}: {exc}"
+    elapsed = time.perf_counter() - start
     reason = _reject(x, ok, status, shape, lower, upper, violation, tol, violation_tol)
+    if time_limit is not None and elapsed > time_limit:
+        reason = f"time limit: the solve took {elapsed:.3g} s > {time_limit:.3g} s ({reason or status})"
     if reason is None:
         info["solver_status"] = status
         return x

@@ -61,6 +61,7 @@ from baselines.base import (
     integer,
     new_info,
     number,
+    time_limit,
     validate,
 )
 from satenv.dynamics import cw_continuous
@@ -331,6 +332,8 @@ class CGMRESConfig:
         fallback_tol: relative GMRES residual above which the update is rejected (fallback).
         max_residual: |F| above which the continuation is considered diverged (fallback).
         newton_iterations: Newton steps of the restart at ``T = 0`` (:meth:`FormationOCP.refine`).
+        solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
+            flagged failure like any other (``baselines.base.guarded_solve``): a stall guard, a continuation update takes milliseconds.
     """
 
     horizon: float = 3.0
@@ -344,6 +347,7 @@ class CGMRESConfig:
     fallback_tol: float = 0.5
     max_residual: float = 1e3
     newton_iterations: int = 50
+    solve_time_limit: float | None = 5.0
 
     def __post_init__(self) -> None:
         rules: dict[str, Any] = {name: number for name in (
@@ -351,6 +355,7 @@ class CGMRESConfig:
             "max_residual")}
         rules["horizon_steps"] = partial(integer, high=MAX_HORIZON)
         rules["kmax"] = rules["newton_iterations"] = integer
+        rules["solve_time_limit"] = time_limit
         if self.zeta is not None:
             rules["zeta"] = number
         validate(self, "CGMRES", rules)
@@ -439,11 +444,13 @@ class CGMRES(Baseline):
         ocp = self.ocp
         if self._u_seq is None:
             self._t = 0.0
-            start = guarded_solve(self.info, lambda: self._restart(x), shape=(ocp.dim,))
+            start = guarded_solve(self.info, lambda: self._restart(x), shape=(ocp.dim,),
+                                  time_limit=self.cfg.solve_time_limit)
             if start is None:
                 return self._fallback()
             self._u_seq, self._u_dot = start, np.zeros(ocp.dim)
-        new = guarded_solve(self.info, lambda: self._continuation_step(x), shape=(ocp.dim,))
+        new = guarded_solve(self.info, lambda: self._continuation_step(x), shape=(ocp.dim,),
+                            time_limit=self.cfg.solve_time_limit)
         if new is None:
             return self._fallback()
         self.info["fallback"] = False

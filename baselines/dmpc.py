@@ -66,6 +66,7 @@ from baselines.base import (
     number,
     record_fallback,
     row_violation,
+    time_limit,
     validate,
     weights,
 )
@@ -107,6 +108,9 @@ class DMPCConfig:
         solver: ``"daqp"`` or ``"osqp"``.
         warm_start: ``"shift"`` or ``"previous"`` (one_hop); initial: ``"random"`` or ``"zeros"``.
         seed: seed of the random initial sequence (``reset(seed)`` overrides).
+        solve_time_limit: wall-time limit [s] of one solve (None: none): a solve over it is a
+            flagged failure like any other (``baselines.base.guarded_solve``); a stall guard, QP median
+            0.1-2 ms (set the control period for a real-time check).
     """
 
     variant: str = "one_hop"
@@ -126,9 +130,11 @@ class DMPCConfig:
     warm_start: str = "shift"
     initial: str = "random"
     seed: int | None = None
+    solve_time_limit: float | None = 1.0
 
     def __post_init__(self) -> None:
         rules: dict[str, Any] = {
+            "solve_time_limit": time_limit,
             "variant": partial(choice, choices=("one_hop", "convex_step")),
             "horizon": partial(integer, high=MAX_HORIZON), "sigma": number,
             "velocity_margin": partial(number, zero_ok=True),
@@ -197,10 +203,11 @@ class QPSolver:
     """
 
     def __init__(self, H: np.ndarray, A: np.ndarray | None, lb: np.ndarray, ub: np.ndarray,
-                 solver: str = "daqp", eps: float = 1e-9):
+                 solver: str = "daqp", eps: float = 1e-9, time_limit: float | None = None):
         if solver not in _SOLVERS:
             raise BaselineError(f"solver must be one of {_SOLVERS}, got {solver!r}.")
         self.solver = solver
+        self.time_limit = time_limit
         self.n = H.shape[0]
         self.A = np.zeros((0, self.n)) if A is None else np.ascontiguousarray(A, dtype=float)
         self.m = self.A.shape[0]
@@ -273,7 +280,7 @@ class QPSolver:
         or the rows by more than ``QP_TOL``."""
         return guarded_solve(info, self.solve_raw, shape=(self.n,), lower=self.lb, upper=self.ub,
                              tol=QP_TOL, violation=self.row_violation, violation_tol=QP_TOL,
-                             fallback=fallback)
+                             fallback=fallback, time_limit=self.time_limit)
 
     def row_violation(self, x: np.ndarray) -> float:
         """Largest violation of ``bl <= A x <= bu``, relative to ``max(1, |bound|)``."""
@@ -396,7 +403,8 @@ class OneHopDMPC:
                 if self.min_error:
                     rows.append(np.zeros((hz, self.nu)))  # filled each step
                 amat = np.vstack(rows) if rows else None
-                self.qps.append(QPSolver(self.H[f], amat, lb, ub, solver=self.solver))
+                self.qps.append(QPSolver(self.H[f], amat, lb, ub, solver=self.solver,
+                                         time_limit=self.cfg.solve_time_limit))
 
     def reset(self, seed: int | None = None) -> None:
         if seed is not None:
@@ -580,9 +588,10 @@ class ConvexStepDMPC:
             npairs = 2 if (self.coupled and j + 1 < m) else 1
             rows = self._n_rows_pair() * npairs
             amat = np.zeros((rows, self.nu)) if rows else None
-            self.qps.append(QPSolver(self.H[j], amat, lb, ub, solver=self.solver))
-            self.box_qps.append(QPSolver(self.H[j], None, lb, ub, solver=self.solver)
-                                if rows else None)
+            self.qps.append(QPSolver(self.H[j], amat, lb, ub, solver=self.solver,
+                                     time_limit=self.cfg.solve_time_limit))
+            self.box_qps.append(QPSolver(self.H[j], None, lb, ub, solver=self.solver,
+                                         time_limit=self.cfg.solve_time_limit) if rows else None)
 
     def reset(self, seed: int | None = None) -> None:
         self.U: np.ndarray | None = None

@@ -84,6 +84,7 @@ from baselines.base import (
     number,
     record_fallback,
     row_violation,
+    time_limit,
     validate,
 )
 from satenv.dynamics import cw_continuous, cw_matrices
@@ -259,6 +260,8 @@ class NMPCConfig:
             at ``tol=1e-8`` on recorded §5.2 problems), 1.5-1.9x faster per solve.
         solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
+        solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
+            flagged failure like any other (``baselines.base.guarded_solve``): a stall guard, the median ipopt solve is 20-40 ms; ipopt's own max_wall_time is set to it.
     """
 
     horizon: int = 30
@@ -277,9 +280,11 @@ class NMPCConfig:
     hessian: str | None = None
     solver_options: dict | None = None
     seed: int | None = None
+    solve_time_limit: float | None = 10.0
 
     def __post_init__(self) -> None:
         rules: dict[str, Any] = {
+            "solve_time_limit": time_limit,
             "horizon": partial(integer, high=MAX_HORIZON), "max_iter": integer,
             "rk4_steps": partial(integer, high=100),
             "solver": partial(choice, choices=_SOLVERS),
@@ -430,6 +435,8 @@ class NMPC(Baseline):
                     "ipopt.max_iter": int(max_iter), "ipopt.tol": float(tol),
                     "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3,
                     "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6}
+            if self.cfg.solve_time_limit is not None:
+                opts["ipopt.max_wall_time"] = float(self.cfg.solve_time_limit)
         else:
             opts = {"print_time": False, "structure_detection": "auto", "expand": True,
                     "fatrop.print_level": 0, "fatrop.max_iter": int(max_iter), "fatrop.tol": float(tol),
@@ -606,7 +613,7 @@ class NMPC(Baseline):
         w = guarded_solve(self.info, lambda: self._run_nlp(args, out), shape=(self._nw,),
                           lower=self._lbx, upper=self._ubx, fallback=False,
                           violation=lambda _: row_violation(out["g"], self._lbg, self._ubg),
-                          violation_tol=NLP_CONSTRAINT_TOL)
+                          violation_tol=NLP_CONSTRAINT_TOL, time_limit=self.cfg.solve_time_limit)
         stats = out.get("stats", {})
         self.info["agent_solve_ms"].append((time.perf_counter() - t0) * 1e3)
         self.info["iterations"].append(int(stats.get("iter_count", -1)) if stats else -1)

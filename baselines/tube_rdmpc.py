@@ -108,6 +108,7 @@ from baselines.base import (
     number,
     record_fallback,
     row_violation,
+    time_limit,
     validate,
 )
 from satenv.cluster_graph import nearest_neighbour_graph
@@ -157,6 +158,9 @@ class TubeRDMPCConfig:
         solver: ``"ipopt"`` (default, the reference) or ``"ipopt-jit"``: the same NLP and ipopt
             options on gcc-compiled problem functions (the same iterates to round-off), compiled
             once per process and config (about 20-50 s of gcc on 2 cores).
+        solve_time_limit: wall-time limit [s] of one NLP solve (None: none); a solve over it is a
+            flagged failure like any other (``baselines.base.guarded_solve``): a stall guard (the
+            median solve is 10-30 ms); ipopt's own ``max_wall_time`` is set to it.
     """
 
     horizon: float = 50.0
@@ -182,6 +186,7 @@ class TubeRDMPCConfig:
     warm_duals: bool = True
     workers: int = 1
     solver: str = "ipopt"
+    solve_time_limit: float | None = 30.0
 
     def __post_init__(self) -> None:
         zero_ok = ("beta", "gamma", "model_error_bound", "lyapunov_tolerance", "safety_margin")
@@ -191,6 +196,8 @@ class TubeRDMPCConfig:
                 rules[f.name] = flag
             elif f.name == "solver":
                 rules[f.name] = partial(choice, choices=SOLVERS)
+            elif f.name == "solve_time_limit":
+                rules[f.name] = time_limit
             elif f.name not in ("v_max", "exact_max_iter") or getattr(self, f.name) is not None:
                 rules[f.name] = partial(number, zero_ok=f.name in zero_ok)
         rules["max_iter"] = integer
@@ -443,6 +450,7 @@ class _NominalNLP:
             "ipopt.acceptable_tol": 1e-4,
             "ipopt.acceptable_iter": 5,
             "ipopt.mu_strategy": "adaptive",
+            **({"ipopt.max_wall_time": float(cfg.solve_time_limit)} if cfg.solve_time_limit else {}),
             **(WARM_DUAL_OPTIONS if cfg.warm_duals else {}),
             **(JIT_OPTIONS if cfg.solver == "ipopt-jit" else {}),
         }
@@ -489,7 +497,7 @@ class _NominalNLP:
 
         return guarded_solve(info, run, shape=(self.n_w,), lower=lbx, upper=ubx, fallback=False,
                              violation=lambda _: row_violation(g["g"], lbg, ubg),
-                             violation_tol=NLP_CONSTRAINT_TOL)
+                             violation_tol=NLP_CONSTRAINT_TOL, time_limit=self.cfg.solve_time_limit)
 
     def states(self, x0: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Predicted nominal states (N + 1, 6) for scaled inputs ``v`` (3N,)."""
