@@ -1,0 +1,234 @@
+"""Stateless experts for imitation: the action depends only on the current state.
+
+DAgger asks the expert what it would do in states the learner flew into; a controller that
+warm-starts from its own previous plan (``baselines.DMPC``) answers a different question there
+(its shadow plan is not the one it would have had). The experts here re-plan from scratch at
+every decision, so a label is a function of the state alone.
+
+:class:`JointPlatoonMPC` — pereira2022 §5.1 (``platoon_v0(preset="pereira2022")``): the joint
+problem the convex-step DMPC iterates towards (pereira2022 eq. 25-29), solved in one QP over both
+followers' input sequences. Cost: ``sum_j atot alpha_j |Z_j - Y_d|^2_calQ + alpha_j^2
+|U_j|^2_calW`` on the pair states ``z_j = x_j - x_{j-1}`` (leader = 0), the prediction
+matrices of ``satenv.dynamics``. Constraints on every pair: the input box, the pair velocity box,
+the keep-out sphere linearised as its tangent half-space at the current direction (eq. 32-33;
+``keepout_margin`` metres added to the radius), the LOS cone (eq. 34); plus (not in the paper) the
+keep-out half-space of every follower around the leader. The QP is built and cold-solved with
+DAQP; if it fails the LOS rows are dropped, then every state row (input box only), and the
+fallback is counted in ``info["fallbacks"]`` as in :mod:`baselines.dmpc`.
+
+Privileged like the DMPC: it reads ``env.state()``.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from baselines.base import new_info, record_fallback
+from baselines.dmpc import ConvexStepDMPC, DMPCConfig, QPSolver
+
+__all__ = ["JointPlatoonMPC"]
+
+
+class JointPlatoonMPC:
+    """Centralised, cold-started joint MPC of the pereira2022 §5.1 platoon (module docstring).
+
+    Args:
+        env: a ``platoon_v0`` env with ``formation="chain"`` (the pereira2022 preset).
+        horizon: prediction horizon N (default: the paper's DMPC, 40).
+        keepout_margin: metres added to the keep-out radius in the plan.
+        leader_keepout: also keep every follower (not only follower 1) out of the leader's sphere.
+        coupling: ``"joint"`` (one QP over all followers) or ``"sequential"`` (follower 1 plans
+            its own pair alone, then each follower j plans its pair against follower j-1's
+            plan: follower j's action then depends only on the states of followers 1..j, which
+            is what its observation holds under the PLF graph).
+    """
+
+    name = "joint_mpc"
+
+    def __init__(self, env: Any, horizon: int | None = None, keepout_margin: float = 0.5,
+                 leader_keepout: bool = True, coupling: str = "joint"):
+        if coupling not in ("joint", "sequential"):
+            raise ValueError(f"coupling must be 'joint' or 'sequential', got {coupling!r}")
+        self.coupling = coupling
+        sc = env.scenario
+        if sc.formation != "chain":
+            raise ValueError(f"JointPlatoonMPC needs a chain-formation platoon (pereira2022), got "
+                             f"formation={sc.formation!r}")
+        self.env, self.scenario = env, sc
+        cfg = DMPCConfig.for_scenario(sc)
+        if horizon is not None:
+            cfg = DMPCConfig(**{**cfg.__dict__, "horizon": int(horizon)})
+        self.core = ConvexStepDMPC(sc, cfg)          # prediction matrices, weights, pair rows
+        self.margin = float(keepout_margin)
+        self.leader_keepout = bool(leader_keepout)
+        self.m = sc.n_followers
+        self.nu = self.core.nu
+        self.agents = [f"follower_{i + 1}" for i in range(self.m)]
+        self.u_max = float(sc.u_max)
+        self._build()
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    def _pair_map(self, j: int) -> np.ndarray:
+        """``D_j`` (nu, m nu): ``U_j - U_{j-1}`` from the stacked inputs (U_0 = 0)."""
+        d = np.zeros((self.nu, self.m * self.nu))
+        d[:, j * self.nu:(j + 1) * self.nu] = np.eye(self.nu)
+        if j >= 1:
+            d[:, (j - 1) * self.nu:j * self.nu] = -np.eye(self.nu)
+        return d
+
+    def _build(self) -> None:
+        c = self.core
+        n = self.m * self.nu
+        self.D = [self._pair_map(j) for j in range(self.m)]
+        h = np.zeros((n, n))
+        wdiag = np.tile(np.asarray(self.scenario.input_weight, float), c.horizon)
+        for j in range(self.m):
+            h += 2 * c.wq[j] * self.D[j].T @ c.btqb @ self.D[j]
+            sl = slice(j * self.nu, (j + 1) * self.nu)
+            h[sl, sl] += 2 * c.wu[j] * np.diag(wdiag)
+        self.H = h
+        lb, ub = np.full(n, -self.u_max), np.full(n, self.u_max)
+        rows_full = self._rows(np.zeros((self.m, 6)), los=True)[0].shape[0]
+        rows_nolos = self._rows(np.zeros((self.m, 6)), los=False)[0].shape[0]
+        self.qp_full = QPSolver(h, np.zeros((rows_full, n)), lb, ub)
+        self.qp_nolos = QPSolver(h, np.zeros((rows_nolos, n)), lb, ub)
+        self.qp_box = QPSolver(h, None, lb, ub)
+        self.seq = []
+        for j in range(self.m):
+            hj = 2 * (c.wq[j] * c.btqb + c.wu[j] * np.diag(wdiag))
+            g = self._seq_rows(j, np.zeros((self.m, 6)), np.zeros((self.m, self.nu)), True)[0]
+            g2 = self._seq_rows(j, np.zeros((self.m, 6)), np.zeros((self.m, self.nu)), False)[0]
+            lbj, ubj = np.full(self.nu, -self.u_max), np.full(self.nu, self.u_max)
+            self.seq.append((QPSolver(hj, np.zeros_like(g), lbj, ubj), QPSolver(hj, np.zeros_like(g2), lbj, ubj),
+                             QPSolver(hj, None, lbj, ubj)))
+
+    def _rows(self, z: np.ndarray, los: bool):
+        """Constraint rows ``G U in [lo, hi]`` on the stacked inputs for pair states ``z`` (m, 6)."""
+        c, sc, hz = self.core, self.scenario, self.core.horizon
+        free = np.einsum("ij,mj->mi", c.ca, z)
+        g_all, lo_all, hi_all = [], [], []
+        r_saved = sc.keepout_radius
+        for j in range(self.m):
+            g, lo, hi = self._pair_rows(z[j], free[j], r_saved + self.margin, los)
+            g_all.append(g @ self.D[j])
+            lo_all.append(lo)
+            hi_all.append(hi)
+        if self.leader_keepout:
+            for j in range(1, self.m):      # follower j+1 (0-based j) relative to the leader
+                x0 = z[: j + 1].sum(0)
+                off = free[: j + 1].sum(0).reshape(hz, 6)[:, :3]
+                d = x0[:3] / max(np.linalg.norm(x0[:3]), 1e-9)
+                gsum = sum(self.D[i] for i in range(j + 1))
+                cbp = c.cb_p.reshape(hz, 3, self.nu)
+                g_all.append(np.einsum("c,kcj->kj", d, cbp) @ gsum)
+                lo_all.append(np.full(hz, sc.follower_radius + sc.leader_radius + self.margin) - off @ d)
+                hi_all.append(np.full(hz, 1e30))
+        return np.vstack(g_all), np.concatenate(lo_all), np.concatenate(hi_all)
+
+    def _seq_rows(self, j: int, x: np.ndarray, u: np.ndarray, los: bool):
+        """Rows on follower j's own ``U_j`` given the earlier followers' plans ``u[:j]``."""
+        c, sc, hz = self.core, self.scenario, self.core.horizon
+        z = x - np.concatenate([np.zeros((1, 6)), x[:-1]], axis=0)
+        off = c.ca @ z[j] - (c.cb @ u[j - 1] if j >= 1 else 0.0)
+        g, lo, hi = self._pair_rows(z[j], off, sc.keepout_radius + self.margin, los)
+        if self.leader_keepout and j >= 1:
+            offp = (c.ca @ x[j]).reshape(hz, 6)[:, :3]
+            d = x[j, :3] / max(np.linalg.norm(x[j, :3]), 1e-9)
+            g = np.vstack([g, np.einsum("c,kcj->kj", d, c.cb_p.reshape(hz, 3, self.nu))])
+            lo = np.concatenate([lo, np.full(hz, sc.follower_radius + sc.leader_radius + self.margin) - offp @ d])
+            hi = np.concatenate([hi, np.full(hz, 1e30)])
+        return g, lo, hi
+
+    def _plan_sequential(self, x: np.ndarray) -> np.ndarray:
+        c = self.core
+        z = x - np.concatenate([np.zeros((1, 6)), x[:-1]], axis=0)
+        u = np.zeros((self.m, self.nu))
+        for j in range(self.m):
+            off = c.ca @ z[j] - (c.cb @ u[j - 1] if j >= 1 else 0.0)
+            f = 2 * c.wq[j] * (c.btq @ (off - c.yd))
+            full, nolos, box = self.seq[j]
+            sol = None
+            for qp, los in ((full, True), (nolos, False)):
+                g, lo, hi = self._seq_rows(j, x, u, los)
+                qp.update(f, lo, hi, A=g)
+                sol = qp.solve(self.info, fallback=False)
+                if sol is not None:
+                    break
+                self.info["relaxed"] += 1
+            if sol is None:
+                box.update(f)
+                sol = box.solve(self.info)
+            if sol is None or not np.all(np.isfinite(sol)):
+                record_fallback(self.info, f"follower {j + 1} QP failed: zero plan")
+                sol = np.zeros(self.nu)
+            u[j] = np.clip(sol, -self.u_max, self.u_max)
+        return u[:, :3].copy()
+
+    def _pair_rows(self, z0, offset, radius, los):
+        """The pair rows of :meth:`ConvexStepDMPC._pair_rows` on ``calB (U_j - U_{j-1})``."""
+        c, sc, hz = self.core, self.scenario, self.core.horizon
+        g_rows = [c.cb_v]
+        off_v = offset.reshape(hz, 6)[:, 3:].ravel()
+        lo, hi = [-sc.v_max - off_v], [sc.v_max - off_v]
+        cbp = c.cb_p.reshape(hz, 3, self.nu)
+        off_p = offset.reshape(hz, 6)[:, :3]
+        if sc.keepout_radius > 0:
+            center = np.asarray(sc.keepout_center)
+            d = z0[:3] - center
+            nrm = np.linalg.norm(d)
+            nvec = d / nrm if nrm > 1e-9 else np.array([0.0, -1.0, 0.0])
+            g_rows.append(np.einsum("c,kcj->kj", nvec, cbp))
+            lo.append(nvec @ (center + radius * nvec) - off_p @ nvec)
+            hi.append(np.full(hz, 1e30))
+        if los and sc.los_slopes is not None:
+            cx, cz = sc.los_slopes
+            xr, yr, zr = sc.port
+            a_los = np.array([[0, 1, 0], [cx, 1, 0], [-cx, 1, 0], [0, 1, cz], [0, 1, -cz]], float)
+            b_los = np.array([-yr, cx * xr, cx * xr, cz * zr, cz * zr])
+            g_rows.append(np.einsum("rc,kcj->krj", a_los, cbp).reshape(5 * hz, self.nu))
+            lo.append(np.full(5 * hz, -1e30))
+            hi.append(np.tile(b_los, hz) - (off_p @ a_los.T).ravel())
+        return np.vstack(g_rows), np.concatenate(lo), np.concatenate(hi)
+
+    # ------------------------------------------------------------------ policy interface
+    def reset(self, seed: int | None = None) -> None:
+        self.info = new_info()
+        self.info["solve_ms"] = []
+        self.info["relaxed"] = 0
+
+    def plan(self, x: np.ndarray) -> np.ndarray:
+        """The first inputs (m, 3) [m/s^2] of the joint plan for follower states ``x`` (m, 6)."""
+        if self.coupling == "sequential":
+            return self._plan_sequential(x)
+        c = self.core
+        z = x - np.concatenate([np.zeros((1, 6)), x[:-1]], axis=0)
+        free = np.einsum("ij,mj->mi", c.ca, z)
+        f = np.zeros(self.m * self.nu)
+        for j in range(self.m):
+            f += 2 * c.wq[j] * self.D[j].T @ (c.btq @ (free[j] - c.yd))
+        sol = None
+        for qp, los in ((self.qp_full, True), (self.qp_nolos, False)):
+            g, lo, hi = self._rows(z, los)
+            qp.update(f, lo, hi, A=g)
+            sol = qp.solve(self.info, fallback=False)
+            if sol is not None:
+                break
+            self.info["relaxed"] += 1
+        if sol is None:
+            self.qp_box.update(f)
+            sol = self.qp_box.solve(self.info)
+        if sol is None or not np.all(np.isfinite(sol)):
+            record_fallback(self.info, "joint QP failed: zero thrust")
+            return np.zeros((self.m, 3))
+        return np.clip(sol.reshape(self.m, self.nu)[:, :3], -self.u_max, self.u_max)
+
+    def act(self, observations: dict) -> dict:
+        t0 = time.perf_counter()
+        x = np.asarray(self.env.state(), dtype=float)[: 6 * self.m].reshape(self.m, 6)
+        a = (self.plan(x) / self.u_max).astype(np.float32)
+        self.info["solve_ms"].append(1e3 * (time.perf_counter() - t0))
+        return {name: a[i] for i, name in enumerate(self.agents) if name in observations}

@@ -1,0 +1,276 @@
+"""DAgger of a stateless MPC expert for pereira2022 §5.1 (``platoon_v0(preset="pereira2022")``).
+
+    nice -n 5 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
+        python -m training.recipes.platoon_dagger --run-dir /work/runs/p22/dagger   # new or resume
+
+The run is resumable at any time: labels go to ``<run>/labels/round_NNNN.npz`` (observations,
+expert actions, the env state and the agent of every row), the network to ``<run>/rounds/NNNN/``
+(the safe policy folder format of :mod:`training.policy`) after each round, with
+``history.json`` and ``learning_curve.png``. Restarting with the same ``--run-dir`` continues
+after the last finished round (``config.json`` of the run; flags given again override it).
+
+Recipe (read top to bottom):
+
+1. expert: :class:`training.experts.JointPlatoonMPC` (sequential coupling: follower j's action
+   depends only on followers 1..j, which its PLF observation holds), re-planned from scratch at
+   every step, so its label in a state the learner flew into is what it would do there;
+2. round 0: the expert flies (a share of episodes with Gaussian action noise, DART-style); each
+   later round the network flies (the expert's action is flown with probability ``beta ** k``)
+   and the expert labels every visited state; collisions do not end collection episodes;
+   a share of episodes starts from the paper's initial state;
+3. the network (one MLP shared by both followers, own observation only; the clock entry 14 is
+   zeroed and symlog features of the tracking error appended, :class:`training.shaping.ObsFeatures`)
+   is refitted on all labels after every round (warm start) and evaluated on validation seeds
+   (never the held-out seeds >= 900000).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["DaggerConfig", "run", "main"]
+
+SCENARIO = {"preset": "pereira2022", "randomize": True}
+"""The scoreboard's ``platoon-pereira2022-random`` kwargs (the evaluation scenario)."""
+
+
+@dataclass(frozen=True)
+class DaggerConfig:
+    """One DAgger run (every field is a ``--flag``)."""
+
+    rounds: int = 1000
+    round0_episodes: int = 40
+    episodes_per_round: int = 16
+    beta: float = 0.5
+    noise_share: float = 0.5
+    noise_std: float = 0.15
+    paper_start_share: float = 0.2
+    train_seed: int = 600_000
+    val_seeds: tuple[int, ...] = tuple(range(700_000, 700_012))
+    expert_options: dict[str, Any] = field(default_factory=lambda: {"coupling": "sequential"})
+    net_arch: tuple[int, ...] = (512, 512, 512)
+    activation: str = "relu"
+    squash: bool = True
+    obs_drop_dims: tuple[int, ...] = (14,)
+    obs_symlog_scale: float = 20.0
+    obs_symlog_dims: int = 6
+    epochs: int = 6
+    batch_size: int = 1024
+    learning_rate: float = 5e-4
+    clip_obs: float = 10.0
+    seed: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+# --------------------------------------------------------------------------- pieces
+def make_envs():
+    import satenv
+
+    collect = satenv.make("platoon_v0", **SCENARIO, terminate_on_collision=False)
+    paper = satenv.make("platoon_v0", preset="pereira2022", terminate_on_collision=False)
+    evaluation = satenv.make("platoon_v0", **SCENARIO)
+    paper_eval = satenv.make("platoon_v0", preset="pereira2022")
+    return collect, paper, evaluation, paper_eval
+
+
+def features(cfg: DaggerConfig):
+    from training.shaping import ObsFeatures
+
+    return ObsFeatures(cfg.obs_symlog_scale, cfg.obs_symlog_dims, tuple(cfg.obs_drop_dims))
+
+
+def collect_episode(env, expert, learner, seed: int, beta: float, noise: float,
+                    rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """One episode: every visited observation with the expert's label, the env state and agent."""
+    obs, _ = env.reset(seed=seed)
+    expert.reset(seed=seed)
+    rows: dict[str, list] = {"obs": [], "act": [], "state": [], "agent": [], "t": []}
+    t = 0
+    while env.agents:
+        agents = list(obs)
+        state = np.asarray(env.state(), dtype=np.float64)
+        labels = expert.act(obs)
+        for a in agents:
+            rows["obs"].append(obs[a])
+            rows["act"].append(labels[a])
+            rows["state"].append(state)
+            rows["agent"].append(int(a.rsplit("_", 1)[1]) - 1)
+            rows["t"].append(t)
+        if learner is None or rng.random() < beta:
+            flown = labels
+        else:
+            flown = learner.act(obs)
+        if noise > 0:
+            flown = {a: np.clip(v + rng.normal(0, noise, 3), -1, 1).astype(np.float32) for a, v in flown.items()}
+        obs, *_ = env.step(flown)
+        t += 1
+    return {k: np.asarray(v, dtype=np.float32 if k in ("obs", "act") else None) for k, v in rows.items()}
+
+
+def load_labels(run: Path) -> tuple[np.ndarray, np.ndarray, int]:
+    files = sorted((run / "labels").glob("round_*.npz"))
+    xs, ys = [], []
+    for f in files:
+        with np.load(f, allow_pickle=False) as d:
+            xs.append(d["obs"])
+            ys.append(d["act"])
+    if not xs:
+        return np.zeros((0, 1)), np.zeros((0, 3)), 0
+    return np.concatenate(xs), np.clip(np.concatenate(ys), -1, 1), len(files)
+
+
+def fit(actor, normalizer, feats, x, y, cfg: DaggerConfig, generator, epochs: int) -> float:
+    import torch
+
+    xt = torch.as_tensor(normalizer(feats(x.astype(np.float64))))
+    yt = torch.as_tensor(y, dtype=torch.float32)
+    opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
+    actor.train()
+    loss_sum = 0.0
+    for _ in range(epochs):
+        loss_sum = 0.0
+        for idx in torch.randperm(len(xt), generator=generator).split(cfg.batch_size):
+            loss = torch.mean((actor(xt[idx]) - yt[idx]) ** 2)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            loss_sum += loss.item() * len(idx)
+    actor.eval()
+    return loss_sum / len(xt)
+
+
+def evaluate(env, policy, seeds) -> dict[str, Any]:
+    """Aggregate of ``satenv.metrics.summary`` over seeds (the scoreboard's episode rule)."""
+    from satenv import metrics
+    from satenv.rollout import rollout
+
+    eps = [metrics.summary(rollout(env, policy, seed=int(s))) for s in seeds]
+    return {"episodes": len(eps), "success_rate": float(np.mean([e["success"] for e in eps])),
+            "collision_episodes": int(sum(e["collisions"] > 0 for e in eps)),
+            "rmse": float(np.mean([e["rmse"] for e in eps])),
+            "delta_v": float(np.mean([e["delta_v"] for e in eps])),
+            "final_error_m": float(np.mean([e["final_error_m"] for e in eps])),
+            "violations": float(np.mean([e["violations"] for e in eps]))}
+
+
+def plot_curve(history: list[dict[str, Any]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = [h["labels"] for h in history]
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
+    ax[0].plot(labels, [h["val"]["success_rate"] for h in history], "o-", label="random starts")
+    ax[0].plot(labels, [h["paper"]["success_rate"] for h in history], "s--", label="paper start")
+    ax[0].set_ylabel("success rate")
+    ax[0].legend()
+    ax[1].plot(labels, [h["val"]["collision_episodes"] for h in history], "o-")
+    ax[1].set_ylabel(f"collision episodes (of {history[-1]['val']['episodes']})")
+    ax[2].semilogy(labels, [h["loss"] for h in history], "o-")
+    ax[2].set_ylabel("regression MSE")
+    for a in ax:
+        a.set_xlabel("expert labels (agent-steps)")
+        a.grid(alpha=0.3)
+    fig.suptitle("DAgger of the sequential joint MPC, pereira2022 §5.1 (validation seeds)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- run
+def run(cfg: DaggerConfig, run_dir: Path) -> None:
+    import torch
+
+    from training.actor import MLPActor
+    from training.envs import policy_env_meta
+    from training.experts import JointPlatoonMPC
+    from training.policy import LearnedPolicy, ObsNormalizer, load, save_artifacts
+
+    torch.set_num_threads(1)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "labels").mkdir(exist_ok=True)
+    (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
+    collect, paper, ev, paper_ev = make_envs()
+    experts = {id(collect): JointPlatoonMPC(collect, **cfg.expert_options),
+               id(paper): JointPlatoonMPC(paper, **cfg.expert_options)}
+    feats = features(cfg)
+    obs_dim = collect.observation_space("follower_1").shape[0]
+    meta = policy_env_meta("platoon_v0", collect, {**SCENARIO, "terminate_on_collision": False}, dict(SCENARIO))
+    policy_cfg = {**cfg.to_json(), "recipe": "training.recipes.platoon_dagger",
+                  "expert": "training.experts.JointPlatoonMPC"}
+    history_path = run_dir / "history.json"
+    history = json.loads(history_path.read_text()) if history_path.is_file() else []
+    x, y, done = load_labels(run_dir)
+    actor = MLPActor(feats.out_dim(obs_dim), 3, list(cfg.net_arch), cfg.activation, cfg.squash)
+    normalizer = None
+    if history:
+        last = load(run_dir / "rounds" / f"{len(history) - 1:04d}")
+        actor.load_state_dict(last.actor.state_dict())
+        normalizer = last.normalizer
+    generator = torch.Generator().manual_seed(cfg.seed + done)
+    rng = np.random.default_rng([cfg.seed, done])
+    t_start = time.perf_counter()
+    episode = sum(cfg.round0_episodes if k == 0 else cfg.episodes_per_round for k in range(done))
+    for k in range(done, cfg.rounds):
+        learner = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats)
+        n_eps = cfg.round0_episodes if k == 0 else cfg.episodes_per_round
+        parts = []
+        t0 = time.perf_counter()
+        for _ in range(n_eps):
+            env = paper if rng.random() < cfg.paper_start_share else collect
+            noise = cfg.noise_std if (k == 0 and rng.random() < cfg.noise_share) else 0.0
+            parts.append(collect_episode(env, experts[id(env)], learner, cfg.train_seed + episode,
+                                         cfg.beta ** k, noise, rng))
+            episode += 1
+        batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+        np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
+        collect_s = time.perf_counter() - t0
+        x = batch["obs"] if len(x) == 0 else np.concatenate([x, batch["obs"]])
+        y = batch["act"] if len(y) == 0 else np.concatenate([y, np.clip(batch["act"], -1, 1)])
+        if normalizer is None:
+            fx = feats(x.astype(np.float64))
+            normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
+        t1 = time.perf_counter()
+        loss = fit(actor, normalizer, feats, x, y, cfg, generator, cfg.epochs * (4 if k == 0 else 1))
+        fit_s = time.perf_counter() - t1
+        policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats, meta=meta)
+        val, pap = evaluate(ev, policy, cfg.val_seeds), evaluate(paper_ev, policy, [0])
+        history.append({"round": k, "labels": int(len(x)), "episodes": episode, "loss": loss,
+                        "beta": cfg.beta ** k, "collect_s": round(collect_s, 1), "fit_s": round(fit_s, 1),
+                        "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap})
+        save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=meta, config=policy_cfg,
+                       source="training.recipes.platoon_dagger round checkpoint")
+        history_path.write_text(json.dumps(history, indent=1) + "\n")
+        plot_curve(history, run_dir / "learning_curve.png")
+        print(f"round {k}: labels {len(x)} loss {loss:.4f} val success {val['success_rate']:.2f} "
+              f"coll {val['collision_episodes']} fe {val['final_error_m']:.2f} paper {pap['success_rate']:.0f} "
+              f"collect {collect_s:.0f}s fit {fit_s:.0f}s", flush=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--run-dir", required=True, type=Path)
+    for f in DaggerConfig.__dataclass_fields__.values():
+        if f.name != "expert_options":
+            parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None)
+    ns = parser.parse_args(argv)
+    saved = ns.run_dir / "config.json"
+    base = DaggerConfig(**{k: tuple(v) if isinstance(v, list) else v
+                           for k, v in json.loads(saved.read_text()).items()}) if saved.is_file() else DaggerConfig()
+    over = {k: json.loads(v) for k, v in vars(ns).items() if k != "run_dir" and v is not None}
+    over = {k: tuple(v) if isinstance(v, list) else v for k, v in over.items()}
+    run(replace(base, **over), ns.run_dir)
+
+
+if __name__ == "__main__":
+    main()
