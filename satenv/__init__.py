@@ -56,24 +56,42 @@ def make(env_id: str, *, safety_filter: Any = False, **kwargs: Any):
     return filtered_env(env, safety_config(safety_filter))
 
 
-def platoon_v0(**kwargs: Any):
-    """Leader-follower platooning on V-bar (pereira2023 / pereira2022 §5.1); see ``satenv.envs.platoon_v0``."""
-    return make("platoon_v0", **kwargs)
+class EnvModule:
+    """``satenv.platoon_v0`` and its siblings: callable (``satenv.platoon_v0(**kwargs)`` is
+    ``satenv.make("platoon_v0", **kwargs)``) and usable as PettingZoo's env module
+    (``from satenv import platoon_v0; platoon_v0.parallel_env()``, ``platoon_v0.env()`` for the
+    AEC view; every other name comes from ``satenv.envs.platoon_v0``)."""
+
+    def __init__(self, env_id: str, doc: str) -> None:
+        self.env_id = env_id
+        self.__doc__ = doc
+
+    def __call__(self, **kwargs: Any):
+        return make(self.env_id, **kwargs)
+
+    def parallel_env(self, **kwargs: Any):
+        """The PettingZoo ``ParallelEnv`` (``satenv.make(env_id, **kwargs)``)."""
+        return make(self.env_id, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        import importlib
+
+        return getattr(importlib.import_module(_MODULES[self.env_id]), name)
+
+    def __repr__(self) -> str:
+        return f"<satenv env module {self.env_id!r} ({_MODULES[self.env_id]})>"
 
 
-def cluster_v0(**kwargs: Any):
-    """10-satellite cluster reconfiguration with a moving obstacle (li2022); see ``satenv.envs.cluster_v0``."""
-    return make("cluster_v0", **kwargs)
-
-
-def servicing_v0(**kwargs: Any):
-    """6-DOF cooperative on-orbit servicing (pereira2022 §4); see ``satenv.envs.servicing_v0``."""
-    return make("servicing_v0", **kwargs)
-
-
-def formation_v0(**kwargs: Any):
-    """Connected in-plane network formations (kannan2022); see ``satenv.envs.formation_v0``."""
-    return make("formation_v0", **kwargs)
+platoon_v0 = EnvModule("platoon_v0", "Leader-follower platooning on V-bar (pereira2023 / pereira2022 §5.1); "
+                                     "see ``satenv.envs.platoon_v0``.")
+cluster_v0 = EnvModule("cluster_v0", "10-satellite cluster reconfiguration with a moving obstacle (li2022); "
+                                     "see ``satenv.envs.cluster_v0``.")
+servicing_v0 = EnvModule("servicing_v0", "6-DOF cooperative on-orbit servicing (pereira2022 §4); "
+                                         "see ``satenv.envs.servicing_v0``.")
+formation_v0 = EnvModule("formation_v0", "Connected in-plane network formations (kannan2022); "
+                                         "see ``satenv.envs.formation_v0``.")
 
 
 def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, safety_filter: Any = False, **kwargs: Any):
@@ -88,16 +106,26 @@ def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, safety_filt
     return _make_vec(env_id, num_envs, seed=seed, **kwargs)
 
 
+GYM_MAX_EPISODE_STEPS: dict[str, int] = {"platoon_v0": 180, "cluster_v0": 400, "servicing_v0": 1200,
+                                          "formation_v0": 2000}
+"""``max_episode_steps`` of the registered Gymnasium ids: each env's default ``max_steps``
+(tests/test_env_surface.py checks they agree)."""
+
+
 def _register_gymnasium() -> None:
-    """Register ``GYM_IDS`` (entry points as strings: nothing of satenv is imported here)."""
+    """Register ``GYM_IDS`` (entry points as strings: nothing of satenv is imported here): the
+    centralised env (:mod:`satenv.gym_env`) and, for ``gymnasium.make_vec``, its batched
+    ``VectorEnv`` (:mod:`satenv.gym_vector`)."""
     from gymnasium.envs.registration import register, registry
 
     for gym_id, env_id in GYM_IDS.items():
         if gym_id not in registry:
-            register(id=gym_id, entry_point="satenv.gym_env:CentralisedEnv", kwargs={"env": env_id})
+            register(id=gym_id, entry_point="satenv.gym_env:CentralisedEnv",
+                     vector_entry_point="satenv.gym_vector:CentralisedVectorEnv",
+                     max_episode_steps=GYM_MAX_EPISODE_STEPS[env_id], kwargs={"env": env_id})
 
 
 _register_gymnasium()
 
-__all__ = ["ENV_IDS", "GYM_IDS", "__version__", "cluster_v0", "formation_v0", "make", "make_vec",
+__all__ = ["ENV_IDS", "EnvModule", "GYM_IDS", "GYM_MAX_EPISODE_STEPS", "__version__", "cluster_v0", "formation_v0", "make", "make_vec",
            "platoon_v0", "servicing_v0"]

@@ -12,10 +12,17 @@ agents' rewards. Terminated/truncated follow the team. It passes
     import satenv
 
     env = gym.make("satenv/Platoon-v0", topology="BDL", max_steps=100)   # env kwargs as in satenv.make
+    vec = gym.make_vec("satenv/Platoon-v0", num_envs=64)    # one batched core (satenv.gym_vector)
+
+The registered ids carry ``max_episode_steps`` (``satenv.GYM_MAX_EPISODE_STEPS``: the default
+preset's ``max_steps``); a longer episode (``max_steps``, another ``preset``) needs
+``max_episode_steps=`` too, as any Gymnasium ``TimeLimit``. ``render()`` without a
+``render_mode`` warns and returns ``None``.
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -83,6 +90,11 @@ class CentralisedEnv(gym.Env):
         return self._flat(obs), reward, any(term.values()), any(trunc.values()), {"agents": infos}
 
     def render(self):
+        if self.render_mode is None:
+            warnings.warn("render() without a render mode draws nothing: make the env with "
+                          "render_mode='rgb_array' (frames) or 'human' (a window), e.g. "
+                          "gymnasium.make('satenv/Platoon-v0', render_mode='rgb_array')", UserWarning, stacklevel=2)
+            return None
         return self.env.render()
 
     def close(self) -> None:

@@ -158,6 +158,63 @@ def test_gymnasium_view_passes_check_env(gym_id):
     assert steps <= 4 and obs in env.observation_space
 
 
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
+def test_env_modules_as_pettingzoo_users_write_them(env_id):
+    module = getattr(satenv, env_id)
+    assert isinstance(module.parallel_env(max_steps=3), SatParallelEnv)   # platoon_v0.parallel_env()
+    assert module(max_steps=3).scenario.max_steps == 3                      # satenv.platoon_v0() too
+    assert module.env is __import__(f"satenv.envs.{env_id}", fromlist=["env"]).env  # the AEC view
+    with pytest.raises(AttributeError):
+        getattr(module, "no_such_name")  # noqa: B009
+
+
+@pytest.mark.parametrize("gym_id", sorted(satenv.GYM_IDS))
+def test_gymnasium_ids_have_max_episode_steps_and_render_warns(gym_id):
+    import gymnasium as gym
+
+    env_id = satenv.GYM_IDS[gym_id]
+    env = gym.make(gym_id)
+    assert env.spec.max_episode_steps == satenv.make(env_id).scenario.max_steps == \
+        satenv.GYM_MAX_EPISODE_STEPS[env_id]
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert env.render() is None
+
+
+@pytest.mark.parametrize("gym_id", ["satenv/Platoon-v0", "satenv/Servicing-v0"])
+def test_make_vec_is_a_gymnasium_vector_env_over_the_batched_core(gym_id):
+    import gymnasium as gym
+    from gymnasium.vector import AutoresetMode, VectorEnv
+
+    vec = gym.make_vec(gym_id, num_envs=3, max_steps=6)
+    assert isinstance(vec, VectorEnv) and vec.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    assert type(vec.unwrapped).__module__ == "satenv.gym_vector" and vec.unwrapped.vec.num_envs == 3
+    singles = [gym.make(gym_id, max_steps=6) for _ in range(3)]
+    obs, _ = vec.reset(seed=10)
+    for b, env in enumerate(singles):  # copy b is the single env seeded 10 + b
+        np.testing.assert_array_equal(obs[b], env.reset(seed=10 + b)[0])
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        act = rng.uniform(-1, 1, vec.action_space.shape).astype(np.float32)
+        obs, rew, term, trunc, info = vec.step(act)
+        for b, env in enumerate(singles):
+            o, r, te, tr, _ = env.step(act[b])
+            assert (te, tr) == (term[b], trunc[b]) and r == pytest.approx(rew[b])
+            if te or tr:  # same-step autoreset: the last observation is in final_obs
+                assert info["_final_obs"][b]
+                np.testing.assert_array_equal(info["final_obs"][b], o)
+                np.testing.assert_array_equal(obs[b], env.reset()[0])  # the next episode, same generator
+            else:
+                np.testing.assert_array_equal(obs[b], o)
+    assert "final_observation" not in info
+    assert obs in vec.observation_space
+    with pytest.raises(SatenvError, match="shape"):
+        vec.step(np.zeros((2, 3)))
+    with pytest.raises(SatenvError, match="render"):
+        gym.make_vec(gym_id, num_envs=2, render_mode="human")
+    vec.close()
+
+
 def test_training_gym_view_is_the_same_class():
     from satenv.gym_env import CentralisedEnv
     from training.gym_view import CentralisedEnv as Reexported

@@ -274,8 +274,9 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     if ckpt:
         restore_vecnormalize(venv, read_json(ckpt[1], "vecnormalize.json"))
 
-    # 4. scripted baselines on the evaluation seeds (cached)
-    baseline_eval = _cached_baselines(out / "baselines_eval.json", eval_env, cfg, cfg.eval_seeds)
+    # 4. scripted baselines on the evaluation seeds (cached; only when there are periodic evaluations)
+    periodic = 0 < cfg.eval_every <= max(cfg.total_timesteps, planned_timesteps(cfg, len(env.possible_agents)))
+    baseline_eval = _cached_baselines(out / "baselines_eval.json", eval_env, cfg, cfg.eval_seeds) if periodic else {}
 
     # 5. model
     model = build_model(cfg, venv)
