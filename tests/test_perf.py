@@ -63,7 +63,7 @@ def test_perf_guard_section_smoke():
 def test_perf_reproductions_section_smoke(tmp_path, monkeypatch):
     """Issue 17's reproduction wall times, on the one-second pereira2023 reproduction: a row with
     its time, target and exit status, and a target flag that can fail."""
-    monkeypatch.setattr(perf, "REPRODUCTION_TARGETS_S", {"pereira2023": (["pereira2023"], 1e-3)})
+    monkeypatch.setattr(perf.reproductions, "REPRODUCTION_TARGETS_S", {"pereira2023": (["pereira2023"], 1e-3)})
     out = tmp_path / "perf.json"
     perf.main(["--out", str(out), "--sections", "reproductions"])
     data = json.loads(out.read_text())
@@ -75,7 +75,7 @@ def test_perf_reproductions_section_smoke(tmp_path, monkeypatch):
 
 def test_perf_scaling_section_smoke(tmp_path, monkeypatch):
     """The swarm table of issue 19 at tiny sizes, through the command line: JSON, targets, plot."""
-    from benchmarks import scaling
+    from benchmarks.perf import scaling
 
     monkeypatch.setattr(scaling, "SIZES", (2, 3))
     monkeypatch.setattr(scaling, "COPIES", 2)
@@ -105,3 +105,41 @@ def test_fast_solver_targets_are_flagged_against_issue_17():
     assert flags == {"(e) tube_rdmpc@cluster-case1 fast solver ms per agent decision": (True, "<="),
                      "(e) nmpc@servicing-pereira2022 fast solver ms per agent decision": (False, "<=")}
     assert ratios["tube_rdmpc@cluster-case1_fast_vs_ipopt_speedup"] == 2.0
+
+
+def test_perf_envs_section_smoke():
+    """Issue 25's comparisons at tiny sizes: each target is the ratio of two figures of the run."""
+    from benchmarks.perf import envs
+
+    out = envs.env_speed(0.002, 0.01, batch=2, swarm_sizes=(4, 8), log=lambda line: None)
+    rates = out["ring_swarm"]["agent_steps_per_s"]
+    ratio = out["ratios"]["ring swarm core x64: per-agent rate N=8 / N=4"]
+    assert ratio == rates["8"] / rates["4"] > 0
+    names = {t["name"]: t for t in out["targets"]}
+    assert all(isinstance(t["met"], bool) and t["op"] == ">=" for t in names.values())
+    if "skipped" not in out["pettingzoo"]:
+        pz = out["pettingzoo"]
+        t = names["(25) cluster_v0 PettingZoo / mpe2 simple_spread, per agent-step"]
+        assert t["value"] == pz["cluster_v0"]["agent_steps_per_s"] / pz["mpe2"]["agent_steps_per_s"]
+        assert t["target"] == 1.0 and names["(25) servicing_v0 PettingZoo / mpe2 simple_spread, per agent-step"][
+            "target"] == 0.5
+    if "vmas_agent_steps_per_s" in out["make_vec"]:
+        assert out["make_vec"]["satenv_agent_steps_per_s"] > 0
+    # the report collects a section's own targets
+    from benchmarks.perf import _ratios
+
+    assert _ratios({"envs": out})[1] == out["targets"]
+
+
+def test_perf_package_has_no_import_cycle_and_runs_as_a_module():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    code = "import benchmarks.perf.scaling, benchmarks.perf.envs; import benchmarks.perf as p; print(len(p.REGISTRY))"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
+    assert int(proc.stdout.strip()) >= 7
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.perf", "--help"], capture_output=True, text=True,
+                          check=True, cwd=root)
+    assert "--sections" in proc.stdout and "envs" in proc.stdout

@@ -10,8 +10,8 @@ from benchmarks import perf
 @pytest.mark.skipif(find_spec("torchrl") is None, reason="torchrl not installed (marl extra)")
 def test_learning_section_smoke(monkeypatch):
     ran = []
-    real = perf._train_rate
-    monkeypatch.setattr(perf, "_train_rate", lambda name, frames: ran.append(name) or (
+    real = perf.learning._train_rate
+    monkeypatch.setattr(perf.learning, "_train_rate", lambda name, frames: ran.append(name) or (
         real(name, frames) if name == "sb3_ppo" else {"skipped": "not timed in the smoke test"}))
     out = perf.learning_throughput(batch=2, frames=64, steps=3, log=lambda _: None)
     t = out["torchrl"]

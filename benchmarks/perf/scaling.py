@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.perf import _rate, act_times
+from ._common import _rate, act_times
 
 SIZES = (4, 16, 64, 256, 1024)
 COPIES = 64
