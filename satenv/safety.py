@@ -221,6 +221,12 @@ class SafetyModel:
     v_max: float = 0.0               # velocity bound (per axis); 0: none
     attitude: tuple | None = None    # servicing: (j_f, j_l, omega_l, omega_max, G (3, d), substeps)
     kinds: tuple[int, ...] = ()
+    budget: tuple[np.ndarray, np.ndarray] | None = None   # (own, other) (M, slots): braking fractions
+
+    @property
+    def n_chain(self) -> int:
+        """Position slots of the platoon target-chaser pairs (keep-out sphere, LOS half-spaces)."""
+        return (self.chain_sphere is not None) + (0 if self.chain_halfspaces is None else len(self.chain_halfspaces[1]))
 
     def state_dim_ok(self, width: int) -> bool:
         return width >= (13 if self.body_frame or self.attitude is not None else 6)
@@ -248,7 +254,22 @@ def safety_model(target: Any) -> SafetyModel:
         reach=float(np.linalg.norm(b[:3], 2)),
         accel_max=float(sv.max()) * u_box * math.sqrt(s.shape[1]))
     model = SafetyModel(**fields)
-    return dataclasses.replace(model, kinds=_row_kinds(model))
+    return dataclasses.replace(model, kinds=_row_kinds(model), budget=_budget(model))
+
+
+def _budget(m: SafetyModel) -> tuple[np.ndarray, np.ndarray]:
+    """The fractions ``(own, other)`` of each agent's braking authority that each position slot
+    may use, ``(M, slots)``: a pair of agents (1, 1), a body or the passive leader (1, 0); a
+    platoon follower between its target and its chaser budgets half to each of the two pairs
+    (otherwise they may ask it to brake both ways at once), the last chaser all to its target."""
+    na = m.n_agents
+    own = [np.ones((na, na if m.pair_distance > 0 else 0)), np.ones((na, len(m.bodies)))]
+    other = [own[0].copy(), np.zeros((na, len(m.bodies)))]
+    chain_own = np.where(np.arange(na) < na - 1, 0.5, 1.0)[:, None]
+    chain_other = np.where(np.arange(na) > 0, 0.5, 0.0)[:, None]
+    own.append(np.repeat(chain_own, m.n_chain, axis=1))
+    other.append(np.repeat(chain_other, m.n_chain, axis=1))
+    return np.concatenate(own, axis=1), np.concatenate(other, axis=1)
 
 
 def _u_scale(sc: Any, d: int) -> np.ndarray:
@@ -300,20 +321,16 @@ def _formation(core: Any, sc: Any) -> dict[str, Any]:
 
 
 def _row_kinds(m: SafetyModel) -> tuple[int, ...]:
-    """The constraint kind of every row slot (the same for every agent and copy)."""
-    kinds: list[int] = []
-    if m.pair_distance > 0:
-        kinds += [_KIND["separation"]] * (2 * m.n_agents)
-    for body in m.bodies:
-        kinds += [_KIND[body.kind]] * 2
-    if m.chain_sphere is not None:
-        kinds += [_KIND["keep-out"]] * 4
-    if m.chain_halfspaces is not None:
-        kinds += [_KIND["los"]] * (4 * len(m.chain_halfspaces[1]))
-    if m.v_max > 0:
-        kinds += [_KIND["velocity"]] * 6
-    if m.attitude is not None:
-        kinds += [_KIND["angular-velocity"]] * 6
+    """The constraint kind of every row slot (the same for every agent and copy), in the order of
+    :func:`constraint_rows`: (C1) then (C2) of every position slot, the chain targets' (C1), (C2),
+    the velocity rows, the angular-velocity rows."""
+    slots = [_KIND["separation"]] * (m.n_agents if m.pair_distance > 0 else 0)
+    slots += [_KIND[body.kind] for body in m.bodies]
+    chain = [_KIND["keep-out"]] * (m.chain_sphere is not None)
+    chain += [_KIND["los"]] * (0 if m.chain_halfspaces is None else len(m.chain_halfspaces[1]))
+    kinds = 2 * (slots + chain) + 2 * chain
+    kinds += [_KIND["velocity"]] * (6 if m.v_max > 0 else 0)
+    kinds += [_KIND["angular-velocity"]] * (6 if m.attitude is not None else 0)
     return tuple(kinds)
 
 
@@ -348,71 +365,87 @@ def _barrier(m: SafetyModel, cfg: SafetyConfig, gap0, rate0, gap_bar, dirn, vel_
     return w1, gap_bar, w2, g2
 
 
-def _sphere_rows(m, cfg, r, r_bar, radius, budget, drift_state):
-    """Rows for relative states ``r`` (now) and ``r_bar`` (coasting, next decision), ``(..., 6)``;
-    ``budget = (own, other)``: the fractions of each agent's braking authority the pair may use
-    (``other = 0``: a body, or the passive leader)."""
-    d0 = np.linalg.norm(r[..., :3], axis=-1)
+def _sphere(cfg, r, r_bar, radius):
+    """Geometry of ``||r_p|| >= radius`` for relative states ``r`` (now) and ``r_bar`` (coasting,
+    next decision), ``(..., 6)``: ``(gap0, rate0, gap_bar, dirn, vel_bar)``, ``dirn`` the unit
+    coasting direction (the margin: :class:`SafetyConfig`, never beyond the current gap)."""
+    d0 = np.sqrt(np.einsum("...i,...i->...", r[..., :3], r[..., :3]))
     d_m = radius + np.minimum(cfg.margin * radius, np.maximum(d0 - radius, 0.0))
-    d_bar = np.linalg.norm(r_bar[..., :3], axis=-1)
+    d_bar = np.sqrt(np.einsum("...i,...i->...", r_bar[..., :3], r_bar[..., :3]))
     dirn = r_bar[..., :3] / np.maximum(d_bar, 1e-12)[..., None]
-    rate0 = np.sum(r[..., :3] * r[..., 3:], axis=-1) / np.maximum(d0, 1e-12)
-    return _shared(m, cfg, budget, drift_state, d0 - d_m, rate0, d_bar - d_m, dirn, r_bar[..., 3:])
+    rate0 = np.einsum("...i,...i->...", r[..., :3], r[..., 3:]) / np.maximum(d0, 1e-12)
+    return d0 - d_m, rate0, d_bar - d_m, dirn, r_bar[..., 3:]
 
 
-def _halfspace_rows(m, cfg, r, r_bar, normal, bound, budget, drift_state):
-    """Rows for ``normal^T r_p <= bound`` (the gap grows along ``-normal``)."""
-    gap0 = bound - r[..., :3] @ normal
-    b_m = bound - np.minimum(cfg.los_margin, np.maximum(gap0, 0.0))
-    dirn = np.broadcast_to(-normal, r_bar[..., :3].shape)
-    return _shared(m, cfg, budget, drift_state, b_m - r[..., :3] @ normal, -(r[..., 3:] @ normal),
-                   b_m - r_bar[..., :3] @ normal, dirn, r_bar[..., 3:])
+def _halfspaces(cfg, r, r_bar, normals, bounds):
+    """Geometry of ``normals_k^T r_p <= bounds_k`` (``(K, 3)``, ``(K,)``) for ``r``, ``r_bar``
+    ``(..., 6)``: arrays ``(..., K)``; the gap grows along ``-normal``."""
+    gap0 = bounds - r[..., :3] @ normals.T
+    b_m = bounds - np.minimum(cfg.los_margin, np.maximum(gap0, 0.0))
+    dirn = np.broadcast_to(-normals, (*r.shape[:-1], *normals.shape))
+    vel = np.repeat(r_bar[..., None, 3:], len(bounds), axis=-2)
+    return b_m - r[..., :3] @ normals.T, -(r[..., 3:] @ normals.T), b_m - r_bar[..., :3] @ normals.T, dirn, vel
 
 
-def _shared(m, cfg, budget, drift_state, gap0, rate0, gap_bar, dirn, vel_bar):
-    """:func:`_barrier` with the pair's authority, and this agent's share of the rows.
-
-    ``budget = (own, other)`` (arrays broadcast over the leading axes; ``other = 0``: the other
-    body is passive): ``a = (own + other) a_i`` minus the CW drift bound
-    ``3 n^2 ||r_p|| + 2 n ||r_v||`` at ``drift_state`` and the disturbance of each moving agent
-    (floored at ``_FLOOR`` of the nominal: there the barrier is no longer a guarantee);
-    ``delta = ||B_p|| max ||S u||`` per moving agent; this agent's share ``own / (own + other)``.
-    """
-    own, other = (np.asarray(v, dtype=float) for v in budget)
-    units, movers = own + other, 1.0 + (other > 0)
-    drift = (3.0 * m.n**2 * np.linalg.norm(drift_state[..., :3], axis=-1)
-             + 2.0 * m.n * np.linalg.norm(drift_state[..., 3:6], axis=-1))
-    brake = np.maximum(units * m.brake - movers * m.disturbance - drift, _FLOOR * units * m.brake)
-    w1, g1, w2, g2 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, movers * m.reach * m.accel_max)
-    share = own / units
-    return w1, -share * g1, w2, -share * g2
+def _drift(m: SafetyModel, state: np.ndarray) -> np.ndarray:
+    """Bound on the CW drift acceleration of a relative state: ``3 n^2 ||r_p|| + 2 n ||r_v||``."""
+    sq = state[..., :6] * state[..., :6]
+    return 3.0 * m.n**2 * np.sqrt(sq[..., :3].sum(-1)) + 2.0 * m.n * np.sqrt(sq[..., 3:].sum(-1))
 
 
 def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every agent's rows ``w^T (S_i u_i) >= l`` in acceleration space: ``w (B, M, K, 3)``,
-    ``l (B, M, K)`` (``l = -1e30``: an unused slot); ``K = len(m.kinds)``."""
+    ``l (B, M, K)`` (``l = -1e30``: an unused slot); ``K = len(m.kinds)`` minus the
+    angular-velocity rows (:func:`_omega_rows`, in action space).
+
+    Every position constraint is one slot ``(gap0, rate0, gap_bar, dirn, vel_bar)`` with a budget
+    ``(own, other)`` (the fractions of each agent's braking authority the pair may use; ``other
+    = 0``: a body or the passive leader) and a drift bound; one :func:`_barrier` call serves all.
+    """
     x6 = x[..., :6]
     xb = x6 @ m.A.T                                       # coasting prediction of every agent
     bsz, na = x6.shape[:2]
-    ws: list[np.ndarray] = []
-    ls: list[np.ndarray] = []
+    geos: list[tuple] = []                                # (gap0, rate0, gap_bar, dirn, vel_bar), (B, M, k)
+    drifts: list[np.ndarray] = []
     if m.pair_distance > 0:
         r = x6[:, :, None] - x6[:, None]                  # (B, M, M, 6): agent i minus agent j
-        rb = xb[:, :, None] - xb[:, None]
-        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, m.pair_distance, (1.0, 1.0), r)
-        eye = np.eye(na, dtype=bool)
-        ws.extend([w1, w2])
-        ls.extend([np.where(eye, -_BIG, l1), np.where(eye, -_BIG, l2)])
+        geos.append(_sphere(cfg, r, xb[:, :, None] - xb[:, None], m.pair_distance))
+        drifts.append(_drift(m, r))
     for body in m.bodies:
         c = body.center + t[:, None] * body.velocity      # (B, 3) now, then at the next decision
         vel = np.broadcast_to(body.velocity, c.shape)
         r = x6 - np.concatenate([c, vel], -1)[:, None]
         rb = xb - np.concatenate([c + m.dt * body.velocity, vel], -1)[:, None]
-        w1, l1, w2, l2 = _sphere_rows(m, cfg, r, rb, body.radius, (1.0, 0.0), x6)
-        ws.extend([w1[:, :, None], w2[:, :, None]])
-        ls.extend([l1[:, :, None], l2[:, :, None]])
-    if m.chain_sphere is not None or m.chain_halfspaces is not None:
-        _chain_rows(m, cfg, x6, xb, ws, ls)
+        geos.append(tuple(v[:, :, None] for v in _sphere(cfg, r, rb, body.radius)))
+        drifts.append(_drift(m, x6)[..., None])
+    n_chain = m.n_chain
+    if n_chain:
+        zero = np.zeros_like(x6[:, :1])
+        r = x6 - np.concatenate([zero, x6[:, :-1]], axis=1)
+        rb = xb - np.concatenate([zero, xb[:, :-1]], axis=1)
+        if m.chain_sphere is not None:
+            off = np.r_[m.chain_sphere[0], np.zeros(3)]
+            geos.append(tuple(v[:, :, None] for v in _sphere(cfg, r - off, rb - off, m.chain_sphere[1])))
+        if m.chain_halfspaces is not None:
+            geos.append(_halfspaces(cfg, r, rb, *m.chain_halfspaces))
+        drifts.append(np.repeat(_drift(m, r)[..., None], n_chain, axis=-1))
+    ws: list[np.ndarray] = []
+    ls: list[np.ndarray] = []
+    if geos:
+        geo = [np.concatenate([g[f] for g in geos], axis=2) if len(geos) > 1 else geos[0][f] for f in range(5)]
+        drift = np.concatenate(drifts, axis=2) if len(drifts) > 1 else drifts[0]
+        w1, l1, w2, l2 = _shared(m, cfg, m.budget[0], m.budget[1], drift, *geo)
+        if m.pair_distance > 0:                            # an agent and itself: no row
+            eye = np.eye(na, dtype=bool)
+            l1[..., :na] = np.where(eye, -_BIG, l1[..., :na])
+            l2[..., :na] = np.where(eye, -_BIG, l2[..., :na])
+        ws += [w1, w2]
+        ls += [l1, l2]
+        if n_chain:   # the target f - 1's rows of chaser f's pair: negated w, its own share
+            ratio = (m.budget[1] / m.budget[0])[:, -n_chain:]
+            for w, lo in ((w1, l1), (w2, l2)):
+                ws.append(_up(-w[:, :, -n_chain:], 0.0))
+                ls.append(_up(lo[:, :, -n_chain:] * ratio, -_BIG))
     if m.v_max > 0:
         _velocity_rows(m, cfg, x6, xb, ws, ls)
     w = np.concatenate([v.reshape(bsz, na, -1, 3) for v in ws], axis=2)
@@ -420,29 +453,18 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
     return w, lo
 
 
-def _chain_rows(m, cfg, x6, xb, ws, ls) -> None:
-    """Platoon target-chaser pairs ``(f - 1, f)`` (follower 1's target is the passive leader):
-    rows for the chaser ``f`` and, negated, for its target ``f - 1`` when that is a follower.
+def _shared(m, cfg, own, other, drift, gap0, rate0, gap_bar, dirn, vel_bar):
+    """:func:`_barrier` with the pair's authority, and this agent's share of the rows.
 
-    A follower between a target and a chaser budgets half its braking authority to each pair
-    (else the two pairs may ask it to brake both ways at once); the last chaser all of it."""
-    zero = np.zeros_like(x6[:, :1])
-    r = x6 - np.concatenate([zero, x6[:, :-1]], axis=1)
-    rb = xb - np.concatenate([zero, xb[:, :-1]], axis=1)
-    na = x6.shape[1]
-    own = np.where(np.arange(na) < na - 1, 0.5, 1.0)     # the chaser's budget for its target
-    other = np.where(np.arange(na) > 0, 0.5, 0.0)        # the target's budget for its chaser
-    blocks = []
-    if m.chain_sphere is not None:
-        off = np.r_[m.chain_sphere[0], np.zeros(3)]
-        blocks.append(_sphere_rows(m, cfg, r - off, rb - off, m.chain_sphere[1], (own, other), r))
-    if m.chain_halfspaces is not None:
-        blocks += [_halfspace_rows(m, cfg, r, rb, nrm, bnd, (own, other), r)
-                   for nrm, bnd in zip(*m.chain_halfspaces, strict=True)]
-    ratio = np.where(other > 0, other / np.maximum(own, 1e-12), 0.0)[None, :]   # target / chaser share
-    for w1, l1, w2, l2 in blocks:
-        ws.extend([w1, w2, _up(-w1, 0.0), _up(-w2, 0.0)])
-        ls.extend([l1, l2, _up(l1 * ratio, -_BIG), _up(l2 * ratio, -_BIG)])
+    ``a = (own + other) a_i`` minus the drift bound and the disturbance of each moving agent
+    (floored at ``_FLOOR`` of the nominal: there the barrier is no longer a guarantee);
+    ``delta = ||B_p|| max ||S u||`` per moving agent; this agent's share ``own / (own + other)``.
+    """
+    units, movers = own + other, 1.0 + (other > 0)
+    brake = np.maximum(units * m.brake - movers * m.disturbance - drift, _FLOOR * units * m.brake)
+    w1, g1, w2, g2 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, movers * m.reach * m.accel_max)
+    share = own / units
+    return w1, -share * g1, w2, -share * g2
 
 
 def _up(v: np.ndarray, fill: float) -> np.ndarray:
