@@ -302,3 +302,25 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
         record = run_episode(Task(ScenarioSpec("chain", "platoon_v0", kwargs), POLICIES["zero"], 0))
         assert summary["collisions"] > 0 and record["collisions"] == summary["collisions"]
         assert summary["success"] is record["success"] is (not voids)
+
+
+RL_READY = {"platoon_v0": {}, "cluster_v0": {}, "servicing_v0": {"preset": "pereira2022-rl"}, "formation_v0": {}}
+"""The kwargs a new RL user needs for episodes of a useful length under random actions."""
+
+
+@pytest.mark.parametrize("env_id", satenv.ENV_IDS)
+def test_random_actions_give_episodes_of_a_useful_length(env_id):
+    lengths = []
+    for seed in range(3):
+        env = satenv.make(env_id, **RL_READY[env_id])
+        env.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        steps = 0
+        while env.agents:
+            env.step({a: rng.uniform(-1, 1, env.action_space(a).shape) for a in env.agents})
+            steps += 1
+        lengths.append(steps)
+    assert min(lengths) >= 40, lengths
+    if env_id == "servicing_v0":  # the paper's preset stays exact: its start touches the keep-out sphere
+        paper = satenv.make(env_id).scenario
+        assert paper.name == "pereira2022" and paper.initial_position[0] == (0.0, -15.0, 0.0)

@@ -28,6 +28,8 @@ Arguments (keywords; all optional)
                   u_max = 3, v_max = 5 m/s, omega_max = 0.7 rad/s, r_sigma = 12 m, r_s = 3 m,
                   p1(0) = [0, -15, 0], p2(0) = [0, 0, -15], q(0), omega(0), waypoints of eq. 50
                   switching at t = 40 s and 80 s, T_s = 0.1 s, ||r_l|| = 6621 km, 1200 steps).
+                  ``"pereira2022-rl"``: the same with both starts at 20 m, 5 m outside the keep-out
+                  sphere (the paper's start touches it: unthrusted episodes end at step 4).
 ``render_mode``   ``None``, ``"rgb_array"`` or ``"human"`` (positions, trails, the object and
                   keep-out spheres, waypoints and each body's pointing axis).
 any field of :class:`satenv.scenarios.servicing.ServicingScenario` overrides the preset, e.g.
