@@ -232,3 +232,44 @@ class JointPlatoonMPC:
         a = (self.plan(x) / self.u_max).astype(np.float32)
         self.info["solve_ms"].append(1e3 * (time.perf_counter() - t0))
         return {name: a[i] for i, name in enumerate(self.agents) if name in observations}
+
+
+class ReplanningTubeRDMPC:
+    """The li2022 tube-RDMPC's nominal DMPC re-anchored at the true state at every decision.
+
+    ``baselines.TubeRDMPC`` propagates its own nominal state and corrects the truth towards it
+    with the tube controller κ inside the env's physics loop (``env.set_inner_loop``), which a
+    learned policy acting once per decision does not have. This expert (``tube=False``) starts
+    the nominal at the env's true state before every decision, so its action depends on the
+    visited state (and, through the Jacobi exchange, on the plans made from the previous visited
+    state), as DAgger needs. Privileged like the tube-RDMPC (``env.state()``, the obstacle).
+
+    Args:
+        env: a ``cluster_v0`` env; ``**options``: :class:`baselines.tube_rdmpc.TubeRDMPCConfig`
+            fields (``tube`` is forced to False).
+    """
+
+    name = "replanning_tube_rdmpc"
+
+    def __init__(self, env: Any, **options: Any):
+        from baselines.tube_rdmpc import TubeRDMPC
+
+        self.env = env
+        self.inner = TubeRDMPC(env, **{**options, "tube": False})
+        self.info = self.inner.info
+
+    def reset(self, seed: int | None = None) -> None:
+        self.inner.reset(seed)
+        self.info = self.inner.info
+
+    def act(self, observations: dict) -> dict:
+        inner, env = self.inner, self.env
+        m = inner.m
+        x = np.asarray(env.state(), dtype=float)[: 6 * m].reshape(m, 6)
+        if env.inner_loop is not inner.tube:
+            env.set_inner_loop(inner.tube)
+        inner.tube.sync(x, env.time)             # nominal := truth (κ is off: tube=False)
+        inner.expected_time = env.time
+        actions = inner.act(observations)
+        self.info = inner.info
+        return actions

@@ -1,25 +1,28 @@
-"""DAgger of a stateless MPC expert for pereira2022 §5.1 (``platoon_v0(preset="pereira2022")``).
+"""DAgger of a stateless expert, resumable, for the systems of issue 27 (one driver, a table of systems).
 
     nice -n 5 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python -m training.recipes.platoon_dagger --run-dir /work/runs/p22/dagger   # new or resume
+        python -m training.recipes.dagger --system platoon-pereira2022 --run-dir /work/runs/p22/dagger
+    nice -n 5 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
+        python -m training.recipes.dagger --system cluster-case1 --run-dir /work/runs/cluster/dagger
 
-The run is resumable at any time: labels go to ``<run>/labels/round_NNNN.npz`` (observations,
-expert actions, the env state and the agent of every row), the network to ``<run>/rounds/NNNN/``
-(the safe policy folder format of :mod:`training.policy`) after each round, with
+The same command resumes a run at any time: labels go to ``<run>/labels/round_NNNN.npz``
+(observations, expert actions, the env state, agent and step of every row), the network to
+``<run>/rounds/NNNN/`` (the policy folder format of :mod:`training.policy`) after each round, with
 ``history.json`` and ``learning_curve.png``. Restarting with the same ``--run-dir`` continues
 after the last finished round (``config.json`` of the run; flags given again override it).
 
 Recipe (read top to bottom):
 
-1. expert: :class:`training.experts.JointPlatoonMPC` (sequential coupling: follower j's action
-   depends only on followers 1..j, which its PLF observation holds), re-planned from scratch at
-   every step, so its label in a state the learner flew into is what it would do there;
+1. expert (:data:`SYSTEMS`): re-planned from the current state at every decision, so its label in
+   a state the learner flew into is what it would do there — :class:`training.experts.JointPlatoonMPC`
+   (pereira2022 §5.1, sequential coupling: follower j's action depends only on followers 1..j,
+   which its PLF observation holds) or :class:`training.experts.ReplanningTubeRDMPC` (li2022);
 2. round 0: the expert flies (a share of episodes with Gaussian action noise, DART-style); each
    later round the network flies (the expert's action is flown with probability ``beta ** k``)
    and the expert labels every visited state; collisions do not end collection episodes;
    a share of episodes starts from the paper's initial state;
-3. the network (one MLP shared by both followers, own observation only; the clock entry 14 is
-   zeroed and symlog features of the tracking error appended, :class:`training.shaping.ObsFeatures`)
+3. the network (one MLP shared by every agent, own observation only; the clock entry is zeroed
+   and symlog features of the tracking error appended, :class:`training.shaping.ObsFeatures`)
    is refitted on all labels after every round (warm start) and evaluated on validation seeds
    (never the held-out seeds >= 900000).
 """
@@ -37,14 +40,36 @@ import numpy as np
 
 __all__ = ["DaggerConfig", "run", "main"]
 
-SCENARIO = {"preset": "pereira2022", "randomize": True}
-"""The scoreboard's ``platoon-pereira2022-random`` kwargs (the evaluation scenario)."""
+@dataclass(frozen=True)
+class System:
+    """A system of issue 27: its env, the paper's start, its stateless expert and defaults."""
+
+    env_id: str
+    scenario: dict[str, Any]            # the scoreboard's randomised scenario kwargs (evaluation)
+    paper: dict[str, Any]               # the paper's own start
+    expert: str                         # "module:Class" built as Class(env, **expert_options)
+    defaults: dict[str, Any]            # DaggerConfig fields for this system
+
+
+SYSTEMS: dict[str, System] = {
+    "platoon-pereira2022": System(
+        "platoon_v0", {"preset": "pereira2022", "randomize": True}, {"preset": "pereira2022"},
+        "training.experts:JointPlatoonMPC", {}),
+    "cluster-case1": System(
+        "cluster_v0", {"preset": "li2022-case1", "randomize": True}, {"preset": "li2022-case1"},
+        "training.experts:ReplanningTubeRDMPC",
+        {"round0_episodes": 6, "episodes_per_round": 4, "val_seeds": (700_000, 700_001, 700_002),
+         "expert_options": {}, "obs_drop_dims": (18,), "obs_symlog_scale": 300.0,
+         "noise_std": 0.1, "epochs": 20}),
+}
+"""The systems this driver trains (names follow the scoreboard scenarios)."""
 
 
 @dataclass(frozen=True)
 class DaggerConfig:
     """One DAgger run (every field is a ``--flag``)."""
 
+    system: str = "platoon-pereira2022"
     rounds: int = 1000
     round0_episodes: int = 40
     episodes_per_round: int = 16
@@ -72,14 +97,20 @@ class DaggerConfig:
 
 
 # --------------------------------------------------------------------------- pieces
-def make_envs():
+def make_envs(system: System):
+    """Collection envs (random and paper start, collisions do not end them) and evaluation envs."""
     import satenv
 
-    collect = satenv.make("platoon_v0", **SCENARIO, terminate_on_collision=False)
-    paper = satenv.make("platoon_v0", preset="pereira2022", terminate_on_collision=False)
-    evaluation = satenv.make("platoon_v0", **SCENARIO)
-    paper_eval = satenv.make("platoon_v0", preset="pereira2022")
-    return collect, paper, evaluation, paper_eval
+    make = satenv.make
+    return (make(system.env_id, **system.scenario, terminate_on_collision=False),
+            make(system.env_id, **system.paper, terminate_on_collision=False),
+            make(system.env_id, **system.scenario), make(system.env_id, **system.paper))
+
+
+def make_expert(system: System, env, options: dict[str, Any]):
+    from benchmarks.scoreboard.specs import resolve
+
+    return resolve(system.expert)(env, **options)
 
 
 def features(cfg: DaggerConfig):
@@ -181,7 +212,7 @@ def plot_curve(history: list[dict[str, Any]], path: Path) -> None:
     for a in ax:
         a.set_xlabel("expert labels (agent-steps)")
         a.grid(alpha=0.3)
-    fig.suptitle("DAgger of the sequential joint MPC, pereira2022 §5.1 (validation seeds)")
+    fig.suptitle(f"DAgger, {history[-1].get('system', '')} (validation seeds)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -193,21 +224,21 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
 
     from training.actor import MLPActor
     from training.envs import policy_env_meta
-    from training.experts import JointPlatoonMPC
     from training.policy import LearnedPolicy, ObsNormalizer, load, save_artifacts
 
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "labels").mkdir(exist_ok=True)
     (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
-    collect, paper, ev, paper_ev = make_envs()
-    experts = {id(collect): JointPlatoonMPC(collect, **cfg.expert_options),
-               id(paper): JointPlatoonMPC(paper, **cfg.expert_options)}
+    system = SYSTEMS[cfg.system]
+    collect, paper, ev, paper_ev = make_envs(system)
+    experts = {id(collect): make_expert(system, collect, cfg.expert_options),
+               id(paper): make_expert(system, paper, cfg.expert_options)}
     feats = features(cfg)
-    obs_dim = collect.observation_space("follower_1").shape[0]
-    meta = policy_env_meta("platoon_v0", collect, {**SCENARIO, "terminate_on_collision": False}, dict(SCENARIO))
-    policy_cfg = {**cfg.to_json(), "recipe": "training.recipes.platoon_dagger",
-                  "expert": "training.experts.JointPlatoonMPC"}
+    obs_dim = collect.observation_space(collect.possible_agents[0]).shape[0]
+    meta = policy_env_meta(system.env_id, collect, {**system.scenario, "terminate_on_collision": False},
+                           dict(system.scenario))
+    policy_cfg = {**cfg.to_json(), "recipe": "training.recipes.dagger", "expert": system.expert}
     history_path = run_dir / "history.json"
     history = json.loads(history_path.read_text()) if history_path.is_file() else []
     x, y, done = load_labels(run_dir)
@@ -245,11 +276,11 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
         fit_s = time.perf_counter() - t1
         policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats, meta=meta)
         val, pap = evaluate(ev, policy, cfg.val_seeds), evaluate(paper_ev, policy, [0])
-        history.append({"round": k, "labels": int(len(x)), "episodes": episode, "loss": loss,
+        history.append({"system": cfg.system, "round": k, "labels": int(len(x)), "episodes": episode, "loss": loss,
                         "beta": cfg.beta ** k, "collect_s": round(collect_s, 1), "fit_s": round(fit_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap})
         save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=meta, config=policy_cfg,
-                       source="training.recipes.platoon_dagger round checkpoint")
+                       source="training.recipes.dagger round checkpoint")
         history_path.write_text(json.dumps(history, indent=1) + "\n")
         plot_curve(history, run_dir / "learning_curve.png")
         print(f"round {k}: labels {len(x)} loss {loss:.4f} val success {val['success_rate']:.2f} "
@@ -260,16 +291,32 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--run-dir", required=True, type=Path)
+    parser.add_argument("--system", choices=sorted(SYSTEMS), default=None)
     for f in DaggerConfig.__dataclass_fields__.values():
-        if f.name != "expert_options":
-            parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None)
+        if f.name != "system":
+            parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None,
+                                help="a JSON value")
     ns = parser.parse_args(argv)
     saved = ns.run_dir / "config.json"
-    base = DaggerConfig(**{k: tuple(v) if isinstance(v, list) else v
-                           for k, v in json.loads(saved.read_text()).items()}) if saved.is_file() else DaggerConfig()
-    over = {k: json.loads(v) for k, v in vars(ns).items() if k != "run_dir" and v is not None}
-    over = {k: tuple(v) if isinstance(v, list) else v for k, v in over.items()}
-    run(replace(base, **over), ns.run_dir)
+    if saved.is_file():
+        base = _config(json.loads(saved.read_text()))
+    else:
+        name = ns.system or DaggerConfig.system
+        base = _config({"system": name, **SYSTEMS[name].defaults})
+    over = {k: (v if k == "system" else json.loads(v)) for k, v in vars(ns).items()
+            if k != "run_dir" and v is not None}
+    cfg = replace(base, **_config_fields(over))
+    if cfg.system not in SYSTEMS:
+        raise SystemExit(f"error: system must be one of {sorted(SYSTEMS)}, got {cfg.system!r}")
+    run(cfg, ns.run_dir)
+
+
+def _config_fields(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+
+
+def _config(d: dict[str, Any]) -> DaggerConfig:
+    return DaggerConfig(**_config_fields(d))
 
 
 if __name__ == "__main__":
