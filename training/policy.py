@@ -36,6 +36,7 @@ import io
 import json
 import math
 import os
+import re
 import warnings
 from os import PathLike
 from pathlib import Path
@@ -352,14 +353,24 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> Learned
     return policy
 
 
+_QUOTED = re.compile(r"'[^'\n]*'|\"[^\"\n]*\"")
+_VOCABULARY = frozenset({"mlp", "identity", "mean", "var", "clip_obs", "epsilon", "inf", "type", "obs_dim",
+                         "act_dim", "hidden", "activation", "squash", "format", "actor", "tanh", "relu",
+                         "elu", "silu"})
+"""Words a load error may quote; any other quoted text in it came from the file and is hidden."""
+
+
 def _parsed(root: Path, name: str, fn: Any, *args: Any) -> Any:
-    """``fn(*args)``; any failure becomes a :class:`PolicyLoadError` naming ``root / name``."""
+    """``fn(*args)``; any failure becomes a :class:`PolicyLoadError` naming ``root / name``, its
+    message with every quoted text that is not a field or choice name hidden (``'...'``): an
+    error never echoes the file's strings."""
     try:
         return fn(*args)
     except (PolicyLoadError, UntrustedDataError):
         raise
     except Exception as err:  # noqa: BLE001 - every failure of reading data is a load error
-        raise PolicyLoadError(f"{root / name}: {type(err).__name__}: {str(err)[:200]}") from None
+        msg = _QUOTED.sub(lambda m: m[0] if m[0][1:-1] in _VOCABULARY else "'...'", str(err))
+        raise PolicyLoadError(f"{root / name}: {type(err).__name__}: {msg[:200]}") from None
 
 
 def _load_safe(root: Path, trusted: bool) -> LearnedPolicy:
