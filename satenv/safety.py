@@ -448,6 +448,8 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
                 ls.append(_up(lo[:, :, -n_chain:] * ratio, -_BIG))
     if m.v_max > 0:
         _velocity_rows(m, cfg, x6, xb, ws, ls)
+    if not ws:                                            # e.g. formation_v0 at collision_distance = 0
+        return np.zeros((bsz, na, 0, 3)), np.zeros((bsz, na, 0))
     w = np.concatenate([v.reshape(bsz, na, -1, 3) for v in ws], axis=2)
     lo = np.concatenate([v.reshape(bsz, na, -1) for v in ls], axis=2)
     return w, lo
