@@ -28,7 +28,7 @@ def _assert_same(kernel, ref):
 
 
 CASES = [(topology, slots, n) for topology in ("PLF", "BDL", "TPLF", "RING") for slots in (False, True)
-         for n in (1, 4, 9) if topology != "RING" or n >= 3]   # a ring needs 3 followers
+         for n in (1, 4, 9, 40) if topology != "RING" or n >= 3]   # a ring needs 3 followers
 
 
 @pytest.mark.parametrize(("topology", "slots", "n"), CASES)
@@ -191,3 +191,45 @@ def test_step_observe_is_step_then_observe(topology, slots, n):
         np.testing.assert_array_equal(res.rewards, ref.rewards)
         for key in ref.info:
             np.testing.assert_array_equal(res.info[key], ref.info[key], err_msg=key)
+
+
+def _squared(d):
+    return d[0] * d[0] + d[1] * d[1] + d[2] * d[2]   # the kernel's formula, in the same order
+
+
+@pytest.mark.parametrize("layout", ["random", "line", "lattice", "clusters"])
+def test_sweep_nearest_distances_equal_all_pairs_bitwise(layout):
+    """The kernel's sort-and-sweep search (above ``SWEEP_MIN`` followers) against all pairs,
+    including ties (a lattice), every follower on one line (no pruning along the sort axis) and
+    duplicates."""
+    from satenv.envs._platoon_kernel import SWEEP_MIN, _nearest_sq
+
+    rng = np.random.default_rng(3)
+    n = 3 * SWEEP_MIN
+    x = np.zeros((2, n, 6))
+    if layout == "random":
+        x[..., :3] = rng.uniform(-500, 500, (2, n, 3))
+    elif layout == "line":
+        x[..., 1] = rng.uniform(-500, 500, (2, n))
+    elif layout == "lattice":
+        x[..., :3] = np.stack(np.meshgrid(*[np.arange(6.0)] * 3, indexing="ij"), -1).reshape(-1, 3)[:n] * 10
+    else:
+        x[..., :3] = rng.integers(0, 4, (2, n, 3)) * 100.0 + rng.normal(size=(2, n, 3))
+        x[0, 5, :3] = x[0, 7, :3]            # a duplicate: distance 0
+    pos = x[..., :3]
+    diff = pos[:, :, None] - pos[:, None]
+    d2 = (diff * diff).sum(-1)
+    d2[:, np.arange(n), np.arange(n)] = np.inf
+    out = np.empty(n)
+    for b in range(2):
+        _nearest_sq(x, b, out)
+        ref = np.array([min(_squared(pos[b, f] - pos[b, j]) for j in range(n) if j != f) for f in range(n)])
+        np.testing.assert_array_equal(out, ref)
+        np.testing.assert_allclose(out, d2[b].min(-1), rtol=1e-15)
+
+
+def test_kernel_is_the_default_for_swarms():
+    from satenv.scenarios.platoon import swarm
+
+    sc = resolve_scenario(**{k: v for k, v in swarm(100, "ring", "RING").items() if k != "preset"})
+    assert PlatoonCore(sc, batch=2).method == "kernel"

@@ -115,9 +115,10 @@ VEL_SCALE = 10.0
 METHODS = ("auto", "kernel", "dense", "sparse")
 """How :class:`PlatoonCore` evaluates a step: ``"dense"`` (affine maps of the whole state) and
 ``"sparse"`` (neighbour gathers and a neighbour search) are the numpy reference, ``"kernel"`` the
-compiled kernel of :mod:`satenv.envs._platoon_kernel` (numba); ``"auto"`` takes the kernel when
-numba is installed, the scenario has none of the optional pereira2022 constraints and
-``N <= DENSE_MAX``, else dense up to ``DENSE_MAX`` followers and sparse above."""
+compiled kernel of :mod:`satenv.envs._platoon_kernel` (numba; any N: above its ``SWEEP_MIN``
+followers a sort-and-sweep nearest-follower search replaces all pairs); ``"auto"`` takes the
+kernel when numba is installed and the scenario has none of the optional pereira2022
+constraints, else dense up to ``DENSE_MAX`` followers and sparse above."""
 
 
 def _kernel_module(scenario: PlatoonScenario, method: str, n: int) -> Any:
@@ -125,7 +126,7 @@ def _kernel_module(scenario: PlatoonScenario, method: str, n: int) -> Any:
     if method in ("dense", "sparse"):
         return None
     extras = scenario.min_error_constraint or scenario.keepout_radius > 0 or scenario.los_slopes is not None
-    if method == "auto" and (extras or n > DENSE_MAX):
+    if method == "auto" and extras:
         return None
     if extras:
         raise ValueError("method='kernel' does not evaluate the optional constraints "
