@@ -58,3 +58,44 @@ def test_config_errors(tmp_path):
     with pytest.raises(SystemExit, match="unknown satenv env id|unknown env id"):
         main(["--env-id", "nope_v0", "--max-frames", "10", "--out-dir", str(tmp_path / "x")])
     assert not (tmp_path / "x").exists()
+
+
+def test_yaml_task_configs_load_through_benchmarl_apis():
+    from pathlib import Path
+
+    import benchmarl
+    from benchmarl.environments import task_config_registry
+    from benchmarl.hydra_config import load_task_config_from_hydra
+    from hydra import compose, initialize_config_dir
+
+    import satenv
+    from training.benchmarl_task import CONF_DIR, SatenvTask
+
+    assert {f"{t.name.lower()}_v0" for t in SatenvTask} == set(satenv.ENV_IDS)
+    for t in SatenvTask:  # BenchMARL's Task.get_from_yaml(), as for VMAS tasks
+        task = t.get_from_yaml()
+        assert task_config_registry[f"satenv/{t.name.lower()}"] is t and isinstance(task.config["env_kwargs"], dict)
+        satenv.make(task.env_id, **task.config["env_kwargs"])
+    assert SatenvTask.SERVICING.get_from_yaml().config == {"env_kwargs": {"preset": "pereira2022-rl"}}
+    conf = str(Path(benchmarl.__file__).parent / "conf")
+    with initialize_config_dir(config_dir=conf, version_base=None):  # BenchMARL's Hydra config tree
+        cfg = compose("config", overrides=["algorithm=mappo", "task=satenv/platoon", "+task.env_kwargs.max_steps=9",
+                                           f"hydra.searchpath=[file://{CONF_DIR}]"])
+    task = load_task_config_from_hydra(cfg.task, "satenv/platoon")
+    assert task.config == {"env_kwargs": {"max_steps": 9}}
+
+
+@pytest.mark.slow
+def test_benchmarl_hydra_runner_trains_a_satenv_task(tmp_path):
+    import subprocess
+    import sys
+
+    overrides = ["algorithm=mappo", "task=satenv/platoon", "+task.env_kwargs.max_steps=10",
+                 "experiment.max_n_frames=200", "experiment.on_policy_collected_frames_per_batch=100",
+                 "experiment.on_policy_n_envs_per_worker=2", "experiment.on_policy_minibatch_size=50",
+                 "experiment.on_policy_n_minibatch_iters=1", "experiment.loggers=[csv]", "experiment.evaluation=false",
+                 "experiment.render=false", "experiment.checkpoint_at_end=false",
+                 f"experiment.save_folder={tmp_path}", f"hydra.run.dir={tmp_path / 'hydra'}"]
+    subprocess.run([sys.executable, "-m", "training.benchmarl_task", *overrides], check=True, cwd=tmp_path,
+                   env={**__import__("os").environ, "PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1])})
+    assert list(tmp_path.rglob("collection_reward_reward_min.csv"))

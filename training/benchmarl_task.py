@@ -10,19 +10,33 @@ MADDPG). The task config is ``{"env_kwargs": {...}}`` (the env's keyword argumen
 
 ``python -m training.benchmarl_train`` wraps this with logs, checkpoints and the export to a
 satenv policy folder.
+
+BenchMARL's own config route works too: each task has a YAML config under
+``training/conf/task/satenv/<task>.yaml`` (:data:`CONF_DIR`, like BenchMARL's
+``conf/task/vmas/*.yaml``); ``SatenvTask.PLATOON.get_from_yaml()`` loads it, importing this module
+registers the tasks as ``satenv/<task>`` for :func:`benchmarl.hydra_config.load_experiment_from_hydra`,
+and ``python -m training.benchmarl_task algorithm=mappo task=satenv/platoon`` runs BenchMARL's
+Hydra runner (``benchmarl/run.py``) with these configs on its search path (every Hydra override
+works: ``task.env_kwargs.randomize=true``, ``experiment.max_n_frames=...``).
 """
 
 from __future__ import annotations
 
 import copy
+import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-from benchmarl.environments.common import Task, TaskClass
+from benchmarl.environments import task_config_registry
+from benchmarl.environments.common import Task, TaskClass, _read_yaml_config
 from torchrl.data import Composite
 from torchrl.envs import EnvBase
 
-__all__ = ["SatenvClass", "SatenvTask", "task_for"]
+__all__ = ["CONF_DIR", "SatenvClass", "SatenvTask", "task_for", "main"]
+
+CONF_DIR = Path(__file__).parent / "conf"
+"""Hydra config root of satenv's BenchMARL tasks (``task/satenv/<task>.yaml``)."""
 
 
 class SatenvClass(TaskClass):
@@ -93,6 +107,15 @@ class SatenvTask(Task):
     def associated_class():
         return SatenvClass
 
+    def get_from_yaml(self, path: str | None = None) -> TaskClass:
+        """The task with its YAML config (default: ``CONF_DIR/task/satenv/<task>.yaml``)."""
+        path = path or str(CONF_DIR / "task" / "satenv" / f"{self.name.lower()}.yaml")
+        config = {k: v for k, v in _read_yaml_config(path).items() if k != "defaults"}
+        return self.get_task(config=config)
+
+
+task_config_registry.update({f"satenv/{t.name.lower()}": t for t in SatenvTask})
+
 
 def task_for(env_id: str, env_kwargs: dict[str, Any] | None = None) -> SatenvClass:
     """The task of a satenv env id (``"platoon_v0"``) with ``env_kwargs``."""
@@ -101,3 +124,17 @@ def task_for(env_id: str, env_kwargs: dict[str, Any] | None = None) -> SatenvCla
         raise ValueError(f"unknown satenv env id {env_id!r}; expected one of "
                          f"{[f'{m.lower()}_v0' for m in SatenvTask.__members__]}")
     return SatenvTask[stem].get_task({"env_kwargs": dict(env_kwargs or {})})
+
+
+def main(argv: list[str] | None = None) -> None:
+    """BenchMARL's Hydra runner with satenv's task configs on the search path
+    (``python -m training.benchmarl_task algorithm=mappo task=satenv/platoon [overrides]``)."""
+    from benchmarl.run import hydra_experiment
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    sys.argv = [sys.argv[0], *args, f"hydra.searchpath=[file://{CONF_DIR.resolve()}]"]
+    hydra_experiment()
+
+
+if __name__ == "__main__":
+    main()
