@@ -41,9 +41,13 @@ prediction ``rbar^+ = A r`` and ``Delta u`` the relative acceleration,
 with ``phi`` the chord of ``sqrt(2 a s)`` over the reachable gaps ``[sbar - delta, sbar + delta]``
 (a lower bound of the concave root there, so (C2) is linear and conservative). Both rows are
 linear in ``Delta u = S_i u_i - S_j u_j``; each agent keeps its share (half for a pair, all
-against a body): ``w^T S_i u_i >= -share * g``. Summed, the two shares give the pair's row. A
-platoon follower that is both a chaser and a target budgets half its authority to each of its
-two LOS / keep-out pairs (otherwise the two pairs can ask it to brake both ways at once).
+against a body): ``w^T S_i u_i >= -share * g``. Summed, the two shares give the pair's row.
+The pereira2022 target-chaser pairs (LOS cone, keep-out sphere of ``p_f - p_{f-1}``) are the
+chaser's alone, filtered down the chain so that its rows hold its target's filtered
+acceleration; a target whose chaser is near its bound (``h < 3 max||S u|| dt``) keeps its
+acceleration along the chaser's direction ``n`` within ``COURTESY a`` (a courtesy row), and the
+chaser's braking authority is ``(1 - COURTESY)`` per chain neighbour (otherwise the two pairs of a
+middle follower can ask it to accelerate both ways along one direction at once).
 The margin (``margin * D``, ``los_margin``) inflates ``D`` but never beyond the current gap (a
 start on the boundary stays feasible).
 
@@ -257,18 +261,23 @@ def safety_model(target: Any) -> SafetyModel:
     return dataclasses.replace(model, kinds=_row_kinds(model), budget=_budget(model))
 
 
+COURTESY = 1.0 / 3.0
+"""Fraction of its braking authority a platoon follower keeps for its chaser (pereira2022 chain)."""
+
+
 def _budget(m: SafetyModel) -> tuple[np.ndarray, np.ndarray]:
     """The fractions ``(own, other)`` of each agent's braking authority that each position slot
-    may use, ``(M, slots)``: a pair of agents (1, 1), a body or the passive leader (1, 0); a
-    platoon follower between its target and its chaser budgets half to each of the two pairs
-    (otherwise they may ask it to brake both ways at once), the last chaser all to its target."""
+    may use, ``(M, slots)``: a pair of agents (1, 1), a body or the passive leader (1, 0). A
+    platoon chaser keeps its target-chaser pair alone (the target's action is known: the chain is
+    filtered in order), with ``1 - COURTESY`` per neighbour in the chain: its target may still
+    accelerate by ``COURTESY a`` against it (:func:`constraint_rows`' courtesy rows), and it keeps
+    ``COURTESY a`` for its own chaser."""
     na = m.n_agents
     own = [np.ones((na, na if m.pair_distance > 0 else 0)), np.ones((na, len(m.bodies)))]
     other = [own[0].copy(), np.zeros((na, len(m.bodies)))]
-    chain_own = np.where(np.arange(na) < na - 1, 0.5, 1.0)[:, None]
-    chain_other = np.where(np.arange(na) > 0, 0.5, 0.0)[:, None]
-    own.append(np.repeat(chain_own, m.n_chain, axis=1))
-    other.append(np.repeat(chain_other, m.n_chain, axis=1))
+    chain_own = 1.0 - COURTESY * ((np.arange(na) < na - 1).astype(float) + (np.arange(na) > 0))
+    own.append(np.repeat(chain_own[:, None], m.n_chain, axis=1))
+    other.append(np.zeros((na, m.n_chain)))
     return np.concatenate(own, axis=1), np.concatenate(other, axis=1)
 
 
@@ -322,13 +331,13 @@ def _formation(core: Any, sc: Any) -> dict[str, Any]:
 
 def _row_kinds(m: SafetyModel) -> tuple[int, ...]:
     """The constraint kind of every row slot (the same for every agent and copy), in the order of
-    :func:`constraint_rows`: (C1) then (C2) of every position slot, the chain targets' (C1), (C2),
-    the velocity rows, the angular-velocity rows."""
+    :func:`constraint_rows`: (C1) then (C2) of every position slot, the chain targets' courtesy
+    rows, the velocity rows, the angular-velocity rows."""
     slots = [_KIND["separation"]] * (m.n_agents if m.pair_distance > 0 else 0)
     slots += [_KIND[body.kind] for body in m.bodies]
     chain = [_KIND["keep-out"]] * (m.chain_sphere is not None)
     chain += [_KIND["los"]] * (0 if m.chain_halfspaces is None else len(m.chain_halfspaces[1]))
-    kinds = 2 * (slots + chain) + 2 * chain
+    kinds = 2 * (slots + chain) + chain
     kinds += [_KIND["velocity"]] * (6 if m.v_max > 0 else 0)
     kinds += [_KIND["angular-velocity"]] * (6 if m.attitude is not None else 0)
     return tuple(kinds)
@@ -350,7 +359,8 @@ def _barrier(m: SafetyModel, cfg: SafetyConfig, gap0, rate0, gap_bar, dirn, vel_
 
     ``gap0, rate0``: the gap and its rate now; ``gap_bar, dirn, vel_bar``: the coasting gap, the
     direction ``n`` and relative velocity at the next decision; ``brake`` the pair's ``a``;
-    ``span`` the bound ``delta`` on ``|n^T B_p du|``. Returns ``(w1, g1, w2, g2)``.
+    ``span`` the bound ``delta`` on ``|n^T B_p du|``. Returns ``(w1, g1, w2, g2, h)``, ``h`` the
+    barrier now.
     """
     bp, bv = m.B[:3], m.B[3:]
     w1 = dirn @ bp
@@ -362,7 +372,7 @@ def _barrier(m: SafetyModel, cfg: SafetyConfig, gap0, rate0, gap_bar, dirn, vel_
     h0 = rate0 + c * np.sqrt(np.maximum(gap0, 0.0))
     g2 = (np.sum(dirn * vel_bar, axis=-1) + c * (np.sqrt(s_lo) + slope * (gap_bar - s_lo))
           - (1.0 - cfg.gamma) * h0)
-    return w1, gap_bar, w2, g2
+    return w1, gap_bar, w2, g2, h0
 
 
 def _sphere(cfg, r, r_bar, radius):
@@ -434,18 +444,17 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
     if geos:
         geo = [np.concatenate([g[f] for g in geos], axis=2) if len(geos) > 1 else geos[0][f] for f in range(5)]
         drift = np.concatenate(drifts, axis=2) if len(drifts) > 1 else drifts[0]
-        w1, l1, w2, l2 = _shared(m, cfg, m.budget[0], m.budget[1], drift, *geo)
+        w1, l1, w2, l2, h0 = _shared(m, cfg, m.budget[0], m.budget[1], drift, *geo)
         if m.pair_distance > 0:                            # an agent and itself: no row
             eye = np.eye(na, dtype=bool)
             l1[..., :na] = np.where(eye, -_BIG, l1[..., :na])
             l2[..., :na] = np.where(eye, -_BIG, l2[..., :na])
         ws += [w1, w2]
         ls += [l1, l2]
-        if n_chain:   # the target f - 1's rows of chaser f's pair: negated w, its own share
-            ratio = (m.budget[1] / m.budget[0])[:, -n_chain:]
-            for w, lo in ((w1, l1), (w2, l2)):
-                ws.append(_up(-w[:, :, -n_chain:], 0.0))
-                ls.append(_up(lo[:, :, -n_chain:] * ratio, -_BIG))
+        if n_chain:   # courtesy: the target f - 1 of a chaser near its bound, |along n| <= COURTESY a
+            near = h0[:, :, -n_chain:] < 3.0 * m.accel_max * m.dt
+            ws.append(_up(-geo[3][:, :, -n_chain:], 0.0))
+            ls.append(_up(np.where(near, -COURTESY * m.brake, -_BIG), -_BIG))
     if m.v_max > 0:
         _velocity_rows(m, cfg, x6, xb, ws, ls)
     if not ws:                                            # e.g. formation_v0 at collision_distance = 0
@@ -464,9 +473,9 @@ def _shared(m, cfg, own, other, drift, gap0, rate0, gap_bar, dirn, vel_bar):
     """
     units, movers = own + other, 1.0 + (other > 0)
     brake = np.maximum(units * m.brake - movers * m.disturbance - drift, _FLOOR * units * m.brake)
-    w1, g1, w2, g2 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, movers * m.reach * m.accel_max)
+    w1, g1, w2, g2, h0 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, movers * m.reach * m.accel_max)
     share = own / units
-    return w1, -share * g1, w2, -share * g2
+    return w1, -share * g1, w2, -share * g2, h0
 
 
 def _up(v: np.ndarray, fill: float) -> np.ndarray:
@@ -540,30 +549,54 @@ def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarr
     if m.attitude is not None:
         w_om, lo_om = _omega_rows(m, cfg, x)
         rows, lo = np.concatenate([rows, w_om], axis=2), np.concatenate([lo, lo_om], axis=2)
+    kinds = np.asarray(m.kinds, dtype=np.int64)
+    bsz, na, d = a.shape
+    if not m.n_chain:
+        res = _solve_rows(m, rows.reshape(bsz * na, -1, d), lo.reshape(bsz * na, -1), a.reshape(bsz * na, d), kinds)
+        out, safe, infeasible, active = (v.reshape(bsz, na, *v.shape[1:]) for v in res)
+    else:   # down the chain: a chaser's rows hold its target's filtered acceleration
+        slots = m.budget[0].shape[1]
+        idx = np.r_[slots - m.n_chain:slots, 2 * slots - m.n_chain:2 * slots]
+        out, safe = np.empty_like(a), np.empty((bsz, na), dtype=bool)
+        infeasible, active = np.empty((bsz, na), dtype=bool), np.empty((bsz, na), dtype=np.int64)
+        acc_prev = np.zeros((bsz, 3))                      # the passive leader's
+        for f in range(na):
+            lo_f = lo[:, f].copy()
+            lo_f[:, idx] += np.einsum("bki,bi->bk", w[:, f, idx], acc_prev)
+            out[:, f], safe[:, f], infeasible[:, f], active[:, f] = _solve_rows(m, rows[:, f], lo_f, a[:, f], kinds)
+            eff = _effective(m, out[:, f])
+            acc_prev = eff @ s.T if s.ndim == 2 else np.einsum("bij,bj->bi", s[:, f], eff)
+    delta = np.linalg.norm(out - a, axis=-1)
+    return out, SafetyRecord(~safe, delta, infeasible, active)
+
+
+def _solve_rows(m: SafetyModel, rows: np.ndarray, lo: np.ndarray, a: np.ndarray,
+                kinds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Filter ``n`` agents' proposals ``a (n, d)`` against their rows ``rows u >= lo``
+    ``(n, K, d)``, ``(n, K)``: ``(out, safe, infeasible, active)``; a safe proposal is returned
+    as it is, an unsafe one is replaced by the QP's point or the backup action."""
     scale = np.linalg.norm(rows, axis=-1)
     tiny = scale < 1e-12
     lo = np.where(tiny, np.where(lo <= 0.0, -_BIG, _BIG), lo / np.where(tiny, 1.0, scale))
     rows = np.where(tiny[..., None], 0.0, rows / np.where(tiny, 1.0, scale)[..., None])
     ref = _effective(m, a)
-    slack = np.einsum("bmkj,bmj->bmk", rows, ref) - lo
+    slack = np.einsum("nkj,nj->nk", rows, ref) - lo
     safe = slack.min(axis=-1, initial=np.inf) >= -_ROW_TOL
     out = a.copy()
-    bsz, na = a.shape[:2]
-    infeasible = np.zeros((bsz, na), dtype=bool)
-    active = np.full((bsz, na), -1, dtype=np.int64)
-    kinds = np.asarray(m.kinds, dtype=np.int64)
-    for b, i in zip(*np.nonzero(~safe), strict=True):
-        keep = lo[b, i] > -m.u_box * math.sqrt(m.action_dim) - 1e-9   # rows that can bind
-        u = _guarded_qp(ref[b, i], rows[b, i][keep], lo[b, i][keep], m.u_box)
+    infeasible = np.zeros(len(a), dtype=bool)
+    active = np.full(len(a), -1, dtype=np.int64)
+    reach = -m.u_box * math.sqrt(m.action_dim) - 1e-9      # rows below this can never bind
+    for i in np.flatnonzero(~safe):
+        keep = lo[i] > reach
+        u = _guarded_qp(ref[i], rows[i][keep], lo[i][keep], m.u_box)
         if u is None:
-            u, k = _backup(m, rows[b, i][keep], lo[b, i][keep], slack[b, i][keep])
-            infeasible[b, i] = True
-            active[b, i] = kinds[keep][k]
+            u, k = _backup(m, rows[i][keep], lo[i][keep], slack[i][keep])
+            infeasible[i] = True
+            active[i] = kinds[keep][k]
         else:
-            active[b, i] = kinds[int(np.argmin(rows[b, i] @ u - lo[b, i]))]
-        out[b, i] = u
-    delta = np.linalg.norm(out - a, axis=-1)
-    return out, SafetyRecord(~safe, delta, infeasible, active)
+            active[i] = kinds[int(np.argmin(rows[i] @ u - lo[i]))]
+        out[i] = u
+    return out, safe, infeasible, active
 
 
 def _effective(m: SafetyModel, a: np.ndarray) -> np.ndarray:
