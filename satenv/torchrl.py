@@ -54,8 +54,8 @@ class SatTorchRLEnv(EnvBase):
         given = device
         try:  # a device this torch build has, named in the error otherwise (e.g. 'cuda:7' on CPU)
             device = torch.device(device)
-            torch.empty(0, device=device)
-        except (AssertionError, RuntimeError, TypeError, ValueError) as exc:
+            torch.zeros(1, device=device).cpu()  # holds data ('meta' does not)
+        except (AssertionError, NotImplementedError, RuntimeError, TypeError, ValueError) as exc:
             raise SatenvError(f"device must be a torch device available here (e.g. 'cpu'), got {given!r:.40} "
                               f"({type(exc).__name__}: {str(exc).splitlines()[0][:80]})") from None
         super().__init__(device=device, batch_size=torch.Size([vec.num_envs]))
