@@ -159,8 +159,6 @@ class SatVectorEnv:
         return obs, dict(info)
 
     def _reset_some(self, indices: Any) -> tuple[np.ndarray, dict[str, Any]]:
-        if self._rngs is None:
-            return self.reset()
         try:
             idx = np.asarray(indices)
         except (TypeError, ValueError):
@@ -168,6 +166,8 @@ class SatVectorEnv:
         if idx.size and idx.dtype.kind not in "biu":  # e.g. [0.5] must not become copy 0
             raise SatenvTypeError(f"reset(indices=...) must be int copy indices or a bool mask of shape "
                                   f"({self.num_envs},), got {type(indices).__name__} of dtype {idx.dtype}")
+        if self._rngs is None:
+            return self.reset()
         if idx.dtype == bool:
             if idx.shape != (self.num_envs,):
                 raise SatenvError(f"reset(indices=mask): the mask must have shape ({self.num_envs},), got {idx.shape}")
