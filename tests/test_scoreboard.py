@@ -1,7 +1,6 @@
 """The scoreboard (benchmarks.scoreboard): files and schema, resume, workers, bad input."""
 
 import json
-import math
 import os
 import signal
 import subprocess
@@ -78,7 +77,7 @@ def test_end_to_end_files_and_schema(tmp_path):
         assert {"scenario", "policy", "seed", "env", "error", "wall_s", *METRICS} <= set(rec)
         assert rec["env"] == "platoon_v0" and rec["error"] is None and rec["steps"] == 20
     data = json.loads((tmp_path / "scoreboard.json").read_text())
-    assert set(data) == {"header", "ranking", "aggregates", "episodes"}
+    assert set(data) == {"header", "ranking", "aggregates", "summary", "episodes"}
     h = data["header"]
     assert h["seeds"] == [0, 1] and h["env_versions"] == ["platoon_v0"] and h["satenv_version"]
     assert {"cpu", "cpus", "platform", "python"} <= set(h["machine"])
@@ -213,6 +212,10 @@ def test_platoon_with_dmpc_through_the_board(tmp_path):
                    policy_registry={k: POLICIES[k] for k in ("zero", "dmpc")})
     assert board.ranking["platoon-short"] == ["dmpc", "zero"]   # closer to the formation than coasting
     assert all(r["error"] is None for r in board.records)
+    summary = board.summary["policies"]                          # across scenarios: 0 = zero, 1 = dmpc
+    assert summary["zero"]["iqm"] == 0.0 and summary["dmpc"]["iqm"] == 1.0
+    assert summary["zero"]["p_improvement"] == 0.0 and summary["dmpc"]["p_improvement"] is None
+    assert "## Across scenarios" in board.markdown and "| dmpc | 1 | 1 | 1.00 [1.00, 1.00] | – |" in board.markdown
 
 
 def test_only_a_missing_optional_dependency_makes_an_entry_unavailable(tmp_path, monkeypatch):
@@ -250,12 +253,57 @@ def test_aggregate_intervals_and_ranking():
     agg = aggregate(recs)
     rmse = agg["s"]["a"]["rmse"]
     assert rmse["mean"] == 2.0 and rmse["n"] == 3
-    half = 4.302652729911275 / math.sqrt(3)          # t_{0.975, 2} * s / sqrt(n), s = 1
-    assert rmse["ci95"] == pytest.approx([2.0 - half, 2.0 + half])
+    lo, hi = rmse["ci95"]                              # percentile bootstrap of the mean of 1, 2, 3
+    assert 1.0 <= lo < 2.0 < hi <= 3.0
     lo, hi = agg["s"]["a"]["success"]["ci95"]           # Wilson interval of 3/3
     assert agg["s"]["a"]["success"]["mean"] == 1.0 and lo == pytest.approx(0.4385, abs=1e-4) and hi == pytest.approx(1.0)
     assert agg["s"]["b"]["errors"] == 1 and agg["s"]["b"]["rmse"]["mean"] is None
     assert rank(agg["s"]) == ["a", "b"]
+
+
+def test_intervals_stay_inside_the_metric_range():
+    """A separation of 5, 10 and 47.7 m has no negative interval (Student t gave 20.9 +- 54.7)."""
+    recs = [{"scenario": "s", "policy": "a", "seed": i, "error": None, "success": i == 0,
+             **{m: v for m in METRICS if m != "success"}} for i, v in enumerate([5.0, 10.0, 47.7])]
+    agg = aggregate(recs)["s"]["a"]
+    lo, hi = agg["min_separation_m"]["ci95"]
+    assert 5.0 <= lo and hi <= 47.7
+    lo, hi = agg["success"]["ci95"]
+    assert 0.0 <= lo < 1 / 3 < hi <= 1.0 and lo == pytest.approx(0.0615, abs=1e-4)  # Wilson, 1 of 3
+    from benchmarks.scoreboard.report import _cell
+
+    assert _cell(agg["success"], "success") == "33 % [6, 79]"
+    assert _cell(agg["min_separation_m"], "min_separation_m").startswith("20.9 [")
+
+
+def test_rliable_style_summary_has_known_answers():
+    from benchmarks.scoreboard.report import summarize
+
+    def recs(pol, values, scen="s"):
+        return [{"scenario": scen, "policy": pol, "seed": i, "error": None, "rmse": v} for i, v in enumerate(values)]
+
+    records = recs("zero", [10.0] * 4) + recs("dmpc", [2.0] * 4) + recs("better", [1.0] * 4) \
+        + recs("mixed", [2.0, 2.0, 10.0, 1.0]) + recs("zero", [5.0] * 2, "t") + [
+            {"scenario": "s", "policy": "crash", "seed": 0, "error": "RuntimeError", "rmse": None}]
+    out = summarize(records, {"s": "platoon_v0", "t": "platoon_v0"}, resamples=200)
+    pol = out["policies"]
+    assert out["reference"] == {"s": "dmpc"} and "t" in out["skipped"]   # t has no dmpc episodes
+    assert pol["zero"]["iqm"] == 0.0 and pol["dmpc"]["iqm"] == 1.0 and pol["better"]["iqm"] == 1.125
+    assert pol["better"]["p_improvement"] == 1.0 and pol["zero"]["p_improvement"] == 0.0
+    assert pol["mixed"]["p_improvement"] == pytest.approx((0.5 + 0.5 + 0.0 + 1.0) / 4)
+    assert pol["crash"]["iqm"] == 0.0                                     # an errored episode scores 0
+    lo, hi = pol["mixed"]["iqm_ci95"]
+    assert lo <= pol["mixed"]["iqm"] <= hi and pol["dmpc"]["p_improvement"] is None
+
+
+def test_a_shipped_folder_given_with_policy_is_ranked_once():
+    from benchmarks.scoreboard.board import _user_specs
+
+    reg = {**POLICIES, **registry.discover_trained_policies()}
+    folder = TESTS.parent / "training" / "policies" / "platoon_tplf_ppo"
+    if "trained:platoon_tplf_ppo" not in reg:
+        pytest.skip("shipped policy not found")
+    assert [s.name for s in _user_specs([str(folder), str(folder) + "/"], reg)] == ["trained:platoon_tplf_ppo"] * 2
 
 
 def test_parse_seeds():

@@ -25,6 +25,7 @@ from benchmarks.scoreboard.report import (
     rank,
     render_markdown,
     satenv_version,
+    summarize,
     write_outputs,
 )
 from benchmarks.scoreboard.runner import EPISODES_FILE, EpisodeLog, Task, read_episodes
@@ -59,6 +60,14 @@ def _registries(scenario_registry: Mapping[str, ScenarioSpec] | None,
         for name, spec in discover_trained_policies().items():
             pol_reg.setdefault(name, spec)
     return scen_reg, pol_reg
+
+
+def _user_specs(paths: list[str], pol_reg: Mapping[str, PolicySpec]) -> list[PolicySpec]:
+    """The ``--policy`` folders' specs; a folder of a shipped policy is its ``trained:<name>``
+    entry (so it is ranked once, not also as ``user:<name>``)."""
+    shipped = {Path(spec.checkpoint).resolve(): spec for spec in pol_reg.values() if spec.checkpoint}
+    same = [shipped[Path(p).resolve()] for p in paths if Path(p).resolve() in shipped]
+    return user_policies([p for p in paths if Path(p).resolve() not in shipped], pol_reg) + same
 
 
 def _selections(scenarios, policies, quick: bool, user: list[PolicySpec], scen_reg, pol_reg,
@@ -174,6 +183,7 @@ def _finish(out: Path, plan: Plan, header: dict[str, Any], done: Mapping[Key, Re
     agg = aggregate(records)
     agg = {s: agg[s] for s in dict.fromkeys(s for s, _ in plan.pairs) if s in agg}
     board = Board(out, header, records, agg, {s: rank(agg[s]) for s in agg}, notes)
+    board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg})
     board.markdown = render_markdown(board)
     write_outputs(board, plots=plots)
     return board
@@ -199,7 +209,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
     _check_options(workers, backend, resume, overwrite)
     seed_list, caps = board_seeds(seeds, quick, scenario_seeds)
     scen_reg, pol_reg = _registries(scenario_registry, policy_registry)
-    user = user_policies(list(checkpoints), pol_reg)
+    user = _user_specs(list(checkpoints), pol_reg)
     pol_reg.update({spec.name: spec for spec in user})
     notes: list[str] = []
     scen_sel, pol_sel = _selections(scenarios, policies, quick, user, scen_reg, pol_reg, notes)

@@ -1,5 +1,13 @@
-"""Scoreboard results: the header, aggregation (mean and 95 % CI), ranking, and the written
-outputs (``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``, ``episodes.csv``, ``plots/``).
+"""Scoreboard results: the header, aggregation (mean and 95 % CI), ranking, the aggregates across
+scenarios, and the written outputs (``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``,
+``episodes.csv``, ``plots/``).
+
+Intervals respect each metric's range: the success rate's is the Wilson score interval
+(``scipy.stats.binomtest``), every other metric's a percentile bootstrap of the mean over seeds
+(``scipy.stats.bootstrap``), so it stays inside the observed values (a separation is never
+negative). Across scenarios (:func:`summarize`, after rliable, Agarwal et al. 2021): the
+interquartile mean of a normalised score and the probability of improvement over the paper's
+controller, with stratified bootstrap confidence intervals.
 
 Pure functions of the episode records written by :mod:`benchmarks.scoreboard.runner`.
 """
@@ -20,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["KEY", "METRICS", "TIMING_FIELDS", "Board", "aggregate", "jsonable", "machine", "rank",
-           "render_markdown", "write_outputs", "write_plots"]
+__all__ = ["KEY", "METRICS", "PAPER_CONTROLLER", "TIMING_FIELDS", "Board", "aggregate", "jsonable", "machine",
+           "rank", "render_markdown", "summarize", "write_outputs", "write_plots"]
 
 KEY = ("scenario", "policy", "seed")
 METRICS: tuple[str, ...] = (
@@ -44,6 +52,13 @@ _TABLE = [  # (metric, column header) of the markdown table
 _SHIELD_TABLE = [("interventions", "interventions"), ("mean_du", "mean ‖Δu‖"),
                  ("infeasible_steps", "infeasible")]
 """Columns of a scenario with a shielded policy (``+shield``): per episode, agent-steps."""
+PAPER_CONTROLLER: dict[str, str] = {"platoon_v0": "dmpc", "cluster_v0": "tube_rdmpc", "servicing_v0": "nmpc",
+                                    "formation_v0": "cgmres"}
+"""The controller each env's paper proposes: the reference (score 1) of the normalised score."""
+FLOOR = "zero"
+"""The policy that scores 0 on the normalised score (no thrust)."""
+BOOTSTRAP_RESAMPLES = 2000
+
 _PLOTS = ("success", "rmse", "rmsee", "foe", "delta_v", "time_to_converge_s", "min_separation_m",
           "collisions", "violations", "compute_ms_per_decision")
 
@@ -77,34 +92,40 @@ class Board:
     ranking: dict[str, list[str]]
     notes: list[str] = field(default_factory=list)
     markdown: str = ""
+    summary: dict[str, Any] = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------------------------
 # Aggregation.
 # ----------------------------------------------------------------------------------------------
-def _t_interval(values: np.ndarray) -> tuple[float, float, float]:
+def _bootstrap_interval(values: np.ndarray) -> tuple[float, float, float]:
+    """Mean and percentile-bootstrap 95 % interval of the mean (inside the observed range)."""
     from scipy import stats
 
-    n = values.size
     mean = float(values.mean())
-    if n < 2:
+    if values.size < 2:
         return mean, math.nan, math.nan
-    half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
-    return mean, mean - half, mean + half
+    if np.ptp(values) == 0:
+        return mean, mean, mean
+    res = stats.bootstrap((values,), np.mean, confidence_level=0.95, n_resamples=BOOTSTRAP_RESAMPLES,
+                          method="percentile", random_state=np.random.default_rng(0))
+    lo, hi = np.clip([res.confidence_interval.low, res.confidence_interval.high], values.min(), values.max())
+    return mean, float(lo), float(hi)   # (clipped: round-off of resampled means can step outside)
 
 
-def _wilson(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float, float]:
+def _wilson(successes: int, n: int) -> tuple[float, float, float]:
+    """Success rate and its 95 % Wilson score interval (``scipy.stats.binomtest``)."""
+    from scipy import stats
+
     if n == 0:
         return math.nan, math.nan, math.nan
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return p, centre - half, centre + half
+    ci = stats.binomtest(successes, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return successes / n, float(ci.low), float(ci.high)
 
 
 def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
-    """``{scenario: {policy: {"n", "errors", metric: {"mean", "ci95": [lo, hi], "n"}}}}``.
+    """``{scenario: {policy: {"n", "errors", metric: {"mean", "ci95": [lo, hi], "n"}}}}`` (module
+    docstring: Wilson for the success rate, percentile bootstrap for the rest).
 
     Errored episodes count as failures in the success rate and are left out of the other
     metrics; ``None`` (e.g. no convergence) values are left out of that metric's mean.
@@ -123,7 +144,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str
             else:
                 vals = np.array([float(r[m]) for r in ok if r.get(m) is not None], dtype=float)
                 n = int(vals.size)
-                mean, lo, hi = _t_interval(vals) if n else (math.nan, math.nan, math.nan)
+                mean, lo, hi = _bootstrap_interval(vals) if n else (math.nan, math.nan, math.nan)
             entry[m] = {"mean": mean, "ci95": [lo, hi], "n": n}
         out.setdefault(scen, {})[pol] = entry
     return jsonable(out)
@@ -141,6 +162,78 @@ def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
 
 
 # ----------------------------------------------------------------------------------------------
+# Across scenarios (rliable-style).
+# ----------------------------------------------------------------------------------------------
+def summarize(records: Iterable[dict[str, Any]], envs: dict[str, str], metric: str = "rmse",
+              resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> dict[str, Any]:
+    """Aggregates of every policy across the scenarios (after rliable, Agarwal et al. 2021).
+
+    The normalised score of an episode on a scenario is ``(m0 - m) / (m0 - m1)`` of its ``metric``
+    (lower is better: RMSE by default), with ``m0`` the mean of :data:`FLOOR` (no thrust) and
+    ``m1`` the mean of the env's paper controller (:data:`PAPER_CONTROLLER`) on that scenario:
+    0 = no thrust, 1 = the paper's controller; an errored episode scores 0. A scenario without
+    both references is left out (``skipped``). Per policy, over the scenarios it ran on:
+    ``iqm`` (interquartile mean of the pooled episode scores) and ``p_improvement`` (the mean over
+    scenarios of P(score > the paper controller's score), ties count half), each with a 95 %
+    stratified bootstrap interval (episodes resampled within each scenario).
+    """
+    from scipy import stats
+
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for rec in records:
+        groups.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
+
+    def values(scen: str, pol: str) -> np.ndarray:
+        return np.array([float(r[metric]) if r.get("error") is None and r.get(metric) is not None else np.nan
+                         for r in groups.get((scen, pol), [])])
+
+    scores: dict[str, dict[str, np.ndarray]] = {}
+    refs: dict[str, str] = {}
+    skipped: dict[str, str] = {}
+    for scen, env in envs.items():
+        ref = PAPER_CONTROLLER.get(env)
+        m0, m1 = np.nanmean(values(scen, FLOOR)) if (scen, FLOOR) in groups else np.nan, \
+            np.nanmean(values(scen, ref)) if (scen, ref) in groups else np.nan
+        if not (np.isfinite(m0) and np.isfinite(m1)) or m0 == m1:
+            skipped[scen] = f"needs {FLOOR} and the paper's controller {ref} on it, with different {metric}"
+            continue
+        refs[scen] = ref
+        scores[scen] = {pol: np.nan_to_num((m0 - values(scen, pol)) / (m0 - m1), nan=0.0)
+                        for (sc, pol) in groups if sc == scen}
+    rng = np.random.default_rng(seed)
+    out: dict[str, Any] = {}
+    for pol in sorted({p for per in scores.values() for p in per}):
+        tasks = [s for s in scores if pol in scores[s]]
+        boot = [scores[s][pol][rng.integers(0, scores[s][pol].size, (resamples, scores[s][pol].size))]
+                for s in tasks]
+        pooled = np.concatenate([scores[s][pol] for s in tasks])
+        iqm_boot = stats.trim_mean(np.concatenate(boot, axis=1), 0.25, axis=1)
+        entry = {"scenarios": len(tasks), "episodes": int(pooled.size),
+                 "iqm": float(stats.trim_mean(pooled, 0.25)),
+                 "iqm_ci95": [float(q) for q in np.percentile(iqm_boot, [2.5, 97.5])],
+                 "p_improvement": None, "p_improvement_ci95": [None, None]}
+        vs = [s for s in tasks if refs[s] != pol]
+        if vs:
+            point, reps = [], []
+            for s in vs:
+                x, y = scores[s][pol], scores[s][refs[s]]
+                point.append(_p_greater(x[None], y[None])[0])
+                bx = x[rng.integers(0, x.size, (resamples, x.size))]
+                by = y[rng.integers(0, y.size, (resamples, y.size))]
+                reps.append(_p_greater(bx, by))
+            entry["p_improvement"] = float(np.mean(point))
+            entry["p_improvement_ci95"] = [float(q) for q in np.percentile(np.mean(reps, axis=0), [2.5, 97.5])]
+        out[pol] = entry
+    return {"metric": metric, "floor": FLOOR, "reference": refs, "skipped": skipped, "policies": out}
+
+
+def _p_greater(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Per row: P(X > Y) + P(X = Y) / 2 over every pair of the rows of ``x`` (R, n) and ``y`` (R, m)."""
+    diff = x[:, :, None] - y[:, None, :]
+    return np.mean((diff > 0) + 0.5 * (diff == 0), axis=(1, 2))
+
+
+# ----------------------------------------------------------------------------------------------
 # Outputs.
 # ----------------------------------------------------------------------------------------------
 def _fmt(x: float | None) -> str:
@@ -154,17 +247,15 @@ def _fmt(x: float | None) -> str:
 
 
 def _cell(stat: dict[str, Any], metric: str) -> str:
+    """``mean [lo, hi]`` (the 95 % interval; the success rate in %)."""
     mean, (lo, hi) = stat["mean"], stat["ci95"]
     if mean is None:
         return "–"
     if metric == "success":
-        return f"{100 * mean:.0f} %"
-    if lo is None or hi is None:
+        return f"{100 * mean:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]" if lo is not None else f"{100 * mean:.0f} %"
+    if lo is None or hi is None or hi - lo <= 1e-9 * max(1.0, abs(mean)):  # one seed, or the same value on all
         return _fmt(mean)
-    half = (hi - lo) / 2
-    if half <= 1e-9 * max(1.0, abs(mean)):   # the same value on every seed (up to round-off)
-        return _fmt(mean)
-    return f"{_fmt(mean)} ± {_fmt(half)}"
+    return f"{_fmt(mean)} [{_fmt(lo)}, {_fmt(hi)}]"
 
 
 def _preamble(h: dict[str, Any]) -> list[str]:
@@ -181,10 +272,19 @@ def _preamble(h: dict[str, Any]) -> list[str]:
         lines += ["Fewer seeds for the expensive scenarios: "
                   + ", ".join(f"{n}: {v}" for n, v in h["scenario_seeds"].items()), ""]
     return lines + [
-        f"Ranked by {h['ranking']}. Cells: mean ± 95 % CI half-width over seeds (Student t; "
-        "success: Wilson interval). * t_conv: mean over the episodes that converged "
-        "(n in scoreboard.json). RMSE, RMSEE, FOE: the env's tracking error as defined by "
-        "its paper (satenv.metrics); Δv summed over agents; ms/decision: wall time of act().", ""]
+        f"Ranked by {h['ranking']}. Cells: mean over seeds [95 % interval]: success rate with the "
+        "Wilson score interval, every other metric with a percentile bootstrap of the mean (inside "
+        "the observed values).", "",
+        "Definitions (satenv.metrics; per episode, then averaged over seeds): **RMSE** [m] root mean "
+        "square tracking error over the episode, mean over agents; **RMSEE** [m/s²] root mean square "
+        "commanded acceleration; **FOE** [m] final tracking error; **Δv** [m/s] total velocity change, "
+        "summed over agents; **t_conv** [s]* time until every agent stays converged (mean over the "
+        "episodes that converged, n in scoreboard.json); **min sep** [m] smallest distance between "
+        "any agent and any other body; **collisions** (step, agent) collision flags; **violations** "
+        "constraint violations counted by the env (speed, keep-out, line of sight, ... as the "
+        "scenario defines them); **cost** the env's safety cost summed over the episode; "
+        "**fallbacks** solver failures replaced by a safe action; **ms/decision** wall time of one "
+        "act() call.", ""]
 
 
 def _scenario_section(board: Board, scen: str) -> list[str]:
@@ -205,8 +305,34 @@ def _scenario_section(board: Board, scen: str) -> list[str]:
     return lines + [""]
 
 
+def _summary_section(summary: dict[str, Any]) -> list[str]:
+    if not summary.get("policies"):
+        return []
+    refs = ", ".join(f"{s}: {r}" for s, r in summary["reference"].items())
+    lines = ["## Across scenarios", "",
+             f"Normalised score per episode: 0 = {summary['floor']} (no thrust), 1 = the env's paper "
+             f"controller, on mean {summary['metric'].upper()} (errored episodes score 0); IQM: "
+             "interquartile mean of the pooled episode scores; P(improvement): probability that an "
+             "episode scores higher than the paper controller's on the same scenario, averaged over "
+             "scenarios (ties half). [95 % stratified bootstrap intervals.] After rliable (Agarwal et "
+             f"al., NeurIPS 2021). Paper controllers: {refs}.", "",
+             "| policy | scenarios | episodes | IQM normalised score | P(improvement over the paper's controller) |",
+             "|---|--:|--:|--:|--:|"]
+    order = sorted(summary["policies"].items(), key=lambda kv: -kv[1]["iqm"])
+    for pol, e in order:
+        lo, hi = e["iqm_ci95"]
+        poi = "–" if e["p_improvement"] is None else \
+            f"{e['p_improvement']:.2f} [{e['p_improvement_ci95'][0]:.2f}, {e['p_improvement_ci95'][1]:.2f}]"
+        lines.append(f"| {pol} | {e['scenarios']} | {e['episodes']} | {e['iqm']:.2f} [{lo:.2f}, {hi:.2f}] | {poi} |")
+    if summary["skipped"]:
+        lines += ["", "Left out of these aggregates: " + "; ".join(f"{s} ({why})" for s, why in summary["skipped"].items())
+                  + "."]
+    return lines + [""]
+
+
 def render_markdown(board: Board) -> str:
     lines = _preamble(board.header)
+    lines += _summary_section(board.summary)
     for scen in board.aggregates:
         lines += _scenario_section(board, scen)
     if board.notes:
@@ -216,6 +342,7 @@ def render_markdown(board: Board) -> str:
 
 def _write_json(board: Board) -> None:
     payload = {"header": board.header, "ranking": board.ranking, "aggregates": board.aggregates,
+               "summary": board.summary,
                "episodes": [{k: v for k, v in r.items() if k != "traceback"} for r in board.records]}
     tmp = board.out / "scoreboard.json.tmp"
     tmp.write_text(json.dumps(jsonable(payload), indent=1, allow_nan=False))
@@ -324,7 +451,33 @@ def write_plots(board: Board) -> list[Path]:
     pdir = board.out / "plots"
     pdir.mkdir(parents=True, exist_ok=True)
     written = [_metric_figure(board, metric, pdir / f"{metric}.png") for metric in _PLOTS]
+    if board.summary.get("policies"):
+        written.append(_summary_figure(board.summary, pdir / "summary.png"))
     return written + _trajectory_plots(board, pdir)
+
+
+def _summary_figure(summary: dict[str, Any], path: Path) -> Path:
+    """IQM of the normalised score and P(improvement over the paper's controller), 95 % CIs."""
+    import matplotlib.pyplot as plt
+
+    order = sorted(summary["policies"].items(), key=lambda kv: kv[1]["iqm"])
+    names = [p for p, _ in order]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 0.45 * len(names) + 1.6), dpi=90, sharey=True)
+    for ax, key, title, ref in ((axes[0], "iqm", "IQM normalised score (0 = zero thrust, 1 = paper controller)", 1.0),
+                                (axes[1], "p_improvement", "P(improvement over the paper's controller)", 0.5)):
+        for y, (_, e) in enumerate(order):
+            if e[key] is None:
+                continue
+            lo, hi = e[f"{key}_ci95"]
+            ax.errorbar(e[key], y, xerr=[[e[key] - lo], [hi - e[key]]], fmt="o", color=f"C{y % 10}", capsize=3)
+        ax.axvline(ref, color="k", ls="--", lw=0.8)
+        ax.set_title(title, fontsize=9)
+        ax.set_yticks(range(len(names)), names)
+    fig.suptitle(f"across {len(summary['reference'])} scenarios (95 % stratified bootstrap CIs)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
 
 
 # ----------------------------------------------------------------------------------------------
