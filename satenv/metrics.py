@@ -23,6 +23,7 @@ agent that has not converged.
 
 from __future__ import annotations
 
+import math
 import numbers
 from collections.abc import Mapping
 from typing import Any
@@ -72,8 +73,11 @@ def _positive(name: str, value: Any) -> float:
     """``value`` as a finite float > 0 (a real number, not a bool), else the typed error."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
         raise SatenvTypeError(f"{name} must be a real number > 0, got {value!r:.60}")
-    v = float(value)
-    if not (np.isfinite(v) and v > 0):
+    try:
+        v = float(value)
+    except OverflowError:  # an int beyond the float range
+        v = math.inf
+    if not (math.isfinite(v) and v > 0):
         raise SatenvError(f"{name} must be finite and > 0, got {value!r:.60}")
     return v
 
