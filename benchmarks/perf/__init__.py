@@ -20,7 +20,7 @@ Agent-steps per second (one agent advanced by one decision step) of
               ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
               on and off) and of the ``satenv.make_vec`` step at each batch size.
 
-Six more sections run only when named in ``--sections`` (they take minutes):
+Seven more sections run only when named in ``--sections`` (they take minutes):
 
 * ``reproductions`` issue 17's wall times of ``reproduce li2022 --case 1`` (both variants) and
               ``reproduce pereira2022-servicing`` (a subprocess each, plots off), against their
@@ -41,6 +41,9 @@ Six more sections run only when named in ``--sections`` (they take minutes):
               problem along the closed loop on both kannan2022 scenarios, and the first-input gap;
 * ``training`` SB3 PPO ``learn()`` on satenv's batched ``SatVecEnv`` against SB3's
               ``DummyVecEnv`` of one PettingZoo env per copy (env-steps/s, learning and raw);
+* ``safety``  issue 26's safety filter (:mod:`benchmarks.perf.safety`): its ms per agent decision
+              beside the env step on the same states (cluster_v0 N = 10 at 1 and 64 copies, targets
+              0.1 / 0.02 ms; pereira2022 platoon and servicing).
 * ``learning`` the native TorchRL env (``satenv.torchrl.make_env``, 256 copies) against TorchRL's
               generic ``PettingZooWrapper`` over the same ``platoon_v0`` (env only), and end-to-end
               training agent-steps/s (env + learner, MLP 64-64, 16 copies, ``20000 x
@@ -75,7 +78,7 @@ from typing import Any
 
 from benchmarks._env import single_thread_blas
 
-from . import cgmres, envs, learning, reproductions, scaling, training
+from . import cgmres, envs, learning, reproductions, safety, scaling, training
 from ._common import AGENTS, PettingZooLoop, _loadavg, _machine, _rate
 from .api import api_loops
 from .batched import batched_core, batched_dynamics
@@ -93,7 +96,7 @@ __all__ = ["AGENTS", "API_VS_MPE2", "CORE_VS_VMAS", "EXTRA_SECTIONS", "FAST_SOLV
 
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard", "envs")
 """The default sections."""
-EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions")
+EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions", "safety")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -142,6 +145,7 @@ REGISTRY: dict[str, Callable[[Options, Log], Any]] = {
     "guard": lambda o, log: guard_cost(o.api_time, o.batches, log),
     "envs": lambda o, log: envs.env_speed(o.min_time, o.api_time, log=log),
     "reproductions": lambda o, log: reproductions.reproduction_times(log),
+    "safety": safety.run,
     "cgmres_ipopt": _cgmres,
     "training": _training,
     "scaling": _scaling,

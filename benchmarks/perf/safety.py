@@ -1,6 +1,6 @@
-"""Cost of the safety filter (:mod:`satenv.safety`), as a ratio to the env step in the same run.
+"""The ``safety`` section (issue 26): the safety filter's cost, beside the env step in the same run.
 
-``run()`` -> dict: for each case (env, copies ``B``), the filter's wall time per agent decision
+``run(options, log)`` -> dict: for each case (env, copies ``B``), the filter's wall time per agent decision
 (``ms_per_agent``: one ``filter`` call over ``B`` copies x ``M`` agents, divided by ``B M``) on the
 states and proposals of a random-policy episode under the filter (so its QPs run as often as the
 random policy makes them), the same for an all-safe proposal (zero thrust: the row check only), the
@@ -8,13 +8,11 @@ env step on the same states (``step_ms_per_agent``: PettingZoo dict step for ``B
 ``make_vec`` batched step otherwise) and their ratio. Targets (issue 26): at N = 10 (cluster_v0)
 <= 0.1 ms per agent decision, and <= 0.02 ms per agent over 64 copies.
 
-    OPENBLAS_NUM_THREADS=1 python -m benchmarks.safety_perf --out safety_perf.json
+    python -m benchmarks.perf --sections safety --out perf_safety.json
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from typing import Any
 
@@ -103,33 +101,19 @@ def measure(env_id: str, kwargs: dict[str, Any], copies: int, decisions: int = 6
             "target_ms_per_agent": target, "met": None if target is None else bool(ms <= target)}
 
 
-def run(decisions: int = 60, repeats: int = 3, cases=CASES, log=print) -> dict[str, Any]:
-    """Every case of :data:`CASES`; ``{"cases": [...], "targets_met": bool}``."""
-    out = []
+def run(options: Any = None, log=print, decisions: int = 60, repeats: int = 3, cases=CASES) -> dict[str, Any]:
+    """Every case of :data:`CASES` (``options.scale`` shrinks the decisions); ``{"cases": [...],
+    "targets": [...]}`` (the perf report's target format)."""
+    decisions = max(5, int(decisions * getattr(options, "scale", 1.0)))
+    out, targets = [], []
     for env_id, kwargs, copies in cases:
         res = measure(env_id, kwargs, copies, decisions, repeats)
         log(f"safety filter {env_id} {kwargs or ''} B={copies}: {res['ms_per_agent']:.4f} ms/agent "
             f"(all safe {res['ms_per_agent_all_safe']:.4f}; env step {res['step_ms_per_agent']:.4f}; "
-            f"ratio {res['ratio_to_step']:.2f}; {res['interventions_per_call']:.2f} QPs/call)"
-            + ("" if res["met"] is None else f" target {res['target_ms_per_agent']} met={res['met']}"))
+            f"ratio {res['ratio_to_step']:.2f}; {res['interventions_per_call']:.2f} QPs/call)")
         out.append(res)
-    return {"cases": out, "targets_met": all(c["met"] for c in out if c["met"] is not None)}
-
-
-def main(argv: list[str] | None = None) -> int:
-    from benchmarks._env import single_thread_blas
-
-    single_thread_blas()
-    p = argparse.ArgumentParser(prog="python -m benchmarks.safety_perf", description=__doc__.splitlines()[0])
-    p.add_argument("--out", help="write the result JSON here")
-    p.add_argument("--decisions", type=int, default=60)
-    args = p.parse_args(argv)
-    result = run(decisions=args.decisions)
-    if args.out:
-        with open(args.out, "w") as fh:
-            json.dump(result, fh, indent=1)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+        if res["met"] is not None:
+            targets.append({"name": f"safety filter {env_id} x{copies}: ms per agent decision",
+                            "value": res["ms_per_agent"], "target": res["target_ms_per_agent"], "op": "<=",
+                            "met": res["met"]})
+    return {"cases": out, "targets": targets}
