@@ -70,6 +70,7 @@ class DaggerConfig:
     """One DAgger run (every field is a ``--flag``)."""
 
     system: str = "platoon-pereira2022"
+    learner_shield: bool = False
     rounds: int = 1000
     round0_episodes: int = 40
     episodes_per_round: int = 16
@@ -124,6 +125,8 @@ def collect_episode(env, expert, learner, seed: int, beta: float, noise: float,
     """One episode: every visited observation with the expert's label, the env state and agent."""
     obs, _ = env.reset(seed=seed)
     expert.reset(seed=seed)
+    if learner is not None:
+        learner.reset(seed=seed)
     rows: dict[str, list] = {"obs": [], "act": [], "state": [], "agent": [], "t": []}
     t = 0
     while env.agents:
@@ -203,10 +206,15 @@ def plot_curve(history: list[dict[str, Any]], path: Path) -> None:
     fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
     ax[0].plot(labels, [h["val"]["success_rate"] for h in history], "o-", label="random starts")
     ax[0].plot(labels, [h["paper"]["success_rate"] for h in history], "s--", label="paper start")
+    if any("shield" in h for h in history):
+        sh = [(h["labels"], h["shield"]["val"]) for h in history if "shield" in h]
+        ax[0].plot([a for a, _ in sh], [v["success_rate"] for _, v in sh], "^-", label="random, +shield")
+        ax[1].plot([a for a, _ in sh], [v["collision_episodes"] for _, v in sh], "^-", label="+shield")
     ax[0].set_ylabel("success rate")
     ax[0].legend()
-    ax[1].plot(labels, [h["val"]["collision_episodes"] for h in history], "o-")
+    ax[1].plot(labels, [h["val"]["collision_episodes"] for h in history], "o-", label="network")
     ax[1].set_ylabel(f"collision episodes (of {history[-1]['val']['episodes']})")
+    ax[1].legend()
     ax[2].semilogy(labels, [h["loss"] for h in history], "o-")
     ax[2].set_ylabel("regression MSE")
     for a in ax:
@@ -222,6 +230,7 @@ def plot_curve(history: list[dict[str, Any]], path: Path) -> None:
 def run(cfg: DaggerConfig, run_dir: Path) -> None:
     import torch
 
+    from satenv.safety import shield
     from training.actor import MLPActor
     from training.envs import policy_env_meta
     from training.policy import LearnedPolicy, ObsNormalizer, load, save_artifacts
@@ -253,21 +262,23 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     t_start = time.perf_counter()
     episode = sum(cfg.round0_episodes if k == 0 else cfg.episodes_per_round for k in range(done))
     for k in range(done, cfg.rounds):
-        learner = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats)
+        net = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats)
+        learners = {id(e): (shield(net, e) if cfg.learner_shield and net is not None else net)
+                    for e in (collect, paper)}
         n_eps = cfg.round0_episodes if k == 0 else cfg.episodes_per_round
         parts = []
         t0 = time.perf_counter()
         for _ in range(n_eps):
             env = paper if rng.random() < cfg.paper_start_share else collect
             noise = cfg.noise_std if (k == 0 and rng.random() < cfg.noise_share) else 0.0
-            parts.append(collect_episode(env, experts[id(env)], learner, cfg.train_seed + episode,
+            parts.append(collect_episode(env, experts[id(env)], learners[id(env)], cfg.train_seed + episode,
                                          cfg.beta ** k, noise, rng))
             episode += 1
         batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
         collect_s = time.perf_counter() - t0
         x = batch["obs"] if len(x) == 0 else np.concatenate([x, batch["obs"]])
-        y = batch["act"] if len(y) == 0 else np.concatenate([y, np.clip(batch["act"], -1, 1)])
+        y = np.clip(batch["act"], -1, 1) if len(y) == 0 else np.concatenate([y, np.clip(batch["act"], -1, 1)])
         if normalizer is None:
             fx = feats(x.astype(np.float64))
             normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
@@ -276,13 +287,20 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
         fit_s = time.perf_counter() - t1
         policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats, meta=meta)
         val, pap = evaluate(ev, policy, cfg.val_seeds), evaluate(paper_ev, policy, [0])
+        if cfg.learner_shield:
+            shielded = {"val": evaluate(ev, shield(policy, ev), cfg.val_seeds),
+                        "paper": evaluate(paper_ev, shield(policy, paper_ev), [0])}
         history.append({"system": cfg.system, "round": k, "labels": int(len(x)), "episodes": episode, "loss": loss,
                         "beta": cfg.beta ** k, "collect_s": round(collect_s, 1), "fit_s": round(fit_s, 1),
-                        "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap})
+                        "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap,
+                        **({"shield": shielded} if cfg.learner_shield else {})})
         save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=meta, config=policy_cfg,
                        source="training.recipes.dagger round checkpoint")
         history_path.write_text(json.dumps(history, indent=1) + "\n")
         plot_curve(history, run_dir / "learning_curve.png")
+        if cfg.learner_shield:
+            print(f"  +shield: val success {shielded['val']['success_rate']:.2f} coll "
+                  f"{shielded['val']['collision_episodes']} fe {shielded['val']['final_error_m']:.2f}", flush=True)
         print(f"round {k}: labels {len(x)} loss {loss:.4f} val success {val['success_rate']:.2f} "
               f"coll {val['collision_episodes']} fe {val['final_error_m']:.2f} paper {pap['success_rate']:.0f} "
               f"collect {collect_s:.0f}s fit {fit_s:.0f}s", flush=True)

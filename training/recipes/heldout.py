@@ -1,0 +1,173 @@
+"""Held-out evaluation against issue 27's targets: a policy folder beside the system's controller.
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m training.recipes.heldout \\
+        --system platoon-pereira2022 --policy training/policies/<name> --out eval_heldout.json
+
+On the system's randomised scoreboard scenario (``--seeds``, default 900000-900049: seeds no
+training run, validation or selection of issue 27 touches) and on the paper's own start, it runs
+the learned policy, the same policy behind the safety filter (``satenv.safety.shield``) and the
+controller of the scenario (``--controller``), and checks the targets: success >= 90 % and >= the
+controller's minus 5 points, 0 collision episodes, 0 hard-constraint violations, RMSE and delta-v
+<= 1.5x the controller's on *matched, completed* episodes (seeds where neither episode ended early
+nor collided), a decision <= 1 ms per agent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from training.recipes.dagger import SYSTEMS
+
+__all__ = ["evaluate_policies", "targets", "main"]
+
+CONTROLLERS = {"platoon-pereira2022": "dmpc", "cluster-case1": "tube_rdmpc"}
+"""The scenario's controller (the comparator of issue 27) per system."""
+
+
+def episodes(env, policy, seeds) -> list[dict[str, Any]]:
+    from satenv import metrics
+    from satenv.rollout import rollout
+
+    out = []
+    for s in seeds:
+        e = metrics.summary(rollout(env, policy, seed=int(s)))
+        e["seed"] = int(s)
+        e["compute_ms_per_agent"] = e["compute_ms_per_decision"] / len(env.possible_agents)
+        info = getattr(policy, "info", {}) or {}
+        for key in ("safety_interventions", "safety_infeasible", "safety_steps"):
+            if key in info:
+                e[key] = int(info[key])
+        out.append(e)
+    return out
+
+
+def aggregate(eps: list[dict[str, Any]]) -> dict[str, Any]:
+    def mean(k):
+        return float(np.mean([e[k] for e in eps]))
+
+    agg = {"episodes": len(eps), "success_rate": mean("success"),
+           "collision_episodes": int(sum(e["collisions"] > 0 for e in eps)),
+           "violation_episodes": int(sum(e["violations"] > 0 for e in eps)),
+           "violations": mean("violations"), "terminated": int(sum(e["terminated"] for e in eps)),
+           "rmse": mean("rmse"), "delta_v": mean("delta_v"), "final_error_m": mean("final_error_m"),
+           "min_separation_m": float(min(e["min_separation_m"] for e in eps)),
+           "compute_ms_per_agent": mean("compute_ms_per_agent")}
+    if "safety_interventions" in eps[0]:
+        agg["safety_interventions"] = int(sum(e["safety_interventions"] for e in eps))
+        agg["safety_infeasible"] = int(sum(e.get("safety_infeasible", 0) for e in eps))
+    return agg
+
+
+def matched_ratios(mine: list[dict[str, Any]], ref: list[dict[str, Any]]) -> dict[str, Any]:
+    """RMSE and delta-v ratios on the seeds where both episodes ran to the end without collision."""
+    by = {e["seed"]: e for e in ref}
+    pairs = [(e, by[e["seed"]]) for e in mine if e["seed"] in by]
+    ok = [(a, b) for a, b in pairs if not (a["terminated"] or b["terminated"] or a["collisions"] or b["collisions"])]
+    if not ok:
+        return {"matched_seeds": 0}
+    return {"matched_seeds": len(ok),
+            "rmse_ratio": float(np.mean([a["rmse"] for a, _ in ok]) / np.mean([b["rmse"] for _, b in ok])),
+            "delta_v_ratio": float(np.mean([a["delta_v"] for a, _ in ok]) / np.mean([b["delta_v"] for _, b in ok]))}
+
+
+def targets(agg: dict[str, Any], ref: dict[str, Any], ratios: dict[str, Any]) -> dict[str, bool]:
+    return {"success": agg["success_rate"] >= 0.9 and agg["success_rate"] >= ref["success_rate"] - 0.05,
+            "no_collisions": agg["collision_episodes"] == 0,
+            "no_violations": agg["violation_episodes"] == 0,
+            "rmse": ratios.get("rmse_ratio", np.inf) <= 1.5,
+            "delta_v": ratios.get("delta_v_ratio", np.inf) <= 1.5,
+            "decision_1ms": agg["compute_ms_per_agent"] <= 1.0}
+
+
+def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: list[int],
+                      controller: str | None, shield: bool = True) -> dict[str, Any]:
+    import baselines
+    import satenv
+    import training
+    from satenv.safety import shield as make_shield
+
+    sysdef = SYSTEMS[system]
+    result: dict[str, Any] = {"system": system, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
+                              "paper_seeds": paper_seeds, "controller": controller}
+    for label, kwargs, ss in (("random", sysdef.scenario, seeds), ("paper", sysdef.paper, paper_seeds)):
+        env = satenv.make(sysdef.env_id, **kwargs)
+        net = training.load(folder, env=env)
+        runs = {"learned": net}
+        if shield:
+            runs["learned+shield"] = make_shield(training.load(folder, env=env), env)
+        if controller:
+            runs[controller] = baselines.make(controller, env)
+        block: dict[str, Any] = {"env_kwargs": dict(kwargs)}
+        eps = {}
+        for name, pol in runs.items():
+            t0 = time.perf_counter()
+            eps[name] = episodes(env, pol, ss)
+            block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1),
+                           "episodes": eps[name]}
+            print(label, name, json.dumps(block[name]["aggregate"]), flush=True)
+        if controller:
+            ref = block[controller]["aggregate"]
+            for name in runs:
+                if name == controller:
+                    continue
+                r = matched_ratios(eps[name], eps[controller])
+                block[name]["ratios"] = r
+                block[name]["targets"] = targets(block[name]["aggregate"], ref, r)
+        result[label] = block
+    return result
+
+
+def table(result: dict[str, Any]) -> str:
+    cols = ["episodes", "success_rate", "collision_episodes", "violation_episodes", "terminated", "rmse",
+            "delta_v", "final_error_m", "min_separation_m", "compute_ms_per_agent"]
+    lines = []
+    for label in ("random", "paper"):
+        block = result[label]
+        lines += [f"\n**{label} start** (`{json.dumps(block['env_kwargs'])}`)\n",
+                  "| policy | " + " | ".join(cols) + " | RMSE ratio | Δv ratio (matched) |",
+                  "|" + "---|" * (len(cols) + 3)]
+        for name, res in block.items():
+            if name == "env_kwargs":
+                continue
+            a, r = res["aggregate"], res.get("ratios", {})
+            cells = [f"{a[c]:.3g}" if isinstance(a[c], float) else str(a[c]) for c in cols]
+            rr = (f"{r['rmse_ratio']:.2f} | {r['delta_v_ratio']:.2f} ({r['matched_seeds']})"
+                  if r.get("matched_seeds") else " | ")
+            lines.append(f"| {name} | " + " | ".join(cells) + f" | {rr} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--system", choices=sorted(SYSTEMS), required=True)
+    p.add_argument("--policy", type=Path, required=True)
+    p.add_argument("--seeds", default="900000-900049", help="first-last (inclusive)")
+    p.add_argument("--paper-seeds", default="0-2")
+    p.add_argument("--controller", default=None, help="default: the system's (CONTROLLERS); 'none' to skip")
+    p.add_argument("--no-shield", action="store_true")
+    p.add_argument("--out", type=Path, required=True)
+    ns = p.parse_args(argv)
+
+    def span(text):
+        a, _, b = text.partition("-")
+        return list(range(int(a), int(b or a) + 1))
+
+    import torch
+
+    torch.set_num_threads(1)
+    ctrl = ns.controller or CONTROLLERS[ns.system]
+    res = evaluate_policies(ns.system, ns.policy, span(ns.seeds), span(ns.paper_seeds),
+                            None if ctrl == "none" else ctrl, shield=not ns.no_shield)
+    res["table"] = table(res)
+    ns.out.write_text(json.dumps(res, indent=1) + "\n")
+    print(res["table"])
+
+
+if __name__ == "__main__":
+    main()
