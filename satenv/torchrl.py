@@ -37,11 +37,19 @@ __all__ = ["SatTorchRLEnv", "make_env"]
 
 
 def make_env(env_id: str, num_envs: int, *, device: str | torch.device = "cpu", seed: int | None = None,
-             **env_kwargs: Any) -> SatTorchRLEnv:
-    """``num_envs`` copies of ``satenv.make(env_id, **env_kwargs)`` as a TorchRL ``EnvBase``."""
+             safety_filter: Any = False, **env_kwargs: Any) -> SatTorchRLEnv:
+    """``num_envs`` copies of ``satenv.make(env_id, **env_kwargs)`` as a TorchRL ``EnvBase``;
+    ``safety_filter=True`` (or a ``SafetyConfig``) filters the actions (:mod:`satenv.safety`) and
+    adds ``("agents", "safety_intervened")`` / ``("agents", "safety_delta")`` ``(B, M, 1)``."""
     import satenv
 
-    vec = SatVectorEnv(satenv.make(env_id, **env_kwargs), num_envs, seed=seed, autoreset=False)
+    if safety_filter is not False:
+        from satenv.safety import filtered_vec, safety_config
+
+        vec = filtered_vec(satenv.make(env_id, **env_kwargs), num_envs, seed=seed, autoreset=False,
+                           config=safety_config(safety_filter))
+    else:
+        vec = SatVectorEnv(satenv.make(env_id, **env_kwargs), num_envs, seed=seed, autoreset=False)
     return SatTorchRLEnv(vec, device=device)
 
 
@@ -67,8 +75,11 @@ class SatTorchRLEnv(EnvBase):
         vec.env.reset(seed=0)  # the template env (never stepped) tells the state size
         state_dim = int(vec.env.state().size)
         f32 = torch.float32
+        self._safety = hasattr(vec, "safety")
+        extra = ({"safety_intervened": Categorical(2, (b, m, 1), dtype=torch.bool, device=device),
+                  "safety_delta": Unbounded((b, m, 1), dtype=f32, device=device)} if self._safety else {})
         self.observation_spec = Composite(
-            agents=Composite(observation=Unbounded((b, m, obs_dim), dtype=f32, device=device),
+            agents=Composite(observation=Unbounded((b, m, obs_dim), dtype=f32, device=device), **extra,
                              shape=(b, m), device=device),
             state=Unbounded((b, state_dim), dtype=f32, device=device), shape=(b,), device=device)
         self.action_spec = Composite(
@@ -110,15 +121,22 @@ class SatTorchRLEnv(EnvBase):
         zeros = np.zeros((self.vec.num_envs, self.vec.n_agents), dtype=bool)
         data = _merge(self._flags(zeros, zeros), "agents", self._observation(obs))
         data["state"] = self._observation(obs)["state"]
+        self._safety_entries(data, {"safety_intervened": zeros, "safety_delta": zeros.astype(np.float32)})
         return self._tensordict(data)
+
+    def _safety_entries(self, data: dict[str, Any], infos: dict[str, Any]) -> None:
+        if self._safety:
+            for key, dtype in (("safety_intervened", torch.bool), ("safety_delta", torch.float32)):
+                data["agents"][key] = torch.as_tensor(np.asarray(infos[key]), dtype=dtype, device=self.device)[..., None]
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get(("agents", "action")).detach().cpu().numpy()
-        obs, rew, term, trunc, _ = self.vec.step(action)
+        obs, rew, term, trunc, infos = self.vec.step(action)
         reward = torch.as_tensor(rew, dtype=torch.float32, device=self.device)[..., None]
         data = _merge(self._flags(term, trunc), "agents", self._observation(obs))
         data["agents"]["reward"] = reward
         data["state"] = self._observation(obs)["state"]
+        self._safety_entries(data, infos)
         return self._tensordict(data)
 
     def _tensordict(self, data: dict[str, Any]) -> TensorDictBase:

@@ -232,3 +232,16 @@ def test_scoreboard_ranks_a_policy_beside_its_shielded_twin(tmp_path):
     assert agg["random+shield"]["interventions"]["n"] == 1 and agg["random"]["interventions"]["n"] == 0
     assert agg["random+shield"]["collisions"]["mean"] == 0
     assert "interventions" in board.markdown and "mean ‖Δu‖" in board.markdown
+
+
+def test_torchrl_env_with_safety_filter():
+    pytest.importorskip("torchrl")
+    from torchrl.envs.utils import check_env_specs
+
+    from satenv.torchrl import make_env
+
+    env = make_env("platoon_v0", 2, seed=0, safety_filter=True)
+    check_env_specs(env)
+    td = env.rollout(20)
+    assert td["next", "agents", "safety_intervened"].shape == (2, 20, 4, 1)
+    assert "safety_delta" not in make_env("platoon_v0", 2, seed=0).observation_spec["agents"].keys()
