@@ -157,13 +157,15 @@ def test_load_errors(tmp_path):
     with pytest.raises(PolicyLoadError, match="not a directory"):
         training.load(tmp_path / "missing")
     (tmp_path / "half").mkdir()
-    (tmp_path / "half" / "weights.pt").write_bytes(b"junk")
+    (tmp_path / "half" / "weights.safetensors").write_bytes(b"junk")
     with pytest.raises(PolicyLoadError, match="missing"):
         training.load(tmp_path / "half")
     for name in ("policy.json", "obs_norm.json", "env.json", "config.json"):
         (tmp_path / "half" / name).write_text("{}")
-    with pytest.raises(PolicyLoadError, match="format"):
+    with pytest.raises(PolicyLoadError, match="manifest"):
         training.load(tmp_path / "half")
+    with pytest.raises(PolicyLoadError, match="format"):
+        training.load(tmp_path / "half", trusted=True)
 
 
 def test_sac_smoke_and_space_mismatch(tmp_path):
