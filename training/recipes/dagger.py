@@ -121,14 +121,15 @@ def features(cfg: DaggerConfig):
 
 
 def collect_episode(env, expert, learner, seed: int, beta: float, noise: float,
-                    rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """One episode: every visited observation with the expert's label, the env state and agent."""
+                    rng: np.random.Generator) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """One episode: every visited observation with the expert's label, the env state and agent;
+    and how the flown episode ended (final position error, collision, closest approach)."""
     obs, _ = env.reset(seed=seed)
     expert.reset(seed=seed)
     if learner is not None:
         learner.reset(seed=seed)
     rows: dict[str, list] = {"obs": [], "act": [], "state": [], "agent": [], "t": []}
-    t = 0
+    t, collided, min_sep, infos = 0, False, np.inf, {}
     while env.agents:
         agents = list(obs)
         state = np.asarray(env.state(), dtype=np.float64)
@@ -145,9 +146,14 @@ def collect_episode(env, expert, learner, seed: int, beta: float, noise: float,
             flown = learner.act(obs)
         if noise > 0:
             flown = {a: np.clip(v + rng.normal(0, noise, 3), -1, 1).astype(np.float32) for a, v in flown.items()}
-        obs, *_ = env.step(flown)
+        obs, _, _, _, infos = env.step(flown)
+        collided |= any(bool(i["collision"]) for i in infos.values())
+        min_sep = min(min_sep, *(float(i["min_separation"]) for i in infos.values()))
         t += 1
-    return {k: np.asarray(v, dtype=np.float32 if k in ("obs", "act") else None) for k, v in rows.items()}
+    final = max(float(np.linalg.norm(np.asarray(i["tracking_error"])[:3])) for i in infos.values())
+    stats = {"seed": seed, "steps": t, "final_error_m": round(final, 4), "collision": collided,
+             "min_separation_m": round(min_sep, 3), "learner": learner is not None, "noise": noise}
+    return {k: np.asarray(v, dtype=np.float32 if k in ("obs", "act") else None) for k, v in rows.items()}, stats
 
 
 def load_labels(run: Path) -> tuple[np.ndarray, np.ndarray, int]:
@@ -266,13 +272,15 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
         learners = {id(e): (shield(net, e) if cfg.learner_shield and net is not None else net)
                     for e in (collect, paper)}
         n_eps = cfg.round0_episodes if k == 0 else cfg.episodes_per_round
-        parts = []
+        parts, flown = [], []
         t0 = time.perf_counter()
         for _ in range(n_eps):
             env = paper if rng.random() < cfg.paper_start_share else collect
             noise = cfg.noise_std if (k == 0 and rng.random() < cfg.noise_share) else 0.0
-            parts.append(collect_episode(env, experts[id(env)], learners[id(env)], cfg.train_seed + episode,
-                                         cfg.beta ** k, noise, rng))
+            part, stats = collect_episode(env, experts[id(env)], learners[id(env)], cfg.train_seed + episode,
+                                          cfg.beta ** k, noise, rng)
+            parts.append(part)
+            flown.append({**stats, "paper_start": env is paper})
             episode += 1
         batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
@@ -292,7 +300,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
                         "paper": evaluate(paper_ev, shield(policy, paper_ev), [0])}
         history.append({"system": cfg.system, "round": k, "labels": int(len(x)), "episodes": episode, "loss": loss,
                         "beta": cfg.beta ** k, "collect_s": round(collect_s, 1), "fit_s": round(fit_s, 1),
-                        "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap,
+                        "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap, "collected": flown,
                         **({"shield": shielded} if cfg.learner_shield else {})})
         save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=meta, config=policy_cfg,
                        source="training.recipes.dagger round checkpoint")
