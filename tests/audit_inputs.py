@@ -54,7 +54,8 @@ import satenv
 from satenv.dynamics import Orbit, simulate
 
 ENVS = ("platoon_v0", "cluster_v0", "servicing_v0", "formation_v0")
-CATEGORIES = ("clear", "vague", "accepted", "late", "nonfinite", "obscure", "hang")
+CATEGORIES = ("clear", "vague", "accepted", "late", "nonfinite", "obscure", "hang", "outside_read",
+              "over_cap", "code_ran")
 
 
 class Hang(Exception):
@@ -350,16 +351,20 @@ def audit_baseline(envs: dict, rng: np.random.Generator, timeout: float) -> tupl
 
 # ------------------------------------------------------------------------------- training.load
 def audit_load(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``training.load`` of a good folder with 1-2 random corruptions (random bytes or JSON,
+    truncation, deleted files, edited fields, bad tensors, huge safetensors headers, links to a
+    file outside, FIFOs, directories, 8 GB sparse files), re-hashed into the manifest half the
+    time; also counts files opened outside the folder, memory growth past ``OVER_CAP_MB`` and
+    the outside file's content echoed in an error."""
     from pathlib import Path
 
     import training
-    from training.policy import write_manifest
 
     with tempfile.TemporaryDirectory(dir=tmp) as folder:
         root = good_policy_folder(Path(folder) / "p")
         names = []
         for _ in range(int(rng.integers(1, 3))):
-            name = str(rng.choice(POLICY_FILE_NAMES + ("model.zip",)))
+            name = str(rng.choice(POLICY_FILE_NAMES + ("model.zip", "weights.pt")))
             kind = str(rng.choice(EDIT_KINDS))
             payload = {"bytes": rng.bytes(int(rng.integers(0, 64))),
                        "json": JSON_PAYLOADS[int(rng.integers(len(JSON_PAYLOADS)))],
@@ -371,15 +376,31 @@ def audit_load(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str,
             with contextlib.suppress(TypeError, ValueError, OverflowError):
                 apply_edit(root, name, kind, _jsonable(payload))
             names += [name, payload[0] if kind == "field" else ""]
-        if rng.random() < 0.5 and all((root / f).is_file() for f in POLICY_FILE_NAMES[:5]):
-            write_manifest(root)
+        if rng.random() < 0.5:
+            rehash(root)
         field = " ".join(n for n in names if n)
-        try:
-            with time_limit(timeout):
-                policy = training.load(root)
-        except BaseException as exc:  # noqa: BLE001
-            cat = classify_error(exc, field + " policy manifest weights obs_norm")
-            return ("clear" if cat == "vague" and type(exc).__name__ == "PolicyLoadError" else cat), field
+        trusted = bool(rng.random() < 0.1)
+        with watched(str(root)) as seen:
+            try:
+                with time_limit(timeout):
+                    policy = training.load(root, trusted=trusted)
+                err = None
+            except BaseException as exc:  # noqa: BLE001
+                err = exc
+        if seen["outside"]:
+            LAST_ERROR[0] = f"opened {seen['outside'][:2]}"
+            return "outside_read", field
+        if seen["grew_mb"] > OVER_CAP_MB:
+            LAST_ERROR[0] = f"peak memory grew {seen['grew_mb']:.0f} MB"
+            return "over_cap", field
+        if err is not None:
+            if SECRET in str(err):
+                LAST_ERROR[0] = "the error echoes the linked file's content"
+                return "outside_read", field
+            cat = classify_error(err, field + " policy manifest weights obs_norm")
+            return ("clear" if cat == "vague" and type(err).__name__ == "PolicyLoadError" else cat), field
+        if SECRET in json.dumps(policy.meta, default=str):
+            return "outside_read", field
         try:
             with time_limit(timeout):
                 obs = rng.normal(size=(4, 6)) * 10.0 ** rng.uniform(-3, 300)
@@ -414,32 +435,65 @@ def good_policy_folder(root):
     return save_artifacts(root, policy, env_meta=meta, config={"algo": "ppo"})
 
 
-POLICY_FILE_NAMES = ("policy.json", "weights.pt", "obs_norm.json", "env.json", "config.json", "manifest.json")
-EDIT_KINDS = ("delete", "bytes", "json", "truncate", "field", "tensors")
+POLICY_FILE_NAMES = ("policy.json", "weights.safetensors", "obs_norm.json", "env.json", "config.json",
+                     "manifest.json")
+EDIT_KINDS = ("delete", "bytes", "json", "truncate", "field", "tensors", "link", "fifo", "sparse", "dir")
 FIELD_EDITS = ("obs_dim", "act_dim", "hidden", "activation", "squash", "format", "observation_shape",
                "obs_symlog_scale", "action_power", "norm")
-TENSOR_EDITS = ("nan", "shape", "dtype", "extra", "missing", "list")
+TENSOR_EDITS = ("nan", "shape", "dtype", "extra", "missing", "list", "bomb", "offsets")
 JSON_PAYLOADS = (None, 1, -1e300, "x", [], {}, [1, 2], {"a": None}, {"format": 1}, {"identity": True},
                  {"sha256": {}}, {"format": "satenv-policy/1", "actor": {"type": "mlp"}})
+SECRET = "AUDIT-SECRET-5b1e"
+"""Content of the file outside every crafted folder that links point to (never to be read)."""
+
+
+def secret_file() -> str:
+    """A file outside the crafted folders (the target of their links)."""
+    path = os.path.join(tempfile.gettempdir(), f"audit_secret_{os.getpid()}.json")
+    if not os.path.exists(path):
+        with open(path, "w") as f:
+            f.write(json.dumps({"format": SECRET, "sha256": {SECRET: SECRET}, "identity": SECRET}) + SECRET)
+    return path
 
 
 def apply_edit(root, name, kind, payload) -> None:
     import json
 
-    import torch
-
     path = root / name
-    if kind == "delete":
-        path.unlink(missing_ok=True)
+    special = os.path.islink(path) or (path.exists() and not path.is_file())
+    if kind in ("delete", "link", "fifo", "sparse", "dir") or kind in ("bytes", "json") and special:
+        if path.is_dir() and not path.is_symlink():
+            path.rmdir()
+        elif os.path.lexists(path):
+            path.unlink()
+    if kind == "link":
+        path.symlink_to(secret_file())
+    elif kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "sparse":
+        with open(path, "wb") as f:
+            f.truncate(8 * 2**30)
+    elif kind == "dir":
+        path.mkdir()
     elif kind == "bytes":
         path.write_bytes(payload)
     elif kind == "json":
         path.write_text(json.dumps(payload))
+    elif special:
+        return
     elif kind == "truncate" and path.exists():
         path.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
     elif kind == "field":
         key, value = payload
-        spec = json.loads((root / "policy.json").read_text())
+        targets = [root / n for n in ("policy.json", "env.json", "obs_norm.json", "config.json")]
+        if any(os.path.lexists(t) and not _regular(t) for t in targets):
+            return  # never read or write through a link, FIFO or directory
+        try:
+            spec = json.loads((root / "policy.json").read_text())
+        except (OSError, ValueError):
+            return
+        if not isinstance(spec, dict) or not isinstance(spec.get("actor"), dict):
+            return
         if key in ("obs_dim", "act_dim", "hidden", "activation", "squash"):
             spec["actor"][key] = value
             (root / "policy.json").write_text(json.dumps(spec))
@@ -452,26 +506,107 @@ def apply_edit(root, name, kind, payload) -> None:
             (root / "obs_norm.json").write_text(json.dumps(value))
         else:
             (root / "config.json").write_text(json.dumps({"algo": "ppo", key: value}))
-    elif kind == "tensors" and (root / "weights.pt").is_file():
-        state = torch.load(root / "weights.pt", weights_only=True)
-        first = next(iter(state))
-        if payload == "nan":
-            state[first] = torch.full_like(state[first], float("nan"))
-        elif payload == "shape":
-            state[first] = torch.zeros(3, 3)
-        elif payload == "dtype":
-            state[first] = state[first].to(torch.int64)
-        elif payload == "extra":
-            state["extra.weight"] = torch.zeros(2)
-        elif payload == "missing":
-            del state[first]
-        else:
-            state = [1, 2, 3]
-        torch.save(state, root / "weights.pt")
+    elif kind == "tensors" and (root / "weights.safetensors").is_file():
+        _edit_tensors(root / "weights.safetensors", payload)
+
+
+def _regular(path) -> bool:
+    return os.path.isfile(path) and not os.path.islink(path)
+
+
+def _edit_tensors(path, payload) -> None:
+    import struct
+
+    import torch
+    from safetensors.torch import load_file, save_file
+
+    if payload in ("bomb", "offsets", "list"):
+        header = {"body.0.weight": {"dtype": "F32", "shape": [2**15, 2**15] if payload == "bomb" else [8, 6],
+                                    "data_offsets": [0, 4 * 2**30] if payload == "bomb" else [0, 10**12]}}
+        raw = json.dumps(header).encode() if payload != "list" else b"[1, 2, 3]"
+        path.write_bytes(struct.pack("<Q", len(raw)) + raw + b"\0" * 4096)
+        return
+    try:
+        state = load_file(str(path))
+    except Exception:  # noqa: BLE001 - an earlier edit broke it: leave it broken
+        return
+    first = next(iter(state))
+    if payload == "nan":
+        state[first] = torch.full_like(state[first], float("nan"))
+    elif payload == "shape":
+        state[first] = torch.zeros(3, 3)
+    elif payload == "dtype":
+        state[first] = state[first].to(torch.int64)
+    elif payload == "extra":
+        state["extra.weight"] = torch.zeros(2)
+    elif payload == "missing":
+        del state[first]
+    save_file(state, str(path))
+
+
+def rehash(root) -> None:
+    """A manifest matching the folder's regular files (a crafted folder's author can write one;
+    links, FIFOs, directories and giant files get a made-up digest)."""
+    import hashlib
+
+    digests = {}
+    for name in POLICY_FILE_NAMES[:5]:
+        path = root / name
+        ok = os.path.isfile(path) and not os.path.islink(path) and os.path.getsize(path) < 2**26
+        digests[name] = hashlib.sha256(path.read_bytes()).hexdigest() if ok else "0" * 64
+    manifest = root / "manifest.json"
+    if os.path.isfile(manifest) and not os.path.islink(manifest) or not os.path.lexists(manifest):
+        manifest.write_text(json.dumps({"sha256": digests}))
+
+
+# ------------------------------------------------------------------------------- what a call did
+WATCH: dict = {"root": None, "outside": []}
+"""The folder whose load is being watched, and the files outside it that were opened."""
+
+
+def _audit_hook(event: str, args: tuple) -> None:
+    root = WATCH["root"]
+    if root is None or event != "open" or not args or not isinstance(args[0], str | bytes | os.PathLike):
+        return
+    path = os.path.abspath(os.fsdecode(args[0]))
+    real = os.path.realpath(path)
+    if real == WATCH["secret"] or (path.startswith(root + os.sep) and not real.startswith(root + os.sep)):
+        WATCH["outside"].append(path)
+
+
+_HOOKED: list[bool] = []
+
+
+@contextlib.contextmanager
+def watched(root: str | None):
+    """Record the files outside ``root`` opened inside the block (``WATCH["outside"]``), and
+    the growth of the process's peak memory [MB] (``WATCH["grew_mb"]``)."""
+    import resource
+
+    if not _HOOKED:
+        sys.addaudithook(_audit_hook)
+        _HOOKED.append(True)
+    secret = os.path.realpath(secret_file())  # (created before the hook watches)
+    WATCH.update(root=None if root is None else os.path.realpath(root), outside=[], secret=secret)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    try:
+        yield WATCH
+    finally:
+        WATCH["root"] = None
+        WATCH["grew_mb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+
+
+OVER_CAP_MB = 512
+"""A call whose peak memory grows by more than this is counted ``over_cap`` (the loads' caps:
+2 MiB per JSON member, the weights of the actor ``policy.json`` describes; the crafted actors
+are tiny)."""
 
 
 # ------------------------------------------------------------------------------- solver faults
-FAULT_KINDS = ("raise", "shape", "nan", "infeasible")
+FAULT_KINDS = ("raise", "shape", "nan", "infeasible", "stall")
+STALL_S, STALL_LIMIT_S = 0.05, 0.02
+"""A ``stall`` fault sleeps ``STALL_S`` in the solve of a policy built with ``solve_time_limit =
+STALL_LIMIT_S``: each such solve must be flagged like any failure."""
 
 
 def _fault_cases():
@@ -488,13 +623,21 @@ def _fault_cases():
             if kind == "raise":
                 raise ValueError("injected")
             x, ok, status = real(self)
+            if kind == "stall":
+                time.sleep(STALL_S)
+                return x, ok, status
             return _bad_point(kind, x), True, status
         QPSolver.solve_raw = faulty
         return lambda: setattr(QPSolver, "solve_raw", real)
 
     def apf(pol, kind, hits):
+        real = pol._law
+
         def faulty():
             hits[0] += 1
+            if kind == "stall":
+                time.sleep(STALL_S)
+                return real()
             if kind == "raise":
                 raise FloatingPointError("injected")
             return _bad_point("nan" if kind == "infeasible" else kind, np.zeros((pol.m, 3)))
@@ -510,6 +653,9 @@ def _fault_cases():
             if kind == "raise":
                 raise np.linalg.LinAlgError("injected")
             x, rel = real(matvec, b, x0, kmax)
+            if kind == "stall":
+                time.sleep(STALL_S)
+                return x, rel
             return (_bad_point(kind, x), rel) if kind != "infeasible" else (x, 10.0)
         mod.gmres = faulty
         return lambda: setattr(mod, "gmres", real)
@@ -519,8 +665,8 @@ def _fault_cases():
             owner, name = (pol.nlp, "solver_for") if attr == "tube" else (pol, "_nlp")
             real = getattr(owner, name)
 
-            def faulty_for(*bounds_args):
-                fake = _FakeNLP(kind, *bounds(pol, *bounds_args))
+            def faulty_for(*bounds_args, solver=None):
+                fake = _FakeNLP(kind, *bounds(pol, *bounds_args)) if kind != "stall" else _Stalled(solver)
 
                 def faulty(**args):
                     hits[0] += 1
@@ -528,9 +674,9 @@ def _fault_cases():
                 faulty.stats = fake.stats
                 return faulty
             if attr == "tube":   # one solver per neighbour-slot count
-                setattr(owner, name, lambda k, copy=0, relaxed=False: faulty_for(k))
+                setattr(owner, name, lambda k, copy=0, relaxed=False: faulty_for(k, solver=real(k, copy, relaxed)))
             else:
-                setattr(owner, name, faulty_for())
+                setattr(owner, name, faulty_for(solver=real))
             return lambda: setattr(owner, name, real)
         return install
 
@@ -539,6 +685,20 @@ def _fault_cases():
             ("cgmres", "formation_v0", {}, {}, cgmres),
             ("tube_rdmpc", "cluster_v0", {}, {}, nlp("tube", lambda p, k: p.nlp.row_bounds(k))),
             ("nmpc", "servicing_v0", {}, {"horizon": 5}, nlp("nmpc", lambda p: (p._lbg, p._ubg)))]
+
+
+class _Stalled:
+    """A real CasADi solver that sleeps ``STALL_S`` before each solve."""
+
+    def __init__(self, solver):
+        self.solver = solver
+
+    def __call__(self, **args):
+        time.sleep(STALL_S)
+        return self.solver(**args)
+
+    def stats(self):
+        return self.solver.stats()
 
 
 def _failures(info: dict) -> int:
@@ -558,7 +718,8 @@ def audit_solver_faults(steps: int = 3) -> dict:
         kinds = FAULT_KINDS + (("rows",) if name in ("tube_rdmpc", "nmpc") else ())
         for kind in kinds:
             env = satenv.make(env_id, max_steps=steps + 2, **env_kwargs)
-            pol = baselines.make(name, env, **options)
+            pol = baselines.make(name, env, **options, **({"solve_time_limit": STALL_LIMIT_S}
+                                                           if kind == "stall" else {}))
             obs, _ = env.reset(seed=0)
             pol.reset(seed=0)
             hits = [0]
@@ -588,9 +749,12 @@ def audit_solver_faults(steps: int = 3) -> dict:
 
 
 def audit_crafted_policy() -> dict:
-    """A ``weights.pt`` and an SB3 ``model.zip`` whose unpickling would create a marker file."""
+    """Folders whose loading would run code if anything were unpickled: a pickle in place of
+    ``weights.safetensors``, a pickle ``weights.pt`` (legacy, also loaded with ``trusted=True``,
+    which reads it weights-only) and an SB3 ``model.zip``; each would create a marker file."""
     import base64
     import pickle
+    import warnings as _warnings
     import zipfile
     from pathlib import Path
 
@@ -606,8 +770,12 @@ def audit_crafted_policy() -> dict:
     payload = pickle.dumps(Boom())
     errors = []
     weights = good_policy_folder(tmp / "weights")
-    (weights / "weights.pt").write_bytes(payload)
+    (weights / "weights.safetensors").write_bytes(payload)
     write_manifest(weights)
+    legacy_pt = good_policy_folder(tmp / "legacy_pt")
+    (legacy_pt / "weights.safetensors").unlink()
+    (legacy_pt / "weights.pt").write_bytes(payload)
+    write_manifest(legacy_pt)
     legacy = tmp / "legacy_zip"
     legacy.mkdir()
     (legacy / "env.json").write_text(json.dumps({"observation_shape": [6]}))
@@ -617,20 +785,295 @@ def audit_crafted_policy() -> dict:
         z.writestr("data", json.dumps({"policy_class": {":type:": "<class 'abc.ABCMeta'>",
                                                         ":serialized:": base64.b64encode(payload).decode()}}))
         z.writestr("policy.pth", payload)
-    for folder in (weights, legacy):
+    for folder, trusted in ((weights, False), (weights, True), (legacy_pt, False), (legacy_pt, True),
+                            (legacy, False)):
         try:
-            training.load(folder)
-            errors.append(f"{folder.name}: loaded")
+            with _warnings.catch_warnings():
+                _warnings.simplefilter("ignore")
+                training.load(folder, trusted=trusted)
+            errors.append(f"{folder.name} (trusted={trusted}): loaded")
         except Exception as exc:  # noqa: BLE001
-            errors.append(f"{folder.name}: {type(exc).__name__}: {str(exc)[:90]}")
+            errors.append(f"{folder.name} (trusted={trusted}): {type(exc).__name__}: {str(exc)[:90]}")
     result = {"code_ran": marker.exists(), "outcomes": errors}
     print(f"crafted policy folders: code ran: {result['code_ran']}; " + " | ".join(errors), flush=True)
     return result
 
 
+# ------------------------------------------------------------------------------- replayed configs
+EVIL_MODULE = "audit_evil_module"
+"""A module (written to a temporary folder on ``sys.path``) whose import creates a marker file:
+a replayed config naming ``audit_evil_module:make`` must not import it."""
+
+
+def _evil_module(tmp: str) -> str:
+    marker = os.path.join(tmp, "EVIL_IMPORTED")
+    with open(os.path.join(tmp, EVIL_MODULE + ".py"), "w") as f:
+        f.write(f"open({marker!r}, 'w').close()\n\ndef make(**kw):\n    open({marker!r}, 'w').close()\n")
+    if tmp not in sys.path:
+        sys.path.insert(0, tmp)
+    return marker
+
+
+class _Reached(Exception):
+    """Raised by the stand-in for ``training.train.train``: the config was accepted."""
+
+
+def audit_config(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``python -m training.train --config FILE`` (its ``main``, training replaced by a stub)
+    with a shipped config whose env id, baselines or other fields are replaced by random,
+    unregistered or code-naming values (``subprocess:run`` with a shell command that would
+    create a marker, a module whose import would); ``--allow-code-env-id`` a tenth of the time.
+    ``code_ran``: a marker appeared, or a config naming unregistered code reached training
+    without the flag."""
+    import io
+    from pathlib import Path
+
+    import baselines
+    import training.train as tt
+
+    marker = _evil_module(tmp)
+    shell_marker = os.path.join(tmp, "SHELL_RAN")
+    base = json.loads((Path(__file__).parents[1] / "training/policies/platoon_tplf_ppo/config.json").read_text())
+    cfg = dict(base, out_dir=os.path.join(tmp, "run"))
+    ids = [*satenv.ENV_IDS, "subprocess:run", "os:system", "builtins:exec", f"{EVIL_MODULE}:make", "x:y",
+           "platoon_v1", "", "PLATOON_V0", 3, None, ["platoon_v0"], {"a": 1}, "satenv:make", "../../etc:passwd"]
+    names = [*baselines.BASELINES, "auto", "os:system", "DMPC", "", None, 7, "subprocess:run", "zero "]
+    picks = [str(n) for n in rng.choice(["env_id", "eval_baselines", "env_kwargs", "other"],
+                                         size=int(rng.integers(1, 3)), replace=False)]
+    for n in picks:
+        if n == "env_id":
+            cfg["env_id"] = ids[int(rng.integers(len(ids)))]
+        elif n == "eval_baselines":
+            cfg["eval_baselines"] = [names[int(rng.integers(len(names)))] for _ in range(int(rng.integers(0, 3)))]
+        elif n == "env_kwargs":
+            cfg["env_kwargs"] = {"args": f"touch {shell_marker}", "shell": True}
+        else:
+            key = str(rng.choice(sorted(base)))
+            cfg[key] = bad_value(rng, base[key] if not isinstance(base[key], list) else None)
+    allow = bool(rng.random() < 0.1)
+    field = " ".join(picks)
+    path = os.path.join(tmp, "config.json")
+    with open(path, "w") as f:
+        json.dump(_jsonable(cfg), f, default=str)
+    argv = ["--config", path, *(["--allow-code-env-id"] if allow else [])]
+    real_train = tt.train
+
+    def stub(c, resume=False):
+        raise _Reached(c)
+    tt.train = stub
+    try:
+        with time_limit(timeout), contextlib.redirect_stderr(io.StringIO()), \
+                contextlib.redirect_stdout(io.StringIO()):
+            tt.main(argv)
+        outcome = None
+    except _Reached as reached:
+        outcome = reached.args[0]
+    except SystemExit as exc:
+        outcome = exc
+    except BaseException as exc:  # noqa: BLE001
+        outcome = exc
+    finally:
+        tt.train = real_train
+    if any(os.path.exists(m) for m in (marker, shell_marker)):
+        for m in (marker, shell_marker):
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(m)
+        LAST_ERROR[0] = "a marker appeared"
+        return "code_ran", field
+    if isinstance(outcome, SystemExit):
+        LAST_ERROR[0] = str(outcome)[:120]
+        words = ["env_id", "baseline", "eval_baselines", *picks, *(str(k) for k in cfg)]
+        named = any(w and w in str(outcome) for w in words)
+        return ("clear" if named else "vague") if outcome.code not in (0, None) else "obscure", field
+    if isinstance(outcome, BaseException):
+        return classify_error(outcome, field), field
+    if outcome.env_id not in satenv.ENV_IDS and not allow:  # training would import and call it
+        LAST_ERROR[0] = f"accepted env_id={outcome.env_id!r} without {'--allow-code-env-id'}"
+        return "code_ran", field
+    if not all(n in baselines.BASELINES or n == "auto" for n in outcome.eval_baselines):
+        LAST_ERROR[0] = f"accepted baselines={outcome.eval_baselines} (rejected only later)"
+        return "late", field
+    return "accepted", field
+
+
+# ------------------------------------------------------------------------------- metrics
+METRIC_NAMES = ("rmse", "rmsee", "foe", "final_position_error", "delta_v_total", "min_separation",
+                "collisions", "violations", "safety_cost", "time_to_converge", "success", "summary")
+_TRAJ: list = []
+
+
+def audit_metrics(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """A metric of ``satenv.metrics`` on a recorded trajectory with one random corruption
+    (arrays emptied, truncated, reshaped, NaN/inf/huge entries, other dtypes; bad ``dt``, ``t``,
+    ``success_tol``, ``collision_voids_success``, ``agents``, ``compute_time``, fallbacks);
+    ``nonfinite`` counts a NaN/inf result other than the documented not-converged ``nan``."""
+    import baselines
+    from satenv import metrics
+    from satenv.rollout import rollout
+
+    if not _TRAJ:
+        for env_id in ENVS:
+            env = satenv.make(env_id, max_steps=4)
+            _TRAJ.append(rollout(env, baselines.make("zero", env), seed=0))
+    traj = _TRAJ[int(rng.integers(len(_TRAJ)))]
+    keys = ("tracking_error", "accel", "delta_v", "min_separation", "collision", "violations", "cost")
+    kind = str(rng.choice(["array", "array", "array", "dt", "t", "tol", "voids", "missing", "agents",
+                           "compute", "fallbacks", "none"]))
+    rep = dataclasses.replace
+    if kind == "array":
+        key = str(rng.choice(keys))
+        a = np.asarray(traj.info[key])
+        how = str(rng.choice(["nan", "inf", "huge", "empty", "one", "ndim", "complex", "object", "str",
+                              "bool", "rows", "cols", "list", "masked"]))
+        if how in ("nan", "inf", "huge"):
+            a = a.astype(float).copy()
+            a.flat[int(rng.integers(a.size))] = {"nan": np.nan, "inf": -np.inf, "huge": 1e300}[how]
+        else:
+            a = {"empty": lambda: a[:0], "one": lambda: a[:1], "ndim": lambda: a.reshape(-1),
+                 "complex": lambda: a + 1j, "object": lambda: a.astype(object), "str": lambda: a.astype(str),
+                 "bool": lambda: a.astype(bool), "rows": lambda: a[:-1], "cols": lambda: a[:, :-1],
+                 "list": lambda: a.tolist(), "masked": lambda: np.ma.masked_array(a, mask=True)}[how]()
+        bad, field = rep(traj, info={**traj.info, key: a}), key
+    elif kind == "dt":
+        bad, field = rep(traj, dt=scalar_pool()[int(rng.integers(len(scalar_pool())))]), "dt"
+    elif kind == "t":
+        t = np.array(traj.t, dtype=float)
+        t[int(rng.integers(t.size))] = float(rng.choice([np.nan, -1e9, np.inf]))
+        bad, field = rep(traj, t=t), "t"
+    elif kind == "tol":
+        bad, field = rep(traj, success_tol=scalar_pool()[int(rng.integers(len(scalar_pool())))]), "success_tol"
+    elif kind == "voids":
+        bad, field = rep(traj, collision_voids_success=scalar_pool()[int(rng.integers(len(scalar_pool())))]), \
+            "collision_voids_success"
+    elif kind == "missing":
+        key = str(rng.choice(keys))
+        bad, field = rep(traj, info={k: v for k, v in traj.info.items() if k != key}), key
+    elif kind == "agents":
+        bad, field = rep(traj, agents=traj.agents[:-1]), "agents"
+    elif kind == "compute":
+        bad, field = rep(traj, compute_time=np.array([np.nan])), "compute_time"
+    elif kind == "fallbacks":
+        bad, field = rep(traj, policy_info={"fallbacks": scalar_pool()[int(rng.integers(len(scalar_pool())))]}), \
+            "fallbacks"
+    else:
+        bad, field = traj, "none"
+    name = str(rng.choice(METRIC_NAMES))
+    kwargs = {"tol": bad_value(rng, 1.0)} if name in ("success", "summary", "time_to_converge") and \
+        rng.random() < 0.2 else {}
+    if kwargs:
+        field += " tol"
+    try:
+        with time_limit(timeout):
+            out = getattr(metrics, name)(bad, **kwargs)
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, field), field
+    items = out.items() if isinstance(out, dict) else [(name, out)]
+    ok = all(k in ("time_to_converge", "time_to_converge_s") or not isinstance(v, float | int | np.ndarray)
+             or np.isfinite(np.asarray(v, dtype=float)).all() for k, v in items)
+    return ("accepted" if ok else "nonfinite"), field
+
+
+# ------------------------------------------------------------------------------- ids, indices, device, CLIs
+def audit_make_id(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``satenv.make`` / ``satenv.make_vec`` / ``training.envs.make_env`` with a bad env id."""
+    from training.envs import make_env
+
+    pool = [["platoon_v0"], None, 3, {"a": 1}, b"platoon_v0", "platoon_v9", "", "PLATOON_V0", "platoon_v0 ",
+            ("platoon_v0",), 1.5, "satenv.envs.platoon_v0", "subprocess:run", np.str_("cluster_v0"), object()]
+    env_id = pool[int(rng.integers(len(pool)))]
+    fn = [satenv.make, lambda e: satenv.make_vec(e, 2), make_env][int(rng.integers(3))]
+    if fn is make_env and isinstance(env_id, str) and ":" in env_id:
+        fn = satenv.make  # make_env runs a 'module:callable' id by design (the CLI guards it)
+    try:
+        with time_limit(timeout):
+            env = fn(env_id)
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, "env id env_id"), "env_id"
+    ok = isinstance(env_id, str) and env_id in satenv.ENV_IDS
+    return ("accepted" if ok and env is not None else "obscure"), "env_id"
+
+
+def audit_vec_reset(vec, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``make_vec(...).reset(indices=...)`` with indices of random kinds (floats must not
+    silently become copy 0); then one step must work."""
+    pool = [[0.5], [1.0], [-1], [2], [0, 1], [], [True, False], [[0], [1]], "0", np.array([0.5]),
+            [1 + 0j], [np.nan], [10**20], np.array([True]), [0, 0], object(), [None], range(2), 0]
+    indices = pool[int(rng.integers(len(pool)))] if rng.random() < 0.7 else bad_value(rng, np.zeros(2))
+    if indices is None:  # None: every copy (documented)
+        indices = [0]
+    try:
+        with time_limit(timeout):
+            obs, _ = vec.reset(indices=indices)
+            out = vec.step(np.zeros(vec.action_shape))
+    except BaseException as exc:  # noqa: BLE001
+        vec.reset(seed=0)
+        return classify_error(exc, "indices"), "indices"
+    with contextlib.suppress(Exception):
+        arr = np.asarray(indices)
+        if arr.size and arr.dtype.kind not in "biu":
+            LAST_ERROR[0] = f"accepted indices={indices!r:.40}"
+            return "obscure", "indices"  # a non-integer index silently used
+    return ("accepted" if finite(obs, out[0], out[1]) else "nonfinite"), "indices"
+
+
+def audit_device(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``satenv.torchrl.make_env(..., device=...)`` with devices this torch may lack."""
+    from satenv.torchrl import make_env
+
+    pool = ["cuda:7", "gpu", None, 3.5, "cpu:0", "meta", "cuda", "mps", "", "cpu", 0, "xla:1", object()]
+    device = pool[int(rng.integers(len(pool)))]
+    try:
+        with time_limit(timeout):
+            env = make_env("platoon_v0", 2, device=device)
+            td = env.reset()
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, "device"), "device"
+    return ("accepted" if finite(td["agents", "observation"].numpy()) else "nonfinite"), "device"
+
+
+def audit_cli_paths(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``python -m benchmarks.scoreboard --out PATH`` with PATH a file, a path through a file or
+    an existing file's name; ``python -m benchmarks.reproduce PAPER`` with path-like or unknown
+    papers. Either must end in the CLI's own error (a non-zero exit with a message), never a
+    traceback, and must leave the file untouched."""
+    import io
+
+    target = os.path.join(tmp, "passwd")
+    with open(target, "w") as f:
+        f.write("root:x:0:0\n")
+    if rng.random() < 0.5:
+        from benchmarks.scoreboard.cli import main as board
+
+        out = [target, os.path.join(target, "sub"), target + os.sep][int(rng.integers(3))]
+        argv, field = ["--out", out, "--quick", "--no-progress", "--no-plots"], "--out"
+        call = board
+    else:
+        from benchmarks.reproduce import main as repro
+
+        paper = ["../../etc/passwd", "/etc/passwd", "pereira2023/../x", "", "os", "li2022 ", "subprocess",
+                 "benchmarks.claims", "PEREIRA2023"][int(rng.integers(9))]
+        argv, field, call = [paper, "--out", target], "paper", repro
+    err = io.StringIO()
+    try:
+        with time_limit(timeout), contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            code = call(argv)
+    except SystemExit as exc:
+        code = exc.code
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, field), field
+    with open(target) as f:
+        intact = f.read() == "root:x:0:0\n"
+    LAST_ERROR[0] = err.getvalue().strip().splitlines()[-1][:120] if err.getvalue().strip() else ""
+    if not intact:
+        return "nonfinite", field  # the file was overwritten
+    return ("clear" if code not in (0, None) and "error" in err.getvalue() else "vague"), field
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=600, help="inputs per entry point")
+    ap.add_argument("--n-slow", type=int, default=None, help="inputs for the slow entry points "
+                    "(baselines.make, the CLIs, the TorchRL device; default: --n)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--timeout", type=float, default=5.0, help="seconds per call before it counts as a hang")
     ap.add_argument("--out", default=None, help="write the counts (and examples) as JSON")
@@ -654,13 +1097,21 @@ def main(argv: list[str] | None = None) -> dict:
     entries += [(f"{e} vec.step", lambda r, e=e: audit_vec_step(vecs[e], r, args.timeout)) for e in ENVS]
     entries += [("baselines.make", lambda r: audit_baseline(envs, r, args.timeout))]
     tmp = tempfile.mkdtemp(prefix="audit_load_")
-    entries += [("training.load", lambda r: audit_load(tmp, r, args.timeout))]
+    entries += [("training.load", lambda r: audit_load(tmp, r, args.timeout)),
+                ("train --config", lambda r: audit_config(tmp, r, args.timeout)),
+                ("satenv.metrics", lambda r: audit_metrics(r, args.timeout)),
+                ("env ids", lambda r: audit_make_id(r, args.timeout))]
+    entries += [(f"{e} vec.reset(indices)", lambda r, e=e: audit_vec_reset(vecs[e], r, args.timeout))
+                for e in ENVS]
+    entries += [("torchrl device", lambda r: audit_device(r, args.timeout)),
+                ("CLI paths", lambda r: audit_cli_paths(tmp, r, args.timeout))]
+    slow = ("baselines.make", "torchrl device", "CLI paths")
     t0 = time.time()
     entries = [(n, f) for n, f in entries if not only or any(w in n for w in only)]
     for name, fn in entries:
         c = counts[name] = Counter()
         ex = examples[name] = {}
-        for _ in range(args.n):
+        for _ in range(args.n if name not in slow or args.n_slow is None else args.n_slow):
             LAST_ERROR[0] = ""
             cat, field = fn(rng)
             c[cat] += 1
