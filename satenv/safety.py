@@ -91,7 +91,7 @@ CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "k
 """Names of the constraint kinds (:attr:`SafetyRecord.active` indexes this tuple; -1: none)."""
 _KIND = {name: k for k, name in enumerate(CONSTRAINTS)}
 _BIG = 1e30
-_ROW_TOL = 1e-9       # a proposal within this (normalised units) of a row passes unchanged
+_ROW_TOL = 1e-12      # a proposal within this of a row (its own units: m, m/s, rad/s) passes unchanged
 _QP_TOL = 1e-7        # a QP point may violate a row / the box by this much
 _FLOOR = 0.05         # braking authority never below this fraction of the nominal (drift-heavy pairs)
 
@@ -575,26 +575,25 @@ def _solve_rows(m: SafetyModel, rows: np.ndarray, lo: np.ndarray, a: np.ndarray,
     """Filter ``n`` agents' proposals ``a (n, d)`` against their rows ``rows u >= lo``
     ``(n, K, d)``, ``(n, K)``: ``(out, safe, infeasible, active)``; a safe proposal is returned
     as it is, an unsafe one is replaced by the QP's point or the backup action."""
-    scale = np.linalg.norm(rows, axis=-1)
-    tiny = scale < 1e-12
-    lo = np.where(tiny, np.where(lo <= 0.0, -_BIG, _BIG), lo / np.where(tiny, 1.0, scale))
-    rows = np.where(tiny[..., None], 0.0, rows / np.where(tiny, 1.0, scale)[..., None])
     ref = _effective(m, a)
-    slack = np.einsum("nkj,nj->nk", rows, ref) - lo
-    safe = slack.min(axis=-1, initial=np.inf) >= -_ROW_TOL
+    safe = (np.einsum("nkj,nj->nk", rows, ref) - lo).min(axis=-1, initial=np.inf) >= -_ROW_TOL
     out = a.copy()
     infeasible = np.zeros(len(a), dtype=bool)
     active = np.full(len(a), -1, dtype=np.int64)
-    reach = -m.u_box * math.sqrt(m.action_dim) - 1e-9      # rows below this can never bind
+    reach = -m.u_box * math.sqrt(m.action_dim) - 1e-9      # (normalised) rows below this never bind
     for i in np.flatnonzero(~safe):
-        keep = lo[i] > reach
-        u = _guarded_qp(ref[i], rows[i][keep], lo[i][keep], m.u_box)
+        scale = np.linalg.norm(rows[i], axis=-1)
+        tiny = scale < 1e-12
+        lo_i = np.where(tiny, np.where(lo[i] <= 0.0, -_BIG, _BIG), lo[i] / np.where(tiny, 1.0, scale))
+        rows_i = np.where(tiny[:, None], 0.0, rows[i] / np.where(tiny, 1.0, scale)[:, None])
+        keep = lo_i > reach
+        u = _guarded_qp(ref[i], rows_i[keep], lo_i[keep], m.u_box)
         if u is None:
-            u, k = _backup(m, rows[i][keep], lo[i][keep], slack[i][keep])
+            u, k = _backup(m, rows_i[keep], lo_i[keep], rows_i[keep] @ ref[i] - lo_i[keep])
             infeasible[i] = True
             active[i] = kinds[keep][k]
         else:
-            active[i] = kinds[int(np.argmin(rows[i] @ u - lo[i]))]
+            active[i] = kinds[int(np.argmin(rows_i @ u - lo_i))]
         out[i] = u
     return out, safe, infeasible, active
 
