@@ -203,8 +203,9 @@ def summary(traj, tol: float | None = None) -> dict[str, Any]:
     if not isinstance(pinfo, Mapping):
         raise SatenvTypeError(f"trajectory.policy_info must be a dict, got {type(pinfo).__name__}")
     fallbacks = pinfo.get("fallbacks", 0)
-    if isinstance(fallbacks, bool) or not isinstance(fallbacks, numbers.Integral) or fallbacks < 0:
-        raise SatenvError(f"trajectory.policy_info['fallbacks'] must be an int >= 0, got {fallbacks!r:.40}")
+    if isinstance(fallbacks, bool) or not isinstance(fallbacks, numbers.Integral) or not 0 <= fallbacks < 2**63:
+        raise SatenvError(f"trajectory.policy_info['fallbacks'] must be an int in [0, 2**63), got "
+                          f"{fallbacks!r:.40}")
     compute = np.asarray(traj.compute_time)
     if compute.dtype.kind not in "biuf" or compute.ndim != 1 or not np.isfinite(compute).all() \
             or (compute < 0).any():

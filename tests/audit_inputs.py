@@ -261,7 +261,7 @@ def audit_simulate(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
         elif n == "orbit":
             kwargs[n] = bad_value(rng, None)
         elif n == "u":
-            kwargs[n] = bad_value(rng, np.full((kwargs["steps"], 1, 3), 0.01)) if isinstance(kwargs["steps"], int) else bad_value(rng, None)
+            kwargs[n] = bad_value(rng, np.full((kwargs["steps"], 1, 3), 0.01)) if isinstance(kwargs["steps"], int) and 0 < kwargs["steps"] <= 10**4 else bad_value(rng, None)
         elif n == "x0":
             kwargs[n] = (np.array([[-6878e3, 0, 0, 0, 0, 0.0]]) if rng.random() < 0.15
                          else bad_value(rng, defaults["x0"]))
@@ -968,8 +968,11 @@ def audit_metrics(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
     except BaseException as exc:  # noqa: BLE001
         return classify_error(exc, field), field
     items = out.items() if isinstance(out, dict) else [(name, out)]
-    ok = all(k in ("time_to_converge", "time_to_converge_s") or not isinstance(v, float | int | np.ndarray)
-             or np.isfinite(np.asarray(v, dtype=float)).all() for k, v in items)
+    try:
+        ok = all(k in ("time_to_converge", "time_to_converge_s") or not isinstance(v, float | int | np.ndarray)
+                 or np.isfinite(np.asarray(v, dtype=float)).all() for k, v in items)
+    except (OverflowError, TypeError, ValueError):
+        ok = False  # a result no float can hold
     return ("accepted" if ok else "nonfinite"), field
 
 
