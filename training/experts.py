@@ -49,7 +49,9 @@ class JointPlatoonMPC:
     name = "joint_mpc"
 
     def __init__(self, env: Any, horizon: int | None = None, keepout_margin: float = 0.5,
-                 leader_keepout: bool = True, coupling: str = "joint"):
+                 leader_keepout: bool = True, coupling: str = "joint", u_scale: float = 1.0):
+        if not 0 < u_scale <= 1:
+            raise ValueError(f"u_scale must be in (0, 1], got {u_scale!r}")
         if coupling not in ("joint", "sequential"):
             raise ValueError(f"coupling must be 'joint' or 'sequential', got {coupling!r}")
         self.coupling = coupling
@@ -68,6 +70,7 @@ class JointPlatoonMPC:
         self.nu = self.core.nu
         self.agents = [f"follower_{i + 1}" for i in range(self.m)]
         self.u_max = float(sc.u_max)
+        self.u_plan = float(u_scale) * self.u_max
         self._build()
         self.reset()
 
@@ -91,7 +94,7 @@ class JointPlatoonMPC:
             sl = slice(j * self.nu, (j + 1) * self.nu)
             h[sl, sl] += 2 * c.wu[j] * np.diag(wdiag)
         self.H = h
-        lb, ub = np.full(n, -self.u_max), np.full(n, self.u_max)
+        lb, ub = np.full(n, -self.u_plan), np.full(n, self.u_plan)
         rows_full = self._rows(np.zeros((self.m, 6)), los=True)[0].shape[0]
         rows_nolos = self._rows(np.zeros((self.m, 6)), los=False)[0].shape[0]
         self.qp_full = QPSolver(h, np.zeros((rows_full, n)), lb, ub)
@@ -102,7 +105,7 @@ class JointPlatoonMPC:
             hj = 2 * (c.wq[j] * c.btqb + c.wu[j] * np.diag(wdiag))
             g = self._seq_rows(j, np.zeros((self.m, 6)), np.zeros((self.m, self.nu)), True)[0]
             g2 = self._seq_rows(j, np.zeros((self.m, 6)), np.zeros((self.m, self.nu)), False)[0]
-            lbj, ubj = np.full(self.nu, -self.u_max), np.full(self.nu, self.u_max)
+            lbj, ubj = np.full(self.nu, -self.u_plan), np.full(self.nu, self.u_plan)
             self.seq.append((QPSolver(hj, np.zeros_like(g), lbj, ubj), QPSolver(hj, np.zeros_like(g2), lbj, ubj),
                              QPSolver(hj, None, lbj, ubj)))
 
