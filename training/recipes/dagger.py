@@ -281,6 +281,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
                                           cfg.beta ** k, noise, rng)
             parts.append(part)
             flown.append({**stats, "paper_start": env is paper})
+            print(f"  episode {json.dumps(flown[-1])} at {time.perf_counter() - t0:.0f}s", flush=True)
             episode += 1
         batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
