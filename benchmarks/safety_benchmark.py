@@ -1,7 +1,8 @@
 """What the safety filter (:mod:`satenv.safety`) achieves, on held-out seeds (>= 900000).
 
 * ``random``: the random policy under the filter on every scoreboard scenario (every env family at
-  its defaults and every randomised scenario), one episode per seed, all seeds as one
+  its defaults and every randomised scenario; and formation_v0 with a 5 m separation, which its
+  presets do not have), one episode per seed, all seeds as one
   ``make_vec`` batch: collision episodes, episodes with hard-constraint violations (the env's own
   ``violations`` info; formation_v0 counts graph cuts there, which the filter does not enforce),
   interventions, infeasible agent-steps, and *unsafe starts* (a collision or violation in the
@@ -27,6 +28,17 @@ HELD_OUT = 900_000
 """First held-out seed (no training run used seeds from here on)."""
 SKIP = {"platoon-swarm256-ring-cw": "256 followers: the pairwise rows of 100 copies do not fit the "
                                     "benchmark's time budget (the filter itself handles them)"}
+
+
+def _extra_scenarios() -> dict[str, Any]:
+    """Scenarios beside the scoreboard's: formation_v0 with a separation to keep (its presets have
+    ``collision_distance = 0``: no separation constraint at all)."""
+    from benchmarks.scoreboard.specs import ScenarioSpec
+
+    return {"formation-kannan2022-position-random-sep5": ScenarioSpec(
+        "formation-kannan2022-position-random-sep5", "formation_v0",
+        {"preset": "kannan2022-position", "randomize": True, "collision_distance": 5.0},
+        "kannan2022 §5.1, randomised starts, collision_distance = 5 m")}
 
 
 def random_policy(scenario: Any, seeds: int, filtered: bool, base: int = HELD_OUT) -> dict[str, Any]:
@@ -71,7 +83,7 @@ def random_benchmark(seeds: int = 100, names: list[str] | None = None, log=print
     from benchmarks.scoreboard.registry import SCENARIOS
 
     out: dict[str, Any] = {}
-    for name, spec in SCENARIOS.items():
+    for name, spec in {**SCENARIOS, **_extra_scenarios()}.items():
         if names is not None and name not in names:
             continue
         if name in SKIP:
