@@ -214,11 +214,14 @@ def _relative(path: Path, root: Path) -> str:
 
 def run(cfg: BenchMARLConfig) -> Path:
     """Train, export the actor to ``out_dir/final`` and evaluate it there; returns ``out_dir/final``."""
+    import torch
+
     import satenv
     from training.envs import policy_env_meta
     from training.evaluate import run_summary
     from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
 
+    torch.set_num_threads(cfg.torch_threads)
     out = Path(cfg.out_dir)
     planned = cfg.planned()
     if planned != cfg:

@@ -130,6 +130,9 @@ def build_algo_config(cfg: RLlibConfig):
 def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
     """Train for ``cfg.iterations``; returns the per-iteration progress rows."""
     ray = require_ray()
+    import torch
+
+    torch.set_num_threads(cfg.torch_threads)
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
