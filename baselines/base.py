@@ -128,9 +128,16 @@ def config_from_options(config_cls: type[C], options: dict[str, Any], owner: str
     return config_cls(**{**values, **options})
 
 
+MAX_OPTION = 1e30
+"""Default upper bound of a real option: far above any gain, margin or tolerance, low enough
+that squares and products of a few stay inside the float range (``keepout_margin=1e300``
+overflowed in the NMPC build)."""
+
+
 def number(owner: str, name: str, value: Any, *, low: float = 0.0, zero_ok: bool = False,
-           high: float = math.inf) -> float:
-    """A finite real ``> low`` (``>= low`` with ``zero_ok``) and ``<= high``; no bools/complex."""
+           high: float = MAX_OPTION) -> float:
+    """A finite real ``> low`` (``>= low`` with ``zero_ok``) and ``<= high`` (default
+    :data:`MAX_OPTION`); no bools/complex."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
         raise BaselineError(f"{owner} option {name} must be a real number, got {show(value)}")
     try:

@@ -205,6 +205,7 @@ class TubeRDMPCConfig:
             rules["exact_max_iter"] = integer
         rules["workers"] = partial(integer, high=MAX_WORKERS)
         rules["sigma"] = partial(number, high=0.999999)
+        rules["horizon"] = partial(number, high=math.inf)  # capped in decision periods by TubeRDMPC
         rules["braking_fraction"] = partial(number, high=1.0)
         validate(self, "TubeRDMPC", rules)
         if self.k2 < 1.0 / (4.0 * self.eta):
