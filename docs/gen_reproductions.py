@@ -82,6 +82,8 @@ def render(result: dict) -> str:
              f"{n['paper gives no value']} where the paper gives no value (reported, never counted as met). "
              "A claim's rule comes from the paper's sentence it quotes: a value is judged as a +-10 % band "
              "around it, a stated limit or fact as stated."]
+    if result.get("not_run"):
+        parts.append("**Not run in this result** (run it and re-render): " + "; ".join(f"`{c}`" for c in result["not_run"]))
     if result.get("departures"):
         parts += ["### Departures from the paper",
                   "Every setting where our run differs from the paper, with its measured effect on the claims.",

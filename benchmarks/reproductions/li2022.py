@@ -446,7 +446,9 @@ def departures(abl: list[dict] | None = None, rows: list[dict] | None = None) ->
                   fields=["kappa_margin"]),
         departure("solver", NOT_STATED + " (MATLAB)", f"CasADi + ipopt, tol {ours.tol:g}, exact NLP capped at "
                   f"{EXACT_MAX_ITER} iterations, warm-started duals", "the same optimum faster "
-                  "(tests/test_fast_solvers.py)", unmeasured,
+                  "(tests/test_fast_solvers.py)", f"not measured separately; the {EXACT_MAX_ITER}-iteration cap was "
+                  "checked on runs with the relaxed solve only (no successful exact solve took over 50); in the "
+                  "as-published and no-relaxed-solve runs an exact solve stopped at the cap counts as a failure",
                   fields=["max_iter", "exact_max_iter", "tol", "warm_duals", "workers", "solver"]),
         departure("chief orbit, truth model", NOT_STATED, "500 km circular, 45 deg; J2 + drag truth",
                   "li2022 gives none (satenv/scenarios/cluster.py)", unmeasured),
@@ -549,6 +551,10 @@ def _assemble(rows: list[dict], state: dict, opts: dict, variants, wall: float) 
         },
     }
     result["pass"] = passed(result)
+    missing = [c for c in CASES if c not in result["cases"]]
+    if missing:
+        result["not_run"] = [f"case {c}: python -m benchmarks.reproduce li2022 --case {c} --with li2022.json "
+                             f"--out li2022.json --plots figs/" for c in missing]
     if state["sensitivity"] is not None:
         result["sensitivity"] = state["sensitivity"]
     if state["tube"] is not None:
