@@ -486,7 +486,8 @@ def run(case: int | None = None, out: str | Path | None = None, plots_dir: str |
     start = time.perf_counter()
     rows = list((earlier or {}).get("rows", []))
     state: dict[str, Any] = {"tube": (earlier or {}).get("tube_experiment"),
-                             "sensitivity": (earlier or {}).get("sensitivity"), "figures": []}
+                             "sensitivity": (earlier or {}).get("sensitivity"),
+                             "figures": list((earlier or {}).get("figures", []))}
     main = [(c, "tube_rdmpc", v) for c in cases for v in variants if "tube_rdmpc" in controllers]
     main += [(1, "apf", "ours")] if 1 in cases and "apf" in controllers else []
     abl = [(1, "tube_rdmpc", f"ours-no-{a}") for a in ADDITIONS] if ablate and 1 in cases else []
