@@ -186,6 +186,13 @@ def test_make_and_make_vec_with_safety_filter_report_and_penalise():
         satenv.make("platoon_v0", safety_filter="yes")
 
 
+@pytest.mark.parametrize("env_id", ["platoon_v0", "servicing_v0"])
+def test_filtered_env_passes_the_pettingzoo_api_test(env_id):
+    from pettingzoo.test import parallel_api_test
+
+    parallel_api_test(satenv.make(env_id, safety_filter=True, max_steps=20), num_cycles=20)
+
+
 # ------------------------------------------------------------------------ bad input
 def test_bad_input_names_the_field():
     env = satenv.make("platoon_v0")
