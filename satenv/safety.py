@@ -722,6 +722,12 @@ class Shield:
     def info(self) -> dict[str, Any]:
         return {**getattr(self.policy, "info", {}), **self._counts}
 
+    def __getattr__(self, name: str) -> Any:
+        """Anything else is the wrapped policy's (e.g. a learned policy's ``obs_shape``)."""
+        if name in ("policy", "filter", "_counts"):
+            raise AttributeError(name)
+        return getattr(self.policy, name)
+
     def reset(self, seed: int | None = None) -> None:
         self.policy.reset(seed)
         self._counts = _zero_counts()
