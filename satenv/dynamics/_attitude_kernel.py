@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["attitude_steps"]
+__all__ = ["attitude_steps", "quat_rotation"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -30,6 +30,16 @@ def _cross(a0, a1, a2, b0, b1, b2):
 
 
 @_jit
+def quat_rotation(e, x1, x2, x3):
+    """The entries ``r00, r01, ..., r22`` (row by row) of ``R(q) = I + 2 eta S(eps) + 2 S(eps)^2``
+    (:func:`satenv.dynamics.attitude.quat_to_matrix`) of ``q = [e, x1, x2, x3]`` (any norm)."""
+    xx, yy, zz = x1 * x1, x2 * x2, x3 * x3
+    return (1.0 - 2.0 * (yy + zz), 2.0 * (x1 * x2 - e * x3), 2.0 * (x1 * x3 + e * x2),
+            2.0 * (x1 * x2 + e * x3), 1.0 - 2.0 * (xx + zz), 2.0 * (x2 * x3 - e * x1),
+            2.0 * (x1 * x3 - e * x2), 2.0 * (x2 * x3 + e * x1), 1.0 - 2.0 * (xx + yy))
+
+
+@_jit
 def _derivative(y, tq, j_f, j_f_inv, wl, lead_acc, dy):
     """``d/dt [q, omega]`` (eq. 10 and eq. 13-16 with a passive leader) of ``y`` (7,) into ``dy``."""
     e, x1, x2, x3 = y[0], y[1], y[2], y[3]
@@ -39,12 +49,8 @@ def _derivative(y, tq, j_f, j_f_inv, wl, lead_acc, dy):
     dy[1] = 0.5 * (e * w0 + c0)
     dy[2] = 0.5 * (e * w1 + c1)
     dy[3] = 0.5 * (e * w2 + c2)
-    # R^fb_lb = R(q)^T, R(q) = I + 2 eta S(eps) + 2 S(eps)^2: rows of R^T are columns of R
-    xx, yy, zz = x1 * x1, x2 * x2, x3 * x3
-    r00, r11, r22 = 1.0 - 2.0 * (yy + zz), 1.0 - 2.0 * (xx + zz), 1.0 - 2.0 * (xx + yy)
-    r01, r10 = 2.0 * (x1 * x2 - e * x3), 2.0 * (x1 * x2 + e * x3)
-    r02, r20 = 2.0 * (x1 * x3 + e * x2), 2.0 * (x1 * x3 - e * x2)
-    r12, r21 = 2.0 * (x2 * x3 - e * x1), 2.0 * (x2 * x3 + e * x1)
+    # R^fb_lb = R(q)^T: rows of R^T are columns of R
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_rotation(e, x1, x2, x3)
     # w_lf = R^T w_l; R^T lead_acc
     v0 = r00 * wl[0] + r10 * wl[1] + r20 * wl[2]
     v1 = r01 * wl[0] + r11 * wl[1] + r21 * wl[2]

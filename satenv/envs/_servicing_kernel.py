@@ -12,6 +12,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from satenv.dynamics._attitude_kernel import quat_rotation
+
 __all__ = ["attitude_features"]
 
 
@@ -94,11 +96,7 @@ def attitude_features(x, target, reference, n, min_sine, q_d, w_d, q_err, pointi
             g0 = (0.0 + (r00 * wf0 + r01 * wf1)) - 0.0
             g1 = (0.0 + (r10 * wf0 + r11 * wf1)) - 0.0
             g2 = (n + (r20 * wf0 + r21 * wf1)) - n
-            xx, yy, zz = q1 * q1, q2 * q2, q3 * q3
-            m00, m11, m22 = 1.0 - 2.0 * (yy + zz), 1.0 - 2.0 * (xx + zz), 1.0 - 2.0 * (xx + yy)
-            m01, m10 = 2.0 * (q1 * q2 - e * q3), 2.0 * (q1 * q2 + e * q3)
-            m02, m20 = 2.0 * (q1 * q3 + e * q2), 2.0 * (q1 * q3 - e * q2)
-            m12, m21 = 2.0 * (q2 * q3 - e * q1), 2.0 * (q2 * q3 + e * q1)
+            m00, m01, m02, m10, m11, m12, m20, m21, m22 = quat_rotation(e, q1, q2, q3)
             w_d[b, i, 0] = m00 * g0 + m10 * g1 + m20 * g2
             w_d[b, i, 1] = m01 * g0 + m11 * g1 + m21 * g2
             w_d[b, i, 2] = m02 * g0 + m12 * g1 + m22 * g2
