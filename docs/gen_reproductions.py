@@ -92,7 +92,8 @@ def render(result: dict) -> str:
     if result.get("ablation"):
         parts += ["### Ablation: ours minus each addition (case 1)",
                   table(result["ablation"], ["variant", "removed", "convergence_time_s", "satellites_within_1m_at_end",
-                                             "final_error_m", "max_rise_m", "collisions", "failed_solves",
+                                             "final_error_m", "max_rise_m", "collisions", "min_pair_distance_m",
+                                             "min_obstacle_distance_m", "failed_solves",
                                              "relaxed_solves", "fallbacks", "changed_claims"])]
     if result.get("sensitivity"):
         parts += ["### Accuracy against our Lyapunov tolerance (case 1, started on the targets)",

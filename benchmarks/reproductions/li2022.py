@@ -375,6 +375,7 @@ def ablation(rows: list[dict], checks: list[dict]) -> list[dict[str, Any]]:
                     "convergence_time_s": r["convergence_time_s"], "final_error_m": r["final_error_m"],
                     "satellites_within_1m_at_end": r["satellites_within_1m_at_end"],
                     "max_rise_m": r["max_rise_m"], "collisions": r["collisions"],
+                    "min_pair_distance_m": r["min_pair_distance_m"], "min_obstacle_distance_m": r["min_obstacle_distance_m"],
                     "failed_solves": r.get("failed_solves"), "relaxed_solves": r.get("relaxed_solves"),
                     "fallbacks": r["fallbacks"], "wall_time_s": r["wall_time_s"],
                     "changed_claims": [f"{n} -> {s}" for n, s in _changes(ours, mine)]})
