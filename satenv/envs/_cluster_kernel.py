@@ -22,27 +22,39 @@ def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt):
     """Minima over the steps of ``path`` (S, B, M, 3) of the distances to the nearest other
     satellite (when ``all_pairs``; else ``pair`` is left as it is), to the obstacle at
     ``obstacle`` (S, B, 3) and to the target spacecraft ``q_r`` (3,), into ``pair``, ``obs``,
-    ``tgt`` (B, M), which the caller fills with ``inf``."""
+    ``tgt`` (B, M), which the caller fills with ``inf``. The minima are taken over squared
+    distances and rooted once (the same numbers: the square root is monotone and correctly
+    rounded)."""
     n_steps, nb, m = path.shape[0], path.shape[1], path.shape[2]
+    for b in range(nb):
+        for i in range(m):
+            pair[b, i] *= pair[b, i]
+            obs[b, i] *= obs[b, i]
+            tgt[b, i] *= tgt[b, i]
     for s in range(n_steps):
         for b in range(nb):
             o0, o1, o2 = obstacle[s, b, 0], obstacle[s, b, 1], obstacle[s, b, 2]
             for i in range(m):
                 p0, p1, p2 = path[s, b, i, 0], path[s, b, i, 1], path[s, b, i, 2]
                 d0, d1, d2 = p0 - o0, p1 - o1, p2 - o2
-                obs[b, i] = min(obs[b, i], np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+                obs[b, i] = min(obs[b, i], d0 * d0 + d1 * d1 + d2 * d2)
                 d0, d1, d2 = p0 - q_r[0], p1 - q_r[1], p2 - q_r[2]
-                tgt[b, i] = min(tgt[b, i], np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+                tgt[b, i] = min(tgt[b, i], d0 * d0 + d1 * d1 + d2 * d2)
                 if all_pairs:
                     for j in range(i + 1, m):
                         d0 = p0 - path[s, b, j, 0]
                         d1 = p1 - path[s, b, j, 1]
                         d2 = p2 - path[s, b, j, 2]
-                        d = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                        d = d0 * d0 + d1 * d1 + d2 * d2
                         if d < pair[b, i]:
                             pair[b, i] = d
                         if d < pair[b, j]:
                             pair[b, j] = d
+    for b in range(nb):
+        for i in range(m):
+            pair[b, i] = np.sqrt(pair[b, i])
+            obs[b, i] = np.sqrt(obs[b, i])
+            tgt[b, i] = np.sqrt(tgt[b, i])
 
 
 @numba.njit(cache=True, nogil=True)

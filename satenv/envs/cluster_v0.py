@@ -199,6 +199,7 @@ class ClusterCore(BatchedCore):
                         if sc.disturbance == "random" else None)
         self._own_rng = np.random.default_rng()
         self._kernel = _kernel_module() if fused else None
+        self._graph_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ helpers
     def time(self) -> np.ndarray:
@@ -306,7 +307,7 @@ class ClusterCore(BatchedCore):
         k-nearest lists on the sparse path)."""
         sc = self.scenario
         if self.dense and self._kernel is not None:
-            return self._neighbours(pos)[1]
+            return self._neighbours(pos)[1].copy()   # a new array for the infos (the graph is cached)
         if self.dense:
             adj = nearest_neighbour_graph(pos, sc.n_neighbours, sc.comm_range)
             return adj.sum(axis=-1).astype(np.int64)
@@ -434,10 +435,14 @@ class ClusterCore(BatchedCore):
     def _neighbours(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Compiled dense graph: neighbour slots ``(B, M, K)`` (nearest first, ``-1`` empty) and
         degrees ``(B, M)`` (:func:`satenv.envs._cluster_kernel.neighbours`)."""
+        cached = self._graph_cache
+        if cached is not None and cached[0].shape == pos.shape and np.array_equal(cached[0], pos):
+            return cached[1], cached[2]   # a step's infos and its observation share one graph
         b, m = pos.shape[:2]
         order, degree = np.empty((b, m, self.n_slots), np.int64), np.empty((b, m), np.int64)
-        self._kernel.neighbours(np.ascontiguousarray(pos), self.n_slots, float(self.scenario.comm_range),
-                                order, degree)
+        pos = np.ascontiguousarray(pos)
+        self._kernel.neighbours(pos, self.n_slots, float(self.scenario.comm_range), order, degree)
+        self._graph_cache = (pos.copy(), order, degree)
         return order, degree
 
     def _observe(self, sel) -> np.ndarray:
