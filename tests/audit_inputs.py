@@ -398,7 +398,10 @@ def audit_load(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str,
                 LAST_ERROR[0] = "the error echoes the linked file's content"
                 return "outside_read", field
             cat = classify_error(err, field + " policy manifest weights obs_norm")
-            return ("clear" if cat == "vague" and type(err).__name__ == "PolicyLoadError" else cat), field
+            names_file = any(n in str(err) for n in (*POLICY_FILE_NAMES, "model.zip", "weights.pt", str(root)))
+            if type(err).__name__ == "PolicyLoadError" and cat in ("clear", "vague"):
+                cat = "clear" if names_file else "vague"  # a load error must name the file (or folder)
+            return cat, field
         if SECRET in json.dumps(policy.meta, default=str):
             return "outside_read", field
         try:
