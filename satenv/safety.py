@@ -81,10 +81,9 @@ from satenv.dynamics import attitude_step, cw_matrices, quat_to_matrix, thruster
 from satenv.errors import SatenvError, SatenvTypeError
 from satenv.vector import SatVectorEnv
 
-__all__ = ["CONSTRAINTS", "SafetyConfig", "SafetyError", "SafetyFilter", "SafetyModel", "SafetyRecord",
-           "SafetyTypeError", "Shield", "FilteredVectorEnv", "filter_actions", "filtered_env", "filtered_vec",
-           "safety_config", "safety_model",
-           "shield", "solve_qp"]
+__all__ = ["CONSTRAINTS", "COURTESY", "FilteredVectorEnv", "SafetyConfig", "SafetyError", "SafetyFilter",
+           "SafetyModel", "SafetyRecord", "SafetyTypeError", "Shield", "constraint_rows", "filter_actions",
+           "filtered_env", "filtered_vec", "safety_config", "safety_model", "shield", "solve_qp"]
 
 CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "keep-out", "los", "velocity",
                                  "angular-velocity")
