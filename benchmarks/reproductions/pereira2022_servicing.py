@@ -336,7 +336,10 @@ def departures(runs: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
                             if c["claim"] in changed_claims(ours["claims"], pub["claims"])) or "no claim changes status"
         po, pp = (next(c for c in r["claims"] if c["claim"].startswith("pointing")) for r in (ours, pub))
         effect = (f"with eq. 39's cost (weight 0): worst pointing {pp['measured']:.3g} deg ({pp['worst_at']}), ours "
-                  f"{po['measured']:.3g} deg; claims changed: {changed}")
+                  f"{po['measured']:.3g} deg (our {POINTING_TOL_DEG:g} deg test: "
+                  f"{'met' if pp['measured'] <= POINTING_TOL_DEG else 'not met'} as published, "
+                  f"{'met' if po['measured'] <= POINTING_TOL_DEG else 'not met'} ours; the paper gives no pointing "
+                  f"value); paper-valued claims changed: {changed}")
     else:
         effect = "not measured in this result"
     unmeasured = "not measured separately"
