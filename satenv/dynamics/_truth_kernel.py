@@ -8,7 +8,9 @@ converts the LVLH states to ECI once, integrates ``n`` steps of ``substeps`` RK4
 LVLH inputs of step ``s`` held in the rotating frame, as the reference: they are rotated by the
 chief's current LVLH axes at every stage) and converts back once. Converting back and forth at
 every step, as ``n`` calls of the reference do, is the identity up to rounding, so the two agree
-to rounding (``tests/test_truth_kernel.py``). Optionally the LVLH positions after every step are
+to rounding (``tests/test_truth_kernel.py``). The chief's motion does not depend on the deputies:
+its RK4 stages are computed once (:func:`_chief_track`) and shared by consecutive copies with
+the same chief, as the copies of a batch stepped in lockstep are. Optionally the LVLH positions after every step are
 written out (a rotation only: the frame rate does not enter positions). Importing this module
 imports numba; compiled code is cached next to the module.
 """
@@ -99,50 +101,6 @@ def _frame_rate(y, h0, h1, h2, p):
 
 
 @_jit
-def _rhs(y, u, p, e, dy):
-    """Right-hand side of the packed state ``y`` (6, 1 + M) (row 0 the chief, ECI; rows 1.. the
-    deputies relative to it, ECI) under LVLH inputs ``u`` (M, 3) into ``dy``
-    (:func:`satenv.dynamics._soa.derivative_soa`)."""
-    rc0, rc1, rc2, vc0, vc1, vc2 = y[0, 0], y[1, 0], y[2, 0], y[3, 0], y[4, 0], y[5, 0]
-    ac0, ac1, ac2 = _accel(rc0, rc1, rc2, vc0, vc1, vc2, p, p[7])
-    _axes(y, e)
-    for c in range(3):
-        dy[c, 0] = y[3 + c, 0]
-    dy[3, 0], dy[4, 0], dy[5, 0] = ac0, ac1, ac2
-    for j in range(1, y.shape[1]):
-        a0, a1, a2 = _accel(rc0 + y[0, j], rc1 + y[1, j], rc2 + y[2, j],
-                            vc0 + y[3, j], vc1 + y[4, j], vc2 + y[5, j], p, p[8])
-        u0, u1, u2 = u[j - 1, 0], u[j - 1, 1], u[j - 1, 2]
-        dy[0, j], dy[1, j], dy[2, j] = y[3, j], y[4, j], y[5, j]
-        dy[3, j] = (a0 - ac0) + e[0, 0] * u0 + e[1, 0] * u1 + e[2, 0] * u2
-        dy[4, j] = (a1 - ac1) + e[0, 1] * u0 + e[1, 1] * u1 + e[2, 1] * u2
-        dy[5, j] = (a2 - ac2) + e[0, 2] * u0 + e[1, 2] * u1 + e[2, 2] * u2
-
-
-@_jit
-def _rk4(y, u, h, p, e, k1, k2, k3, k4, tmp):
-    """One classical RK4 step of ``y`` in place (:func:`satenv.dynamics.integrators.rk4_step`)."""
-    half = 0.5 * h
-    _rhs(y, u, p, e, k1)
-    for c in range(6):
-        for j in range(y.shape[1]):
-            tmp[c, j] = y[c, j] + half * k1[c, j]
-    _rhs(tmp, u, p, e, k2)
-    for c in range(6):
-        for j in range(y.shape[1]):
-            tmp[c, j] = y[c, j] + half * k2[c, j]
-    _rhs(tmp, u, p, e, k3)
-    for c in range(6):
-        for j in range(y.shape[1]):
-            tmp[c, j] = y[c, j] + h * k3[c, j]
-    _rhs(tmp, u, p, e, k4)
-    sixth = h / 6.0
-    for c in range(6):
-        for j in range(y.shape[1]):
-            y[c, j] = y[c, j] + sixth * (k1[c, j] + 2.0 * (k2[c, j] + k3[c, j]) + k4[c, j])
-
-
-@_jit
 def _to_eci(x, b, chief, p, e, y):
     """LVLH states ``x[b]`` (M, 6) and chief ``chief[b]`` -> packed ``y``
     (:func:`satenv.dynamics._soa.lvlh_to_eci_rel_soa`)."""
@@ -178,29 +136,129 @@ def _to_lvlh(y, e, p, b, x_out, chief_out):
         x_out[b, j, 5] -= wx * r1
 
 
+TRACK = 18
+"""Per RK4 stage of the chief, :func:`_chief_track` keeps its state (6), acceleration (3) and
+LVLH axes ex, ey, ez (9)."""
+
+
+@_jit
+def _chief_track(c0, n, h, p, track, ends):
+    """The chief's ``n`` RK4 sub-steps from ``c0`` (6,) (:func:`satenv.dynamics.integrators.rk4_step`
+    on the chief's row of the packed state): every stage's state, acceleration and axes into
+    ``track`` (4 n, 18), the state after every sub-step into ``ends`` (n, 6). The chief does not
+    depend on the deputies, so copies that share a chief share its track."""
+    y, tmp, e = np.empty((6, 1)), np.empty((6, 1)), np.empty((3, 3))
+    k = np.empty((4, 6))
+    for c in range(6):
+        y[c, 0] = c0[c]
+    half, sixth = 0.5 * h, h / 6.0
+    for i in range(n):
+        for stage in range(4):
+            src = y if stage == 0 else tmp
+            a0, a1, a2 = _accel(src[0, 0], src[1, 0], src[2, 0], src[3, 0], src[4, 0], src[5, 0], p, p[7])
+            _axes(src, e)
+            rec = track[4 * i + stage]
+            for c in range(6):
+                rec[c] = src[c, 0]
+            rec[6], rec[7], rec[8] = a0, a1, a2
+            for r in range(3):
+                for c in range(3):
+                    rec[9 + 3 * r + c] = e[r, c]
+            k[stage, 0], k[stage, 1], k[stage, 2] = src[3, 0], src[4, 0], src[5, 0]
+            k[stage, 3], k[stage, 4], k[stage, 5] = a0, a1, a2
+            if stage < 3:
+                coef = h if stage == 2 else half
+                for c in range(6):
+                    tmp[c, 0] = y[c, 0] + coef * k[stage, c]
+        for c in range(6):
+            y[c, 0] = y[c, 0] + sixth * (k[0, c] + 2.0 * (k[1, c] + k[2, c]) + k[3, c])
+            ends[i, c] = y[c, 0]
+
+
+@_jit
+def _rhs_deputies(yd, u, p, rec, dy):
+    """Right-hand side of the deputies' relative ECI states ``yd`` (6, M) under LVLH inputs ``u``
+    (M, 3) at the chief's stage ``rec`` (a row of :func:`_chief_track`) into ``dy``
+    (:func:`satenv.dynamics._soa.derivative_soa`)."""
+    rc0, rc1, rc2, vc0, vc1, vc2 = rec[0], rec[1], rec[2], rec[3], rec[4], rec[5]
+    ac0, ac1, ac2 = rec[6], rec[7], rec[8]
+    for j in range(yd.shape[1]):
+        a0, a1, a2 = _accel(rc0 + yd[0, j], rc1 + yd[1, j], rc2 + yd[2, j],
+                            vc0 + yd[3, j], vc1 + yd[4, j], vc2 + yd[5, j], p, p[8])
+        u0, u1, u2 = u[j, 0], u[j, 1], u[j, 2]
+        dy[0, j], dy[1, j], dy[2, j] = yd[3, j], yd[4, j], yd[5, j]
+        dy[3, j] = (a0 - ac0) + rec[9] * u0 + rec[12] * u1 + rec[15] * u2
+        dy[4, j] = (a1 - ac1) + rec[10] * u0 + rec[13] * u1 + rec[16] * u2
+        dy[5, j] = (a2 - ac2) + rec[11] * u0 + rec[14] * u1 + rec[17] * u2
+
+
+@_jit
+def _rk4_deputies(yd, u, h, p, track, i, k1, k2, k3, k4, tmp):
+    """The deputies' RK4 sub-step ``i`` of the chief's track, in place (the same operations as
+    :func:`satenv.dynamics.integrators.rk4_step` on their rows of the packed state)."""
+    half = 0.5 * h
+    m = yd.shape[1]
+    _rhs_deputies(yd, u, p, track[4 * i], k1)
+    for c in range(6):
+        for j in range(m):
+            tmp[c, j] = yd[c, j] + half * k1[c, j]
+    _rhs_deputies(tmp, u, p, track[4 * i + 1], k2)
+    for c in range(6):
+        for j in range(m):
+            tmp[c, j] = yd[c, j] + half * k2[c, j]
+    _rhs_deputies(tmp, u, p, track[4 * i + 2], k3)
+    for c in range(6):
+        for j in range(m):
+            tmp[c, j] = yd[c, j] + h * k3[c, j]
+    _rhs_deputies(tmp, u, p, track[4 * i + 3], k4)
+    sixth = h / 6.0
+    for c in range(6):
+        for j in range(m):
+            yd[c, j] = yd[c, j] + sixth * (k1[c, j] + 2.0 * (k2[c, j] + k3[c, j]) + k4[c, j])
+
+
 @_jit
 def propagate(x, chief, u, substeps, h, p, x_out, chief_out, path):
     """Propagate LVLH states ``x`` (B, M, 6) and chief ECI states ``chief`` (B, 6) over
     ``u.shape[0]`` steps of ``substeps`` RK4 sub-steps of ``h`` seconds, the LVLH inputs ``u[s]``
     (B, M, 3) held over step ``s``; ``p`` from :func:`force_params`. Writes the final states into
     ``x_out`` / ``chief_out`` (may be ``x`` / ``chief``), and, when ``path.shape[0] > 0``, the
-    LVLH positions after every step into ``path`` (S, B, M, 3)."""
-    nb, m = x.shape[0], x.shape[1]
+    LVLH positions after every step into ``path`` (S, B, M, 3). A copy whose chief equals the
+    previous copy's reuses its track (copies stepped in lockstep share one)."""
+    nb, m, n_steps = x.shape[0], x.shape[1], u.shape[0]
+    n_sub = n_steps * substeps
     y = np.empty((6, 1 + m))
-    k1, k2, k3 = np.empty((6, 1 + m)), np.empty((6, 1 + m)), np.empty((6, 1 + m))
-    k4, tmp = np.empty((6, 1 + m)), np.empty((6, 1 + m))
-    e = np.empty((3, 3))
+    k1, k2, k3 = np.empty((6, m)), np.empty((6, m)), np.empty((6, m))
+    k4, tmp, yd = np.empty((6, m)), np.empty((6, m)), np.empty((6, m))
+    e, yc = np.empty((3, 3)), np.empty((6, 1))
+    track, ends = np.empty((4 * n_sub, TRACK)), np.empty((n_sub, 6))
+    last = np.full(6, np.nan)
     recording = path.shape[0] > 0
     for b in range(nb):
+        shared = True
+        for c in range(6):
+            shared = shared and chief[b, c] == last[c]
+        if not shared:
+            _chief_track(chief[b], n_sub, h, p, track, ends)
+            for c in range(6):
+                last[c] = chief[b, c]
         _to_eci(x, b, chief, p, e, y)
-        for s in range(u.shape[0]):
+        for c in range(6):
+            for j in range(m):
+                yd[c, j] = y[c, j + 1]
+        for s in range(n_steps):
             us = u[s, b]
-            for _ in range(substeps):
-                _rk4(y, us, h, p, e, k1, k2, k3, k4, tmp)
+            for k in range(substeps):
+                _rk4_deputies(yd, us, h, p, track, s * substeps + k, k1, k2, k3, k4, tmp)
             if recording:
-                _axes(y, e)
+                for c in range(6):
+                    yc[c, 0] = ends[(s + 1) * substeps - 1, c]
+                _axes(yc, e)
                 for j in range(m):
                     for i in range(3):
-                        path[s, b, j, i] = (e[i, 0] * y[0, j + 1] + e[i, 1] * y[1, j + 1]
-                                            + e[i, 2] * y[2, j + 1])
+                        path[s, b, j, i] = e[i, 0] * yd[0, j] + e[i, 1] * yd[1, j] + e[i, 2] * yd[2, j]
+        for c in range(6):
+            y[c, 0] = ends[n_sub - 1, c] if n_sub > 0 else chief[b, c]
+            for j in range(m):
+                y[c, j + 1] = yd[c, j]
         _to_lvlh(y, e, p, b, x_out, chief_out)
