@@ -149,7 +149,7 @@ class RunConfig:
     progress: Flag = True
     """Show progress bars (training and every evaluation)."""
     workers: int = 0
-    """Processes for evaluation episodes (0: one per core, at most 2; 1: in this process)."""
+    """Processes for evaluation episodes (0: one per idle core, at most 2; 1: in this process)."""
 
     def __post_init__(self) -> None:
         check_run_fields(self, ("env_kwargs", "eval_env_kwargs"))

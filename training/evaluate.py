@@ -73,21 +73,21 @@ def evaluate(env: Any, policy: Any, seeds: Iterable[int], *, desc: str = "evalua
     seeds = [int(s) for s in seeds]
     bar = progress_bar(len(seeds), desc, progress)
     episodes = []
-    n = min(resolve_workers(workers), len(seeds))
-    if n > 1 and "fork" in multiprocessing.get_all_start_methods():
+    n = min(resolve_workers(workers), len(seeds) - 1)
+    parallel = n > 1 and "fork" in multiprocessing.get_all_start_methods()
+    for seed in seeds[:1] if parallel else seeds:  # in parallel, the first episode here warms up the
+        episodes.append(_episode(env, policy, seed))  # compiled kernels and solver caches the workers inherit
+        bar.update(1)
+    if parallel:
         global _WORK
         _WORK = (env, policy)  # inherited by the forked workers, never pickled
         try:
             with multiprocessing.get_context("fork").Pool(n, initializer=_init_worker) as pool:
-                for s in pool.imap(_episode_in_worker, seeds):
+                for s in pool.imap(_episode_in_worker, seeds[1:]):
                     episodes.append(s)
                     bar.update(1)
         finally:
             _WORK = None
-    else:
-        for seed in seeds:
-            episodes.append(_episode(env, policy, seed))
-            bar.update(1)
     bar.close()
     return {"aggregate": aggregate(episodes), "episodes": episodes}
 
@@ -103,12 +103,9 @@ _WORK: tuple[Any, Any] | None = None
 
 
 def _init_worker() -> None:
-    try:
-        import torch
-
+    torch = sys.modules.get("torch")  # one thread per worker where a torch policy runs (never imported here)
+    if torch is not None:
         torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover - torch is optional for scripted baselines
-        pass
 
 
 def _episode_in_worker(seed: int) -> dict[str, Any]:
@@ -117,8 +114,13 @@ def _episode_in_worker(seed: int) -> dict[str, Any]:
 
 
 def resolve_workers(workers: int) -> int:
-    """``workers`` processes for evaluation episodes; 0 means one per core, at most 2."""
-    return workers if workers > 0 else max(1, min(2, os.cpu_count() or 1))
+    """``workers`` processes for evaluation episodes; 0 (auto): one per idle core, at most 2 (on a
+    machine whose cores are busy, extra processes only add their start-up: measured 9.6 s vs 13 s
+    wall for six DMPC episodes at load 7 on 2 cores)."""
+    if workers > 0:
+        return workers
+    idle = (os.cpu_count() or 1) - int(os.getloadavg()[0]) if hasattr(os, "getloadavg") else 1
+    return max(1, min(2, idle))
 
 
 def progress_bar(total: int, desc: str, enabled: bool = True):
