@@ -278,6 +278,12 @@ def format_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def add_arguments(parser) -> None:
+    """``benchmarks.reproduce pereira2023`` options: ``--no-analysis`` (Table II only, about 1 s)."""
+    parser.add_argument("--no-analysis", dest="analysis", action="store_false",
+                        help="skip the FOE analysis (Table II and the claims only)")
+
+
 def save_figures(runs: dict, out: Path) -> list[Path]:
     """Analogues of pereira2023 Fig. 4-7 (one PNG per follower: position error, velocity error
     and input per axis, the three topologies overlaid) and a 3-D trajectory plot per topology."""
