@@ -24,7 +24,8 @@ import numpy as np
 from .integrators import rk4_step
 
 __all__ = [
-    "attitude_derivative", "attitude_step", "desired_angular_velocity", "matrix_to_quat",
+    "ATTITUDE_METHODS", "attitude_constants", "attitude_derivative", "attitude_kernel", "attitude_step",
+    "compiled_attitude_step", "desired_angular_velocity", "matrix_to_quat",
     "pointing_error", "pointing_frame", "pointing_rate", "quat_conjugate", "quat_error",
     "quat_kinematics", "quat_multiply", "quat_normalize", "quat_to_euler_xyz", "quat_to_matrix",
     "relative_angular_acceleration", "skew", "thruster_matrices",
@@ -170,7 +171,7 @@ def attitude_step(q: np.ndarray, omega: np.ndarray, torque: np.ndarray, dt: floa
     """
     if method not in ATTITUDE_METHODS:
         raise ValueError(f"unknown attitude method {method!r}; expected one of {list(ATTITUDE_METHODS)}")
-    kernel = None if method == "numpy" else _attitude_kernel(method, omega_l)
+    kernel = None if method == "numpy" else attitude_kernel(method, omega_l)
     if kernel is not None:
         return compiled_attitude_step(kernel, q, omega, torque, dt, substeps,
                                       attitude_constants(j_f, j_l, omega_l))
@@ -183,7 +184,7 @@ def attitude_step(q: np.ndarray, omega: np.ndarray, torque: np.ndarray, dt: floa
     return y[..., :4], y[..., 4:]
 
 
-def _attitude_kernel(method: str, omega_l):
+def attitude_kernel(method: str, omega_l):
     """The compiled step, or ``None`` when it does not apply (``method="auto"``)."""
     if np.shape(omega_l) != (3,):
         if method == "kernel":

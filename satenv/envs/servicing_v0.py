@@ -114,8 +114,8 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from satenv.dynamics import Orbit, RelativeModel, delta_v, saturate_box
 from satenv.dynamics.attitude import (
-    _attitude_kernel,
     attitude_constants,
+    attitude_kernel,
     attitude_step,
     compiled_attitude_step,
     desired_angular_velocity,
@@ -213,7 +213,7 @@ class ServicingCore(BatchedCore):
         self.j_f = np.array(sc.inertia)
         self.j_l = np.array(sc.object_inertia)
         self.omega_l = np.array([0.0, 0.0, sc.mean_motion])
-        self._att_kernel = _attitude_kernel("auto", self.omega_l)   # compiled step (None: numpy)
+        self._att_kernel = attitude_kernel("auto", self.omega_l)   # compiled step (None: numpy)
         self._att_constants = attitude_constants(self.j_f, self.j_l, self.omega_l)
         self._ref_kernel = _reference_kernel(sc)          # compiled attitude reference (None: numpy)
         self._pointing = (np.asarray(sc.pointing_target, dtype=float),
