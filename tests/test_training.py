@@ -71,7 +71,8 @@ def test_cli_flags_parse_into_the_config(capsys):
     assert (cfg.algo, cfg.net_arch, cfg.env_kwargs, cfg.eval_seeds, cfg.progress, cfg.gamma, cfg.lr,
             cfg.num_envs) == ("sac", (32, 32), {"randomize": True}, (5, 6, 7), False, 0.98, 0.01, 4)
     # the old spellings are deprecated aliases
-    old, _ = parse_args(["--n-copies", "4", "--learning-rate", "0.01", "--eval-seeds", "5:8"])
+    with pytest.warns(FutureWarning, match="--n-copies is deprecated: use --num-envs"):
+        old, _ = parse_args(["--n-copies", "4", "--learning-rate", "0.01", "--eval-seeds", "5:8"])
     assert (old.num_envs, old.lr, old.eval_seeds) == (4, 0.01, (5, 6, 7))
     for argv, match in [(["--env-kwargs", "randomize"], "JSON object"), (["--num-envs", "many"], "num-envs"),
                         (["--algo", "dqn"], "ppo"), (["--num-envs", "0"], "num_envs must be an int >= 1"),

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import typing
+import warnings
 from dataclasses import asdict, dataclass, field, fields
 from typing import Annotated, Any, Literal
 
@@ -34,6 +35,9 @@ not hours of evaluation)."""
 
 RENAMED = {"n_copies": "num_envs", "learning_rate": "lr", "num_envs_per_env_runner": "num_envs"}
 """Old config keys (``config.json`` written before the common grammar) -> current field names."""
+DEPRECATED_FLAGS = {"--n-copies": "--num-envs", "--learning-rate": "--lr",
+                    "--num-envs-per-env-runner": "--num-envs", "--ray-address": "--address"}
+"""Old flags still accepted (aliases), with a ``FutureWarning`` naming the new one."""
 
 
 def parse_seeds(text: str | typing.Iterable[str]) -> tuple[int, ...]:
@@ -373,6 +377,10 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     import sys
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    for arg in argv:
+        if arg.split("=", 1)[0] in DEPRECATED_FLAGS:
+            old = arg.split("=", 1)[0]
+            warnings.warn(f"{old} is deprecated: use {DEPRECATED_FLAGS[old]}", FutureWarning, stacklevel=2)
     argv, opts = _split_options(argv, resume)
     if base is None and opts.config is not None:
         base = load_config(opts.config, cls)
