@@ -106,10 +106,11 @@ def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, safety_filt
     return _make_vec(env_id, num_envs, seed=seed, **kwargs)
 
 
-GYM_MAX_EPISODE_STEPS: dict[str, int] = {"platoon_v0": 180, "cluster_v0": 400, "servicing_v0": 1200,
+GYM_MAX_EPISODE_STEPS: dict[str, int] = {"platoon_v0": 300, "cluster_v0": 400, "servicing_v0": 1200,
                                           "formation_v0": 2000}
-"""``max_episode_steps`` of the registered Gymnasium ids: each env's default ``max_steps``
-(tests/test_env_surface.py checks they agree)."""
+"""``max_episode_steps`` of the registered Gymnasium ids: the longest ``max_steps`` of each env's
+presets (tests/test_env_surface.py checks it), so the ``TimeLimit`` never cuts a preset's episode
+short; the env truncates at its own ``max_steps`` first."""
 
 
 def _register_gymnasium() -> None:

@@ -14,9 +14,9 @@ agents' rewards. Terminated/truncated follow the team. It passes
     env = gym.make("satenv/Platoon-v0", topology="BDL", max_steps=100)   # env kwargs as in satenv.make
     vec = gym.make_vec("satenv/Platoon-v0", num_envs=64)    # one batched core (satenv.gym_vector)
 
-The registered ids carry ``max_episode_steps`` (``satenv.GYM_MAX_EPISODE_STEPS``: the default
-preset's ``max_steps``); a longer episode (``max_steps``, another ``preset``) needs
-``max_episode_steps=`` too, as any Gymnasium ``TimeLimit``. ``render()`` without a
+The registered ids carry ``max_episode_steps`` (``satenv.GYM_MAX_EPISODE_STEPS``: the longest
+``max_steps`` of the env's presets; the env truncates at its own ``max_steps`` first); a
+``max_steps`` above it needs ``max_episode_steps=`` too, as any Gymnasium ``TimeLimit``. ``render()`` without a
 ``render_mode`` warns and returns ``None``.
 """
 

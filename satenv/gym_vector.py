@@ -15,9 +15,9 @@ last step). The other ``infos`` entries are the env's per-agent physical quantit
 ``(num_envs, n_agents, ...)`` arrays. ``reset(seed=s)`` seeds copy ``b`` with ``s + b``, as
 ``gymnasium.make("satenv/Platoon-v0").reset(seed=s + b)``.
 
-``max_episode_steps`` (registered: the default preset's ``max_steps``) caps the episode length of
-every copy (the scenario's own ``max_steps`` when that is shorter); pass it with a longer
-``max_steps`` or another preset, as for ``gymnasium.make``.
+``max_episode_steps`` (registered: the longest ``max_steps`` of the env's presets) caps the
+episode length of every copy (the scenario's own ``max_steps`` when that is shorter); pass it with
+a ``max_steps`` above it, as for ``gymnasium.make``.
 """
 
 from __future__ import annotations

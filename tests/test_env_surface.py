@@ -1,6 +1,7 @@
 """One env surface: the same keywords, spaces and conventions in all four envs; the env registry
 and its Gymnasium ids; the one success rule shared by metrics, the scoreboard and evaluation."""
 
+import importlib
 import subprocess
 import sys
 
@@ -173,9 +174,18 @@ def test_gymnasium_ids_have_max_episode_steps_and_render_warns(gym_id):
     import gymnasium as gym
 
     env_id = satenv.GYM_IDS[gym_id]
+    presets = importlib.import_module(f"satenv.scenarios.{env_id.removesuffix('_v0')}").PRESETS
     env = gym.make(gym_id)
-    assert env.spec.max_episode_steps == satenv.make(env_id).scenario.max_steps == \
-        satenv.GYM_MAX_EPISODE_STEPS[env_id]
+    assert env.spec.max_episode_steps == satenv.GYM_MAX_EPISODE_STEPS[env_id] == \
+        max(p.max_steps for p in presets.values())   # no preset's episode is cut short
+    if env_id == "platoon_v0":  # the longer pereira2022 preset runs to its own truncation (300 steps)
+        long = gym.make(gym_id, preset="pereira2022", terminate_on_collision=False)
+        long.reset(seed=0)
+        steps, done = 0, False
+        while not done:
+            _, _, term, trunc, _ = long.step(np.zeros(long.action_space.shape, np.float32))
+            steps, done = steps + 1, term or trunc
+        assert steps == 300
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None

@@ -335,7 +335,7 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
     if not callable(getattr(training, "load", None)):
         pytest.skip("training.load not available")
     run = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "training.train", "--total-timesteps", "256", "--n-copies", "2",
+    proc = subprocess.run([sys.executable, "-m", "training.train", "--total-timesteps", "256", "--num-envs", "2",
                            "--n-steps", "32", "--batch-size", "64", "--eval-every", "0", "--test-seeds", "0",
                            "--eval-baselines", "zero", "--checkpoint-every", "0", "--progress", "false",
                            "--env-kwargs", '{"randomize": true}', "--out-dir", str(run)],
