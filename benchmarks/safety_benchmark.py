@@ -100,30 +100,47 @@ def random_benchmark(seeds: int = 100, names: list[str] | None = None, log=print
     return out
 
 
-def learned_benchmark(seeds: int = 50, out_dir: str = "results/safety_learned", log=print) -> dict[str, Any]:
-    """Every shipped policy on its first scoreboard scenario, with and without the filter, on
-    seeds ``HELD_OUT ... HELD_OUT + seeds - 1`` (the scoreboard's episodes and aggregates)."""
-    from benchmarks.scoreboard import run_scoreboard
+def learned_benchmark(seeds: int = 50, out_dir: str = "results/safety_learned", log=print,
+                      names: list[str] | None = None) -> dict[str, Any]:
+    """Every shipped policy (or ``names``) on its first scoreboard scenario, with and without the
+    filter, on seeds ``HELD_OUT ... HELD_OUT + seeds - 1`` (the scoreboard's episodes and
+    aggregates); a policy whose board fails is recorded with its error."""
     from benchmarks.scoreboard.registry import discover_trained_policies
 
     res: dict[str, Any] = {}
     for name, spec in discover_trained_policies().items():
+        if names is not None and name not in names:
+            continue
         scen = spec.scenarios[0]
-        board = run_scoreboard(f"{out_dir}/{name.split(':')[1]}", scenarios=scen,
-                               policies=f"{name},{name}+shield", seeds=f"{HELD_OUT}-{HELD_OUT + seeds - 1}",
-                               plots=False, progress=False, overwrite=True)
-        agg = board.aggregates[scen]
-        res[name] = {"scenario": scen, **{("filtered" if pol.endswith("+shield") else "unfiltered"): {
-            m: agg[pol][m]["mean"] for m in ("success", "collisions", "violations", "interventions", "mean_du",
-                                             "infeasible_steps", "min_separation_m")}
-            | {"collision_episodes": sum(1 for r in board.records if r["policy"] == pol and r["collisions"]),
-               "violation_episodes": sum(1 for r in board.records if r["policy"] == pol and r["violations"])}
-            for pol in agg}}
+        try:
+            res[name] = {"scenario": scen, **_learned_pair(name, scen, seeds, out_dir)}
+        except Exception as exc:  # noqa: BLE001 - one policy's failure is a result, not the end
+            res[name] = {"scenario": scen, "error": f"{type(exc).__name__}: {exc}"}
+            log(f"{name} on {scen}: error {res[name]['error']}")
+            continue
         f, u = res[name]["filtered"], res[name]["unfiltered"]
         log(f"{name} on {scen}: success {u['success']:.2f} -> {f['success']:.2f}; collision episodes "
             f"{u['collision_episodes']} -> {f['collision_episodes']}; violation episodes "
             f"{u['violation_episodes']} -> {f['violation_episodes']}; infeasible steps/ep {f['infeasible_steps']}")
     return res
+
+
+def _learned_pair(name: str, scen: str, seeds: int, out_dir: str) -> dict[str, Any]:
+    """``name`` and ``name+shield`` on ``scen`` through the scoreboard: their summary metrics."""
+    from benchmarks.scoreboard import run_scoreboard
+
+    board = run_scoreboard(f"{out_dir}/{name.split(':')[1]}", scenarios=scen, policies=f"{name},{name}+shield",
+                           seeds=f"{HELD_OUT}-{HELD_OUT + seeds - 1}", plots=False, progress=False, overwrite=True)
+    agg = board.aggregates[scen]
+    out = {}
+    for pol in agg:
+        recs = [r for r in board.records if r["policy"] == pol]
+        out["filtered" if pol.endswith("+shield") else "unfiltered"] = {
+            **{m: agg[pol][m]["mean"] for m in ("success", "collisions", "violations", "interventions",
+                                                "mean_du", "infeasible_steps", "min_separation_m")},
+            "collision_episodes": sum(1 for r in recs if r["collisions"]),
+            "violation_episodes": sum(1 for r in recs if r["violations"])}
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -136,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--learned-seeds", type=int, default=50)
     p.add_argument("--parts", default="random,learned")
     p.add_argument("--scenarios", help="comma-separated scoreboard scenarios (random part)")
+    p.add_argument("--policies", help="comma-separated shipped policies, e.g. trained:a (learned part)")
     args = p.parse_args(argv)
     parts = args.parts.split(",")
     result: dict[str, Any] = {"held_out_from": HELD_OUT}
@@ -143,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     if "random" in parts:
         result["random"] = random_benchmark(args.seeds, args.scenarios.split(",") if args.scenarios else None, log)
     if "learned" in parts:
-        result["learned"] = learned_benchmark(args.learned_seeds, log=log)
+        result["learned"] = learned_benchmark(args.learned_seeds, log=log,
+                                              names=args.policies.split(",") if args.policies else None)
     with open(args.out, "w") as fh:
         json.dump(result, fh, indent=1)
     return 0
