@@ -44,10 +44,10 @@ linear in ``Delta u = S_i u_i - S_j u_j``; each agent keeps its share (half for 
 against a body): ``w^T S_i u_i >= -share * g``. Summed, the two shares give the pair's row.
 The pereira2022 target-chaser pairs (LOS cone, keep-out sphere of ``p_f - p_{f-1}``) are the
 chaser's alone, filtered down the chain so that its rows hold its target's filtered
-acceleration; a target whose chaser is near its bound (``h < 3 max||S u|| dt``) keeps its
-acceleration along the chaser's direction ``n`` within ``COURTESY a`` (a courtesy row), and the
-chaser's braking authority is ``(1 - COURTESY)`` per chain neighbour (otherwise the two pairs of a
-middle follower can ask it to accelerate both ways along one direction at once).
+acceleration; a target ``f`` whose chaser is near its bound (``h < 3 max||S u|| dt``) keeps its
+acceleration along the chaser's direction ``n`` within ``c_f a`` (a courtesy row, ``c_f = (f+1)/M``),
+and every chain pair brakes with ``a / M`` (:func:`courtesy`: otherwise the two pairs of a follower
+can ask it to accelerate both ways along one direction at once).
 The margin (``margin * D``, ``los_margin``) inflates ``D`` but never beyond the current gap (a
 start on the boundary stays feasible).
 
@@ -81,8 +81,8 @@ from satenv.dynamics import attitude_step, cw_matrices, quat_to_matrix, thruster
 from satenv.errors import SatenvError, SatenvTypeError
 from satenv.vector import SatVectorEnv
 
-__all__ = ["CONSTRAINTS", "COURTESY", "FilteredVectorEnv", "SafetyConfig", "SafetyError", "SafetyFilter",
-           "SafetyModel", "SafetyRecord", "SafetyTypeError", "Shield", "constraint_rows", "filter_actions",
+__all__ = ["CONSTRAINTS", "FilteredVectorEnv", "SafetyConfig", "SafetyError", "SafetyFilter",
+           "SafetyModel", "SafetyRecord", "SafetyTypeError", "Shield", "constraint_rows", "courtesy", "filter_actions",
            "filtered_env", "filtered_vec", "safety_config", "safety_model", "shield", "solve_qp"]
 
 CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "keep-out", "los", "velocity",
@@ -260,22 +260,25 @@ def safety_model(target: Any) -> SafetyModel:
     return dataclasses.replace(model, kinds=_row_kinds(model), budget=_budget(model))
 
 
-COURTESY = 1.0 / 3.0
-"""Fraction of its braking authority a platoon follower keeps for its chaser (pereira2022 chain)."""
+def courtesy(n_agents: int) -> np.ndarray:
+    """``c_f`` ``(M,)``: the fraction of its braking authority platoon follower ``f`` may use along
+    its chaser's direction when the chaser is near its bound, ``(f + 1) / M`` (0-based ``f``).
+
+    A chaser's braking relative to its target must cover the target's ``c_{f-1}``, and the chaser's
+    own acceleration along that direction is capped at ``c_f`` by its own chaser: every chain pair
+    keeps ``c_f - c_{f-1} = 1 / M`` of an authority (the last chaser ``1 - c_{M-2} = 1 / M``)."""
+    return (np.arange(n_agents) + 1.0) / n_agents
 
 
 def _budget(m: SafetyModel) -> tuple[np.ndarray, np.ndarray]:
     """The fractions ``(own, other)`` of each agent's braking authority that each position slot
     may use, ``(M, slots)``: a pair of agents (1, 1), a body or the passive leader (1, 0). A
     platoon chaser keeps its target-chaser pair alone (the target's action is known: the chain is
-    filtered in order), with ``1 - COURTESY`` per neighbour in the chain: its target may still
-    accelerate by ``COURTESY a`` against it (:func:`constraint_rows`' courtesy rows), and it keeps
-    ``COURTESY a`` for its own chaser."""
+    filtered in order) with ``1 / M`` of its authority (:func:`courtesy`)."""
     na = m.n_agents
     own = [np.ones((na, na if m.pair_distance > 0 else 0)), np.ones((na, len(m.bodies)))]
     other = [own[0].copy(), np.zeros((na, len(m.bodies)))]
-    chain_own = 1.0 - COURTESY * ((np.arange(na) < na - 1).astype(float) + (np.arange(na) > 0))
-    own.append(np.repeat(chain_own[:, None], m.n_chain, axis=1))
+    own.append(np.full((na, m.n_chain), 1.0 / na))
     other.append(np.zeros((na, m.n_chain)))
     return np.concatenate(own, axis=1), np.concatenate(other, axis=1)
 
@@ -450,10 +453,11 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
             l2[..., :na] = np.where(eye, -_BIG, l2[..., :na])
         ws += [w1, w2]
         ls += [l1, l2]
-        if n_chain:   # courtesy: the target f - 1 of a chaser near its bound, |along n| <= COURTESY a
+        if n_chain:   # courtesy: the target f - 1 of a chaser near its bound, along n <= c_{f-1} a
             near = h0[:, :, -n_chain:] < 3.0 * m.accel_max * m.dt
+            bound = -(courtesy(na) * m.brake)[None, :, None]      # shifted: agent f - 1 gets c_{f-1}
             ws.append(_up(-geo[3][:, :, -n_chain:], 0.0))
-            ls.append(_up(np.where(near, -COURTESY * m.brake, -_BIG), -_BIG))
+            ls.append(np.where(_up(near, False), np.broadcast_to(bound, near.shape), -_BIG))
     if m.v_max > 0:
         _velocity_rows(m, cfg, x6, xb, ws, ls)
     if not ws:                                            # e.g. formation_v0 at collision_distance = 0
