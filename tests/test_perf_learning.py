@@ -5,17 +5,40 @@ from importlib.util import find_spec
 import pytest
 
 from benchmarks import perf
+from benchmarks.perf import learning
 
 
 @pytest.mark.skipif(find_spec("torchrl") is None, reason="torchrl not installed (marl extra)")
 def test_learning_section_smoke(monkeypatch):
     ran = []
-    real = perf.learning._train_rate
-    monkeypatch.setattr(perf.learning, "_train_rate", lambda name, frames: ran.append(name) or (
-        real(name, frames) if name == "sb3_ppo" else {"skipped": "not timed in the smoke test"}))
-    out = perf.learning_throughput(batch=2, frames=64, steps=3, log=lambda _: None)
+    real = learning.end_to_end
+    monkeypatch.setattr(learning, "end_to_end", lambda trainer, env_id, steps: ran.append((trainer, env_id)) or (
+        real(trainer, env_id, steps) if env_id == "platoon_v0" else {"skipped": "not timed in the smoke test"}))
+    out = perf.learning_throughput(batch=2, agent_steps=64, steps=3, trainers=("sb3_ppo",), log=lambda _: None)
     t = out["torchrl"]
     assert t["native_agent_steps_per_s"] > 0 and t["ratio"] == t["native_agent_steps_per_s"] / t[
         "pettingzoo_wrapper_agent_steps_per_s"]
-    assert ran == ["sb3_ppo", "benchmarl_mappo", "rllib_ppo"]
-    assert out["training"]["sb3_ppo"]["agent_steps"] >= 64 * perf.AGENTS
+    assert ran == [("sb3_ppo", "platoon_v0")] + [("sb3_ppo", e) for e in learning.ENV_IDS]
+    row = out["training"]["sb3_ppo"]["platoon_v0"]
+    assert row["agent_steps"] >= 64 and row["config"] == learning.FAST_CONFIGS["sb3_ppo"]
+    assert 0 < row["env_share"] and 0 < row["learner_share"] and row["env_share"] + row["learner_share"] < 1
+
+
+def test_dagger_end_to_end_splits_expert_env_and_learner():
+    row = learning.end_to_end("dagger", "platoon_v0", 64)
+    assert row["expert"] == "dmpc" and row["agent_steps"] > 0
+    shares = [row[f"{k}_share"] for k in ("env", "expert", "learner")]
+    assert all(s > 0 for s in shares) and sum(shares) < 1
+
+
+def test_fast_configs_are_valid_trainer_configs():
+    """Every fast configuration builds its trainer's validated config (no stale field names)."""
+    from training.config import TrainConfig
+    from training.imitate import ImitationConfig
+
+    TrainConfig(**learning.FAST_CONFIGS["sb3_ppo"])
+    ImitationConfig(**learning.FAST_CONFIGS["dagger"])
+    if find_spec("benchmarl") is not None:
+        from training.benchmarl_train import BenchMARLConfig
+
+        BenchMARLConfig(**learning.FAST_CONFIGS["benchmarl_mappo"])

@@ -46,9 +46,10 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
               0.1 / 0.02 ms; pereira2022 platoon and servicing).
 * ``learning`` the native TorchRL env (``satenv.torchrl.make_env``, 256 copies) against TorchRL's
               generic ``PettingZooWrapper`` over the same ``platoon_v0`` (env only), and end-to-end
-              training agent-steps/s (env + learner, MLP 64-64, 16 copies, ``20000 x
-              --solver-scale`` env steps of one copy each) of SB3 PPO, BenchMARL MAPPO and RLlib
-              PPO, each skipped with a note when its extra is missing.
+              training agent-steps/s of SB3 PPO, BenchMARL MAPPO and DAgger on each env with its
+              fast configuration (:data:`benchmarks.perf.learning.FAST_CONFIGS`, about ``4096 x
+              --solver-scale`` agent-steps each) and the env / learner (/ expert) shares of the
+              wall time, each skipped with a note when its extra is missing.
 
 The default sections also include
 
@@ -149,7 +150,7 @@ REGISTRY: dict[str, Callable[[Options, Log], Any]] = {
     "cgmres_ipopt": _cgmres,
     "training": _training,
     "scaling": _scaling,
-    "learning": lambda o, log: learning.learning_throughput(frames=max(64, int(20_000 * o.scale)),
+    "learning": lambda o, log: learning.learning_throughput(agent_steps=max(64, int(4096 * o.scale)),
                                                             steps=max(3, int(100 * o.scale)), log=log),
 }
 """Sections that are one call each: ``name -> section(options, log) -> JSON part``, run in this

@@ -1,19 +1,198 @@
 """The ``learning`` section: the native TorchRL env against TorchRL's generic wrapper, and
-end-to-end training agent-steps/s of SB3 PPO, BenchMARL MAPPO and RLlib PPO."""
+end-to-end training throughput of each trainer on each env with its fast configuration.
+
+:data:`FAST_CONFIGS` is the documented fast configuration of each trainer (``docs/training.md``,
+"Fast configurations"): the fields of ``training.config.TrainConfig`` (SB3 PPO,
+``python -m training.train``), ``training.benchmarl_train.BenchMARLConfig`` (BenchMARL MAPPO) and
+``training.imitate.ImitationConfig`` (DAgger) that set the speed. :func:`end_to_end` runs each
+trainer's own building blocks with it for a few thousand agent-steps (no evaluation, no
+checkpoints) and splits the wall time into
+
+* ``env``: ``SatVectorEnv.step`` (SB3, BenchMARL: the batched core of every copy) or the
+  PettingZoo ``env.step`` (DAgger);
+* ``learner``: the gradient updates (SB3 ``model.train``, BenchMARL's optimiser loop, DAgger's
+  regression ``fit``);
+* ``expert`` (DAgger only): the scripted expert's ``act`` (the labels);
+* the rest: policy inference during collection, buffers, adapters.
+
+Each trainer runs once untimed first (torch's one-time costs: the first ``learn()`` of a process
+ran 10x slower); DAgger gets an eighth of the agent-steps (its scripted experts, not the learner,
+set its pace).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
+
+import numpy as np
 
 from ._common import AGENTS
 
+ENV_IDS = ("platoon_v0", "cluster_v0", "servicing_v0", "formation_v0")
+TRAINERS = ("sb3_ppo", "benchmarl_mappo", "dagger")
+DAGGER_EXPERTS = {"platoon_v0": "dmpc", "cluster_v0": "apf", "servicing_v0": "nmpc", "formation_v0": "cgmres"}
+"""The scripted expert DAgger imitates on each env in the measurement."""
 
-def learning_throughput(batch: int = 256, frames: int = 20_000, steps: int = 100,
+FAST_CONFIGS: dict[str, dict[str, Any]] = {
+    "sb3_ppo": {"num_envs": 64, "n_steps": 32, "batch_size": 4096, "n_epochs": 2, "net_arch": (64, 64),
+                "torch_threads": 1},
+    "benchmarl_mappo": {"num_envs": 64, "frames_per_batch": 64 * 32, "minibatch_size": 1024,
+                        "minibatch_iters": 4, "net_arch": (64, 64), "torch_threads": 1},
+    "dagger": {"episodes_per_round": 4, "epochs": 5, "batch_size": 2048, "net_arch": (64, 64),
+               "torch_threads": 1},
+}
+"""The fast configuration of each trainer (config field -> value), the same on every env: large
+batches (the learner, not the env, bounds training on these CPUs: one gradient step over 4096 rows
+costs about what 64 small ones cost in Python overhead), few epochs per batch, a 64-64 MLP and one
+torch thread (a second thread only competes with the env for the other core)."""
+
+
+@contextlib.contextmanager
+def _timed(owner: Any, name: str, acc: dict[str, float], key: str) -> Iterator[None]:
+    """Accumulate the wall time of every call of ``owner.name`` into ``acc[key]`` while inside."""
+    inner = getattr(owner, name)
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            acc[key] += time.perf_counter() - t0
+
+    setattr(owner, name, timed)
+    try:
+        yield
+    finally:
+        if isinstance(owner, type):
+            setattr(owner, name, inner)
+        else:
+            delattr(owner, name)
+
+
+def _row(agent_steps: int, wall: float, acc: dict[str, float], config: dict[str, Any]) -> dict:
+    return {"agent_steps": int(agent_steps), "wall_s": round(wall, 3), "agent_steps_per_s": agent_steps / wall,
+            **{f"{k}_share": v / wall for k, v in acc.items()}, "config": config}
+
+
+def _sb3(env_id: str, agent_steps: int, out_dir: str) -> dict:
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from satenv.vector import SatVectorEnv
+    from training.config import TrainConfig
+    from training.envs import make_env
+    from training.train import build_model
+    from training.vec_env import SatVecEnv
+
+    cfg = TrainConfig(env_id=env_id, out_dir=out_dir, **FAST_CONFIGS["sb3_ppo"])
+    env = make_env(env_id)
+    venv = VecNormalize(VecMonitor(SatVecEnv(env, cfg.num_envs, seed=cfg.seed)), gamma=cfg.gamma)
+    model = build_model(cfg, venv)
+    rows = cfg.num_envs * len(env.possible_agents) * cfg.n_steps
+    acc = {"env": 0.0, "learner": 0.0}
+    with _timed(SatVectorEnv, "step", acc, "env"), _timed(model, "train", acc, "learner"):
+        t0 = time.perf_counter()
+        model.learn(total_timesteps=max(rows, -(-agent_steps // rows) * rows))
+        wall = time.perf_counter() - t0
+    venv.close()
+    return _row(model.num_timesteps, wall, acc, FAST_CONFIGS["sb3_ppo"])
+
+
+def _benchmarl(env_id: str, agent_steps: int, out_dir: str) -> dict:
+    import torch
+
+    from satenv.vector import SatVectorEnv
+    from training.benchmarl_train import BenchMARLConfig, build_experiment
+
+    fast = FAST_CONFIGS["benchmarl_mappo"]
+    m = len(_agents(env_id))
+    batch = fast["frames_per_batch"]
+    frames = max(batch, -(-agent_steps // (m * batch)) * batch)
+    cfg = BenchMARLConfig(env_id=env_id, out_dir=out_dir, max_frames=frames, **fast).planned()
+    torch.set_num_threads(cfg.torch_threads)
+    exp = build_experiment(cfg)
+    acc = {"env": 0.0, "learner": 0.0}
+    with _timed(SatVectorEnv, "step", acc, "env"), _timed(exp, "_optimizer_loop", acc, "learner"):
+        t0 = time.perf_counter()
+        exp.run()
+        wall = time.perf_counter() - t0
+    return _row(exp.total_frames * m, wall, acc, fast)
+
+
+def _dagger(env_id: str, agent_steps: int, out_dir: str) -> dict:
+    """Two DAgger rounds (the expert's own flights, then the learner's with ``beta = 0.5``) of
+    ``training.imitate``'s ``collect_episode`` and ``fit`` on episodes cut to ``max_steps`` so the
+    rounds hold about ``agent_steps`` labels; evaluation and saving left out."""
+    import torch
+
+    import baselines
+    from training.actor import MLPActor
+    from training.envs import make_env
+    from training.imitate import ImitationConfig, collect_episode, fit
+    from training.policy import LearnedPolicy, ObsNormalizer
+
+    fast = FAST_CONFIGS["dagger"]
+    m = len(_agents(env_id))
+    max_steps = max(2, agent_steps // (2 * fast["episodes_per_round"] * m))
+    cfg = ImitationConfig(env_id=env_id, env_kwargs={"max_steps": max_steps}, out_dir=out_dir,
+                          expert=DAGGER_EXPERTS[env_id], **fast)
+    torch.set_num_threads(cfg.torch_threads)
+    env = make_env(env_id, **cfg.env_kwargs)
+    expert = baselines.make(cfg.expert, env)
+    agent = env.possible_agents[0]
+    obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
+    actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
+    generator, rng = torch.Generator().manual_seed(cfg.seed), np.random.default_rng(cfg.seed)
+    acc = {"env": 0.0, "expert": 0.0, "learner": 0.0}
+    xs, ys, normalizer = [], [], None
+    with _timed(env, "step", acc, "env"), _timed(expert, "act", acc, "expert"):
+        t0 = time.perf_counter()
+        for k in range(2):
+            learner = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,))
+            for e in range(cfg.episodes_per_round):
+                x, y = collect_episode(env, expert, learner, cfg.train_seed + k * cfg.episodes_per_round + e,
+                                       cfg.beta ** k, rng)
+                xs.append(x)
+                ys.append(y)
+            x_all, y_all = np.concatenate(xs), np.concatenate(ys)
+            normalizer = normalizer or ObsNormalizer(x_all.mean(0), x_all.var(0), cfg.clip_obs)
+            t1 = time.perf_counter()
+            fit(actor, normalizer, x_all, y_all, cfg, generator)
+            acc["learner"] += time.perf_counter() - t1
+        wall = time.perf_counter() - t0
+    return {**_row(sum(len(x) for x in xs), wall, acc, fast), "expert": cfg.expert,
+            "episode_max_steps": max_steps}
+
+
+def _agents(env_id: str) -> list[str]:
+    import satenv
+
+    return list(satenv.make(env_id).possible_agents)
+
+
+TRAINER_RUNS: dict[str, Callable[[str, int, str], dict]] = {"sb3_ppo": _sb3, "benchmarl_mappo": _benchmarl,
+                                                             "dagger": _dagger}
+
+
+def end_to_end(trainer: str, env_id: str, agent_steps: int = 4096) -> dict:
+    """About ``agent_steps`` agent-steps of ``trainer`` (a key of :data:`FAST_CONFIGS`) on
+    ``env_id`` with its fast configuration: agent-steps/s and the env / learner (/ expert) shares
+    of the wall time; ``{"skipped": why}`` when the trainer's extra is missing."""
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            return TRAINER_RUNS[trainer](env_id, agent_steps, tmp)
+        except ImportError as err:
+            return {"skipped": f"{trainer}: extra not installed ({err})"}
+
+
+def learning_throughput(batch: int = 256, agent_steps: int = 4096, steps: int = 100,
+                        env_ids: tuple[str, ...] = ENV_IDS, trainers: tuple[str, ...] = TRAINERS,
                         log: Callable[[str], None] = print) -> dict:
     """The ``learning`` section: TorchRL envs (env only) and end-to-end training, agent-steps/s."""
-    out: dict[str, Any] = {"env_id": "platoon_v0", "agents": AGENTS, "net_arch": [64, 64]}
+    out: dict[str, Any] = {"torchrl_env_id": "platoon_v0", "agents": AGENTS, "fast_configs": FAST_CONFIGS}
     try:
         import torch
         from torchrl.envs.libs.pettingzoo import PettingZooWrapper
@@ -38,48 +217,13 @@ def learning_throughput(batch: int = 256, frames: int = 20_000, steps: int = 100
             f"{wrapper:.3g} ({native / wrapper:.0f}x)")
     except ImportError as err:
         out["torchrl"] = {"skipped": f"torchrl not installed ({err})"}
-    out["training"] = {name: _train_rate(name, frames) for name in ("sb3_ppo", "benchmarl_mappo", "rllib_ppo")}
-    for name, row in out["training"].items():
-        log(f"(f) {name}: " + (f"skipped ({row['skipped']})" if "skipped" in row
-                               else f"{row['agent_steps_per_s']:.3g} agent-steps/s end to end"))
+    out["training"] = {}
+    for trainer in trainers:
+        budget = agent_steps // 8 if trainer == "dagger" else agent_steps   # scripted experts are slow
+        end_to_end(trainer, env_ids[0], 64)       # warm-up: the first learn() pays torch's one-time costs
+        for env_id in env_ids:
+            row = out["training"].setdefault(trainer, {})[env_id] = end_to_end(trainer, env_id, budget)
+            shares = ", ".join(f"{k[:-6]} {100 * v:.0f} %" for k, v in row.items() if k.endswith("_share"))
+            log(f"(f) {trainer} {env_id}: " + (f"skipped ({row['skipped']})" if "skipped" in row else
+                                                f"{row['agent_steps_per_s']:.3g} agent-steps/s ({shares})"))
     return out
-
-
-def _train_rate(name: str, frames: int) -> dict:
-    """Agent-steps/s of one training stack on platoon_v0 (``frames`` env steps of one copy)."""
-    import tempfile
-
-    copies = 16
-    with tempfile.TemporaryDirectory() as tmp:
-        try:
-            if name == "sb3_ppo":
-                from stable_baselines3 import PPO
-
-                import satenv
-                from training.vec_env import SatVecEnv
-
-                vec = SatVecEnv(satenv.make("platoon_v0"), copies, seed=0)
-                model = PPO("MlpPolicy", vec, n_steps=64, batch_size=1024, n_epochs=5, device="cpu", seed=0,
-                            policy_kwargs={"net_arch": [64, 64]})
-                t0 = time.perf_counter()
-                model.learn(total_timesteps=frames * AGENTS)
-                return {"agent_steps": model.num_timesteps, "agent_steps_per_s": model.num_timesteps / (time.perf_counter() - t0)}
-            if name == "benchmarl_mappo":
-                from training.benchmarl_train import BenchMARLConfig, build_experiment
-
-                exp = build_experiment(BenchMARLConfig(max_frames=frames, frames_per_batch=min(frames, 64 * copies),
-                                                       num_envs=copies, minibatch_size=1024 // AGENTS,
-                                                       minibatch_iters=5, out_dir=tmp))
-                t0 = time.perf_counter()
-                exp.run()
-                return {"agent_steps": exp.total_frames * AGENTS,
-                        "agent_steps_per_s": exp.total_frames * AGENTS / (time.perf_counter() - t0)}
-            from training.rllib_train import RLlibConfig, run
-
-            batch = min(frames, 64 * copies)
-            rows = run(RLlibConfig(iterations=max(1, frames // batch), train_batch_size=batch,
-                                   minibatch_size=min(batch, 1024 // AGENTS), num_epochs=5, out_dir=tmp), verbose=False)
-            return {"agent_steps": rows[-1]["env_steps"] * AGENTS,
-                    "agent_steps_per_s": rows[-1]["env_steps"] * AGENTS / rows[-1]["wall_s"]}
-        except ImportError as err:
-            return {"skipped": f"{name}: extra not installed ({err})"}
