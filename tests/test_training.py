@@ -86,8 +86,8 @@ def test_cli_config_replay_and_readable_help(tmp_path, capsys):
     cfg = _cfg(tmp_path, seed=5, env_kwargs={"max_steps": 7})
     path = tmp_path / "config.json"
     path.write_text(json.dumps(cfg.to_json()))
-    assert parse_args(["--config", str(path)])[0] == cfg
-    assert parse_args(["--config", str(path), "--seed", "7"])[0] == cfg.replace(seed=7)
+    assert parse_args(["--config", str(path), "--allow-code-env-id"])[0] == cfg
+    assert parse_args(["--config", str(path), "--allow-code-env-id", "--seed", "7"])[0] == cfg.replace(seed=7)
     with pytest.raises(ValueError, match="--config"):
         parse_args(["--config", str(tmp_path / "nope.json")])
     with pytest.raises(SystemExit):
@@ -194,7 +194,9 @@ def test_resume_continues_the_step_count(tmp_path):
     with pytest.raises(SystemExit, match="already has checkpoints"):
         main(["--out-dir", cfg.out_dir, "--env-id", TOY])
     # resume via the CLI: the saved config, a larger budget
-    final = main(["--out-dir", cfg.out_dir, "--resume", "--total-timesteps", "192"])
+    with pytest.raises(SystemExit, match="--resume: .*module:callable"):  # the saved config is vetted too
+        main(["--out-dir", cfg.out_dir, "--resume", "--total-timesteps", "192"])
+    final = main(["--out-dir", cfg.out_dir, "--resume", "--allow-code-env-id", "--total-timesteps", "192"])
     meta = json.loads((final / "env.json").read_text())
     assert meta["step"] == 192
     steps_after, _ = latest_checkpoint(tmp_path / "run")

@@ -74,9 +74,13 @@ def test_the_code_flag_must_be_a_bool_and_the_config_an_object():
             check_replayed_config(bad)
 
 
-def test_train_config_replay_refuses_code_before_anything_runs(tmp_path):
-    """The audit's case: ``env_id: "subprocess:run"`` ran a shell command before the type check."""
-    from training.train import main
+@pytest.mark.parametrize("cli", ["train", "imitate", "benchmarl_train", "rllib_train"])
+def test_config_replay_refuses_code_before_anything_runs(tmp_path, cli):
+    """The audit's case: ``env_id: "subprocess:run"`` ran a shell command before the type check.
+    Every CLI reads ``--config`` through ``training.config.load_config``, which vets it."""
+    import importlib
+
+    main = importlib.import_module(f"training.{cli}").main
 
     marker = tmp_path / "PWNED"
     cfg = json.loads(open(SHIPPED_CONFIG).read())

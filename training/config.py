@@ -19,6 +19,7 @@ import math
 import typing
 import warnings
 from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tyro
@@ -345,15 +346,21 @@ def _bare(tp: Any) -> Any:
     return typing.get_args(tp)[0] if typing.get_origin(tp) is Annotated else tp
 
 
-def load_config(path: str, cls: type = TrainConfig) -> Any:
-    """The ``cls`` config saved in a ``config.json`` (a clear ``ValueError`` otherwise)."""
+def load_config(path: str, cls: type = TrainConfig, *, allow_code_env_id: bool = False) -> Any:
+    """The ``cls`` config saved in a ``config.json`` (a clear ``ValueError`` otherwise).
+
+    The file is untrusted data: :func:`training.trust.check_replayed_config` vets the names it
+    holds (registered env ids and baselines only; a ``module:callable`` env id needs
+    ``allow_code_env_id``, the CLI flag ``--allow-code-env-id``) before anything is built.
+    """
+    from training.trust import UntrustedDataError, check_replayed_config, read_json
+
+    where = Path(path)
     try:
-        with open(path) as f:
-            data = json.load(f)
-    except (OSError, json.JSONDecodeError) as err:
-        raise ValueError(f"--config {path!r}: cannot read a JSON config ({err})") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"--config {path!r}: expected a JSON object of {cls.__name__} fields")
+        data = read_json(where.parent, where.name)
+    except UntrustedDataError as err:
+        raise UntrustedDataError(f"--config: {err}") from None
+    check_replayed_config(data, allow_code_env_id=allow_code_env_id, source=f"--config {path}")
     return config_from_json(data, cls)
 
 
@@ -362,6 +369,7 @@ class CliOptions(typing.NamedTuple):
 
     config: str | None
     resume: bool
+    allow_code_env_id: bool = False
 
 
 def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: Any = None,
@@ -383,8 +391,10 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
             warnings.warn(f"{old} is deprecated: use {DEPRECATED_FLAGS[old]}", FutureWarning, stacklevel=2)
     argv, opts = _split_options(argv, resume)
     if base is None and opts.config is not None:
-        base = load_config(opts.config, cls)
-    extra = ("--config FILE replays a run (its config.json; flags given override it)."
+        base = load_config(opts.config, cls, allow_code_env_id=opts.allow_code_env_id)
+    extra = ("--config FILE replays a run (its config.json; flags given override it). A replayed "
+             "config may name only registered env ids and baselines; --allow-code-env-id also admits "
+             "a 'module:callable' env id, which imports and runs that code (only for a file you trust)."
              + ("\n--resume continues the run in --out-dir from its saved config.json and last "
                 "checkpoint (flags given override it)." if resume else ""))
     text = "\n\n".join(filter(None, [description or (cls.__doc__ or "").strip(), extra]))
@@ -393,16 +403,19 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     if opts.resume and base is None:
         saved = f"{cfg.out_dir}/config.json"
         try:
-            saved_cfg = load_config(saved, cls)
-        except ValueError:
-            raise ValueError(f"--resume: {saved} not found or unreadable; run first without --resume") from None
+            saved_cfg = load_config(saved, cls, allow_code_env_id=opts.allow_code_env_id)
+        except ValueError as err:
+            raise ValueError(f"--resume: {err} (a run folder's config.json, written by a run without "
+                             "--resume)") from None
         cfg = tyro.cli(cls, args=argv, default=saved_cfg, **opts_)
     return cfg, opts
 
 
 def _split_options(argv: list[str], resume: bool) -> tuple[list[str], CliOptions]:
     """``argv`` without ``--config FILE`` / ``--resume``, and their values."""
-    rest, config, resumed = [], None, False
+    from training.trust import CODE_FLAG
+
+    rest, config, resumed, allow_code = [], None, False, False
     it = iter(argv)
     for arg in it:
         if arg == "--config" or arg.startswith("--config="):
@@ -411,6 +424,8 @@ def _split_options(argv: list[str], resume: bool) -> tuple[list[str], CliOptions
                 raise SystemExit("error: --config needs a FILE (a run's config.json)")
         elif arg == "--resume" and resume:
             resumed = True
+        elif arg == CODE_FLAG:
+            allow_code = True
         else:
             rest.append(arg)
-    return rest, CliOptions(config, resumed)
+    return rest, CliOptions(config, resumed, allow_code)

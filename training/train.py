@@ -47,7 +47,7 @@ from training.policy import (
     save_artifacts,
 )
 from training.shaping import RewardShaping
-from training.trust import CODE_FLAG, MAX_CHECKPOINT_BYTES, check_replayed_config, member, read_json
+from training.trust import MAX_CHECKPOINT_BYTES, member, read_json
 
 __all__ = ["main", "train", "latest_checkpoint"]
 
@@ -343,14 +343,9 @@ def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str
 
 # --------------------------------------------------------------------------- CLI
 def main(argv: list[str] | None = None) -> Path:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    allow_code = CODE_FLAG in argv  # a replayed --config is data: training.trust
-    argv = [a for a in argv if a != CODE_FLAG]
     try:
         cfg, opts = parse_args(argv, resume=True, prog="python -m training.train",
                                description=__doc__.split("\n\n")[0])
-        if opts.config is not None:
-            check_replayed_config(cfg.to_json(), allow_code_env_id=allow_code, source=f"--config {opts.config}")
         return train(cfg, resume=opts.resume)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
