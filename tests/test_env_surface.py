@@ -189,6 +189,10 @@ def test_gymnasium_ids_have_max_episode_steps_and_render_warns(gym_id):
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None
+    penv = satenv.make(env.unwrapped.env.metadata["name"])   # the PettingZoo env warns too
+    penv.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert penv.render() is None
 
 
 @pytest.mark.parametrize("gym_id", ["satenv/Platoon-v0", "satenv/Servicing-v0"])

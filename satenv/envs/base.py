@@ -361,8 +361,13 @@ class SatParallelEnv(ParallelEnv):
 
     # ---------------------------------------------------------------- render
     def render(self):
-        """Draw the current scene (matplotlib, 3-D positions and trails)."""
+        """Draw the current scene (matplotlib, 3-D positions and trails); without a
+        ``render_mode`` it warns and draws nothing."""
         if self.render_mode is None:
+            warnings.warn(f"render() without a render mode draws nothing: make the env with "
+                          f"render_mode='rgb_array' (frames) or 'human' (a window), e.g. "
+                          f"satenv.make({self.metadata.get('name', 'platoon_v0')!r}, render_mode='rgb_array')",
+                          UserWarning, stacklevel=2)
             return None
         from satenv.render import render_frame
 
