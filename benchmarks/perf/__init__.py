@@ -47,7 +47,7 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
 * ``learning`` the native TorchRL env (``satenv.torchrl.make_env``, 256 copies) against TorchRL's
               generic ``PettingZooWrapper`` over the same ``platoon_v0`` (env only), and end-to-end
               training agent-steps/s of SB3 PPO, BenchMARL MAPPO and DAgger on each env with its
-              fast configuration (:data:`benchmarks.perf.learning.FAST_CONFIGS`, about ``4096 x
+              fast configuration (:data:`benchmarks.perf.learning.FAST_CONFIGS`, about ``16384 x
               --solver-scale`` agent-steps each) and the env / learner (/ expert) shares of the
               wall time, each skipped with a note when its extra is missing.
 
@@ -150,7 +150,7 @@ REGISTRY: dict[str, Callable[[Options, Log], Any]] = {
     "cgmres_ipopt": _cgmres,
     "training": _training,
     "scaling": _scaling,
-    "learning": lambda o, log: learning.learning_throughput(agent_steps=max(64, int(4096 * o.scale)),
+    "learning": lambda o, log: learning.learning_throughput(agent_steps=max(64, int(16384 * o.scale)),
                                                             steps=max(3, int(100 * o.scale)), log=log),
 }
 """Sections that are one call each: ``name -> section(options, log) -> JSON part``, run in this

@@ -16,8 +16,7 @@ checkpoints) and splits the wall time into
 * the rest: policy inference during collection, buffers, adapters.
 
 Each trainer runs once untimed first (torch's one-time costs: the first ``learn()`` of a process
-ran 10x slower); DAgger gets an eighth of the agent-steps (its scripted experts, not the learner,
-set its pace).
+ran 10x slower); DAgger gets :data:`DAGGER_LABEL_FRACTION` of the agent-steps.
 """
 
 from __future__ import annotations
@@ -36,6 +35,10 @@ ENV_IDS = ("platoon_v0", "cluster_v0", "servicing_v0", "formation_v0")
 TRAINERS = ("sb3_ppo", "benchmarl_mappo", "dagger")
 DAGGER_EXPERTS = {"platoon_v0": "dmpc", "cluster_v0": "apf", "servicing_v0": "nmpc", "formation_v0": "cgmres"}
 """The scripted expert DAgger imitates on each env in the measurement."""
+DAGGER_LABEL_FRACTION = {"platoon_v0": 1 / 16, "cluster_v0": 1 / 16, "servicing_v0": 1 / 256,
+                         "formation_v0": 1 / 16}
+"""DAgger's labels as a fraction of the section's agent-steps: the scripted experts, not the
+learner, set its pace (the servicing NMPC labels about 4 agent-steps/s at the episode start)."""
 
 FAST_CONFIGS: dict[str, dict[str, Any]] = {
     "sb3_ppo": {"num_envs": 64, "n_steps": 32, "batch_size": 4096, "n_epochs": 2, "net_arch": (64, 64),
@@ -188,7 +191,7 @@ def end_to_end(trainer: str, env_id: str, agent_steps: int = 4096) -> dict:
             return {"skipped": f"{trainer}: extra not installed ({err})"}
 
 
-def learning_throughput(batch: int = 256, agent_steps: int = 4096, steps: int = 100,
+def learning_throughput(batch: int = 256, agent_steps: int = 16384, steps: int = 100,
                         env_ids: tuple[str, ...] = ENV_IDS, trainers: tuple[str, ...] = TRAINERS,
                         log: Callable[[str], None] = print) -> dict:
     """The ``learning`` section: TorchRL envs (env only) and end-to-end training, agent-steps/s."""
@@ -219,10 +222,10 @@ def learning_throughput(batch: int = 256, agent_steps: int = 4096, steps: int = 
         out["torchrl"] = {"skipped": f"torchrl not installed ({err})"}
     out["training"] = {}
     for trainer in trainers:
-        budget = agent_steps // 8 if trainer == "dagger" else agent_steps   # scripted experts are slow
         end_to_end(trainer, env_ids[0], 64)       # warm-up: the first learn() pays torch's one-time costs
         for env_id in env_ids:
-            row = out["training"].setdefault(trainer, {})[env_id] = end_to_end(trainer, env_id, budget)
+            budget = int(agent_steps * DAGGER_LABEL_FRACTION[env_id]) if trainer == "dagger" else agent_steps
+            row = out["training"].setdefault(trainer, {})[env_id] = end_to_end(trainer, env_id, max(budget, 16))
             shares = ", ".join(f"{k[:-6]} {100 * v:.0f} %" for k, v in row.items() if k.endswith("_share"))
             log(f"(f) {trainer} {env_id}: " + (f"skipped ({row['skipped']})" if "skipped" in row else
                                                 f"{row['agent_steps_per_s']:.3g} agent-steps/s ({shares})"))
