@@ -495,18 +495,17 @@ def _velocity_rows(m, cfg, x6, xb, ws, ls) -> None:
     bv = m.B[3:]
     if m.lbar is not None:
         gd = np.diag(m.lbar)
-        e_now = np.einsum("ij,bjk->bik", m.lbar, x6[..., 3:])
         e_bar = np.einsum("ij,bjk->bik", m.lbar, xb[..., 3:])
         heard = -(m.lbar - np.diag(gd)).sum(axis=1)
         beta = heard[:, None] * (np.abs(bv @ m.S).sum(axis=1) * m.u_box)[None, :]
-        v_lim = np.broadcast_to(gd[:, None] * m.v_max, e_now.shape[1:])
+        v_lim = gd[:, None] * m.v_max
         gain = gd[:, None, None] * bv[None]
     else:
-        e_now, e_bar = x6[..., 3:], xb[..., 3:]
+        e_bar = xb[..., 3:]
         beta = 0.0
         v_lim = m.v_max
         gain = bv[None]
-    lim = np.minimum(v_lim, np.maximum(v_lim * (1.0 - cfg.velocity_margin), np.abs(e_now)))
+    lim = v_lim * (1.0 - cfg.velocity_margin)     # one decision can always come back inside
     g = np.broadcast_to(gain, (*x6.shape[:2], 3, 3))
     ws.extend([g, -g])
     ls.extend([-lim - e_bar + beta, -lim + e_bar + beta])
@@ -517,8 +516,8 @@ def _omega_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray) -> tuple[np.nd
     ``omega^+`` of the env's attitude step, plus ``dt J_f^-1 F_r diag(u_max) u`` (first order)."""
     j_f, j_l, omega_l, w_max, gain, sub = m.attitude
     w_now = x[..., 10:13]
-    _, w_bar = attitude_step(x[..., 6:10], w_now, np.zeros_like(w_now), m.dt, j_f, j_l, omega_l, sub)
-    lim = np.minimum(w_max, np.maximum(w_max * (1.0 - cfg.velocity_margin), np.abs(w_now)))
+    _, w_bar = attitude_step(x[..., 6:10], w_now, np.zeros_like(w_now), m.dt, j_f, j_l, omega_l, sub)  # coasting
+    lim = w_max * (1.0 - cfg.velocity_margin)
     g = np.broadcast_to(gain, (*x.shape[:2], *gain.shape))
     return np.concatenate([g, -g], axis=2), np.concatenate([-lim - w_bar, -lim + w_bar], axis=2)
 
