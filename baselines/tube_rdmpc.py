@@ -157,7 +157,11 @@ class TubeRDMPCConfig:
             solver copy (``ipopt-jit`` compiles one per thread); the same points as ``workers=1``.
         solver: ``"ipopt"`` (default, the reference) or ``"ipopt-jit"``: the same NLP and ipopt
             options on gcc-compiled problem functions (the same iterates to round-off), compiled
-            once per process and config (about 20-50 s of gcc on 2 cores).
+            once per process and config (about 20-50 s of gcc on 2 cores). Not the default: with
+            ``warm_duals`` (the default, most of the fast path's gain) it saves only ~10 % a solve
+            (10.7 against 11.9 ms on recorded li2022 problems, ``benchmarks.perf --sections
+            fast_solvers``), so its 28 s compile pays back after ~2e4 solves, about ten li2022
+            episodes in one process.
         solve_time_limit: wall-time limit [s] of one NLP solve (None: none); a solve over it is a
             flagged failure like any other (``baselines.base.guarded_solve``): a stall guard (the
             median solve is 10-30 ms); ipopt's own ``max_wall_time`` is set to it.
