@@ -12,16 +12,21 @@ from benchmarks.perf import learning
 def test_learning_section_smoke(monkeypatch):
     ran = []
     real = learning.end_to_end
-    monkeypatch.setattr(learning, "end_to_end", lambda trainer, env_id, steps: ran.append((trainer, env_id)) or (
-        real(trainer, env_id, steps) if env_id == "platoon_v0" else {"skipped": "not timed in the smoke test"}))
+    monkeypatch.setattr(learning, "end_to_end", lambda trainer, env_id, steps, config=None: ran.append(
+        (trainer, env_id, config)) or (real(trainer, env_id, steps, config) if env_id == "platoon_v0"
+                                       else {"skipped": "not timed in the smoke test"}))
     out = perf.learning_throughput(batch=2, agent_steps=64, steps=3, trainers=("sb3_ppo",), log=lambda _: None)
     t = out["torchrl"]
     assert t["native_agent_steps_per_s"] > 0 and t["ratio"] == t["native_agent_steps_per_s"] / t[
         "pettingzoo_wrapper_agent_steps_per_s"]
-    assert ran == [("sb3_ppo", "platoon_v0")] + [("sb3_ppo", e) for e in learning.ENV_IDS]
-    row = out["training"]["sb3_ppo"]["platoon_v0"]
-    assert row["agent_steps"] >= 64 and row["config"] == learning.FAST_CONFIGS["sb3_ppo"]
-    assert 0 < row["env_share"] and 0 < row["learner_share"] and row["env_share"] + row["learner_share"] < 1
+    assert ran == ([("sb3_ppo", "platoon_v0", None)] + [("sb3_ppo", e, None) for e in learning.ENV_IDS]
+                   + [("sb3_ppo", "platoon_v0", {})])
+    rows = out["training"]["sb3_ppo"]
+    row, ref = rows["platoon_v0"], rows["platoon_v0 (defaults)"]
+    assert row["agent_steps"] >= 64 and row["config"] == learning.FAST_CONFIGS["sb3_ppo"] and ref["config"] == {}
+    assert ref["fast_speedup"] == row["agent_steps_per_s"] / ref["agent_steps_per_s"]
+    for r in (row, ref):
+        assert 0 < r["env_share"] and 0 < r["learner_share"] and r["env_share"] + r["learner_share"] < 1
 
 
 def test_dagger_end_to_end_splits_expert_env_and_learner():

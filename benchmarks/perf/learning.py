@@ -81,7 +81,7 @@ def _row(agent_steps: int, wall: float, acc: dict[str, float], config: dict[str,
             **{f"{k}_share": v / wall for k, v in acc.items()}, "config": config}
 
 
-def _sb3(env_id: str, agent_steps: int, out_dir: str) -> dict:
+def _sb3(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -> dict:
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from satenv.vector import SatVectorEnv
@@ -90,7 +90,7 @@ def _sb3(env_id: str, agent_steps: int, out_dir: str) -> dict:
     from training.train import build_model
     from training.vec_env import SatVecEnv
 
-    cfg = TrainConfig(env_id=env_id, out_dir=out_dir, **FAST_CONFIGS["sb3_ppo"])
+    cfg = TrainConfig(env_id=env_id, out_dir=out_dir, **fast)
     env = make_env(env_id)
     venv = VecNormalize(VecMonitor(SatVecEnv(env, cfg.num_envs, seed=cfg.seed)), gamma=cfg.gamma)
     model = build_model(cfg, venv)
@@ -101,18 +101,17 @@ def _sb3(env_id: str, agent_steps: int, out_dir: str) -> dict:
         model.learn(total_timesteps=max(rows, -(-agent_steps // rows) * rows))
         wall = time.perf_counter() - t0
     venv.close()
-    return _row(model.num_timesteps, wall, acc, FAST_CONFIGS["sb3_ppo"])
+    return _row(model.num_timesteps, wall, acc, fast)
 
 
-def _benchmarl(env_id: str, agent_steps: int, out_dir: str) -> dict:
+def _benchmarl(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -> dict:
     import torch
 
     from satenv.vector import SatVectorEnv
     from training.benchmarl_train import BenchMARLConfig, build_experiment
 
-    fast = FAST_CONFIGS["benchmarl_mappo"]
     m = len(_agents(env_id))
-    batch = fast["frames_per_batch"]
+    batch = BenchMARLConfig(**fast).frames_per_batch
     frames = max(batch, -(-agent_steps // (m * batch)) * batch)
     cfg = BenchMARLConfig(env_id=env_id, out_dir=out_dir, max_frames=frames, **fast).planned()
     torch.set_num_threads(cfg.torch_threads)
@@ -125,7 +124,7 @@ def _benchmarl(env_id: str, agent_steps: int, out_dir: str) -> dict:
     return _row(exp.total_frames * m, wall, acc, fast)
 
 
-def _dagger(env_id: str, agent_steps: int, out_dir: str) -> dict:
+def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -> dict:
     """Two DAgger rounds (the expert's own flights, then the learner's with ``beta = 0.5``) of
     ``training.imitate``'s ``collect_episode`` and ``fit`` on episodes cut to ``max_steps`` so the
     rounds hold about ``agent_steps`` labels; evaluation and saving left out."""
@@ -137,9 +136,8 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str) -> dict:
     from training.imitate import ImitationConfig, collect_episode, fit
     from training.policy import LearnedPolicy, ObsNormalizer
 
-    fast = FAST_CONFIGS["dagger"]
     m = len(_agents(env_id))
-    max_steps = max(2, agent_steps // (2 * fast["episodes_per_round"] * m))
+    max_steps = max(2, agent_steps // (2 * ImitationConfig(**fast).episodes_per_round * m))
     cfg = ImitationConfig(env_id=env_id, env_kwargs={"max_steps": max_steps}, out_dir=out_dir,
                           expert=DAGGER_EXPERTS[env_id], **fast)
     torch.set_num_threads(cfg.torch_threads)
@@ -176,19 +174,26 @@ def _agents(env_id: str) -> list[str]:
     return list(satenv.make(env_id).possible_agents)
 
 
-TRAINER_RUNS: dict[str, Callable[[str, int, str], dict]] = {"sb3_ppo": _sb3, "benchmarl_mappo": _benchmarl,
+TRAINER_RUNS: dict[str, Callable[[str, int, str, dict[str, Any]], dict]] = {"sb3_ppo": _sb3, "benchmarl_mappo": _benchmarl,
                                                              "dagger": _dagger}
 
 
-def end_to_end(trainer: str, env_id: str, agent_steps: int = 4096) -> dict:
+def end_to_end(trainer: str, env_id: str, agent_steps: int = 4096, config: dict[str, Any] | None = None) -> dict:
     """About ``agent_steps`` agent-steps of ``trainer`` (a key of :data:`FAST_CONFIGS`) on
-    ``env_id`` with its fast configuration: agent-steps/s and the env / learner (/ expert) shares
-    of the wall time; ``{"skipped": why}`` when the trainer's extra is missing."""
+    ``env_id`` with ``config`` (fields of the trainer's config; default: its fast configuration,
+    ``{}``: the trainer's defaults): agent-steps/s and the env / learner (/ expert) shares of the
+    wall time; ``{"skipped": why}`` when the trainer's extra is missing."""
     with tempfile.TemporaryDirectory() as tmp:
         try:
-            return TRAINER_RUNS[trainer](env_id, agent_steps, tmp)
+            return TRAINER_RUNS[trainer](env_id, agent_steps, tmp, FAST_CONFIGS[trainer] if config is None else config)
         except ImportError as err:
             return {"skipped": f"{trainer}: extra not installed ({err})"}
+
+
+def _log_row(log: Callable[[str], None], name: str, row: dict) -> None:
+    shares = ", ".join(f"{k[:-6]} {100 * v:.0f} %" for k, v in row.items() if k.endswith("_share"))
+    log(f"(f) {name}: " + (f"skipped ({row['skipped']})" if "skipped" in row else
+                           f"{row['agent_steps_per_s']:.3g} agent-steps/s ({shares})"))
 
 
 def learning_throughput(batch: int = 256, agent_steps: int = 16384, steps: int = 100,
@@ -223,10 +228,13 @@ def learning_throughput(batch: int = 256, agent_steps: int = 16384, steps: int =
     out["training"] = {}
     for trainer in trainers:
         end_to_end(trainer, env_ids[0], 64)       # warm-up: the first learn() pays torch's one-time costs
+        rows = out["training"].setdefault(trainer, {})
         for env_id in env_ids:
-            budget = int(agent_steps * DAGGER_LABEL_FRACTION[env_id]) if trainer == "dagger" else agent_steps
-            row = out["training"].setdefault(trainer, {})[env_id] = end_to_end(trainer, env_id, max(budget, 16))
-            shares = ", ".join(f"{k[:-6]} {100 * v:.0f} %" for k, v in row.items() if k.endswith("_share"))
-            log(f"(f) {trainer} {env_id}: " + (f"skipped ({row['skipped']})" if "skipped" in row else
-                                                f"{row['agent_steps_per_s']:.3g} agent-steps/s ({shares})"))
+            budget = max(16, int(agent_steps * DAGGER_LABEL_FRACTION[env_id]) if trainer == "dagger" else agent_steps)
+            rows[env_id] = end_to_end(trainer, env_id, budget)
+            _log_row(log, f"{trainer} {env_id}", rows[env_id])
+        if "skipped" not in rows[env_ids[0]]:   # the trainer's default config, same env, same run
+            ref = rows[f"{env_ids[0]} (defaults)"] = end_to_end(trainer, env_ids[0], rows[env_ids[0]]["agent_steps"], {})
+            ref["fast_speedup"] = rows[env_ids[0]]["agent_steps_per_s"] / ref["agent_steps_per_s"]
+            _log_row(log, f"{trainer} {env_ids[0]} with its defaults", ref)
     return out

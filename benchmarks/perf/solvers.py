@@ -178,8 +178,15 @@ def nmpc_closed_loop(env, decisions: int = 300) -> dict[str, float]:
 def tube_closed_loop(env, decisions: int = 6, workers: tuple[int, ...] = (1, 2)) -> dict[str, float]:
     """Wall time of whole ``TubeRDMPC.act`` calls (ipopt with ``warm_duals``) divided by the number
     of satellites, median over ``decisions`` from the same start, for each thread count (the
-    decisions are identical; ``tests/test_tube_rdmpc.py``)."""
+    decisions are identical; ``tests/test_tube_rdmpc.py``), and for ``solver="ipopt-jit"`` on one
+    thread (``ipopt_jit_workers_1``; timed on a second pass, after the compiles)."""
     from baselines.tube_rdmpc import TubeRDMPC
 
-    return {f"workers_{n}": float(np.median(act_times(env, TubeRDMPC(env, workers=n), decisions)) * 1e3 / len(env.possible_agents))
-            for n in workers}
+    def per_agent(pol: TubeRDMPC) -> float:
+        return float(np.median(act_times(env, pol, decisions))) * 1e3 / len(env.possible_agents)
+
+    out = {f"workers_{n}": per_agent(TubeRDMPC(env, workers=n)) for n in workers}
+    jit = TubeRDMPC(env, solver="ipopt-jit")
+    act_times(env, jit, decisions)              # compiles the solvers these decisions use
+    out["ipopt_jit_workers_1"] = per_agent(jit)
+    return out
