@@ -65,7 +65,7 @@ def ship(run_dir: Path, k: int, name: str, heldout: Path, with_shield: bool) -> 
     curve = run_dir / "learning_curve.png"
     if curve.is_file():
         (dest / "learning_curve.png").write_bytes(curve.read_bytes())
-    hist = json.loads((run_dir / "history.json").read_text())[: k + 1]
+    hist = json.loads((run_dir / "history.json").read_text())
     (dest / "history.json").write_text(json.dumps(hist, indent=1) + "\n")
     return dest
 
