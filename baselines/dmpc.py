@@ -599,9 +599,12 @@ class ConvexStepDMPC:
         self.iterations: list[int] = []
         self.qp_ms: list[float] = []
 
-    def _pair_rows(self, z0: np.ndarray, offset: np.ndarray, sign: float):
+    def _pair_rows(self, z0: np.ndarray, offset: np.ndarray, sign: float, margin: float = 0.0,
+                   los: bool = True):
         """Rows ``G U_j in [lo, hi]`` of the constraints on one pair whose prediction is
-        ``Z = offset + sign * calB U_j`` (offset includes calA z0 and the other agents)."""
+        ``Z = offset + sign * calB U_j`` (offset includes calA z0 and the other agents);
+        ``margin`` [m] is added to the keep-out radius, ``los=False`` leaves out the LOS cone
+        (both for ``training.experts.JointPlatoonMPC``)."""
         sc, hz = self.scenario, self.horizon
         g_rows, lo, hi = [], [], []
         gv = sign * self.cb_v
@@ -616,11 +619,11 @@ class ConvexStepDMPC:
             d = z0[:3] - center
             nrm = np.linalg.norm(d)
             nvec = d / nrm if nrm > 1e-9 else np.array([0.0, -1.0, 0.0])
-            p_o = center + sc.keepout_radius * nvec  # eq. 32-33: tangent plane at p_o
+            p_o = center + (sc.keepout_radius + margin) * nvec  # eq. 32-33: tangent plane at p_o
             g_rows.append(np.einsum("c,kcj->kj", nvec, cbp))
             lo.append(nvec @ p_o - off_p @ nvec)
             hi.append(np.full(hz, 1e30))
-        if sc.los_slopes is not None:
+        if los and sc.los_slopes is not None:
             cx, cz = sc.los_slopes
             xr, yr, zr = sc.port
             a_los = np.array([[0, 1, 0], [cx, 1, 0], [-cx, 1, 0], [0, 1, cz], [0, 1, -cz]], float)

@@ -114,9 +114,8 @@ class JointPlatoonMPC:
         c, sc, hz = self.core, self.scenario, self.core.horizon
         free = np.einsum("ij,mj->mi", c.ca, z)
         g_all, lo_all, hi_all = [], [], []
-        r_saved = sc.keepout_radius
         for j in range(self.m):
-            g, lo, hi = self._pair_rows(z[j], free[j], r_saved + self.margin, los)
+            g, lo, hi = c._pair_rows(z[j], free[j], 1.0, margin=self.margin, los=los)
             g_all.append(g @ self.D[j])
             lo_all.append(lo)
             hi_all.append(hi)
@@ -137,7 +136,7 @@ class JointPlatoonMPC:
         c, sc, hz = self.core, self.scenario, self.core.horizon
         z = x - np.concatenate([np.zeros((1, 6)), x[:-1]], axis=0)
         off = c.ca @ z[j] - (c.cb @ u[j - 1] if j >= 1 else 0.0)
-        g, lo, hi = self._pair_rows(z[j], off, sc.keepout_radius + self.margin, los)
+        g, lo, hi = c._pair_rows(z[j], off, 1.0, margin=self.margin, los=los)
         if self.leader_keepout and j >= 1:
             offp = (c.ca @ x[j]).reshape(hz, 6)[:, :3]
             d = x[j, :3] / max(np.linalg.norm(x[j, :3]), 1e-9)
@@ -146,6 +145,20 @@ class JointPlatoonMPC:
             hi = np.concatenate([hi, np.full(hz, 1e30)])
         return g, lo, hi
 
+    def _solve_relaxing(self, qps, f: np.ndarray, rows) -> np.ndarray | None:
+        """Solve with every row, then without the LOS rows, then with the input box only
+        (``qps`` = (full, no-LOS, box) solvers; ``rows(los)`` gives ``(G, lo, hi)``)."""
+        for qp, los in ((qps[0], True), (qps[1], False)):
+            g, lo, hi = rows(los)
+            qp.update(f, lo, hi, A=g)
+            sol = qp.solve(self.info, fallback=False)
+            if sol is not None:
+                return sol
+            self.info["relaxed"] += 1
+        qps[2].update(f)
+        sol = qps[2].solve(self.info)
+        return sol if sol is not None and np.all(np.isfinite(sol)) else None
+
     def _plan_sequential(self, x: np.ndarray) -> np.ndarray:
         c = self.core
         z = x - np.concatenate([np.zeros((1, 6)), x[:-1]], axis=0)
@@ -153,49 +166,12 @@ class JointPlatoonMPC:
         for j in range(self.m):
             off = c.ca @ z[j] - (c.cb @ u[j - 1] if j >= 1 else 0.0)
             f = 2 * c.wq[j] * (c.btq @ (off - c.yd))
-            full, nolos, box = self.seq[j]
-            sol = None
-            for qp, los in ((full, True), (nolos, False)):
-                g, lo, hi = self._seq_rows(j, x, u, los)
-                qp.update(f, lo, hi, A=g)
-                sol = qp.solve(self.info, fallback=False)
-                if sol is not None:
-                    break
-                self.info["relaxed"] += 1
+            sol = self._solve_relaxing(self.seq[j], f, lambda los, j=j: self._seq_rows(j, x, u, los))
             if sol is None:
-                box.update(f)
-                sol = box.solve(self.info)
-            if sol is None or not np.all(np.isfinite(sol)):
                 record_fallback(self.info, f"follower {j + 1} QP failed: zero plan")
                 sol = np.zeros(self.nu)
             u[j] = np.clip(sol, -self.u_max, self.u_max)
         return u[:, :3].copy()
-
-    def _pair_rows(self, z0, offset, radius, los):
-        """The pair rows of :meth:`ConvexStepDMPC._pair_rows` on ``calB (U_j - U_{j-1})``."""
-        c, sc, hz = self.core, self.scenario, self.core.horizon
-        g_rows = [c.cb_v]
-        off_v = offset.reshape(hz, 6)[:, 3:].ravel()
-        lo, hi = [-sc.v_max - off_v], [sc.v_max - off_v]
-        cbp = c.cb_p.reshape(hz, 3, self.nu)
-        off_p = offset.reshape(hz, 6)[:, :3]
-        if sc.keepout_radius > 0:
-            center = np.asarray(sc.keepout_center)
-            d = z0[:3] - center
-            nrm = np.linalg.norm(d)
-            nvec = d / nrm if nrm > 1e-9 else np.array([0.0, -1.0, 0.0])
-            g_rows.append(np.einsum("c,kcj->kj", nvec, cbp))
-            lo.append(nvec @ (center + radius * nvec) - off_p @ nvec)
-            hi.append(np.full(hz, 1e30))
-        if los and sc.los_slopes is not None:
-            cx, cz = sc.los_slopes
-            xr, yr, zr = sc.port
-            a_los = np.array([[0, 1, 0], [cx, 1, 0], [-cx, 1, 0], [0, 1, cz], [0, 1, -cz]], float)
-            b_los = np.array([-yr, cx * xr, cx * xr, cz * zr, cz * zr])
-            g_rows.append(np.einsum("rc,kcj->krj", a_los, cbp).reshape(5 * hz, self.nu))
-            lo.append(np.full(5 * hz, -1e30))
-            hi.append(np.tile(b_los, hz) - (off_p @ a_los.T).ravel())
-        return np.vstack(g_rows), np.concatenate(lo), np.concatenate(hi)
 
     # ------------------------------------------------------------------ policy interface
     def reset(self, seed: int | None = None) -> None:
@@ -213,18 +189,8 @@ class JointPlatoonMPC:
         f = np.zeros(self.m * self.nu)
         for j in range(self.m):
             f += 2 * c.wq[j] * self.D[j].T @ (c.btq @ (free[j] - c.yd))
-        sol = None
-        for qp, los in ((self.qp_full, True), (self.qp_nolos, False)):
-            g, lo, hi = self._rows(z, los)
-            qp.update(f, lo, hi, A=g)
-            sol = qp.solve(self.info, fallback=False)
-            if sol is not None:
-                break
-            self.info["relaxed"] += 1
+        sol = self._solve_relaxing((self.qp_full, self.qp_nolos, self.qp_box), f, lambda los: self._rows(z, los))
         if sol is None:
-            self.qp_box.update(f)
-            sol = self.qp_box.solve(self.info)
-        if sol is None or not np.all(np.isfinite(sol)):
             record_fallback(self.info, "joint QP failed: zero thrust")
             return np.zeros((self.m, 3))
         return np.clip(sol.reshape(self.m, self.nu)[:, :3], -self.u_max, self.u_max)
