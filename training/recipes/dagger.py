@@ -61,6 +61,14 @@ SYSTEMS: dict[str, System] = {
         {"round0_episodes": 6, "episodes_per_round": 4, "val_seeds": (700_000, 700_001, 700_002),
          "expert_options": {}, "obs_drop_dims": (18,), "obs_symlog_scale": 300.0,
          "noise_std": 0.1, "epochs": 20}),
+    # not run yet: the cooperative NMPC (N = 30) warm-starts and plans against the other
+    # spacecraft's previous plan, so its shadow labels are close to, not exactly, what it would do
+    "servicing-pereira2022": System(
+        "servicing_v0", {"preset": "pereira2022", "randomize": True}, {"preset": "pereira2022"},
+        "baselines:NMPC",
+        {"round0_episodes": 4, "episodes_per_round": 2, "val_seeds": (700_000, 700_001, 700_002),
+         "expert_options": {}, "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05,
+         "epochs": 20}),
 }
 """The systems this driver trains (names follow the scoreboard scenarios)."""
 
@@ -145,7 +153,7 @@ def collect_episode(env, expert, learner, seed: int, beta: float, noise: float,
         else:
             flown = learner.act(obs)
         if noise > 0:
-            flown = {a: np.clip(v + rng.normal(0, noise, 3), -1, 1).astype(np.float32) for a, v in flown.items()}
+            flown = {a: np.clip(v + rng.normal(0, noise, np.shape(v)), -1, 1).astype(np.float32) for a, v in flown.items()}
         obs, _, _, _, infos = env.step(flown)
         collided |= any(bool(i["collision"]) for i in infos.values())
         min_sep = min(min_sep, *(float(i["min_separation"]) for i in infos.values()))
@@ -257,7 +265,8 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     history_path = run_dir / "history.json"
     history = json.loads(history_path.read_text()) if history_path.is_file() else []
     x, y, done = load_labels(run_dir)
-    actor = MLPActor(feats.out_dim(obs_dim), 3, list(cfg.net_arch), cfg.activation, cfg.squash)
+    act_dim = collect.action_space(collect.possible_agents[0]).shape[0]
+    actor = MLPActor(feats.out_dim(obs_dim), act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     normalizer = None
     if history:
         last = load(run_dir / "rounds" / f"{len(history) - 1:04d}")
