@@ -123,6 +123,22 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
     return result
 
 
+def card_fields(result: dict[str, Any], shipped: str = "learned") -> dict[str, Any]:
+    """The keys ``training.card`` reads (``aggregate``, ``vs_<REF>``, ``test_seeds``) for the
+    randomised scenario. ``learned`` is what ``training.load(folder)`` returns (the network: the
+    loader does not add a safety filter yet), ``learned+shield`` beside it; ratios on matched
+    completed episodes. ``shipped`` names the variant the folder ships."""
+    block, ref = result["random"], result["controller"]
+    agg = {"learned": block["learned"]["aggregate"]}
+    ratios = {"reference": ref, "all": block["learned"]["ratios"], "shipped": shipped}
+    if "learned+shield" in block:
+        agg["learned+shield"] = block["learned+shield"]["aggregate"]
+        ratios["learned+shield"] = block["learned+shield"]["ratios"]
+    agg[ref] = block[ref]["aggregate"]
+    seeds = [e["seed"] for e in block["learned"]["episodes"]]
+    return {"test_seeds": seeds, "aggregate": agg, f"vs_{ref.upper()}": ratios}
+
+
 def table(result: dict[str, Any]) -> str:
     cols = ["episodes", "success_rate", "collision_episodes", "violation_episodes", "terminated", "rmse",
             "delta_v", "final_error_m", "min_separation_m", "compute_ms_per_agent"]
@@ -151,6 +167,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--paper-seeds", default="0-2")
     p.add_argument("--controller", default=None, help="default: the system's (CONTROLLERS); 'none' to skip")
     p.add_argument("--no-shield", action="store_true")
+    p.add_argument("--shipped", default="learned", choices=["learned", "learned+shield"],
+                   help="which variant the folder ships (the card's 'learned' row)")
     p.add_argument("--out", type=Path, required=True)
     ns = p.parse_args(argv)
 
@@ -165,6 +183,8 @@ def main(argv: list[str] | None = None) -> None:
     res = evaluate_policies(ns.system, ns.policy, span(ns.seeds), span(ns.paper_seeds),
                             None if ctrl == "none" else ctrl, shield=not ns.no_shield)
     res["table"] = table(res)
+    if res["controller"]:
+        res.update(card_fields(res, ns.shipped))
     ns.out.write_text(json.dumps(res, indent=1) + "\n")
     print(res["table"])
 

@@ -61,7 +61,9 @@ def ship(run_dir: Path, k: int, name: str, heldout: Path, with_shield: bool) -> 
     config["shipped_round"] = k
     evaluation = json.loads(heldout.read_text())
     dest = save_artifacts(training.POLICIES_DIR / name, policy, env_meta=meta, config=config,
-                          evaluation=evaluation, source=f"training.recipes.dagger round {k}")
+                          evaluation=evaluation,
+                          source=f"DAgger of {config.get('expert', '?')} (training.recipes.dagger round {k})"
+                          + (", ships behind satenv.safety.shield" if with_shield else ""))
     curve = run_dir / "learning_curve.png"
     if curve.is_file():
         (dest / "learning_curve.png").write_bytes(curve.read_bytes())
