@@ -71,6 +71,7 @@ pereira2023 minimum-error constraint (41) (implied by separation for the PLF top
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -78,6 +79,7 @@ from typing import Any
 import numpy as np
 
 from satenv.dynamics import attitude_step, cw_matrices, quat_to_matrix, thruster_matrices
+from satenv.dynamics._checks import all_finite
 from satenv.errors import SatenvError, SatenvTypeError
 from satenv.vector import SatVectorEnv
 
@@ -225,6 +227,15 @@ class SafetyModel:
     attitude: tuple | None = None    # servicing: (j_f, j_l, omega_l, omega_max, G (3, d), substeps)
     kinds: tuple[int, ...] = ()
     budget: tuple[np.ndarray, np.ndarray] | None = None   # (own, other) (M, slots): braking fractions
+
+    @functools.cached_property
+    def body_state(self) -> np.ndarray:
+        """``[centre at t = 0, velocity]`` of every body ``(nb, 6)``."""
+        return np.array([np.r_[b.center, b.velocity] for b in self.bodies]).reshape(-1, 6)
+
+    @functools.cached_property
+    def body_radius(self) -> np.ndarray:
+        return np.array([b.radius for b in self.bodies])
 
     @property
     def n_chain(self) -> int:
@@ -423,13 +434,12 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
         r = x6[:, :, None] - x6[:, None]                  # (B, M, M, 6): agent i minus agent j
         geos.append(_sphere(cfg, r, xb[:, :, None] - xb[:, None], m.pair_distance))
         drifts.append(_drift(m, r))
-    for body in m.bodies:
-        c = body.center + t[:, None] * body.velocity      # (B, 3) now, then at the next decision
-        vel = np.broadcast_to(body.velocity, c.shape)
-        r = x6 - np.concatenate([c, vel], -1)[:, None]
-        rb = xb - np.concatenate([c + m.dt * body.velocity, vel], -1)[:, None]
-        geos.append(tuple(v[:, :, None] for v in _sphere(cfg, r, rb, body.radius)))
-        drifts.append(_drift(m, x6)[..., None])
+    if m.bodies:   # (B, nb, 6) body states now and at the next decision (their own motion)
+        centre = m.body_state[None, :, :3] + t[:, None, None] * m.body_state[None, :, 3:]
+        now = np.concatenate([centre, np.broadcast_to(m.body_state[None, :, 3:], centre.shape)], -1)
+        nxt = now + m.dt * np.concatenate([m.body_state[:, 3:], np.zeros((len(m.bodies), 3))], -1)
+        geos.append(_sphere(cfg, x6[:, :, None] - now[:, None], xb[:, :, None] - nxt[:, None], m.body_radius))
+        drifts.append(np.repeat(_drift(m, x6)[..., None], len(m.bodies), axis=-1))
     n_chain = m.n_chain
     if n_chain:
         zero = np.zeros_like(x6[:, :1])
@@ -661,7 +671,7 @@ def _check_inputs(m: SafetyModel, x: Any, t: Any, actions: Any) -> tuple[np.ndar
             raise SafetyTypeError(f"safety filter: {name} must be a real array, got {type(value).__name__}") from None
         if arr.ndim != ndim:
             raise SafetyError(f"safety filter: {name} must have {ndim} dimensions, got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
+        if not all_finite(arr):
             raise SafetyError(f"safety filter: {name} has non-finite entries (NaN or inf)")
         arrays.append(arr)
     x, t, a = arrays
