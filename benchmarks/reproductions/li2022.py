@@ -1,11 +1,13 @@
 """Reproduce li2022 §4: tube-based robust DMPC vs APF on the 10-satellite cluster.
 
 ``python -m benchmarks.reproduce li2022 --out FILE.json [--plots DIR] [--case 1|2]
-[--variant ours|published|both] [--no-ablation]``. Expected run time on 2 cores: about 1.5-6 min
-per RDMPC episode (2000 s, 400 decisions of 10 NLPs; the as-published and no-relaxed-solve runs are
-the slow ones), 12 s for the APF episode, about 1 min for the ``lyapunov_tolerance`` sensitivity
-and the tube experiment; the default (both cases, the ablation on case 1) runs 10 RDMPC episodes.
-Progress lines go to stderr.
+[--variant ours|published|both] [--no-ablation] [--partial FILE.json] [--with RESULT.json]``.
+Measured on 2 cores shared at a load of 4-8 (2026-12-01): 2-6 min per RDMPC episode of ours and
+the ablation (2000 s, 400 decisions of 10 NLPs), 13 min for the as-published one (3047 of its
+4000 exact solves fail at the iteration cap or infeasible), seconds for the APF, a few minutes for
+the ``lyapunov_tolerance`` sensitivity and the tube experiment; the default (both cases, the
+ablation on case 1) runs 9 RDMPC episodes. ``--partial`` rewrites the result after every episode,
+``--with`` resumes from (or adds a case to) an earlier result. Progress lines go to stderr.
 
 Runs ``satenv.cluster_v0(preset="li2022-case<k>", terminate_on_collision=False)`` (a safety
 violation is counted, not hidden by an early end) with ``baselines.TubeRDMPC`` and (case 1, the
@@ -88,8 +90,9 @@ EXACT_MAX_ITER = 60
 """ipopt iteration limit of the RDMPC's exact NLP here (``TubeRDMPCConfig.exact_max_iter``; the
 relaxed NLP keeps 150): no exact solve that succeeded took over 50 in these episodes, so the
 rows are those of the default 150, while the failing solves stop sooner."""
-RUN_TIME = ("about 40-60 min by default (10 RDMPC episodes of 1.5-6 min); --case 1 --no-ablation: "
-            "about 10 min; --variant ours --no-ablation: about 2.5 min per case")
+RUN_TIME = ("about 50-60 min by default at a load of 4-8 on 2 cores (case 1: ours 4 min, as published 13 min, "
+            "ablation 2-6 min per run; case 2 likewise); --case 1 --no-ablation: about 20 min; "
+            "--variant ours --no-ablation: about 4 min per case")
 
 SOURCES = {
     "s43": "The convergence time of the distributed RDMPC controller is 1000 s, while the control accuracy "
