@@ -52,6 +52,7 @@ def list_registry() -> str:
         fits = _fits(spec)
         ranked = f" (ranked on {','.join(spec.scenarios)})" if spec.scenarios else ""
         lines.append(f"  {name:<32} {_status(spec):<12}  fits {fits}{ranked}  {spec.description}")
+    lines.append(f"any policy name + '{SHIELD_SUFFIX}': the policy behind the safety filter (--shield: every one)")
     lines.append(f"quick: {QUICK}")
     return "\n".join(lines)
 
