@@ -311,6 +311,17 @@ def test_parse_seeds():
     for bad in ("", "a", "-1", "5-2"):
         with pytest.raises(ScoreboardError):
             parse_seeds(bad)
+    with pytest.raises(ScoreboardError, match="more than"):   # the audit's 0-99999999999: capped
+        parse_seeds("0-99999999999")
+
+
+def test_quick_board_has_servicing_and_notes_say_where_a_baseline_applies():
+    from benchmarks.scoreboard.plan import _supported_envs
+    from benchmarks.scoreboard.registry import POLICIES, QUICK
+
+    assert "servicing-pereira2022" in QUICK["scenarios"]
+    for name in ("apf", "nmpc", "cgmres", "tube_rdmpc"):
+        assert "any env" not in _supported_envs(POLICIES[name])[0]
 
 
 def test_scenario_seed_caps(tmp_path):

@@ -40,29 +40,15 @@ def split_names(value: str | Iterable[str] | None) -> list[str] | None:
     return [s.strip() for s in items if s.strip()]
 
 
-def _parse_part(part: str, seeds: set[int]) -> None:
-    if "-" in part:
-        lo, hi = (int(p) for p in part.split("-", 1))
-        if hi < lo:
-            raise ValueError
-        seeds.update(range(lo, hi + 1))
-    else:
-        seeds.add(int(part))
-
-
 def parse_seeds(text: str) -> list[int]:
-    """``"0-9"``, ``"0,3,7"`` or ``"0-4,10"`` -> sorted unique non-negative ints."""
-    seeds: set[int] = set()
+    """``"0-9"``, ``"0,3,7"`` or ``"0-4,10"`` -> sorted unique non-negative ints: the one seeds
+    grammar of every CLI (:func:`training.config.parse_seeds`, capped at its ``MAX_SEEDS``)."""
+    from training.config import parse_seeds as parse
+
     try:
-        for part in text.split(","):
-            if part.strip():
-                _parse_part(part.strip(), seeds)
-    except ValueError:
-        raise ScoreboardError(f"--seeds must be non-negative integers or ranges like '0-9' or "
-                              f"'0,3,7', got {text!r}") from None
-    if not seeds or min(seeds) < 0:
-        raise ScoreboardError(f"--seeds must name at least one non-negative seed, got {text!r}")
-    return sorted(seeds)
+        return sorted(parse(text))
+    except ValueError as err:
+        raise ScoreboardError(f"--{err}" if str(err).startswith("seeds") else str(err)) from None
 
 
 def board_seeds(seeds: list[int] | str | None, quick: bool,
@@ -235,11 +221,20 @@ class Plan:
         return self.seeds_of(key[0])[0] == key[2]
 
 
+def _supported_envs(spec: PolicySpec) -> tuple[str, ...]:
+    """Where a policy spec applies: a baseline's class says (``supported()``), else any env."""
+    if spec.baseline is None:
+        return ("any env",)
+    from baselines.registry import get
+
+    return (get(spec.baseline).supported(),)
+
+
 def _unpaired_notes(plan: Plan, policies: Mapping[str, PolicySpec], names: list[str],
                     notes: list[str]) -> None:
     for name in names:
         if not any(p == name for _, p in plan.pairs) and not any(f"policy {name} on" in n for n in notes):
-            fits = ", ".join(policies[name].env_ids or ("any env",))
+            fits = ", ".join(policies[name].env_ids or _supported_envs(policies[name]))
             notes.append(f"policy {name}: fits none of the selected scenarios (it controls {fits})")
 
 

@@ -110,10 +110,12 @@ POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
 
 QUICK: dict[str, Any] = {
     "scenarios": ["platoon-PLF-cw", "platoon-BDL-j2", "platoon-chain-cw", "platoon-tplf30-random-cw",
-                  "platoon-pereira2022", "formation-kannan2022-position", "cluster-case1"],
-    "policies": ["zero", "random", "dmpc", "apf", "cgmres", "trained:*"],
+                  "platoon-pereira2022", "formation-kannan2022-position", "cluster-case1",
+                  "servicing-pereira2022"],
+    "policies": ["zero", "random", "dmpc", "apf", "cgmres", "trained:*"],   # no NMPC: minutes an episode
     "seeds": [0, 1, 2],
-    "scenario_seeds": {"cluster-case1": [0]},   # ~10 s per episode: one seed in the quick board
+    # cluster ~10 s per episode; servicing: one seed of the paper's start
+    "scenario_seeds": {"cluster-case1": [0], "servicing-pereira2022": [0]},
 }
 """The ``--quick`` board (the README's first command): a few minutes on 2 cores at most."""
 
