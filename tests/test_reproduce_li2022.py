@@ -10,7 +10,8 @@ def _row(**kw):
     row = {"case": 1, "controller": "tube_rdmpc", "variant": "ours", "convergence_time_s": 1055.0,
            "final_error_m": 0.0227, "satellites_within_1m_at_end": 10, "relaxed_solves": 0, "fallbacks": 0,
            "failed_solves": 0, "final_nominal_error_m": 0.02, "max_tube_error_m": 0.001, "lyapunov_floor_m": 0.0224,
-           "collisions": 0, "max_thrust_N": 0.97, "max_rise_m": 0.01, "wall_time_s": 1.0, "reallocations": 0}
+           "collisions": 0, "max_thrust_N": 0.97, "max_rise_m": 0.01, "wall_time_s": 1.0, "reallocations": 0,
+           "min_pair_distance_m": 210.0, "min_obstacle_distance_m": 405.0}
     return {**row, **kw}
 
 
