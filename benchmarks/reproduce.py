@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
+import os
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -54,6 +56,31 @@ def run_times() -> str:
     return "\n".join(lines)
 
 
+MAX_RESULT_BYTES = 64 * 2**20
+"""The largest existing file ``--out`` may replace (a reproduction JSON is well under a MB)."""
+
+
+def _unsafe_out(path: Path) -> str | None:
+    """Why ``--out path`` must not be written, or None: it names a new ``.json`` file, or an
+    earlier reproduction's result (a JSON object with ``paper`` and ``claims``), nothing else —
+    the command never overwrites another file (it may run as root)."""
+    if path.suffix != ".json":
+        return "expected a .json file name"
+    if not os.path.lexists(path):
+        return None
+    if path.is_symlink() or not path.is_file():
+        return "exists and is not a regular file"
+    if path.stat().st_size > MAX_RESULT_BYTES:
+        return "exists and is not a reproduction result (too large); choose another name"
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        data = None
+    if not (isinstance(data, dict) and "paper" in data and "claims" in data):
+        return "exists and is not an earlier reproduction result; choose another name"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.reproduce", description=__doc__.splitlines()[0],
                                      epilog=run_times(), formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -74,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     if module is not None and hasattr(module, "add_arguments"):
         module.add_arguments(parser)
     args = parser.parse_args(argv)
+    if args.out is not None and (problem := _unsafe_out(args.out)):
+        parser.error(f"--out {str(args.out)!r}: {problem}")
     module = module or load(args.paper)
     extra = {k: v for k, v in vars(args).items() if k not in base}
     result = module.reproduce(plots=args.plots, seed=args.seed, **extra)

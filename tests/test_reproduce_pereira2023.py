@@ -94,3 +94,20 @@ def test_unknown_paper_is_a_clear_error():
         reproduce.main(["smith1999"])
     with pytest.raises(SystemExit):
         reproduce.main(["../../etc/passwd"])
+
+
+def test_out_never_replaces_a_file_that_is_not_an_earlier_result(tmp_path, capsys):
+    """``--out`` (the command may run as root): a new .json file or an earlier reproduction JSON
+    only; a system file, a folder, a link or another JSON is refused before anything runs."""
+    other = tmp_path / "other.json"
+    other.write_text('{"keep": 1}')
+    target = tmp_path / "target.json"
+    target.write_text('{"paper": "x", "claims": []}')
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    for bad in ("/etc/passwd", str(tmp_path), str(other), str(link), str(tmp_path / "sub")):
+        with pytest.raises(SystemExit):
+            reproduce.main(["pereira2023", "--out", bad])
+        assert "--out" in capsys.readouterr().err
+    assert other.read_text() == '{"keep": 1}'
+    assert reproduce._unsafe_out(target) is None and reproduce._unsafe_out(tmp_path / "new.json") is None

@@ -22,9 +22,9 @@ Agent-steps per second (one agent advanced by one decision step) of
 
 Seven more sections run only when named in ``--sections`` (they take minutes):
 
-* ``reproductions`` issue 17's wall times of ``reproduce li2022 --case 1`` (both variants) and
+* ``reproductions`` wall times of ``reproduce li2022 --case 1`` (our variant) and
               ``reproduce pereira2022-servicing`` (a subprocess each, plots off), against their
-              targets (60 s / 20 s);
+              targets (li2022 case 1 <= 120 s, servicing <= 20 s; our variant only);
 
 * ``fast_solvers`` (stored as ``solvers.fast_vs_ipopt``) the fast paths of tube-RDMPC (compiled
               ``solver="ipopt-jit"`` with ``warm_duals``; one gcc compile, about 1 min) and NMPC
