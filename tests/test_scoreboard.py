@@ -522,3 +522,12 @@ def test_workers_die_with_a_killed_parent(tmp_path):
         assert not [c for c in children if _alive(c)]
     finally:
         proc.kill()
+
+
+def test_cli_shares_the_training_grammar():
+    """``--out-dir`` and ``--address`` as in every training CLI (the old names still work)."""
+    from benchmarks.scoreboard.cli import build_parser
+
+    parse = build_parser().parse_args
+    assert parse(["--out-dir", "a"]).out == parse(["--out", "a"]).out == "a"
+    assert parse(["--address", "h:1"]).ray_address == parse(["--ray-address", "h:1"]).ray_address == "h:1"

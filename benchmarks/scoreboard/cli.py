@@ -74,15 +74,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "only JSON and torch weights are read, nothing is unpickled; old SB3 "
                         "model.zip folders are refused (training.policy.convert_sb3 converts one "
                         "you trust)")
-    p.add_argument("--out", help="output directory (default: results/scoreboard, "
-                                 "results/scoreboard/quick with --quick)")
+    p.add_argument("--out-dir", "--out", dest="out",
+                   help="output directory (default: results/scoreboard, results/scoreboard/quick with "
+                        "--quick); --out is the same option")
     p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     p.add_argument("--overwrite", action="store_true", help="discard the episodes already in --out")
     p.add_argument("--workers", type=int, default=1, help="parallel worker processes")
     p.add_argument("--backend", choices=("process", "ray"), default="process",
                    help="where episodes run: local processes or Ray")
-    p.add_argument("--ray-address", default=None,
-                   help="address of an existing Ray cluster (default: start a local one)")
+    p.add_argument("--address", "--ray-address", dest="ray_address", default=None,
+                   help="address of an existing Ray cluster (default: start a local one); "
+                        "--ray-address is the same option")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots and trajectories")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--shield", action="store_true",
