@@ -56,7 +56,7 @@ def plot(out: str | Path, name: str = POLICY, seed: int = SEED) -> dict[str, Any
 
     folder = SHIPPED_POLICY_DIR / name
     kwargs = dict(read_json(folder, "env.json")["eval_env_kwargs"])
-    policy = training.load(folder)
+    policy = training.load(folder, shielded=False)
     raw, safe = episode(policy, kwargs, False, seed), episode(policy, kwargs, True, seed)
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8.0, 6.4), sharex=True, constrained_layout=True)
     colors = {"pair": "tab:blue", "obstacle": "tab:red"}

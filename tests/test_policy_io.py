@@ -133,3 +133,35 @@ def test_trusted_sb3_zip_loads_with_a_warning_and_converts(tmp_path):
     new = training.load(folder)
     obs = np.random.default_rng(1).normal(size=(3, 6))
     np.testing.assert_array_equal(new.predict(obs), old.predict(obs))
+
+
+def test_a_folder_shipped_behind_the_safety_filter_loads_as_shipped(tmp_path):
+    """``env.json`` ``safety_filter``: ``training.load(folder, env=env)`` returns the filtered
+    policy, ``shielded=False`` the network, no env a warning; the entry is data (never imported)."""
+    import json
+    import shutil
+    import warnings
+
+    import satenv
+    from satenv.safety import Shield
+    from training.card import card
+    from training.policy import PolicyLoadError, write_manifest
+
+    src = training.POLICIES_DIR / "platoon_pereira2022_dagger_shield"
+    env = satenv.platoon_v0(preset="pereira2022", randomize=True)
+    assert isinstance(training.load(src, env=env), Shield)
+    assert not isinstance(training.load(src, env=env, shielded=False), Shield)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert not isinstance(training.load(src), Shield)
+    assert any("ships behind the safety filter" in str(w.message) for w in caught)
+    c = card(src)
+    assert c["shipped"] == "learned+shield" and c["network_alone"] is not None
+    bad = tmp_path / "bad"
+    shutil.copytree(src, bad)
+    meta = json.loads((bad / "env.json").read_text())
+    meta["safety_filter"] = {"wrapper": "os:system", "options": {}}
+    (bad / "env.json").write_text(json.dumps(meta))
+    write_manifest(bad)
+    with pytest.raises(PolicyLoadError, match="safety_filter"):
+        training.load(bad, env=env)

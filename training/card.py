@@ -34,16 +34,24 @@ def card(folder: Path) -> dict[str, Any]:
     agg = ev["aggregate"]
     base = next((v for k, v in agg.items() if k.lower() == reference.lower()), None)
     scen = folder / "scoreboard.json"
+    # what training.load(folder, env=env) returns: the network, or (a folder that ships behind the
+    # safety filter) "learned+shield"; the network alone is then reported beside it
+    shipped = ratios.get("shipped", "learned")
+    own = agg[shipped]
+    shipped_ratios = ratios.get("all", {}) if shipped == "learned" else ratios.get(shipped, {})
     return {
         "name": folder.name,
         "scenarios": json.loads(scen.read_text())["scenarios"] if scen.is_file() else [],
         "source": json.loads((folder / "policy.json").read_text()).get("source", ""),
-        "episodes": agg["learned"]["episodes"],
-        "success": agg["learned"]["success_rate"],
-        "collision_episodes": agg["learned"]["collision_episodes"],
-        "violations": agg["learned"]["violations"],
-        "rmse_ratio": ratios.get("all", {}).get("rmse_ratio"),
-        "delta_v_ratio": ratios.get("all", {}).get("delta_v_ratio"),
+        "shipped": shipped,
+        "episodes": own["episodes"],
+        "success": own["success_rate"],
+        "collision_episodes": own["collision_episodes"],
+        "violations": own["violations"],
+        "rmse_ratio": shipped_ratios.get("rmse_ratio"),
+        "delta_v_ratio": shipped_ratios.get("delta_v_ratio"),
+        "network_alone": None if shipped == "learned" else {
+            k: agg["learned"][k] for k in ("success_rate", "collision_episodes", "violations")},
         "baseline": reference,
         "baseline_success": None if base is None else base["success_rate"],
         "baseline_episodes": None if base is None else base["episodes"],
@@ -67,6 +75,15 @@ def _f(v: Any, fmt: str = ".2f") -> str:
     return "–" if v is None else format(v, fmt)
 
 
+def _alone(c: dict[str, Any]) -> str:
+    """For a policy shipped behind the safety filter: that, and the network's own numbers."""
+    n = c["network_alone"]
+    if n is None:
+        return ""
+    return (f" (ships with the safety filter; the network alone: success {_f(n['success_rate'])}, "
+            f"{n['collision_episodes']} collision episodes, {_f(n['violations'], '.3g')} violations / episode)")
+
+
 def shipped_table(root: Path = POLICIES_DIR) -> str:
     """A Markdown table of every shipped policy against its baseline and the targets."""
     lines = ["| policy | scenario | how it was trained | success | collision episodes | violations / episode "
@@ -76,7 +93,7 @@ def shipped_table(root: Path = POLICIES_DIR) -> str:
         c = card(folder)
         met = targets(c)
         lines.append(
-            f"| `{c['name']}` | {', '.join(f'`{s}`' for s in c['scenarios'][:1])} | {c['source']} "
+            f"| `{c['name']}`{_alone(c)} | {', '.join(f'`{s}`' for s in c['scenarios'][:1])} | {c['source']} "
             f"| {_f(c['success'])} | {c['collision_episodes']} | {_f(c['violations'], '.3g')} "
             f"| {_f(c['rmse_ratio'])} | {_f(c['delta_v_ratio'])} "
             f"| {c['baseline']} {_f(c['baseline_success'])} ({c['baseline_episodes']}) "

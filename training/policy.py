@@ -316,8 +316,14 @@ def _check_manifest(root: Path, table: dict[str, str], blobs: dict[str, bytes]) 
                               "re-save the folder or restore the files")
 
 
-def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> LearnedPolicy:
+def load(path: str | Path, env: Any = None, *, trusted: bool = False, shielded: bool = True) -> Any:
     """Load the policy in artefact folder ``path``; if ``env`` is given, check its spaces fit.
+
+    A folder whose ``env.json`` has ``"safety_filter"`` ships behind the safety filter: with
+    ``env`` given (and ``shielded``, the default) it is returned as shipped,
+    ``satenv.safety.shield(network, env, **options)``; ``shielded=False`` returns the network
+    alone (its own numbers, reported beside the shipped ones); without ``env`` the filter cannot
+    be built (it reads the env's state), so the network is returned with a ``UserWarning``.
 
     The folder is untrusted data (module docstring, :mod:`training.trust`): nothing in it runs,
     nothing outside it is read, sizes are capped before reading, and ``manifest.json`` must list
@@ -350,7 +356,37 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False) -> Learned
             raise PolicyLoadError(f"env must be a PettingZoo env (possible_agents, observation_space), "
                                   f"got {type(env).__name__}")
         policy.check_env(env)
-    return policy
+    if not isinstance(shielded, bool):
+        raise PolicyLoadError(f"shielded must be a bool, got {shielded!r:.40}")
+    options = shipped_filter(root, getattr(policy, "meta", {}))
+    if options is None or not shielded:
+        return policy
+    if env is None:
+        warnings.warn(f"{root}: this policy ships behind the safety filter (env.json 'safety_filter'); "
+                      f"pass env= to load it as shipped, filter included; returning the network alone",
+                      UserWarning, stacklevel=2)
+        return policy
+    from satenv.safety import shield
+
+    return shield(policy, env, **options)
+
+
+SHIELD_WRAPPER = "satenv.safety.shield"
+"""The one wrapper a folder's ``env.json`` ``"safety_filter"`` may name (it is compared, never imported)."""
+
+
+def shipped_filter(root: Path, meta: dict[str, Any]) -> dict[str, Any] | None:
+    """The safety-filter options a folder ships with (``env.json`` ``"safety_filter"``), or None.
+    The entry is data: ``wrapper`` must be :data:`SHIELD_WRAPPER` and ``options`` a JSON object of
+    ``satenv.safety.SafetyConfig`` fields (validated by the filter itself)."""
+    entry = meta.get("safety_filter")
+    if entry is None:
+        return None
+    if not (isinstance(entry, dict) and entry.get("wrapper") == SHIELD_WRAPPER
+            and isinstance(entry.get("options", {}), dict)):
+        raise PolicyLoadError(f"{root / 'env.json'}: safety_filter must be an object with wrapper "
+                              f"{SHIELD_WRAPPER!r} and options (an object of SafetyConfig fields)")
+    return dict(entry.get("options", {}))
 
 
 _QUOTED = re.compile(r"'[^'\n]*'|\"[^\"\n]*\"")

@@ -195,7 +195,7 @@ def _load_or_raise(path: str) -> None:
     except ModuleNotFoundError as exc:
         raise ScoreboardError(f"--policy needs the training package ({exc})") from None
     try:
-        training.load(path)
+        training.load(path, shielded=False)
     except Exception as exc:
         raise ScoreboardError(f"--policy {path}: cannot load this checkpoint: {type(exc).__name__}: "
                               f"{exc}") from None

@@ -97,10 +97,10 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
                               "paper_seeds": paper_seeds, "controller": controller}
     for label, kwargs, ss in (("random", sysdef.scenario, seeds), ("paper", sysdef.paper, paper_seeds)):
         env = satenv.make(sysdef.env_id, **kwargs)
-        net = training.load(folder, env=env)
+        net = training.load(folder, env=env, shielded=False)
         runs = {"learned": net}
         if shield:
-            runs["learned+shield"] = make_shield(training.load(folder, env=env), env)
+            runs["learned+shield"] = make_shield(training.load(folder, env=env, shielded=False), env)
         if controller:
             runs[controller] = baselines.make(controller, env)
         block: dict[str, Any] = {"env_kwargs": dict(kwargs)}
@@ -125,8 +125,8 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
 
 def card_fields(result: dict[str, Any], shipped: str = "learned") -> dict[str, Any]:
     """The keys ``training.card`` reads (``aggregate``, ``vs_<REF>``, ``test_seeds``) for the
-    randomised scenario. ``learned`` is what ``training.load(folder)`` returns (the network: the
-    loader does not add a safety filter yet), ``learned+shield`` beside it; ratios on matched
+    randomised scenario. ``learned`` is the network alone (``training.load(folder, shielded=False)``),
+    ``learned+shield`` the network behind the filter (what a folder shipped with it loads as); ratios on matched
     completed episodes. ``shipped`` names the variant the folder ships."""
     block, ref = result["random"], result["controller"]
     agg = {"learned": block["learned"]["aggregate"]}

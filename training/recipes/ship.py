@@ -38,8 +38,8 @@ def select(run_dir: Path, rounds: list[int], seeds: list[int]) -> list[dict[str,
     rows = []
     for k in rounds:
         folder = run_dir / "rounds" / f"{k:04d}"
-        net = aggregate(episodes(env, training.load(folder, env=env), seeds))
-        shielded = aggregate(episodes(env, shield(training.load(folder, env=env), env), seeds))
+        net = aggregate(episodes(env, training.load(folder, env=env, shielded=False), seeds))
+        shielded = aggregate(episodes(env, shield(training.load(folder, env=env, shielded=False), env), seeds))
         rows.append({"round": k, "net": net, "shield": shielded})
         print(k, "net", net["success_rate"], net["collision_episodes"], round(net["final_error_m"], 3),
               "| shield", shielded["success_rate"], shielded["collision_episodes"],
@@ -52,7 +52,7 @@ def ship(run_dir: Path, k: int, name: str, heldout: Path, with_shield: bool) -> 
     from training.policy import save_artifacts
 
     src = run_dir / "rounds" / f"{k:04d}"
-    policy = training.load(src)
+    policy = training.load(src, shielded=False)
     meta = dict(policy.meta)
     if with_shield:
         meta["safety_filter"] = {"wrapper": "satenv.safety.shield", "options": {},
