@@ -138,15 +138,23 @@ def collect_episode(env: Any, expert: Any, learner: LearnedPolicy | None, seed: 
 def fit(actor: Any, normalizer: ObsNormalizer, x: np.ndarray, y: np.ndarray, cfg: ImitationConfig,
         generator: Any) -> float:
     """Regress ``actor`` on ``(x, y)`` for ``cfg.epochs`` epochs; returns the last epoch's mean loss."""
+    return regress(actor, normalizer(x), y, lr=cfg.lr, epochs=cfg.epochs, batch_size=cfg.batch_size,
+                   generator=generator, weight_decay=cfg.weight_decay)
+
+
+def regress(actor: Any, x: np.ndarray, y: np.ndarray, *, lr: float, epochs: int, batch_size: int,
+            generator: Any, weight_decay: float = 0.0) -> float:
+    """Adam on the mean squared error of ``actor(x)`` against ``y`` (``x`` already normalised),
+    shuffled minibatches from ``generator``; returns the last epoch's mean loss."""
     import torch
 
-    xt, yt = torch.as_tensor(normalizer(x)), torch.as_tensor(y, dtype=torch.float32)
-    opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    xt, yt = torch.as_tensor(x), torch.as_tensor(y, dtype=torch.float32)
+    opt = torch.optim.Adam(actor.parameters(), lr=lr, weight_decay=weight_decay)
     actor.train()
     loss_sum = 0.0
-    for _ in range(cfg.epochs):
+    for _ in range(epochs):
         loss_sum = 0.0
-        for idx in torch.randperm(len(xt), generator=generator).split(cfg.batch_size):
+        for idx in torch.randperm(len(xt), generator=generator).split(batch_size):
             loss = torch.mean((actor(xt[idx]) - yt[idx]) ** 2)
             opt.zero_grad()
             loss.backward()

@@ -177,23 +177,11 @@ def load_labels(run: Path) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 def fit(actor, normalizer, feats, x, y, cfg: DaggerConfig, generator, epochs: int) -> float:
-    import torch
+    """:func:`training.imitate.regress` on the features of ``x``."""
+    from training.imitate import regress
 
-    xt = torch.as_tensor(normalizer(feats(x.astype(np.float64))))
-    yt = torch.as_tensor(y, dtype=torch.float32)
-    opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
-    actor.train()
-    loss_sum = 0.0
-    for _ in range(epochs):
-        loss_sum = 0.0
-        for idx in torch.randperm(len(xt), generator=generator).split(cfg.batch_size):
-            loss = torch.mean((actor(xt[idx]) - yt[idx]) ** 2)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            loss_sum += loss.item() * len(idx)
-    actor.eval()
-    return loss_sum / len(xt)
+    return regress(actor, normalizer(feats(x.astype(np.float64))), y, lr=cfg.learning_rate, epochs=epochs,
+                   batch_size=cfg.batch_size, generator=generator)
 
 
 def evaluate(env, policy, seeds) -> dict[str, Any]:
