@@ -185,17 +185,11 @@ def fit(actor, normalizer, feats, x, y, cfg: DaggerConfig, generator, epochs: in
 
 
 def evaluate(env, policy, seeds) -> dict[str, Any]:
-    """Aggregate of ``satenv.metrics.summary`` over seeds (the scoreboard's episode rule)."""
-    from satenv import metrics
-    from satenv.rollout import rollout
+    """Aggregate of ``satenv.metrics.summary`` over seeds (the scoreboard's episode rule):
+    :func:`training.recipes.heldout.aggregate` of its episodes."""
+    from training.recipes.heldout import aggregate, episodes
 
-    eps = [metrics.summary(rollout(env, policy, seed=int(s))) for s in seeds]
-    return {"episodes": len(eps), "success_rate": float(np.mean([e["success"] for e in eps])),
-            "collision_episodes": int(sum(e["collisions"] > 0 for e in eps)),
-            "rmse": float(np.mean([e["rmse"] for e in eps])),
-            "delta_v": float(np.mean([e["delta_v"] for e in eps])),
-            "final_error_m": float(np.mean([e["final_error_m"] for e in eps])),
-            "violations": float(np.mean([e["violations"] for e in eps]))}
+    return aggregate(episodes(env, policy, seeds))
 
 
 def plot_curve(history: list[dict[str, Any]], path: Path) -> None:
