@@ -165,3 +165,8 @@ def test_a_folder_shipped_behind_the_safety_filter_loads_as_shipped(tmp_path):
     write_manifest(bad)
     with pytest.raises(PolicyLoadError, match="safety_filter"):
         training.load(bad, env=env)
+    meta["safety_filter"] = {"wrapper": "satenv.safety.shield", "options": {"margin": float("nan")}}
+    (bad / "env.json").write_text(json.dumps(meta))
+    write_manifest(bad)
+    with pytest.raises(PolicyLoadError, match="env.json: safety_filter options.*margin"):
+        training.load(bad, env=env)

@@ -358,8 +358,8 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False, shielded: 
         policy.check_env(env)
     if not isinstance(shielded, bool):
         raise PolicyLoadError(f"shielded must be a bool, got {shielded!r:.40}")
-    options = shipped_filter(root, getattr(policy, "meta", {}))
-    if options is None or not shielded:
+    config = shipped_filter(root, getattr(policy, "meta", {}))
+    if config is None or not shielded:
         return policy
     if env is None:
         warnings.warn(f"{root}: this policy ships behind the safety filter (env.json 'safety_filter'); "
@@ -368,17 +368,17 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False, shielded: 
         return policy
     from satenv.safety import shield
 
-    return shield(policy, env, **options)
+    return shield(policy, env, config)
 
 
 SHIELD_WRAPPER = "satenv.safety.shield"
 """The one wrapper a folder's ``env.json`` ``"safety_filter"`` may name (it is compared, never imported)."""
 
 
-def shipped_filter(root: Path, meta: dict[str, Any]) -> dict[str, Any] | None:
-    """The safety-filter options a folder ships with (``env.json`` ``"safety_filter"``), or None.
-    The entry is data: ``wrapper`` must be :data:`SHIELD_WRAPPER` and ``options`` a JSON object of
-    ``satenv.safety.SafetyConfig`` fields (validated by the filter itself)."""
+def shipped_filter(root: Path, meta: dict[str, Any]) -> Any:
+    """The ``satenv.safety.SafetyConfig`` a folder ships with (``env.json`` ``"safety_filter"``),
+    or None. The entry is data: ``wrapper`` must be :data:`SHIELD_WRAPPER` and ``options`` a JSON
+    object of ``SafetyConfig`` fields (validated here, so a bad one names the file)."""
     entry = meta.get("safety_filter")
     if entry is None:
         return None
@@ -386,7 +386,12 @@ def shipped_filter(root: Path, meta: dict[str, Any]) -> dict[str, Any] | None:
             and isinstance(entry.get("options", {}), dict)):
         raise PolicyLoadError(f"{root / 'env.json'}: safety_filter must be an object with wrapper "
                               f"{SHIELD_WRAPPER!r} and options (an object of SafetyConfig fields)")
-    return dict(entry.get("options", {}))
+    from satenv.safety import SafetyConfig
+
+    try:
+        return SafetyConfig.from_options(**entry.get("options", {}))
+    except (ValueError, TypeError) as err:
+        raise PolicyLoadError(f"{root / 'env.json'}: safety_filter options: {err}") from None
 
 
 _QUOTED = re.compile(r"'[^'\n]*'|\"[^\"\n]*\"")
