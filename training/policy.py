@@ -154,11 +154,13 @@ class LearnedPolicy:
     name = "learned"
 
     def __init__(self, actor: Any, normalizer: ObsNormalizer | None = None, *, obs_shape: tuple[int, ...],
-                 features: Any = None, action_map: Any = None, meta: dict[str, Any] | None = None) -> None:
+                 features: Any = None, action_map: Any = None, meta: dict[str, Any] | None = None,
+                 terminal: Any = None) -> None:
         self.actor = actor.eval()
         self.normalizer = normalizer or ObsNormalizer()
         self.features = features
         self.action_map = action_map
+        self.terminal = terminal      # training.shaping.TerminalFeedback (None: the network alone)
         self.meta = dict(meta or {})
         self.obs_shape = tuple(obs_shape)  # the env's per-agent observation (before the features)
         self.action_shape = (int(actor.spec["act_dim"]),)
@@ -171,6 +173,7 @@ class LearnedPolicy:
         """Actions ``(n, act_dim)`` in ``[-1, 1]`` for raw per-agent observations ``(n, *obs_shape)``."""
         import torch
 
+        raw = obs
         if self.features is not None:
             obs = self.features(obs)
         with torch.no_grad():
@@ -183,6 +186,8 @@ class LearnedPolicy:
             self.info["solver_status"] = "non-finite actor output: zero action"
         if self.action_map is not None:
             actions = self.action_map(actions)
+        if self.terminal is not None:
+            actions = self.terminal(raw, actions)
         return actions.astype(np.float32)
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -243,6 +248,14 @@ def features_from_config(config: dict[str, Any]):
     feats = ObsFeatures(config.get("obs_symlog_scale", 0.0), config.get("obs_symlog_dims", 6),
                         tuple(config.get("obs_drop_dims", ())))
     return feats if feats.active else None
+
+
+def terminal_from_config(config: dict[str, Any]):
+    """The terminal feedback of a run config (``None`` when off)."""
+    from training.shaping import TerminalFeedback
+
+    term = TerminalFeedback.from_config(config)
+    return term if term.active else None
 
 
 def action_map_from_config(config: dict[str, Any]):
@@ -484,8 +497,9 @@ def _load_safe(root: Path, trusted: bool) -> LearnedPolicy:
         raise PolicyLoadError(f"{root / 'env.json'}: observation_shape does not fit the actor's obs_dim "
                               f"{actor.spec['obs_dim']} (with the config's features)")
     action_map = _parsed(root, "config.json", action_map_from_config, config)
+    terminal = _parsed(root, "config.json", terminal_from_config, config)
     return LearnedPolicy(actor, normalizer, obs_shape=tuple(obs_shape), features=features,
-                         action_map=action_map, meta=meta)
+                         action_map=action_map, meta=meta, terminal=terminal)
 
 
 def _load_sb3_zip(root: Path, trusted: bool) -> LearnedPolicy:

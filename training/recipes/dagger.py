@@ -100,6 +100,7 @@ class DaggerConfig:
     learning_rate: float = 5e-4
     clip_obs: float = 10.0
     seed: int = 0
+    terminal: dict[str, Any] = field(default_factory=dict)   # training.shaping.TerminalFeedback fields
 
     def to_json(self) -> dict[str, Any]:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -229,7 +230,13 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     from satenv.safety import shield
     from training.actor import MLPActor
     from training.envs import policy_env_meta
-    from training.policy import LearnedPolicy, ObsNormalizer, load, save_artifacts
+    from training.policy import (
+        LearnedPolicy,
+        ObsNormalizer,
+        load,
+        save_artifacts,
+        terminal_from_config,
+    )
 
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -240,6 +247,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     experts = {id(collect): make_expert(system, collect, cfg.expert_options),
                id(paper): make_expert(system, paper, cfg.expert_options)}
     feats = features(cfg)
+    term = terminal_from_config(cfg.to_json())      # part of the learner, as at inference
     obs_dim = collect.observation_space(collect.possible_agents[0]).shape[0]
     meta = policy_env_meta(system.env_id, collect, {**system.scenario, "terminate_on_collision": False},
                            dict(system.scenario))
@@ -259,7 +267,8 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     t_start = time.perf_counter()
     episode = sum(cfg.round0_episodes if k == 0 else cfg.episodes_per_round for k in range(done))
     for k in range(done, cfg.rounds):
-        net = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats)
+        net = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats,
+                                                terminal=term)
         learners = {id(e): (shield(net, e) if cfg.learner_shield and net is not None else net)
                     for e in (collect, paper)}
         n_eps = cfg.round0_episodes if k == 0 else cfg.episodes_per_round
@@ -285,7 +294,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
         t1 = time.perf_counter()
         loss = fit(actor, normalizer, feats, x, y, cfg, generator, cfg.epochs * (4 if k == 0 else 1))
         fit_s = time.perf_counter() - t1
-        policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats, meta=meta)
+        policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats, meta=meta, terminal=term)
         val, pap = evaluate(ev, policy, cfg.val_seeds), evaluate(paper_ev, policy, [0])
         if cfg.learner_shield:
             shielded = {"val": evaluate(ev, shield(policy, ev), cfg.val_seeds),
