@@ -8,7 +8,13 @@ from test_env_base import ToyEnv
 
 import training
 from training.actor import MLPActor
-from training.policy import LearnedPolicy, ObsNormalizer, PolicyLoadError, save_artifacts, write_manifest
+from training.policy import (
+    LearnedPolicy,
+    ObsNormalizer,
+    PolicyLoadError,
+    save_artifacts,
+    write_manifest,
+)
 from training.shaping import TerminalFeedback
 
 META = {"env_id": "test_env_base:ToyEnv", "observation_shape": [6], "action_shape": [3]}
