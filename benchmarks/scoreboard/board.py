@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Callable, Iterator, Mapping
 from datetime import datetime, timezone
@@ -9,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.scoreboard.backends import stream
+from benchmarks.scoreboard.headline import headline
 from benchmarks.scoreboard.plan import Plan, Selection, board_seeds, make_plan, select, split_names
 from benchmarks.scoreboard.registry import (
     POLICIES,
@@ -31,7 +33,7 @@ from benchmarks.scoreboard.report import (
 from benchmarks.scoreboard.runner import EPISODES_FILE, EpisodeLog, Task, read_episodes
 from benchmarks.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
 
-__all__ = ["run_scoreboard"]
+__all__ = ["reaggregate", "run_scoreboard"]
 
 Key = tuple[str, str, int]
 Record = dict[str, Any]
@@ -177,16 +179,37 @@ def _run(records: Iterator[Record], log_path: Path, done: dict[Key, Record], tot
         bar.close()
 
 
-def _finish(out: Path, plan: Plan, header: dict[str, Any], done: Mapping[Key, Record], notes: list[str],
-            plots: bool) -> Board:
-    records = [done[k] for k in plan.keys if k in done]       # plan order: registry order, then seed
+def _finish(out: Path, header: dict[str, Any], records: list[Record], notes: list[str], plots: bool) -> Board:
+    """Aggregate, rank and write ``records`` (in plan order: scenarios in that order)."""
     agg = aggregate(records)
-    agg = {s: agg[s] for s in dict.fromkeys(s for s, _ in plan.pairs) if s in agg}
+    agg = {s: agg[s] for s in dict.fromkeys(r["scenario"] for r in records)}
     board = Board(out, header, records, agg, {s: rank(agg[s]) for s in agg}, notes)
     board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg})
-    board.markdown = render_markdown(board)
+    board.headline = headline(records, board.ranking)
+    board.markdown = render_markdown(board, plots=plots)
     write_outputs(board, plots=plots)
     return board
+
+
+def reaggregate(out: str | Path, plots: bool = True) -> Board:
+    """Re-write a finished board's outputs in ``out`` from its ``episodes.jsonl`` and the header of
+    its ``scoreboard.json`` (running no episode, checking no fingerprint): e.g. after the report
+    code changed. Episodes (the first line of each key, as ``--resume`` reads them) are ordered as
+    the header lists scenarios and policies, then by seed; scenarios not in the header are left out."""
+    out = Path(out)
+    try:
+        header = json.loads((out / "scoreboard.json").read_text())["header"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise ScoreboardError(f"{out}/scoreboard.json: no board header to re-aggregate with ({exc}); "
+                              "finish the run first (--resume)") from None
+    scen, pol = list(header["scenarios"]), list(header["policies"])
+
+    def order(r: Record) -> tuple:
+        return scen.index(r["scenario"]), pol.index(r["policy"]) if r["policy"] in pol else len(pol), \
+            r["policy"], r["seed"]
+
+    records = sorted((r for r in read_episodes(out / EPISODES_FILE) if r["scenario"] in scen), key=order)
+    return _finish(out, header, records, list(header.get("notes", [])), plots)
 
 
 def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | list[str] | None = None,
@@ -226,4 +249,5 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
         print(f"note: {note}", file=sys.stderr)
     _run(stream(tasks, backend, workers, ray_address), out / EPISODES_FILE, done, len(plan.keys),
          progress, on_record)
-    return _finish(out, plan, header, done, notes, plots)
+    records = [done[k] for k in plan.keys if k in done]       # plan order: registry order, then seed
+    return _finish(out, header, records, notes, plots)

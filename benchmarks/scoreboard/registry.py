@@ -18,7 +18,7 @@ from benchmarks.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardErro
 from satenv.scenarios import cluster as _cluster
 from satenv.scenarios.platoon import swarm
 
-__all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "discover_trained_policies", "user_policy",
+__all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "SYSTEMS", "discover_trained_policies", "user_policy",
            "user_policy_name"]
 
 SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
@@ -89,6 +89,19 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
                  "kannan2022 §5.2 with randomised starts (±20 m, ±1 m/s around the origin)"),
 ]}
 """Every scenario of the scoreboard by name."""
+
+SYSTEMS: dict[str, tuple[str, ...]] = {
+    "platoon, pereira2023 (Table I)": ("platoon-tplf30-random-cw", "platoon-random-cw", "platoon-PLF-cw"),
+    "platoon, pereira2022 §5.1": ("platoon-pereira2022-random", "platoon-pereira2022"),
+    "cluster, li2022": ("cluster-case1-random", "cluster-case1"),
+    "servicing, pereira2022 §5.2": ("servicing-pereira2022-random", "servicing-pereira2022"),
+    "formation, kannan2022 position": ("formation-kannan2022-position-random", "formation-kannan2022-position"),
+    "formation, kannan2022 collision": ("formation-kannan2022-collision-random",
+                                        "formation-kannan2022-collision"),
+}
+"""The papers' systems of the board's summary (:mod:`benchmarks.scoreboard.headline`): each is
+shown on the first of its scenarios that is on the board (first: the one its learned policies are
+ranked on)."""
 
 POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
     PolicySpec("zero", "baselines.base:ZeroPolicy", baseline="zero", description="no thrust (coasting)"),

@@ -93,6 +93,7 @@ class Board:
     notes: list[str] = field(default_factory=list)
     markdown: str = ""
     summary: dict[str, Any] = field(default_factory=dict)
+    headline: list[dict[str, Any]] = field(default_factory=list)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -329,8 +330,13 @@ def _summary_section(summary: dict[str, Any]) -> list[str]:
     return lines + [""]
 
 
-def render_markdown(board: Board) -> str:
+def render_markdown(board: Board, plots: bool = True) -> str:
+    """``scoreboard.md``: header, the headline (``plots``: with its figure), the aggregates across
+    scenarios, one ranked table per scenario, notes."""
+    from benchmarks.scoreboard.headline import headline_section
+
     lines = _preamble(board.header)
+    lines += headline_section(board.headline, figure=plots)
     lines += _summary_section(board.summary)
     for scen in board.aggregates:
         lines += _scenario_section(board, scen)
@@ -341,7 +347,7 @@ def render_markdown(board: Board) -> str:
 
 def _write_json(board: Board) -> None:
     payload = {"header": board.header, "ranking": board.ranking, "aggregates": board.aggregates,
-               "summary": board.summary,
+               "summary": board.summary, **({"headline": board.headline} if board.headline else {}),
                "episodes": [{k: v for k, v in r.items() if k != "traceback"} for r in board.records]}
     tmp = board.out / "scoreboard.json.tmp"
     tmp.write_text(json.dumps(jsonable(payload), indent=1, allow_nan=False))
@@ -452,6 +458,10 @@ def write_plots(board: Board) -> list[Path]:
     written = [_metric_figure(board, metric, pdir / f"{metric}.png") for metric in _PLOTS]
     if board.summary.get("policies"):
         written.append(_summary_figure(board.summary, pdir / "summary.png"))
+    if board.headline:
+        from benchmarks.scoreboard.headline import FIGURE, headline_figure
+
+        written.append(headline_figure(board.headline, board.out / FIGURE))
     return written + _trajectory_plots(board, pdir)
 
 

@@ -1,0 +1,156 @@
+"""The board's headline: per system of the papers (:data:`~benchmarks.scoreboard.registry.SYSTEMS`),
+the best scripted and the best learned policy side by side, as a table at the top of
+``scoreboard.md`` and one figure, ``plots/headline.png``.
+
+On each system's scenario (the first of its scenarios on the board: the one its learned policies
+are ranked on), the best of each kind by the board's own ranking (success rate desc, RMSE asc,
+delta-v asc); learned means a ``trained:`` or ``user:`` policy (with or without the safety filter),
+scripted everything else. The RMSE and delta-v ratios (learned / scripted, ratio of the means)
+are taken on *matched, completed* episodes only (``training.recipes.heldout.matched_ratios``):
+the seeds where both episodes ran to the end without an error and without a collision, so an
+episode that ends early cannot improve a ratio.
+
+Pure functions of the episode records and the board's ranking.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from benchmarks.scoreboard.report import _wilson  # the board's success-rate interval
+
+__all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
+
+LEARNED_PREFIXES = ("trained:", "user:")
+"""Names of learned policies: shipped (``trained:<folder>``) and user checkpoints (``user:<run>``)."""
+FIGURE = "plots/headline.png"
+"""The headline figure, relative to the board's folder."""
+HEADING = "Summary: best scripted and best learned policy per system"
+
+
+def is_learned(policy: str) -> bool:
+    """Whether a board policy name is a learned policy (its ``+shield`` variant included)."""
+    return policy.startswith(LEARNED_PREFIXES)
+
+
+def _policy_stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
+    n = len(recs)
+    wins = sum(bool(r.get("success")) for r in recs)
+    rate, lo, hi = _wilson(wins, n)
+    return {"episodes": n, "successes": wins, "success": rate, "success_ci95": [lo, hi],
+            "collision_episodes": sum(bool(r.get("collisions")) for r in recs),
+            "errors": sum(r.get("error") is not None for r in recs)}
+
+
+def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> dict[str, Any]:
+    """``matched_ratios`` of the episodes that ran (an errored episode is not completed); a
+    non-finite ratio (a scripted mean of 0) is ``None``."""
+    from training.recipes.heldout import matched_ratios
+
+    ran = [[r for r in recs if r.get("error") is None] for recs in (learned, scripted)]
+    out = {"matched_seeds": 0, "rmse_ratio": None, "delta_v_ratio": None}
+    out.update(matched_ratios(*ran))
+    for k in ("rmse_ratio", "delta_v_ratio"):
+        if out[k] is not None and not math.isfinite(out[k]):
+            out[k] = None
+    return out
+
+
+def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]],
+             systems: Mapping[str, tuple[str, ...]] | None = None) -> list[dict[str, Any]]:
+    """One row per system with a scenario on the board: ``system``, ``scenario``, ``scripted`` and
+    ``learned`` (``{"policy", "episodes", "successes", "success", "collision_episodes", "errors"}``
+    or ``None`` when the scenario has no policy of that kind) and ``ratios``
+    (``matched_seeds``, ``rmse_ratio``, ``delta_v_ratio``; ``None`` when not computable)."""
+    if systems is None:
+        from benchmarks.scoreboard.registry import SYSTEMS as systems
+    by_pair: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for rec in records:
+        by_pair.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
+    rows = []
+    for system, scenarios in systems.items():
+        scen = next((s for s in scenarios if s in ranking), None)
+        if scen is None:
+            continue
+        best = {kind: next((p for p in ranking[scen] if is_learned(p) == (kind == "learned")), None)
+                for kind in ("scripted", "learned")}
+        row: dict[str, Any] = {"system": system, "scenario": scen}
+        for kind, pol in best.items():
+            row[kind] = None if pol is None else {"policy": pol, **_policy_stats(by_pair[(scen, pol)])}
+        row["ratios"] = (_ratios(by_pair[(scen, best["learned"])], by_pair[(scen, best["scripted"])])
+                         if None not in best.values() else {"matched_seeds": 0, "rmse_ratio": None,
+                                                            "delta_v_ratio": None})
+        rows.append(row)
+    return rows
+
+
+def _who(e: dict[str, Any] | None) -> list[str]:
+    if e is None:
+        return ["–", "–", "–"]
+    return [f"`{e['policy']}`", f"{100 * e['success']:.0f} % ({e['successes']}/{e['episodes']})",
+            f"{e['collision_episodes']}/{e['episodes']}"]
+
+
+def _ratio(x: float | None) -> str:
+    return "–" if x is None else f"{x:.2f}"
+
+
+def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[str]:
+    """The markdown section (empty without rows); ``figure``: link :data:`FIGURE`."""
+    if not rows:
+        return []
+    lines = [f"## {HEADING}", "",
+             "Per system of the papers, on the scenario its learned policies are ranked on, the best "
+             "scripted and the best learned policy by this board's ranking (success rate, then RMSE, "
+             "then Δv). Collisions: episodes with at least one collision. RMSE and Δv ratios: "
+             "learned / scripted, ratio of the means over the *matched, completed* episodes (seeds "
+             "where both episodes ran to the end without a collision), so an episode that ends "
+             "early cannot improve a ratio; `matched`: how many seeds; – when none.", "",
+             "| system | scenario | best scripted | success | collisions | best learned | success | "
+             "collisions | RMSE ratio | Δv ratio | matched |",
+             "|---|---|---|--:|--:|---|--:|--:|--:|--:|--:|"]
+    for row in rows:
+        r = row["ratios"]
+        cells = [row["system"], f"`{row['scenario']}`", *_who(row["scripted"]), *_who(row["learned"]),
+                 _ratio(r["rmse_ratio"]), _ratio(r["delta_v_ratio"]), str(r["matched_seeds"])]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    if figure:
+        lines += [f"![Success and collision episodes, best scripted vs best learned per system]({FIGURE})", ""]
+    return lines
+
+
+def headline_figure(rows: list[dict[str, Any]], path: Path) -> Path:
+    """Two panels, a pair of bars per system (best scripted, best learned, each named on its bar):
+    the success rate with its 95 % Wilson interval, and the share of episodes with a collision."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 0.8 * len(rows) + 1.6), dpi=90, sharey=True)
+    for j, kind in enumerate(("scripted", "learned")):
+        for i, row in enumerate(rows):
+            e, y = row[kind], i + (0.2 if j else -0.2)
+            if e is None:
+                axes[0].text(1, y, f"no {kind} policy", va="center", fontsize=7)
+                continue
+            rate, (lo, hi) = 100 * e["success"], e["success_ci95"]
+            label = f"best {kind}" if i == 0 else None
+            axes[0].barh(y, rate, 0.4, xerr=[[rate - 100 * lo], [100 * hi - rate]], capsize=2,
+                         color=f"C{j}", ecolor="0.45", label=label)
+            axes[0].text(1, y, e["policy"], va="center", fontsize=7)
+            share = 100 * e["collision_episodes"] / e["episodes"]
+            axes[1].barh(y, share, 0.4, color=f"C{j}", label=label)
+            axes[1].text(share + 1, y, f"{e['collision_episodes']}/{e['episodes']}", va="center", fontsize=7)
+    axes[0].set_yticks(range(len(rows)), [f"{r['system']}\n{r['scenario']}" for r in rows], fontsize=8)
+    axes[0].invert_yaxis()
+    for ax, title in ((axes[0], "success rate [%] (95 % Wilson interval)"),
+                      (axes[1], "episodes with a collision [%]")):
+        ax.set_xlim(0, 112)
+        ax.set_title(title, fontsize=9)
+    axes[1].legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
