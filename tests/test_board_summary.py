@@ -60,6 +60,12 @@ def test_best_of_each_kind_by_the_board_ranking():
     assert row["scripted"]["policy"] == "tube_rdmpc" and row["learned"]["policy"] == "trained:a"
     assert row["scripted"]["success"] == 1.0 and row["scripted"]["episodes"] == 4
     assert row["ratios"] == {"matched_seeds": 4, "rmse_ratio": pytest.approx(0.75), "delta_v_ratio": 1.0}
+    assert "unfiltered" not in row["learned"]
+    shielded = [r | {"rmse": 1.0} if r["policy"] == "trained:a+shield" else r for r in records]
+    (row,) = _rows(shielded)
+    assert row["learned"]["policy"] == "trained:a+shield"
+    assert row["learned"]["unfiltered"]["policy"] == "trained:a"
+    assert "`trained:a+shield` (network alone: `trained:a`)" in "\n".join(headline_section([row]))
 
 
 def test_ratios_only_on_matched_completed_episodes():

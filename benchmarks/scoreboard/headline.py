@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.scoreboard.report import _wilson  # the board's success-rate interval
+from benchmarks.scoreboard.specs import SHIELD_SUFFIX
 
 __all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
 
@@ -62,8 +63,10 @@ def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> di
 def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]],
              systems: Mapping[str, tuple[str, ...]] | None = None) -> list[dict[str, Any]]:
     """One row per system with a scenario on the board: ``system``, ``scenario``, ``scripted`` and
-    ``learned`` (``{"policy", "episodes", "successes", "success", "collision_episodes", "errors"}``
-    or ``None`` when the scenario has no policy of that kind) and ``ratios``
+    ``learned`` (``{"policy", "episodes", "successes", "success", "success_ci95",
+    "collision_episodes", "errors"}`` or ``None`` when the scenario has no policy of that kind; a
+    best learned ``<name>+shield`` also holds ``unfiltered``, the same of ``<name>`` when it ran)
+    and ``ratios``
     (``matched_seeds``, ``rmse_ratio``, ``delta_v_ratio``; ``None`` when not computable)."""
     if systems is None:
         from benchmarks.scoreboard.registry import SYSTEMS as systems
@@ -80,6 +83,9 @@ def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]]
         row: dict[str, Any] = {"system": system, "scenario": scen}
         for kind, pol in best.items():
             row[kind] = None if pol is None else {"policy": pol, **_policy_stats(by_pair[(scen, pol)])}
+        net = (best["learned"] or "").removesuffix(SHIELD_SUFFIX)
+        if net != best["learned"] and (scen, net) in by_pair:   # the network alone, beside its +shield
+            row["learned"]["unfiltered"] = {"policy": net, **_policy_stats(by_pair[(scen, net)])}
         row["ratios"] = (_ratios(by_pair[(scen, best["learned"])], by_pair[(scen, best["scripted"])])
                          if None not in best.values() else {"matched_seeds": 0, "rmse_ratio": None,
                                                             "delta_v_ratio": None})
@@ -90,8 +96,11 @@ def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]]
 def _who(e: dict[str, Any] | None) -> list[str]:
     if e is None:
         return ["–", "–", "–"]
-    return [f"`{e['policy']}`", f"{100 * e['success']:.0f} % ({e['successes']}/{e['episodes']})",
-            f"{e['collision_episodes']}/{e['episodes']}"]
+    cells = [f"`{e['policy']}`", f"{100 * e['success']:.0f} % ({e['successes']}/{e['episodes']})",
+             f"{e['collision_episodes']}/{e['episodes']}"]
+    if "unfiltered" in e:
+        cells = [f"{a} (network alone: {b})" for a, b in zip(cells, _who(e["unfiltered"]), strict=True)]
+    return cells
 
 
 def _ratio(x: float | None) -> str:
@@ -139,7 +148,8 @@ def headline_figure(rows: list[dict[str, Any]], path: Path) -> Path:
             label = f"best {kind}" if i == 0 else None
             axes[0].barh(y, rate, 0.4, xerr=[[rate - 100 * lo], [100 * hi - rate]], capsize=2,
                          color=f"C{j}", ecolor="0.45", label=label)
-            axes[0].text(1, y, e["policy"], va="center", fontsize=7)
+            axes[0].text(1, y, e["policy"], va="center", fontsize=7,
+                         bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0, "pad": 1})
             share = 100 * e["collision_episodes"] / e["episodes"]
             axes[1].barh(y, share, 0.4, color=f"C{j}", label=label)
             axes[1].text(share + 1, y, f"{e['collision_episodes']}/{e['episodes']}", va="center", fontsize=7)
