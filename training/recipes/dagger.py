@@ -69,6 +69,19 @@ SYSTEMS: dict[str, System] = {
         {"round0_episodes": 4, "episodes_per_round": 2, "val_seeds": (700_000, 700_001, 700_002),
          "expert_options": {}, "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05,
          "epochs": 20}),
+    # held-out evaluation only so far (their policies came from training.imitate / training.train):
+    # C/GMRES continues its previous solution and the pereira2023 DMPC warm-starts, so neither is
+    # a stateless expert
+    "formation-kannan2022-collision": System(
+        "formation_v0", {"preset": "kannan2022-collision", "randomize": True},
+        {"preset": "kannan2022-collision"}, "baselines:CGMRES",
+        {"expert_options": {}, "obs_drop_dims": (), "val_seeds": (700_000, 700_001, 700_002)}),
+    "platoon-tplf30": System(
+        "platoon_v0", {"preset": "pereira2023", "topology": "TPLF", "desired_error": (0.0, -30.0, 0.0, 0.0, 0.0, 0.0),
+                       "randomize": True, "terminate_on_collision": True},
+        {"preset": "pereira2023", "topology": "TPLF", "desired_error": (0.0, -30.0, 0.0, 0.0, 0.0, 0.0),
+         "terminate_on_collision": True}, "baselines:DMPC",
+        {"expert_options": {}, "obs_drop_dims": (14,), "val_seeds": (700_000, 700_001, 700_002)}),
 }
 """The systems this driver trains (names follow the scoreboard scenarios)."""
 

@@ -26,7 +26,9 @@ from training.recipes.dagger import SYSTEMS
 
 __all__ = ["evaluate_policies", "targets", "main"]
 
-CONTROLLERS = {"platoon-pereira2022": "dmpc", "cluster-case1": "tube_rdmpc"}
+CONTROLLERS = {"platoon-pereira2022": "dmpc", "cluster-case1": "tube_rdmpc",
+               "formation-kannan2022-collision": "cgmres", "platoon-tplf30": "dmpc",
+               "servicing-pereira2022": "nmpc"}
 """The scenario's controller (the comparator of issue 27) per system."""
 
 
@@ -86,7 +88,8 @@ def targets(agg: dict[str, Any], ref: dict[str, Any], ratios: dict[str, Any]) ->
 
 
 def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: list[int],
-                      controller: str | None, shield: bool = True) -> dict[str, Any]:
+                      controller: str | None, shield: bool = True,
+                      controller_seeds: list[int] | None = None) -> dict[str, Any]:
     import baselines
     import satenv
     import training
@@ -94,7 +97,8 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
 
     sysdef = SYSTEMS[system]
     result: dict[str, Any] = {"system": system, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
-                              "paper_seeds": paper_seeds, "controller": controller}
+                              "paper_seeds": paper_seeds, "controller": controller,
+                              "controller_seeds": controller_seeds}
     for label, kwargs, ss in (("random", sysdef.scenario, seeds), ("paper", sysdef.paper, paper_seeds)):
         env = satenv.make(sysdef.env_id, **kwargs)
         net = training.load(folder, env=env, shielded=False)
@@ -107,7 +111,9 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
         eps = {}
         for name, pol in runs.items():
             t0 = time.perf_counter()
-            eps[name] = episodes(env, pol, ss)
+            run_on = ss if name != controller or controller_seeds is None or label == "paper" \
+                else [x for x in ss if x in set(controller_seeds)]
+            eps[name] = episodes(env, pol, run_on)
             block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1),
                            "episodes": eps[name]}
             print(label, name, json.dumps(block[name]["aggregate"]), flush=True)
@@ -166,6 +172,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seeds", default="900000-900049", help="first-last (inclusive)")
     p.add_argument("--paper-seeds", default="0-2")
     p.add_argument("--controller", default=None, help="default: the system's (CONTROLLERS); 'none' to skip")
+    p.add_argument("--controller-seeds", default=None,
+                   help="first-last: run the controller on these of --seeds only (a slow one, e.g. the NMPC); "
+                        "ratios are then on the matched subset")
     p.add_argument("--no-shield", action="store_true")
     p.add_argument("--shipped", default="learned", choices=["learned", "learned+shield"],
                    help="which variant the folder ships (the card's 'learned' row)")
@@ -181,7 +190,8 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     ctrl = ns.controller or CONTROLLERS[ns.system]
     res = evaluate_policies(ns.system, ns.policy, span(ns.seeds), span(ns.paper_seeds),
-                            None if ctrl == "none" else ctrl, shield=not ns.no_shield)
+                            None if ctrl == "none" else ctrl, shield=not ns.no_shield,
+                            controller_seeds=span(ns.controller_seeds) if ns.controller_seeds else None)
     res["table"] = table(res)
     if res["controller"]:
         res.update(card_fields(res, ns.shipped))
