@@ -91,7 +91,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
 """Every scenario of the scoreboard by name."""
 
 SYSTEMS: dict[str, tuple[str, ...]] = {
-    "platoon, pereira2023 (Table I)": ("platoon-tplf30-random-cw", "platoon-random-cw", "platoon-PLF-cw"),
+    "platoon, pereira2023": ("platoon-tplf30-random-cw", "platoon-random-cw", "platoon-PLF-cw"),
     "platoon, pereira2022 §5.1": ("platoon-pereira2022-random", "platoon-pereira2022"),
     "cluster, li2022": ("cluster-case1-random", "cluster-case1"),
     "servicing, pereira2022 §5.2": ("servicing-pereira2022-random", "servicing-pereira2022"),
