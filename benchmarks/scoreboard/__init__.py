@@ -31,7 +31,11 @@ The package, one job per module:
   delta-v asc) and the outputs in ``OUT`` (default ``results/scoreboard``,
   ``results/scoreboard/quick`` with ``--quick``): ``scoreboard.md``, ``scoreboard.json``,
   ``scoreboard.csv``, ``episodes.csv``, ``plots/<metric>.png``, ``plots/trajectories/*.png``;
-* :mod:`~benchmarks.scoreboard.board` — :func:`run_scoreboard`, the steps above in order;
+* :mod:`~benchmarks.scoreboard.headline` — the summary at the top of ``scoreboard.md``: per system
+  of the papers (``registry.SYSTEMS``), the best scripted and the best learned policy side by
+  side, ratios on matched completed episodes, and ``plots/headline.png``;
+* :mod:`~benchmarks.scoreboard.board` — :func:`run_scoreboard`, the steps above in order, and
+  :func:`reaggregate` (re-write a board's files from its ``episodes.jsonl``, running nothing);
 * :mod:`~benchmarks.scoreboard.cli` — :func:`main` (sets one BLAS thread per process first).
 
 Importing the package changes no environment variable and imports its modules lazily.
@@ -43,7 +47,7 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "board": ("run_scoreboard",),
+    "board": ("reaggregate", "run_scoreboard"),
     "cli": ("build_parser", "main"),
     "plan": ("parse_seeds",),
     "registry": ("FULL", "POLICIES", "QUICK", "SCENARIOS", "discover_trained_policies", "user_policy_name"),
