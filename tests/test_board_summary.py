@@ -136,3 +136,22 @@ def test_reaggregate_writes_the_summary_at_the_top(tmp_path):
     (tmp_path / "scoreboard.json").unlink()
     with pytest.raises(ScoreboardError, match="scoreboard.json"):
         reaggregate(tmp_path)
+
+
+def test_a_policy_shipped_with_its_filter_has_its_network_alone_beside_it():
+    import satenv
+    from satenv.safety import Shield
+
+    specs = discover_trained_policies()
+    name = "trained:platoon_pereira2022_dagger_shield"
+    assert name + ":network" in specs and "trained:platoon_tplf_ppo:network" not in specs
+    env = satenv.platoon_v0(preset="pereira2022", randomize=True)
+    assert isinstance(specs[name].make(env), Shield)
+    assert not isinstance(specs[name + ":network"].make(env), Shield)
+    assert specs[name].fingerprint() != specs[name + ":network"].fingerprint()
+    records = [_ep("tube_rdmpc", s) for s in range(2)] + [_ep("trained:s", s) for s in range(2)]
+    records += [_ep("trained:s:network", s, success=False, collisions=1) for s in range(2)]
+    (row,) = _rows(records)
+    assert row["learned"]["policy"] == "trained:s"
+    assert row["learned"]["unfiltered"]["policy"] == "trained:s:network"
+    assert row["learned"]["unfiltered"]["collision_episodes"] == 2

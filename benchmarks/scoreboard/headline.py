@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.scoreboard.report import _wilson  # the board's success-rate interval
-from benchmarks.scoreboard.specs import SHIELD_SUFFIX
+from benchmarks.scoreboard.specs import NETWORK_SUFFIX, SHIELD_SUFFIX
 
 __all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
 
@@ -65,7 +65,8 @@ def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]]
     """One row per system with a scenario on the board: ``system``, ``scenario``, ``scripted`` and
     ``learned`` (``{"policy", "episodes", "successes", "success", "success_ci95",
     "collision_episodes", "errors"}`` or ``None`` when the scenario has no policy of that kind; a
-    best learned ``<name>+shield`` also holds ``unfiltered``, the same of ``<name>`` when it ran)
+    best learned ``<name>+shield`` also holds ``unfiltered``, the same of ``<name>`` when it ran, and a
+    best learned that ships with its filter the same of ``<name>:network``)
     and ``ratios``
     (``matched_seeds``, ``rmse_ratio``, ``delta_v_ratio``; ``None`` when not computable)."""
     if systems is None:
@@ -84,7 +85,9 @@ def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]]
         for kind, pol in best.items():
             row[kind] = None if pol is None else {"policy": pol, **_policy_stats(by_pair[(scen, pol)])}
         net = (best["learned"] or "").removesuffix(SHIELD_SUFFIX)
-        if net != best["learned"] and (scen, net) in by_pair:   # the network alone, beside its +shield
+        if net == best["learned"]:                               # shipped with its filter: <name>:network
+            net = f"{net}{NETWORK_SUFFIX}"
+        if best["learned"] and (scen, net) in by_pair:          # the network alone, beside the filtered one
             row["learned"]["unfiltered"] = {"policy": net, **_policy_stats(by_pair[(scen, net)])}
         row["ratios"] = (_ratios(by_pair[(scen, best["learned"])], by_pair[(scen, best["scripted"])])
                          if None not in best.values() else {"matched_seeds": 0, "rmse_ratio": None,

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from benchmarks.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
+from benchmarks.scoreboard.specs import NETWORK_SUFFIX, PolicySpec, ScenarioSpec, ScoreboardError
 from satenv.scenarios import cluster as _cluster
 from satenv.scenarios.platoon import swarm
 
@@ -170,22 +170,39 @@ def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
                               f"unreadable file ({exc})") from None
 
 
-def _learned(name: str, path: Path, description: str, scenarios: tuple[str, ...] | None) -> PolicySpec:
-    return PolicySpec(name, "training:load", env_ids=_folder_env_ids(path), scenarios=scenarios,
+def _learned(name: str, path: Path, description: str, scenarios: tuple[str, ...] | None,
+             **kwargs: Any) -> PolicySpec:
+    return PolicySpec(name, "training:load", kwargs, env_ids=_folder_env_ids(path), scenarios=scenarios,
                       checkpoint=str(path), learned=True, requires=("torch",),
                       description=description)
+
+
+def _ships_filtered(path: Path) -> bool:
+    """Whether a policy folder ships behind the safety filter (``env.json`` ``"safety_filter"``)."""
+    from training.trust import read_json
+
+    try:
+        return read_json(path, "env.json").get("safety_filter") is not None
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, PolicySpec]:
     """One ``trained:<name>`` entry per shipped artefact folder under ``training/policies/``; it
     fits the env it was trained on (``env.json``'s ``env_id``) and is ranked on the scenarios of
-    its optional ``scoreboard.json``."""
+    its optional ``scoreboard.json``. A folder that ships behind the safety filter also gets
+    ``trained:<name>:network``, its network alone (:data:`~benchmarks.scoreboard.specs.NETWORK_SUFFIX`)."""
     if not root.is_dir():
         return {}
     folders = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
-    return {f"trained:{p.name}": _learned(f"trained:{p.name}", p, f"shipped trained policy {p.name}",
-                                          _folder_scenarios(p))
-            for p in folders}
+    out = {}
+    for p in folders:
+        name, scen = f"trained:{p.name}", _folder_scenarios(p)
+        out[name] = _learned(name, p, f"shipped trained policy {p.name}", scen)
+        if _ships_filtered(p):
+            out[name + NETWORK_SUFFIX] = _learned(name + NETWORK_SUFFIX, p, f"the network of {p.name} alone, "
+                                                  "without the safety filter it ships with", scen, shielded=False)
+    return out
 
 
 GENERIC_FOLDER_NAMES = ("final", "best", "last", "latest", "model", "policy")

@@ -25,6 +25,9 @@ __all__ = ["SHIELD_SUFFIX", "PolicySpec", "ScenarioSpec", "ScoreboardError", "Un
 
 SHIELD_SUFFIX = "+shield"
 """A policy name ending in this is the policy filtered by :mod:`satenv.safety` (:func:`shielded`)."""
+NETWORK_SUFFIX = ":network"
+"""A shipped policy that ships behind its safety filter, named with this suffix, is its network alone
+(``training.load(folder, env=env, shielded=False)``): the unfiltered numbers beside the shipped ones."""
 
 
 class ScoreboardError(ValueError):
@@ -183,7 +186,7 @@ class PolicySpec:
         """A fresh policy for ``env``."""
         fn = self.factory()
         if self.checkpoint is not None:
-            policy = checkpoint_policy(fn, self.checkpoint, env)
+            policy = checkpoint_policy(fn, self.checkpoint, env, **dict(self.kwargs))
         else:
             policy = fn(env, **dict(self.kwargs))
         if self.shield:
@@ -260,13 +263,13 @@ def _content_hash(path: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def checkpoint_policy(load: Callable[..., Any], path: str, env) -> Any:
-    """``load(path)`` (passing ``env=env`` when the loader accepts it) as a policy for ``env``."""
+def checkpoint_policy(load: Callable[..., Any], path: str, env, **kwargs: Any) -> Any:
+    """``load(path, **kwargs)`` (passing ``env=env`` when the loader accepts it) as a policy for ``env``."""
     try:
         params = inspect.signature(load).parameters
     except (TypeError, ValueError):
         params = {}
-    policy = load(path, env=env) if "env" in params else load(path)
+    policy = load(path, env=env, **kwargs) if "env" in params else load(path, **kwargs)
     for method in ("reset", "act"):
         if not callable(getattr(policy, method, None)):
             raise ScoreboardError(f"training.load({path!r}) returned {type(policy).__name__}, which has "
