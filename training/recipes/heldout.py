@@ -104,7 +104,9 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
         net = training.load(folder, env=env, shielded=False)
         runs = {"learned": net}
         if shield:
-            runs["learned+shield"] = make_shield(training.load(folder, env=env, shielded=False), env)
+            # the folder's own filter options (env.json "safety_filter"), as training.load ships it
+            opts = (json.loads((Path(folder) / "env.json").read_text()).get("safety_filter") or {}).get("options", {})
+            runs["learned+shield"] = make_shield(training.load(folder, env=env, shielded=False), env, **opts)
         if controller:
             runs[controller] = baselines.make(controller, env)
         block: dict[str, Any] = {"env_kwargs": dict(kwargs)}
