@@ -89,7 +89,8 @@ def targets(agg: dict[str, Any], ref: dict[str, Any], ratios: dict[str, Any]) ->
 
 def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: list[int],
                       controller: str | None, shield: bool = True,
-                      controller_seeds: list[int] | None = None) -> dict[str, Any]:
+                      controller_seeds: list[int] | None = None,
+                      controller_episodes: dict[str, list[dict[str, Any]]] | None = None) -> dict[str, Any]:
     import baselines
     import satenv
     import training
@@ -115,7 +116,10 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
             t0 = time.perf_counter()
             run_on = ss if name != controller or controller_seeds is None or label == "paper" \
                 else [x for x in ss if x in set(controller_seeds)]
-            eps[name] = episodes(env, pol, run_on)
+            if name == controller and controller_episodes and label in controller_episodes:
+                eps[name] = [e for e in controller_episodes[label] if e["seed"] in set(ss)]   # run before
+            else:
+                eps[name] = episodes(env, pol, run_on)
             block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1),
                            "episodes": eps[name]}
             print(label, name, json.dumps(block[name]["aggregate"]), flush=True)
@@ -177,6 +181,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--controller-seeds", default=None,
                    help="first-last: run the controller on these of --seeds only (a slow one, e.g. the NMPC); "
                         "ratios are then on the matched subset")
+    p.add_argument("--controller-episodes", type=Path, default=None,
+                   help="JSON {\"random\": [episode, ...], \"paper\": [...]}: the controller's episodes "
+                        "(this module's episodes() records) run before on these seeds, used instead of "
+                        "running it again (a slow controller, run once in the background)")
     p.add_argument("--no-shield", action="store_true")
     p.add_argument("--shipped", default="learned", choices=["learned", "learned+shield"],
                    help="which variant the folder ships (the card's 'learned' row)")
@@ -193,7 +201,9 @@ def main(argv: list[str] | None = None) -> None:
     ctrl = ns.controller or CONTROLLERS[ns.system]
     res = evaluate_policies(ns.system, ns.policy, span(ns.seeds), span(ns.paper_seeds),
                             None if ctrl == "none" else ctrl, shield=not ns.no_shield,
-                            controller_seeds=span(ns.controller_seeds) if ns.controller_seeds else None)
+                            controller_seeds=span(ns.controller_seeds) if ns.controller_seeds else None,
+                            controller_episodes=(json.loads(ns.controller_episodes.read_text())
+                                                 if ns.controller_episodes else None))
     res["table"] = table(res)
     if res["controller"]:
         res.update(card_fields(res, ns.shipped))
