@@ -95,6 +95,7 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
     import satenv
     import training
     from satenv.safety import shield as make_shield
+    from training.policy import shipped_filter
 
     sysdef = SYSTEMS[system]
     result: dict[str, Any] = {"system": system, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
@@ -106,8 +107,9 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
         runs = {"learned": net}
         if shield:
             # the folder's own filter options (env.json "safety_filter"), as training.load ships it
-            opts = (json.loads((Path(folder) / "env.json").read_text()).get("safety_filter") or {}).get("options", {})
-            runs["learned+shield"] = make_shield(training.load(folder, env=env, shielded=False), env, **opts)
+            net_again = training.load(folder, env=env, shielded=False)
+            config = shipped_filter(Path(folder), net_again.meta)   # the folder's own options, as shipped
+            runs["learned+shield"] = make_shield(net_again, env, config)
         if controller:
             runs[controller] = baselines.make(controller, env)
         block: dict[str, Any] = {"env_kwargs": dict(kwargs)}
