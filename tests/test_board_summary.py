@@ -155,3 +155,16 @@ def test_a_policy_shipped_with_its_filter_has_its_network_alone_beside_it():
     assert row["learned"]["policy"] == "trained:s"
     assert row["learned"]["unfiltered"]["policy"] == "trained:s:network"
     assert row["learned"]["unfiltered"]["collision_episodes"] == 2
+
+
+def test_shield_twins_skip_a_policy_shipped_with_its_filter():
+    from benchmarks.scoreboard.plan import select
+
+    registry = {**discover_trained_policies()}
+    notes: list[str] = []
+    sel = select(["trained:*+shield"], registry, "policy", notes, strict=True)
+    assert "trained:platoon_tplf_ppo+shield" in sel.names
+    assert not any(n.startswith("trained:platoon_pereira2022_dagger_shield") for n in sel.names)
+    notes = []
+    sel = select(["trained:platoon_pereira2022_dagger_shield+shield"], registry, "policy", notes, strict=True)
+    assert not sel.names and "ships behind the safety filter already" in notes[0]

@@ -18,6 +18,7 @@ import numpy as np
 
 from benchmarks.scoreboard.registry import FULL, QUICK
 from benchmarks.scoreboard.specs import (
+    NETWORK_SUFFIX,
     SHIELD_SUFFIX,
     PolicySpec,
     ScenarioSpec,
@@ -109,6 +110,11 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
         if pat.endswith(SHIELD_SUFFIX) and kind == "policy":
             _add_shielded(pat[:-len(SHIELD_SUFFIX)], registry)
         matches = [n for n in registry if fnmatch.fnmatchcase(n, pat)]
+        if not matches and kind == "policy" and pat.endswith(SHIELD_SUFFIX) \
+                and pat[:-len(SHIELD_SUFFIX)] + NETWORK_SUFFIX in registry:
+            notes.append(f"policy {pat!r}: {pat[:-len(SHIELD_SUFFIX)]!r} ships behind the safety filter "
+                         f"already (its network alone: {pat[:-len(SHIELD_SUFFIX)] + NETWORK_SUFFIX!r}); skipped")
+            continue
         if not matches and strict:
             raise _unknown(pat, registry, kind)
         if not matches:
@@ -120,8 +126,12 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
 
 def _add_shielded(base: str, registry: Any) -> None:
     """Register ``<name>+shield`` (:func:`~benchmarks.scoreboard.specs.shielded`) for every policy
-    matching ``base`` (a name or glob), in ``registry`` (the board's dict of policies)."""
+    matching ``base`` (a name or glob), in ``registry`` (the board's dict of policies); not for a
+    shipped policy that ships behind its filter already (it has a ``<name>:network`` twin), nor for
+    that twin (behind the filter it is the shipped policy)."""
     for name in [n for n in registry if fnmatch.fnmatchcase(n, base) and not n.endswith(SHIELD_SUFFIX)]:
+        if name.endswith(NETWORK_SUFFIX) or name + NETWORK_SUFFIX in registry:
+            continue
         registry.setdefault(name + SHIELD_SUFFIX, shielded(registry[name]))
 
 
