@@ -98,11 +98,13 @@ def test_no_matched_seed_no_ratio_and_missing_kind():
 
 def test_section_and_figure(tmp_path):
     records = [_ep("dmpc", s) for s in range(3)] + [_ep("trained:x", s, success=s > 0) for s in range(3)]
+    records[4]["violations"] = 2                                   # one learned episode breaks a bound
     rows = _rows(records) + _rows([_ep("cgmres", 0, scenario="formation-kannan2022-position")],
                                   {"formation": ("formation-kannan2022-position",)})
     text = "\n".join(headline_section(rows))
     assert "## Summary: best scripted and best learned policy per system" in text
-    assert "| cluster | `cluster-case1-random` | `dmpc` | 100 % (3/3) | 0/3 | `trained:x` | 67 % (2/3) |" in text
+    assert ("| cluster | `cluster-case1-random` | `dmpc` | 100 % (3/3) | 0/3 | 0/3 | `trained:x` | 67 % (2/3) "
+            "| 0/3 | 1/3 |") in text
     assert f"]({FIGURE})" in text and FIGURE not in "\n".join(headline_section(rows, figure=False))
     assert headline_section([]) == []
     path = headline_figure(rows, tmp_path / "h.png")

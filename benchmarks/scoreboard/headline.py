@@ -43,6 +43,7 @@ def _policy_stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
     rate, lo, hi = _wilson(wins, n)
     return {"episodes": n, "successes": wins, "success": rate, "success_ci95": [lo, hi],
             "collision_episodes": sum(bool(r.get("collisions")) for r in recs),
+            "violation_episodes": sum(bool(r.get("violations")) for r in recs),
             "errors": sum(r.get("error") is not None for r in recs)}
 
 
@@ -64,7 +65,7 @@ def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]]
              systems: Mapping[str, tuple[str, ...]] | None = None) -> list[dict[str, Any]]:
     """One row per system with a scenario on the board: ``system``, ``scenario``, ``scripted`` and
     ``learned`` (``{"policy", "episodes", "successes", "success", "success_ci95",
-    "collision_episodes", "errors"}`` or ``None`` when the scenario has no policy of that kind; a
+    "collision_episodes", "violation_episodes", "errors"}`` or ``None`` when the scenario has no policy of that kind; a
     best learned ``<name>+shield`` also holds ``unfiltered``, the same of ``<name>`` when it ran, and a
     best learned that ships with its filter the same of ``<name>:network``)
     and ``ratios``
@@ -98,9 +99,9 @@ def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]]
 
 def _who(e: dict[str, Any] | None) -> list[str]:
     if e is None:
-        return ["–", "–", "–"]
+        return ["–", "–", "–", "–"]
     cells = [f"`{e['policy']}`", f"{100 * e['success']:.0f} % ({e['successes']}/{e['episodes']})",
-             f"{e['collision_episodes']}/{e['episodes']}"]
+             f"{e['collision_episodes']}/{e['episodes']}", f"{e.get('violation_episodes', 0)}/{e['episodes']}"]
     if "unfiltered" in e:
         cells = [f"{a} (network alone: {b})" for a, b in zip(cells, _who(e["unfiltered"]), strict=True)]
     return cells
@@ -117,13 +118,14 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
     lines = [f"## {HEADING}", "",
              "Per system of the papers, on the scenario its learned policies are ranked on, the best "
              "scripted and the best learned policy by this board's ranking (success rate, then RMSE, "
-             "then Δv). Collisions: episodes with at least one collision. RMSE and Δv ratios: "
+             "then Δv). Collisions, violations: episodes with at least one collision, with at least "
+             "one hard-constraint violation counted by the env. RMSE and Δv ratios: "
              "learned / scripted, ratio of the means over the *matched, completed* episodes (seeds "
              "where both episodes ran to the end without a collision), so an episode that ends "
              "early cannot improve a ratio; `matched`: how many seeds; – when none.", "",
-             "| system | scenario | best scripted | success | collisions | best learned | success | "
-             "collisions | RMSE ratio | Δv ratio | matched |",
-             "|---|---|---|--:|--:|---|--:|--:|--:|--:|--:|"]
+             "| system | scenario | best scripted | success | collisions | violations | best learned | "
+             "success | collisions | violations | RMSE ratio | Δv ratio | matched |",
+             "|---|---|---|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|"]
     for row in rows:
         r = row["ratios"]
         cells = [row["system"], f"`{row['scenario']}`", *_who(row["scripted"]), *_who(row["learned"]),
