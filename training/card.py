@@ -6,7 +6,9 @@
 Each row compares the learned policy with the scripted baseline its ``eval.json`` names (the
 ``vs_<BASELINE>`` entry: ratios on the same held-out seeds) against issue 15's targets: no
 collision episode, no hard-constraint violation, success >= 90 % and >= the baseline's, RMSE and
-total delta-v within 1.5x of the baseline's.
+total delta-v within 1.5x of the baseline's. A folder evaluated by ``training.recipes.heldout``
+(issue 27) is held to that issue's success rule instead: >= 90 % and >= the controller's minus
+:data:`ISSUE27_SUCCESS_MARGIN`.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ __all__ = ["card", "targets", "shipped_table", "folder_table", "readme"]
 RATIO_LIMIT = 1.5
 """RMSE and delta-v of a learned policy may be at most this multiple of its baseline's."""
 SUCCESS_MIN = 0.9
+ISSUE27_SUCCESS_MARGIN = 0.05
+"""Issue 27: success >= the controller's minus 5 points (``training.recipes.heldout.targets``)."""
 
 
 def card(folder: Path) -> dict[str, Any]:
@@ -55,17 +59,20 @@ def card(folder: Path) -> dict[str, Any]:
         "baseline": reference,
         "baseline_success": None if base is None else base["success_rate"],
         "baseline_episodes": None if base is None else base["episodes"],
+        # the held-out recipe of issue 27 writes "random" / "paper" blocks
+        "success_margin": ISSUE27_SUCCESS_MARGIN if "random" in ev else 0.0,
     }
 
 
 def targets(c: dict[str, Any]) -> dict[str, bool]:
-    """Issue 15's targets for one card (``True`` = met)."""
+    """Issue 15's (or 27's: ``success_margin``) targets for one card (``True`` = met)."""
     ratio_ok = [c[k] is not None and c[k] <= RATIO_LIMIT for k in ("rmse_ratio", "delta_v_ratio")]
     return {
         "no_collisions": c["collision_episodes"] == 0,
         "no_violations": c["violations"] == 0,
         "success": c["success"] >= SUCCESS_MIN and (c["baseline_success"] is None
-                                                   or c["success"] >= c["baseline_success"]),
+                                                   or c["success"] >= c["baseline_success"]
+                                                   - c.get("success_margin", 0.0) - 1e-12),
         "rmse": ratio_ok[0],
         "delta_v": ratio_ok[1],
     }

@@ -79,11 +79,14 @@ def matched_ratios(mine: list[dict[str, Any]], ref: list[dict[str, Any]]) -> dic
 
 
 def targets(agg: dict[str, Any], ref: dict[str, Any], ratios: dict[str, Any]) -> dict[str, bool]:
-    return {"success": agg["success_rate"] >= 0.9 and agg["success_rate"] >= ref["success_rate"] - 0.05,
+    from training.card import ISSUE27_SUCCESS_MARGIN, RATIO_LIMIT, SUCCESS_MIN
+
+    return {"success": agg["success_rate"] >= SUCCESS_MIN
+            and agg["success_rate"] >= ref["success_rate"] - ISSUE27_SUCCESS_MARGIN - 1e-12,
             "no_collisions": agg["collision_episodes"] == 0,
             "no_violations": agg["violation_episodes"] == 0,
-            "rmse": ratios.get("rmse_ratio", np.inf) <= 1.5,
-            "delta_v": ratios.get("delta_v_ratio", np.inf) <= 1.5,
+            "rmse": ratios.get("rmse_ratio", np.inf) <= RATIO_LIMIT,
+            "delta_v": ratios.get("delta_v_ratio", np.inf) <= RATIO_LIMIT,
             "decision_1ms": agg["compute_ms_per_agent"] <= 1.0}
 
 
