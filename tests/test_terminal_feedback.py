@@ -66,3 +66,15 @@ def test_a_folder_carries_its_feedback_and_a_bad_one_is_a_load_error(tmp_path):
     write_manifest(folder)
     with pytest.raises(PolicyLoadError, match="config.json.*terminal radius"):
         training.load(folder, env=ToyEnv())
+
+
+def test_a_non_finite_observation_gives_the_flagged_zero_action_not_nan():
+    actor = MLPActor(6, 3, [8], "relu", True)
+    policy = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(6,), meta=META,
+                           terminal=TerminalFeedback(**TERM))
+    obs = np.zeros((3, 6))
+    obs[0, 0], obs[1, 1] = np.nan, np.inf           # position errors the feedback reads
+    out = policy.predict(obs)
+    assert np.isfinite(out).all()
+    np.testing.assert_array_equal(out[:2], 0.0)
+    assert policy.info["fallbacks"] == 2

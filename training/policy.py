@@ -179,15 +179,15 @@ class LearnedPolicy:
         with torch.no_grad():
             y = self.actor(torch.as_tensor(self.normalizer(obs))).numpy()
         actions = np.clip(y.astype(np.float64), -1.0, 1.0)
+        if self.action_map is not None:
+            actions = self.action_map(actions)
+        if self.terminal is not None:   # reads the raw observation: checked below with the rest
+            actions = self.terminal(raw, actions)
         bad = ~np.isfinite(actions).all(axis=-1)
         if bad.any():  # e.g. an observation beyond the float range: the safe action, flagged
             actions[bad] = 0.0
             self.info["fallbacks"] = self.info.get("fallbacks", 0) + int(bad.sum())
-            self.info["solver_status"] = "non-finite actor output: zero action"
-        if self.action_map is not None:
-            actions = self.action_map(actions)
-        if self.terminal is not None:
-            actions = self.terminal(raw, actions)
+            self.info["solver_status"] = "non-finite action (actor output or terminal feedback): zero action"
         return actions.astype(np.float32)
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
