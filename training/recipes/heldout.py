@@ -97,8 +97,8 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
     import baselines
     import satenv
     import training
+    from satenv.safety import Shield
     from satenv.safety import shield as make_shield
-    from training.policy import shipped_filter
 
     sysdef = SYSTEMS[system]
     result: dict[str, Any] = {"system": system, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
@@ -108,23 +108,21 @@ def evaluate_policies(system: str, folder: Path, seeds: list[int], paper_seeds: 
         env = satenv.make(sysdef.env_id, **kwargs)
         net = training.load(folder, env=env, shielded=False)
         runs = {"learned": net}
-        if shield:
-            # the folder's own filter options (env.json "safety_filter"), as training.load ships it
-            net_again = training.load(folder, env=env, shielded=False)
-            config = shipped_filter(Path(folder), net_again.meta)   # the folder's own options, as shipped
-            runs["learned+shield"] = make_shield(net_again, env, config)
+        if shield:   # as training.load ships a filtered folder (its own options), else the default filter
+            shipped = training.load(folder, env=env)
+            runs["learned+shield"] = shipped if isinstance(shipped, Shield) else make_shield(shipped, env)
         if controller:
             runs[controller] = baselines.make(controller, env)
         block: dict[str, Any] = {"env_kwargs": dict(kwargs)}
         eps = {}
         for name, pol in runs.items():
             t0 = time.perf_counter()
-            run_on = ss if name != controller or controller_seeds is None or label == "paper" \
-                else [x for x in ss if x in set(controller_seeds)]
             if name == controller and controller_episodes and label in controller_episodes:
-                eps[name] = [e for e in controller_episodes[label] if e["seed"] in set(ss)]   # run before
+                eps[name] = [e for e in controller_episodes[label] if e["seed"] in ss]   # run before
+            elif name == controller and controller_seeds is not None and label == "random":
+                eps[name] = episodes(env, pol, [x for x in ss if x in controller_seeds])
             else:
-                eps[name] = episodes(env, pol, run_on)
+                eps[name] = episodes(env, pol, ss)
             block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1),
                            "episodes": eps[name]}
             print(label, name, json.dumps(block[name]["aggregate"]), flush=True)
