@@ -145,14 +145,20 @@ FULL: dict[str, Any] = {
 """The full (published) board: every scenario x fitting policy x these seeds."""
 
 
-def _folder_env_ids(path: Path) -> tuple[str, ...] | None:
-    """The env id of a policy folder's ``env.json`` (``None`` when it has none)."""
+def _folder_env(path: Path) -> dict[str, Any]:
+    """A policy folder's ``env.json`` (``{}`` when it has none or it is unreadable)."""
     from training.trust import read_json  # a folder's files are untrusted: no links, sizes capped
 
     try:
-        env_id = read_json(path, "env.json").get("env_id")
-    except (OSError, ValueError, AttributeError):
-        return None
+        meta = read_json(path, "env.json")
+    except (OSError, ValueError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
+def _env_ids(meta: dict[str, Any]) -> tuple[str, ...] | None:
+    """The env id of a folder's ``env.json`` (``None`` when it has none)."""
+    env_id = meta.get("env_id")
     return (env_id,) if isinstance(env_id, str) and env_id else None
 
 
@@ -171,20 +177,10 @@ def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
 
 
 def _learned(name: str, path: Path, description: str, scenarios: tuple[str, ...] | None,
-             **kwargs: Any) -> PolicySpec:
-    return PolicySpec(name, "training:load", kwargs, env_ids=_folder_env_ids(path), scenarios=scenarios,
-                      checkpoint=str(path), learned=True, requires=("torch",),
+             meta: dict[str, Any] | None = None, **kwargs: Any) -> PolicySpec:
+    return PolicySpec(name, "training:load", kwargs, env_ids=_env_ids(_folder_env(path) if meta is None else meta),
+                      scenarios=scenarios, checkpoint=str(path), learned=True, requires=("torch",),
                       description=description)
-
-
-def _ships_filtered(path: Path) -> bool:
-    """Whether a policy folder ships behind the safety filter (``env.json`` ``"safety_filter"``)."""
-    from training.trust import read_json
-
-    try:
-        return read_json(path, "env.json").get("safety_filter") is not None
-    except (OSError, ValueError, AttributeError):
-        return False
 
 
 def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, PolicySpec]:
@@ -197,11 +193,12 @@ def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, Poli
     folders = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
     out = {}
     for p in folders:
-        name, scen = f"trained:{p.name}", _folder_scenarios(p)
-        out[name] = _learned(name, p, f"shipped trained policy {p.name}", scen)
-        if _ships_filtered(p):
+        name, scen, meta = f"trained:{p.name}", _folder_scenarios(p), _folder_env(p)
+        out[name] = _learned(name, p, f"shipped trained policy {p.name}", scen, meta)
+        if meta.get("safety_filter") is not None:    # ships behind the filter: its network alone too
             out[name + NETWORK_SUFFIX] = _learned(name + NETWORK_SUFFIX, p, f"the network of {p.name} alone, "
-                                                  "without the safety filter it ships with", scen, shielded=False)
+                                                  "without the safety filter it ships with", scen, meta,
+                                                  shielded=False)
     return out
 
 

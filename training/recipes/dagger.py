@@ -61,8 +61,9 @@ SYSTEMS: dict[str, System] = {
         {"round0_episodes": 6, "episodes_per_round": 4, "val_seeds": (700_000, 700_001, 700_002),
          "expert_options": {}, "obs_drop_dims": (18,), "obs_symlog_scale": 300.0,
          "noise_std": 0.1, "epochs": 20}),
-    # not run yet: the cooperative NMPC (N = 30) warm-starts and plans against the other
-    # spacecraft's previous plan, so its shadow labels are close to, not exactly, what it would do
+    # the cooperative NMPC (N = 30) warm-starts and plans against the other spacecraft's previous
+    # plan, so its shadow labels are close to, not exactly, what it would do (run in session 7:
+    # training/runs/servicing_pereira2022_dagger)
     "servicing-pereira2022": System(
         "servicing_v0", {"preset": "pereira2022", "randomize": True}, {"preset": "pereira2022"},
         "baselines:NMPC",
