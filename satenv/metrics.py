@@ -228,3 +228,18 @@ def summary(traj, tol: float | None = None) -> dict[str, Any]:
         "steps": traj.steps,
         "terminated": bool(traj.terminated),
     }
+
+
+def matched_ratios(mine: list[dict[str, Any]], ref: list[dict[str, Any]]) -> dict[str, Any]:
+    """RMSE and delta-v ratios, ``mine`` over ``ref``, of episode summaries (:func:`summary` records
+    with a ``seed``), on *matched, completed* episodes only: the seeds where both ran to the end
+    without a collision, so an episode that ends early cannot improve a ratio. Returns
+    ``matched_seeds`` and, when it is > 0, ``rmse_ratio`` and ``delta_v_ratio`` (ratios of the means)."""
+    by = {e["seed"]: e for e in ref}
+    pairs = [(e, by[e["seed"]]) for e in mine if e["seed"] in by]
+    ok = [(a, b) for a, b in pairs if not (a["terminated"] or b["terminated"] or a["collisions"] or b["collisions"])]
+    if not ok:
+        return {"matched_seeds": 0}
+    return {"matched_seeds": len(ok),
+            "rmse_ratio": float(np.mean([a["rmse"] for a, _ in ok]) / np.mean([b["rmse"] for _, b in ok])),
+            "delta_v_ratio": float(np.mean([a["delta_v"] for a, _ in ok]) / np.mean([b["delta_v"] for _, b in ok]))}

@@ -6,7 +6,7 @@ On each system's scenario (the first of its scenarios on the board: the one its 
 are ranked on), the best of each kind by the board's own ranking (success rate desc, RMSE asc,
 delta-v asc); learned means a ``trained:`` or ``user:`` policy (with or without the safety filter),
 scripted everything else. The RMSE and delta-v ratios (learned / scripted, ratio of the means)
-are taken on *matched, completed* episodes only (``training.recipes.heldout.matched_ratios``):
+are taken on *matched, completed* episodes only (``satenv.metrics.matched_ratios``):
 the seeds where both episodes ran to the end without an error and without a collision, so an
 episode that ends early cannot improve a ratio.
 
@@ -22,6 +22,7 @@ from typing import Any
 
 from benchmarks.scoreboard.report import _wilson  # the board's success-rate interval
 from benchmarks.scoreboard.specs import NETWORK_SUFFIX, SHIELD_SUFFIX
+from satenv.metrics import matched_ratios
 
 __all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
 
@@ -50,8 +51,6 @@ def _policy_stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
 def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> dict[str, Any]:
     """``matched_ratios`` of the episodes that ran (an errored episode is not completed); a
     non-finite ratio (a scripted mean of 0) is ``None``."""
-    from training.recipes.heldout import matched_ratios
-
     ran = [[r for r in recs if r.get("error") is None] for recs in (learned, scripted)]
     out = {"matched_seeds": 0, "rmse_ratio": None, "delta_v_ratio": None}
     out.update(matched_ratios(*ran))

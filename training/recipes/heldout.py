@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from satenv.metrics import matched_ratios  # the one home of the matched-episode rule
 from training.recipes.dagger import SYSTEMS
 
 __all__ = ["evaluate_policies", "targets", "main"]
@@ -64,18 +65,6 @@ def aggregate(eps: list[dict[str, Any]]) -> dict[str, Any]:
         agg["safety_interventions"] = int(sum(e["safety_interventions"] for e in eps))
         agg["safety_infeasible"] = int(sum(e.get("safety_infeasible", 0) for e in eps))
     return agg
-
-
-def matched_ratios(mine: list[dict[str, Any]], ref: list[dict[str, Any]]) -> dict[str, Any]:
-    """RMSE and delta-v ratios on the seeds where both episodes ran to the end without collision."""
-    by = {e["seed"]: e for e in ref}
-    pairs = [(e, by[e["seed"]]) for e in mine if e["seed"] in by]
-    ok = [(a, b) for a, b in pairs if not (a["terminated"] or b["terminated"] or a["collisions"] or b["collisions"])]
-    if not ok:
-        return {"matched_seeds": 0}
-    return {"matched_seeds": len(ok),
-            "rmse_ratio": float(np.mean([a["rmse"] for a, _ in ok]) / np.mean([b["rmse"] for _, b in ok])),
-            "delta_v_ratio": float(np.mean([a["delta_v"] for a, _ in ok]) / np.mean([b["delta_v"] for _, b in ok]))}
 
 
 def targets(agg: dict[str, Any], ref: dict[str, Any], ratios: dict[str, Any]) -> dict[str, bool]:
