@@ -48,6 +48,10 @@ def test_off_by_default_and_bad_fields_named():
         TerminalFeedback(radius=float("nan"))
     with pytest.raises(ValueError, match=r"unknown field\(s\) \['gian'\]"):
         TerminalFeedback.from_config({"terminal": {"gian": 1.0}})
+    for bad in ([], 0, "", [["radius", 1.0]]):         # not an object: an error, never "off"
+        with pytest.raises(ValueError, match="terminal must be an object"):
+            TerminalFeedback.from_config({"terminal": bad})
+    assert not TerminalFeedback.from_config({"terminal": None}).active
     with pytest.raises(ValueError, match="do not fit"):
         TerminalFeedback(radius=1.0, velocity_at=5)(np.zeros((1, 6)), np.zeros((1, 3)))
 

@@ -264,7 +264,8 @@ class TerminalFeedback:
     @classmethod
     def from_config(cls, config: dict) -> TerminalFeedback:
         """The feedback of a run config (its ``"terminal"`` object of these fields; absent: off)."""
-        entry = config.get("terminal") or {}
+        entry = config.get("terminal")
+        entry = {} if entry is None else entry
         if not isinstance(entry, dict):
             raise ValueError(f"terminal must be an object of TerminalFeedback fields, got {type(entry).__name__}")
         unknown = set(entry) - {f.name for f in fields(cls)}
