@@ -1,0 +1,156 @@
+"""Named perturbations a task is evaluated under: navigation error, actuator degradation, a
+stronger disturbance, model mismatch.
+
+    from satenv import tasks, perturbations
+    env = perturbations.make_env(tasks.get("cluster-case1-random"), "nav-1m")
+
+A :class:`Perturbation` changes the truth, never the nominal model: the env's ``scenario`` stays the
+task's nominal one (what a controller or a filter built from the env plans with), while the core
+integrates the perturbed physics (``truth`` overrides) and applies ``thrust_scale`` times the
+commanded thrust. **Navigation error** is what everyone on board reads: between two steps the
+core's agent states are replaced by a noisy estimate (Gaussian, ``sigma_position`` [m] and
+``sigma_velocity`` [m/s] per axis, drawn from the episode's seed), so the policy's observation,
+``env.state()``, the scripted controllers and the safety filter wrapped around a policy
+(:class:`satenv.safety.Shield`) all see the same estimate; the truth is restored before the
+physics of the next step and the ``infos`` (what the metrics score) are the truth's. A filter
+built into the env (``safety_filter=True``) runs inside the step and reads the truth.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from pettingzoo.utils.wrappers import BaseParallelWrapper
+
+from satenv.errors import SatenvError
+
+__all__ = ["PERTURBATIONS", "Perturbation", "PerturbedEnv", "make_env", "names"]
+
+NAV_SEED_KEY = 0x6E6176
+"""Mixed with the episode seed to seed the navigation error (independent of the env's own draws)."""
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """One named perturbation: ``truth(scenario) -> overrides`` of the truth env's scenario,
+    ``thrust_scale`` on the commanded thrust, navigation error ``sigma_position`` [m] and
+    ``sigma_velocity`` [m/s]."""
+
+    name: str
+    description: str
+    truth: Callable[[Any], Mapping[str, Any]] = field(default=lambda sc: {})
+    thrust_scale: float = 1.0
+    sigma_position: float = 0.0
+    sigma_velocity: float = 0.0
+
+
+def _scaled_inertia(k: float) -> Callable[[Any], Mapping[str, Any]]:
+    return lambda sc: {"inertia": tuple(tuple(k * v for v in row) for row in np.asarray(sc.inertia).tolist())}
+
+
+PERTURBATIONS: Mapping[str, Perturbation] = MappingProxyType({p.name: p for p in [
+    Perturbation("nav-0.1m", "navigation error 0.1 m, 1 mm/s (1 sigma per axis), read by everyone on board",
+                 sigma_position=0.1, sigma_velocity=0.001),
+    Perturbation("nav-1m", "navigation error 1 m, 1 cm/s (1 sigma per axis), read by everyone on board",
+                 sigma_position=1.0, sigma_velocity=0.01),
+    Perturbation("thrust-80", "actuator degradation: 80 % of the commanded thrust is applied", thrust_scale=0.8),
+    Perturbation("disturbance-x2", "the disturbance force doubled",
+                 truth=lambda sc: {"disturbance_force": 2.0 * sc.disturbance_force}),
+    Perturbation("model-j2", "model mismatch: J2 truth (chief inclination 51.6 deg) under a CW nominal model",
+                 truth=lambda sc: {"dynamics": "j2", **({"inclination": np.radians(51.6)}
+                                                        if hasattr(sc, "inclination") else {})}),
+    Perturbation("model-cw", "model mismatch the other way: CW truth under the nominal J2 + drag scenario",
+                 truth=lambda sc: {"dynamics": "cw"}),
+    Perturbation("inertia-x1.5", "model mismatch: true inertia 1.5x the nominal", truth=_scaled_inertia(1.5)),
+    Perturbation("inertia-x0.5", "model mismatch: true inertia 0.5x the nominal", truth=_scaled_inertia(0.5)),
+]})
+"""Every perturbation by name; a task lists those that apply to it (``Task.perturbations``)."""
+
+
+def names() -> tuple[str, ...]:
+    return tuple(PERTURBATIONS)
+
+
+def get(name: str) -> Perturbation:
+    if not isinstance(name, str) or name not in PERTURBATIONS:
+        raise SatenvError(f"unknown perturbation {name!r:.80}; expected one of {list(PERTURBATIONS)}")
+    return PERTURBATIONS[name]
+
+
+class PerturbedEnv(BaseParallelWrapper):
+    """A satenv ``ParallelEnv`` under one :class:`Perturbation` (see the module docstring).
+
+    ``truth_env`` runs the perturbed physics; ``nominal_scenario`` is what ``env.scenario``
+    shows (the model a controller built from this env plans with)."""
+
+    def __init__(self, truth_env: Any, perturbation: Perturbation, nominal_scenario: Any) -> None:
+        super().__init__(truth_env)
+        self.perturbation = perturbation
+        self.nominal_scenario = nominal_scenario
+        self.metadata = {**truth_env.metadata, "perturbation": perturbation.name}
+        self._truth: np.ndarray | None = None
+        self._nav_rng = np.random.default_rng(NAV_SEED_KEY)
+
+    @property
+    def scenario(self) -> Any:
+        return self.nominal_scenario
+
+    @property
+    def unwrapped(self) -> Any:
+        return self   # controllers and filters read scenario/core through this wrapper
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self.env, name)
+
+    def _estimate(self, obs: dict[str, Any]) -> dict[str, Any]:
+        """Install the navigation estimate in the core and observe it (no-op without nav error)."""
+        p = self.perturbation
+        if not (p.sigma_position or p.sigma_velocity) or not obs:
+            return obs
+        core = self.env.core
+        self._truth = core.x.copy()
+        noise = self._nav_rng.standard_normal(core.x[..., :6].shape)
+        noise[..., :3] *= p.sigma_position
+        noise[..., 3:6] *= p.sigma_velocity
+        core.x[..., :6] += noise
+        noisy = core.observe()[0]
+        return {a: noisy[i] for i, a in enumerate(self.env.possible_agents) if a in obs}
+
+    def _restore(self) -> None:
+        if self._truth is not None:
+            self.env.core.x[...] = self._truth
+            self._truth = None
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        self._restore()
+        self._nav_rng = np.random.default_rng([NAV_SEED_KEY, 0 if seed is None else int(seed)])
+        obs, infos = self.env.reset(seed=seed, options=options)
+        return self._estimate(obs), infos
+
+    def step(self, actions: dict[str, Any]):
+        self._restore()
+        k = self.perturbation.thrust_scale
+        if k != 1.0 and isinstance(actions, dict):
+            actions = {a: np.clip(np.asarray(v, dtype=float), -1.0, 1.0) * k for a, v in actions.items()}
+        obs, rewards, terms, truncs, infos = self.env.step(actions)
+        return self._estimate(obs), rewards, terms, truncs, infos
+
+    def state(self) -> np.ndarray:
+        return self.env.state()
+
+
+def make_env(task: Any, perturbation: str | None, **overrides: Any) -> Any:
+    """The task's env under the named perturbation (``None``: the nominal env), with
+    ``overrides`` applied to both the nominal and the truth scenario."""
+    nominal = task.make_env(**overrides)
+    if perturbation is None:
+        return nominal
+    p = get(perturbation)
+    truth = task.make_env(**{**overrides, **p.truth(nominal.scenario)})
+    return PerturbedEnv(truth, p, nominal.scenario)

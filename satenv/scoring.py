@@ -1,0 +1,143 @@
+"""How an evaluation is scored, one home for the training evaluation, the held-out recipe, the
+policy card and the scoreboard.
+
+* **Episode record** (:func:`episode_record`): :func:`satenv.metrics.summary` of a trajectory, plus
+  ``seed``, ``compute_ms_per_agent`` and, for a policy behind the safety filter, its counts
+  ``safety_interventions``, ``safety_infeasible`` and ``safety_steps`` (agent-steps seen).
+* **Aggregate** (:func:`aggregate`) of a list of records, keys:
+
+  ================================  =============================================================
+  ``episodes``                      number of episodes
+  ``success_rate``                  share of successful episodes (the scenario's rule, ``metrics.success``)
+  ``success_ci95``                  95 % Wilson interval of ``success_rate`` (``None`` on one episode)
+  ``collision_episodes``            episodes with at least one collision flag
+  ``violation_episodes``            episodes with at least one hard-constraint violation
+  ``safe_success_rate``             share reached with no collision and no violation
+  ``violations``                    mean violations per episode
+  ``terminated``                    episodes that ended early (collision, left the region)
+  ``rmse``, ``delta_v``, ...        means over episodes (``final_error_m``, ``time_to_converge_s``
+                                    over the episodes that converged, ``compute_ms_per_agent``)
+  ``min_separation_m``              smallest separation over every episode
+  ``interventions_per_agent_step``  filter interventions / agent-steps (filtered policies only)
+  ================================  =============================================================
+
+* **Ratio rule**: :func:`satenv.metrics.matched_ratios` (ratios of the means on matched, completed
+  episodes), re-exported here.
+* **Target rule** (:func:`targets`) with named thresholds, and the **safety-first ranking**
+  (:func:`rank_key`): success rate, then collision episodes, then violation episodes, then RMSE,
+  then delta-v.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+from satenv.errors import SatenvError
+from satenv.metrics import matched_ratios, summary
+
+__all__ = ["DECISION_MS_PER_AGENT_LIMIT", "RATIO_LIMIT", "SUCCESS_MARGIN", "SUCCESS_MIN", "aggregate",
+           "episode_record", "matched_ratios", "rank_key", "targets", "wilson"]
+
+SUCCESS_MIN = 0.9
+"""A learned policy's success rate must be at least this."""
+SUCCESS_MARGIN = 0.05
+"""... and at least the controller's success rate minus this margin (5 points)."""
+RATIO_LIMIT = 1.5
+"""RMSE and delta-v of a learned policy: at most this multiple of the controller's (matched episodes)."""
+DECISION_MS_PER_AGENT_LIMIT = 1.0
+"""A learned policy's decision time per agent [ms]."""
+
+SAFETY_COUNTS = ("safety_interventions", "safety_infeasible", "safety_steps")
+
+
+def episode_record(traj: Any, seed: int, n_agents: int, policy_info: Mapping[str, Any] | None = None
+                   ) -> dict[str, Any]:
+    """The one episode record: ``metrics.summary(traj)`` with ``seed``, ``compute_ms_per_agent``
+    and the filter's counts from ``policy_info`` when it has them."""
+    rec = summary(traj)
+    rec["seed"] = int(seed)
+    rec["compute_ms_per_agent"] = rec["compute_ms_per_decision"] / max(1, int(n_agents))
+    for key in SAFETY_COUNTS:
+        if policy_info and key in policy_info:
+            rec[key] = int(policy_info[key])
+    return rec
+
+
+def wilson(successes: int, n: int) -> tuple[float, float, float]:
+    """Success rate and its 95 % Wilson score interval (``scipy.stats.binomtest``); NaNs for n = 0."""
+    from scipy import stats
+
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    ci = stats.binomtest(int(successes), int(n)).proportion_ci(confidence_level=0.95, method="wilson")
+    return successes / n, float(ci.low), float(ci.high)
+
+
+def _mean(eps: list[dict[str, Any]], key: str) -> float | None:
+    vals = [float(e[key]) for e in eps if e.get(key) is not None and math.isfinite(float(e[key]))]
+    return float(np.mean(vals)) if vals else None
+
+
+def aggregate(episodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
+    """The aggregate of episode records (keys in the module docstring). Records with an ``error``
+    (an episode that crashed) count as failures and are left out of the means."""
+    eps = list(episodes)
+    if not eps:
+        raise SatenvError("aggregate() needs at least one episode record, got none")
+    ok = [e for e in eps if e.get("error") is None]
+    wins = sum(bool(e.get("success")) for e in eps)
+    rate, lo, hi = wilson(wins, len(eps))
+    safe = sum(bool(e.get("success")) and not e.get("collisions") and not e.get("violations") for e in eps)
+    out: dict[str, Any] = {
+        "episodes": len(eps), "errors": len(eps) - len(ok), "success_rate": rate,
+        "success_ci95": [lo, hi] if len(eps) > 1 else None,
+        "collision_episodes": sum(bool(e.get("collisions")) for e in eps),
+        "violation_episodes": sum(bool(e.get("violations")) for e in eps),
+        "safe_success_rate": safe / len(eps),
+        "terminated": sum(bool(e.get("terminated")) for e in ok),
+        "violations": _mean(ok, "violations"),
+    }
+    for key in ("rmse", "rmsee", "delta_v", "final_error_m", "time_to_converge_s", "compute_ms_per_agent",
+                "compute_ms_per_decision", "steps"):
+        out[key] = _mean(ok, key)
+    seps = [e["min_separation_m"] for e in ok if e.get("min_separation_m") is not None]
+    out["min_separation_m"] = float(min(seps)) if seps else None
+    if any("safety_interventions" in e for e in ok):
+        for key in SAFETY_COUNTS:
+            out[key] = int(sum(e.get(key, 0) for e in ok))
+        out["interventions_per_agent_step"] = (out["safety_interventions"] / out["safety_steps"]
+                                               if out["safety_steps"] else None)
+    return out
+
+
+def targets(agg: Mapping[str, Any], ref: Mapping[str, Any] | None, ratios: Mapping[str, Any]) -> dict[str, bool]:
+    """A learned policy's targets against its controller (``True`` = met): success >= :data:`SUCCESS_MIN`
+    and >= the controller's minus :data:`SUCCESS_MARGIN`; no collision episode; no violation
+    episode; RMSE and delta-v ratios (matched episodes) <= :data:`RATIO_LIMIT`; a decision <=
+    :data:`DECISION_MS_PER_AGENT_LIMIT` ms per agent (when measured)."""
+    ref_rate = None if ref is None else ref.get("success_rate")
+    out = {"success": agg["success_rate"] >= SUCCESS_MIN
+           and (ref_rate is None or agg["success_rate"] >= ref_rate - SUCCESS_MARGIN - 1e-12),
+           "no_collisions": agg["collision_episodes"] == 0,
+           "no_violations": agg.get("violation_episodes", 0) == 0,
+           "rmse": (ratios.get("rmse_ratio") if ratios.get("rmse_ratio") is not None else math.inf) <= RATIO_LIMIT,
+           "delta_v": (ratios.get("delta_v_ratio") if ratios.get("delta_v_ratio") is not None else math.inf)
+           <= RATIO_LIMIT}
+    if agg.get("compute_ms_per_agent") is not None:
+        out["decision_time"] = agg["compute_ms_per_agent"] <= DECISION_MS_PER_AGENT_LIMIT
+    return out
+
+
+def rank_key(success_rate: float | None, collision_episodes: float | None, violation_episodes: float | None,
+             rmse: float | None, delta_v: float | None) -> tuple[float, ...]:
+    """The safety-first ranking key (sort ascending: best first): success rate (higher first), then
+    collision episodes, then violation episodes, then RMSE, then delta-v (fewer / lower first); a
+    missing value ranks last on its criterion."""
+    def v(x: float | None, sign: float = 1.0) -> float:
+        return math.inf if x is None or (isinstance(x, float) and math.isnan(x)) else sign * float(x)
+
+    return (v(success_rate, -1.0), v(collision_episodes), v(violation_episodes), v(rmse), v(delta_v))

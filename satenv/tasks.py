@@ -1,0 +1,352 @@
+"""The task registry: what is run and how it is scored, one home for training and benchmarks.
+
+A :class:`Task` is a named env configuration with everything a fair comparison needs: the env id
+and keyword arguments, the paper system it belongs to, that system's controller (the comparator)
+and expert (for imitation) by registry name, the seeds of each split and the perturbations it is
+evaluated under::
+
+    from satenv import tasks
+    task = tasks.get("cluster-case1-random")
+    env = task.make_env()                       # satenv.make(task.env_id, **task.env_kwargs)
+    test = task.seeds("test")                   # the held-out seeds every published number uses
+    tasks.training_task("cluster-li2022").name  # 'cluster-case1-random'
+
+Seed splits (:data:`SEED_SPLITS`) are the same bands for every task and disjoint by construction
+(:func:`check_splits` runs at import): train seeds for training runs, validation seeds for every
+choice (round, checkpoint, hyper-parameter), test seeds only for the reported result. A
+deterministic task (the paper's own start) has a single test seed: every seed gives the same
+episode, so nobody reports an interval on it.
+
+Each paper system (:data:`SYSTEMS`) has a **training task** (a randomised start drawn from the
+seed, usable by RL: every start outside the keep-out zones) and a **paper task** (the paper's start,
+deterministic, reproducing the paper). The other tasks (``role="extra"``) are variants the
+scoreboard also runs (other topologies, J2 truth, swarms).
+
+The registry imports no baseline: controllers and experts are names that ``baselines.make`` and
+``training.experts.make`` resolve.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from satenv.errors import SatenvError, SatenvTypeError
+
+__all__ = ["SEED_SPLITS", "SPLITS", "SYSTEMS", "TASKS", "MAX_SEEDS", "System", "Task", "check_splits",
+           "get", "names", "paper_task", "parse_seeds", "show_seeds", "system", "training_task"]
+
+SPLITS = ("train", "validation", "test")
+"""The seed splits, in the order a study uses them."""
+
+SEED_SPLITS: Mapping[str, range] = MappingProxyType({
+    "train": range(0, 700_000),
+    "validation": range(700_000, 800_000),
+    "test": range(900_000, 901_000),
+})
+"""The seed band of each split, the same for every task: training runs draw from ``train``,
+every choice is made on ``validation``, published numbers use ``test`` only (1,000 seeds)."""
+
+MAX_SEEDS = 100_000
+"""The most seeds one seed list may name (a typo such as ``0-10000000`` is an error, not hours of
+evaluation)."""
+
+
+def check_splits(splits: Mapping[str, range] = SEED_SPLITS) -> None:
+    """Raise :class:`SatenvError` unless the splits are non-empty, non-negative and pairwise
+    disjoint (run at import on :data:`SEED_SPLITS`)."""
+    bands = sorted((r.start, r.stop, name) for name, r in splits.items())
+    for start, stop, name in bands:
+        if start < 0 or stop <= start:
+            raise SatenvError(f"seed split {name!r} must be a non-empty band of seeds >= 0, got "
+                              f"{start}..{stop - 1}")
+    for (_, stop, a), (start, _, b) in zip(bands, bands[1:]):   # noqa: B905 (consecutive pairs)
+        if start < stop:
+            raise SatenvError(f"seed splits {a!r} and {b!r} overlap (seeds {start}..{stop - 1})")
+
+
+check_splits()
+
+
+def parse_seeds(text: str | Iterable[str]) -> tuple[int, ...]:
+    """``"0-9"`` (inclusive), ``"0,3,7"``, ``"0-4,10"`` or several such strings -> the seeds in
+    the order given, duplicates dropped; at least one, at most :data:`MAX_SEEDS`. ``"a:b"``
+    (Python's half-open range) is accepted too. The one seed grammar of every command line."""
+    if not isinstance(text, str) and not (isinstance(text, Iterable) and all(isinstance(t, str) for t in text)):
+        raise SatenvTypeError(f"seeds must be a string like '0-9' or '0,3,7' (or a list of them), got "
+                              f"{type(text).__name__}")
+    parts = [p.strip() for t in ([text] if isinstance(text, str) else text) for p in t.split(",")]
+    seeds: dict[int, None] = {}
+    try:
+        for part in filter(None, parts):
+            sep = ":" if ":" in part else ("-" if "-" in part[1:] else None)
+            if sep is None:
+                lo, hi = int(part), int(part) + 1
+            else:
+                a, b = part.split(sep, 1)
+                lo, hi = int(a), int(b) + (sep == "-")
+            if lo < 0 or hi <= lo:
+                raise ValueError
+            if len(seeds) + hi - lo > MAX_SEEDS:
+                raise OverflowError
+            seeds.update(dict.fromkeys(range(lo, hi)))
+        if not seeds:
+            raise ValueError
+    except OverflowError:
+        raise SatenvError(f"seeds: {text!r:.80} names more than {MAX_SEEDS} seeds") from None
+    except ValueError:
+        raise SatenvError(f"seeds must be non-negative integers or ranges like '0-9' (inclusive) or "
+                          f"'0,3,7', got {text!r:.80}") from None
+    return tuple(seeds)
+
+
+def show_seeds(seeds: Iterable[int]) -> str:
+    """``A-B`` for a run of consecutive seeds (the :func:`parse_seeds` range syntax), else
+    comma-separated."""
+    seeds = tuple(seeds)
+    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
+
+
+@dataclass(frozen=True)
+class System:
+    """A paper system: its label, its controller (a ``baselines`` registry name), its expert for
+    imitation (a ``training.experts`` registry name) and its training and paper tasks."""
+
+    name: str
+    label: str
+    controller: str
+    expert: str
+    training_task: str
+    paper_task: str
+
+
+SYSTEMS: Mapping[str, System] = MappingProxyType({s.name: s for s in [
+    System("platoon-pereira2023", "platoon, pereira2023", "dmpc", "dmpc",
+           "platoon-tplf30-random-cw", "platoon-PLF-cw"),
+    System("platoon-pereira2022", "platoon, pereira2022 §5.1", "dmpc", "joint_platoon_mpc",
+           "platoon-pereira2022-random", "platoon-pereira2022"),
+    System("cluster-li2022", "cluster, li2022", "tube_rdmpc", "replanning_tube_rdmpc",
+           "cluster-case1-random", "cluster-case1"),
+    System("servicing-pereira2022", "servicing, pereira2022 §5.2", "nmpc", "nmpc",
+           "servicing-pereira2022-random", "servicing-pereira2022"),
+    System("formation-kannan2022-position", "formation, kannan2022 position", "cgmres", "cgmres",
+           "formation-kannan2022-position-random", "formation-kannan2022-position"),
+    System("formation-kannan2022-collision", "formation, kannan2022 collision", "cgmres", "cgmres",
+           "formation-kannan2022-collision-random", "formation-kannan2022-collision"),
+]})
+"""The six paper systems, in the order the board's summary lists them."""
+
+
+def _frozen(kwargs: Mapping[str, Any]) -> Mapping[str, Any]:
+    return MappingProxyType(dict(kwargs))
+
+
+@dataclass(frozen=True)
+class Task:
+    """One named task (frozen): ``make_env()`` builds its env, ``seeds(split)`` gives its seeds.
+
+    ``cost_budget`` is the per-episode safety-cost budget the paper implies (the env's ``cost``
+    info summed over an episode): ``0.0`` where collisions and keep-out zones are hard constraints,
+    ``None`` where the paper sets no safety constraint (its target formation itself is in contact).
+    Constrained-RL libraries read it from here or from ``env.metadata["cost_budget"]``.
+    """
+
+    name: str
+    env_id: str
+    env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    system: str | None = None
+    role: str = "extra"
+    description: str = ""
+    perturbations: tuple[str, ...] = ()
+    cost_budget: float | None = 0.0
+
+    def __post_init__(self) -> None:
+        from satenv import ENV_IDS
+
+        if not isinstance(self.name, str) or not self.name:
+            raise SatenvError(f"task name must be a non-empty string, got {self.name!r}")
+        if self.env_id not in ENV_IDS:
+            raise SatenvError(f"task {self.name}: env_id must be one of {list(ENV_IDS)}, got {self.env_id!r}")
+        if self.role not in ("training", "paper", "extra"):
+            raise SatenvError(f"task {self.name}: role must be 'training', 'paper' or 'extra', got {self.role!r}")
+        object.__setattr__(self, "env_kwargs", _frozen(self.env_kwargs))
+
+    @property
+    def randomized(self) -> bool:
+        """Whether the start is drawn from the seed (else every seed gives the same episode)."""
+        return bool(self.env_kwargs.get("randomize", False))
+
+    @property
+    def controller(self) -> str | None:
+        """The system's controller (a ``baselines`` registry name), ``None`` for a task of no system."""
+        return SYSTEMS[self.system].controller if self.system else None
+
+    @property
+    def expert(self) -> str | None:
+        """The system's expert for imitation (a ``training.experts`` registry name)."""
+        return SYSTEMS[self.system].expert if self.system else None
+
+    def seeds(self, split: str, n: int | None = None) -> tuple[int, ...]:
+        """The first ``n`` seeds (all when ``None``) of ``split`` (``"train"``, ``"validation"``,
+        ``"test"``); a deterministic task has one test seed."""
+        if split not in SEED_SPLITS:
+            raise SatenvError(f"split must be one of {list(SPLITS)}, got {split!r:.40}")
+        band = SEED_SPLITS[split]
+        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+            raise SatenvError(f"n must be a positive int or None, got {n!r:.40}")
+        if split == "test" and not self.randomized:
+            return (band.start,)
+        return tuple(band[: len(band) if n is None else min(n, len(band))])
+
+    def split_of(self, seed: int) -> str | None:
+        """The split a seed belongs to (``None`` for a seed in no band)."""
+        return next((s for s, band in SEED_SPLITS.items() if seed in band), None)
+
+    def make_env(self, **overrides: Any) -> Any:
+        """``satenv.make(env_id, **env_kwargs, **overrides)``, with ``metadata["task"]`` and
+        ``metadata["cost_budget"]`` set on the env."""
+        import satenv
+
+        env = satenv.make(self.env_id, **{**self.env_kwargs, **overrides})
+        env.metadata = {**env.metadata, "task": self.name, "cost_budget": self.cost_budget}
+        return env
+
+
+_ISS_INCLINATION = math.radians(51.6)
+_TABLE1_NOTE = ("the Table I formation puts followers closer than 2 r_f, so collisions are counted "
+                "but do not end the episode or void success")
+_TPLF30 = {"preset": "pereira2023", "topology": "TPLF", "desired_error": (0.0, -30.0, 0.0, 0.0, 0.0, 0.0),
+           "terminate_on_collision": True}
+_NAV = ("nav-0.1m", "nav-1m")
+_TRANSLATION = (*_NAV, "thrust-80")
+
+
+def _platoon(name: str, description: str, *, system: str | None = None, role: str = "extra",
+             perturbations: tuple[str, ...] = (), **kwargs: Any) -> Task:
+    """A platoon_v0 task; pereira2023 Table I ones count collisions without ending the episode
+    (their target formation is closer than 2 r_f, so the paper sets no collision constraint)."""
+    table1 = kwargs.get("preset") == "pereira2023" and not kwargs.get("terminate_on_collision", True)
+    return Task(name, "platoon_v0", kwargs, system, role, description, perturbations,
+                None if table1 else 0.0)
+
+
+def _tasks() -> list[Task]:
+    from satenv.scenarios import cluster as _cluster
+    from satenv.scenarios.platoon import swarm
+
+    return [
+        *[_platoon(f"platoon-{topo}-{dyn}",
+                   f"pereira2023 Table I, {topo} topology, {dyn} truth"
+                   + (" (chief inclination 51.6 deg)" if dyn == "j2" else "") + f"; {_TABLE1_NOTE}",
+                   system="platoon-pereira2023" if (topo, dyn) == ("PLF", "cw") else None,
+                   role="paper" if (topo, dyn) == ("PLF", "cw") else "extra",
+                   preset="pereira2023", topology=topo, dynamics=dyn, terminate_on_collision=False,
+                   **({"inclination": _ISS_INCLINATION} if dyn == "j2" else {}))
+          for dyn in ("cw", "j2") for topo in ("PLF", "BDL", "TPLF")],
+        _platoon("platoon-random-cw", f"pereira2023 PLF with randomised initial states, cw; {_TABLE1_NOTE}",
+                 preset="pereira2023", randomize=True, terminate_on_collision=False),
+        _platoon("platoon-random-j2", f"pereira2023 PLF with randomised initial states, j2 (51.6 deg); "
+                 f"{_TABLE1_NOTE}", preset="pereira2023", randomize=True, dynamics="j2",
+                 inclination=_ISS_INCLINATION, terminate_on_collision=False),
+        _platoon("platoon-chain-cw", "pereira2023 Table I start, PLF, chain formation (followers 8 m "
+                 "apart, collision-free target); a collision ends the episode",
+                 preset="pereira2023", formation="chain", terminate_on_collision=True),
+        _platoon("platoon-tplf30-random-cw", "pereira2023 TPLF with E_d = [0, -30, 0] (targets 8-15 m "
+                 "apart, collision-free) and randomised initial states, cw; a collision ends the episode",
+                 system="platoon-pereira2023", role="training",
+                 perturbations=(*_TRANSLATION, "model-j2"), **_TPLF30, randomize=True),
+        _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, "
+                 "LOS cone (collision-free success)", system="platoon-pereira2022", role="paper",
+                 preset="pereira2022"),
+        _platoon("platoon-swarm256-ring-cw", "swarm of 256 followers on a ring 20 m apart, each hearing "
+                 "its two ring neighbours (RING), randomised starts within 4 m of the targets, cw; a "
+                 "collision ends the episode (satenv.scenarios.platoon.swarm)", **swarm(256, "ring", "RING")),
+        _platoon("platoon-pereira2022-random", "pereira2022 §5.1 with randomised initial states (inside "
+                 "the LOS cone, outside the keep-out sphere)", system="platoon-pereira2022",
+                 role="training", perturbations=(*_TRANSLATION, "model-j2"),
+                 preset="pereira2022", randomize=True),
+        Task("cluster-case1", "cluster_v0", {"preset": "li2022-case1"}, "cluster-li2022", "paper",
+             "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
+        Task("cluster-case2", "cluster_v0", {"preset": "li2022-case2"}, None, "extra",
+             "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
+        Task("cluster-case1-random", "cluster_v0", {"preset": "li2022-case1", "randomize": True},
+             "cluster-li2022", "training",
+             "li2022 case 1 with randomised starts (±50 m) and target slots (on the 300 m sphere)",
+             (*_TRANSLATION, "disturbance-x2", "model-cw")),
+        Task("cluster-swarm64-cw", "cluster_v0", _cluster.swarm(64, dynamics="cw"), None, "extra",
+             "li2022 case-1 physics with 64 satellites and 64 slots (random each reset, Hungarian "
+             "allocation), cw truth (satenv.scenarios.cluster.swarm)"),
+        Task("servicing-pereira2022", "servicing_v0", {"preset": "pereira2022"},
+             "servicing-pereira2022", "paper", "pereira2022 §5.2: 6-DOF servicing around a passive object"),
+        Task("servicing-pereira2022-random", "servicing_v0", {"preset": "pereira2022", "randomize": True},
+             "servicing-pereira2022", "training",
+             "pereira2022 §5.2 with randomised initial states (every start at least 1 m outside the "
+             "keep-out sphere)", (*_TRANSLATION, "inertia-x1.5", "inertia-x0.5")),
+        Task("formation-kannan2022-position", "formation_v0", {"preset": "kannan2022-position"},
+             "formation-kannan2022-position", "paper", "kannan2022 §5.1: 3 spacecraft to a connected "
+             "in-plane network"),
+        Task("formation-kannan2022-collision", "formation_v0", {"preset": "kannan2022-collision"},
+             "formation-kannan2022-collision", "paper", "kannan2022 §5.2: leader-follower y-spacing of 10 m"),
+        Task("formation-kannan2022-position-random", "formation_v0",
+             {"preset": "kannan2022-position", "randomize": True}, "formation-kannan2022-position",
+             "training", "kannan2022 §5.1 with randomised starts (±20 m, ±1 m/s around the origin)",
+             (*_TRANSLATION, "model-j2")),
+        Task("formation-kannan2022-collision-random", "formation_v0",
+             {"preset": "kannan2022-collision", "randomize": True}, "formation-kannan2022-collision",
+             "training", "kannan2022 §5.2 with randomised starts (±20 m, ±1 m/s around the origin)",
+             (*_TRANSLATION, "model-j2")),
+    ]
+
+
+TASKS: Mapping[str, Task] = MappingProxyType({t.name: t for t in _tasks()})
+"""Every task by name (the scoreboard's scenarios)."""
+
+def names() -> tuple[str, ...]:
+    """Every task name, registry order."""
+    return tuple(TASKS)
+
+
+def get(name: str) -> Task:
+    """The task called ``name`` (a system name means its training task)."""
+    if isinstance(name, str) and name in SYSTEMS and name not in TASKS:
+        name = SYSTEMS[name].training_task
+    if not isinstance(name, str) or name not in TASKS:
+        raise SatenvError(f"unknown task {name!r:.80}; expected one of {list(TASKS)} or a system "
+                          f"({list(SYSTEMS)})")
+    return TASKS[name]
+
+
+def system(name: str) -> System:
+    """The paper system called ``name``."""
+    if not isinstance(name, str) or name not in SYSTEMS:
+        raise SatenvError(f"unknown system {name!r:.80}; expected one of {list(SYSTEMS)}")
+    return SYSTEMS[name]
+
+
+def training_task(system_name: str) -> Task:
+    """The system's training task (randomised start from the seed)."""
+    return TASKS[system(system_name).training_task]
+
+
+def paper_task(system_name: str) -> Task:
+    """The system's paper task (the paper's start, deterministic)."""
+    return TASKS[system(system_name).paper_task]
+
+
+def _check_registry() -> None:
+    for s in SYSTEMS.values():
+        for name, role in ((s.training_task, "training"), (s.paper_task, "paper")):
+            t = TASKS[name]
+            if t.system != s.name or t.role != role:
+                raise SatenvError(f"system {s.name}: task {name} must have system={s.name!r} and "
+                                  f"role={role!r}, has {t.system!r} and {t.role!r}")
+        if not TASKS[s.training_task].randomized:
+            raise SatenvError(f"system {s.name}: its training task must randomise the start")
+
+
+_check_registry()
