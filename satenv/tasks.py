@@ -36,7 +36,7 @@ from typing import Any
 
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["SEED_SPLITS", "SPLITS", "SYSTEMS", "TASKS", "MAX_SEEDS", "System", "Task", "check_splits",
+__all__ = ["CONTROLLERS", "SEED_SPLITS", "SPLITS", "SYSTEMS", "TASKS", "MAX_SEEDS", "System", "Task", "check_splits",
            "get", "names", "paper_task", "parse_seeds", "show_seeds", "system", "training_task"]
 
 SPLITS = ("train", "validation", "test")
@@ -112,31 +112,40 @@ def show_seeds(seeds: Iterable[int]) -> str:
     return ",".join(map(str, seeds))
 
 
+CONTROLLERS: Mapping[str, str] = MappingProxyType({
+    "platoon_v0": "dmpc", "cluster_v0": "tube_rdmpc", "servicing_v0": "nmpc", "formation_v0": "cgmres"})
+"""The controller each env's paper proposes (a ``baselines`` registry name): the comparator of every
+task on that env, the reference of the board's normalised score."""
+
+
 @dataclass(frozen=True)
 class System:
-    """A paper system: its label, its controller (a ``baselines`` registry name), its expert for
-    imitation (a ``training.experts`` registry name) and its training and paper tasks."""
+    """A paper system: its label, its expert for imitation (a ``training.experts`` registry name)
+    and its training and paper tasks; its controller is its env's (:data:`CONTROLLERS`)."""
 
     name: str
     label: str
-    controller: str
     expert: str
     training_task: str
     paper_task: str
 
+    @property
+    def controller(self) -> str:
+        return CONTROLLERS[TASKS[self.training_task].env_id]
+
 
 SYSTEMS: Mapping[str, System] = MappingProxyType({s.name: s for s in [
-    System("platoon-pereira2023", "platoon, pereira2023", "dmpc", "dmpc",
+    System("platoon-pereira2023", "platoon, pereira2023", "dmpc",
            "platoon-tplf30-random-cw", "platoon-PLF-cw"),
-    System("platoon-pereira2022", "platoon, pereira2022 §5.1", "dmpc", "joint_platoon_mpc",
+    System("platoon-pereira2022", "platoon, pereira2022 §5.1", "joint_platoon_mpc",
            "platoon-pereira2022-random", "platoon-pereira2022"),
-    System("cluster-li2022", "cluster, li2022", "tube_rdmpc", "replanning_tube_rdmpc",
+    System("cluster-li2022", "cluster, li2022", "replanning_tube_rdmpc",
            "cluster-case1-random", "cluster-case1"),
-    System("servicing-pereira2022", "servicing, pereira2022 §5.2", "nmpc", "nmpc",
+    System("servicing-pereira2022", "servicing, pereira2022 §5.2", "nmpc",
            "servicing-pereira2022-random", "servicing-pereira2022"),
-    System("formation-kannan2022-position", "formation, kannan2022 position", "cgmres", "cgmres",
+    System("formation-kannan2022-position", "formation, kannan2022 position", "cgmres",
            "formation-kannan2022-position-random", "formation-kannan2022-position"),
-    System("formation-kannan2022-collision", "formation, kannan2022 collision", "cgmres", "cgmres",
+    System("formation-kannan2022-collision", "formation, kannan2022 collision", "cgmres",
            "formation-kannan2022-collision-random", "formation-kannan2022-collision"),
 ]})
 """The six paper systems, in the order the board's summary lists them."""
@@ -182,9 +191,9 @@ class Task:
         return bool(self.env_kwargs.get("randomize", False))
 
     @property
-    def controller(self) -> str | None:
-        """The system's controller (a ``baselines`` registry name), ``None`` for a task of no system."""
-        return SYSTEMS[self.system].controller if self.system else None
+    def controller(self) -> str:
+        """The controller of the task's env (:data:`CONTROLLERS`): the comparator of its results."""
+        return CONTROLLERS[self.env_id]
 
     @property
     def expert(self) -> str | None:

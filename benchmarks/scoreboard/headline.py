@@ -3,8 +3,8 @@ the best scripted and the best learned policy side by side, as a table at the to
 ``scoreboard.md`` and one figure, ``plots/headline.png``.
 
 On each system's scenario (the first of its scenarios on the board: the one its learned policies
-are ranked on), the best of each kind by the board's own ranking (success rate desc, RMSE asc,
-delta-v asc); learned means a ``trained:`` or ``user:`` policy (with or without the safety filter),
+are ranked on), the best of each kind by the board's own safety-first ranking (success rate desc,
+collision episodes asc, violation episodes asc, RMSE asc, delta-v asc); learned means a ``trained:`` or ``user:`` policy (with or without the safety filter),
 scripted everything else. The RMSE and delta-v ratios (learned / scripted, ratio of the means)
 are taken on *matched, completed* episodes only (``satenv.metrics.matched_ratios``):
 the seeds where both episodes ran to the end without an error and without a collision, so an
@@ -20,9 +20,9 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from benchmarks.scoreboard.report import _wilson  # the board's success-rate interval
 from benchmarks.scoreboard.specs import NETWORK_SUFFIX, SHIELD_SUFFIX
 from satenv.metrics import matched_ratios
+from satenv.scoring import wilson as _wilson  # the board's success-rate interval
 
 __all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
 
@@ -116,8 +116,9 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
         return []
     lines = [f"## {HEADING}", "",
              "Per system of the papers, on the scenario its learned policies are ranked on, the best "
-             "scripted and the best learned policy by this board's ranking (success rate, then RMSE, "
-             "then Δv). Collisions, violations: episodes with at least one collision, with at least "
+             "scripted and the best learned policy by this board's safety-first ranking (success rate, "
+             "then collision episodes, then violation episodes, then RMSE, then Δv), so the best learned "
+             "policy is the best *safe* one among equally successful ones. Collisions, violations: episodes with at least one collision, with at least "
              "one hard-constraint violation counted by the env. RMSE and Δv ratios: "
              "learned / scripted, ratio of the means over the *matched, completed* episodes (seeds "
              "where both episodes ran to the end without a collision), so an episode that ends "

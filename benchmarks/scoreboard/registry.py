@@ -1,107 +1,34 @@
 """The scoreboard's tables: every scenario and scripted policy by name, the ``--quick`` and full
 boards, shipped trained policies (``training/policies/*``) and user checkpoints (``--policy``).
 
-Adding an env configuration or a baseline is one entry here::
+The scenarios are the tasks of :mod:`satenv.tasks` (add a task there); adding a baseline is one
+entry here::
 
-    SCENARIOS["cluster-case1"] = ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"})
     POLICIES["apf"] = PolicySpec("apf", "baselines:APF", baseline="apf")  # where: APF.supports(env)
 """
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import Any
 
 from benchmarks.scoreboard.specs import NETWORK_SUFFIX, PolicySpec, ScenarioSpec, ScoreboardError
-from satenv.scenarios import cluster as _cluster
-from satenv.scenarios.platoon import swarm
+from satenv import tasks
 
 __all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "SYSTEMS", "discover_trained_policies", "user_policy",
            "user_policy_name"]
 
 SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
 
-_ISS_INCLINATION = math.radians(51.6)
-_TABLE1_NOTE = ("the Table I formation puts followers closer than 2 r_f, so collisions are counted "
-                "but do not end the episode or void success")
+SCENARIOS: dict[str, ScenarioSpec] = {t.name: ScenarioSpec(t.name, t.env_id, dict(t.env_kwargs), t.description)
+                                       for t in tasks.TASKS.values()}
+"""Every scenario of the scoreboard by name: the tasks of :mod:`satenv.tasks` (one registry)."""
 
-
-def _platoon(name: str, description: str, **kwargs) -> ScenarioSpec:
-    """A platoon_v0 scenario; pereira2023-based ones run without collision termination (as the
-    paper's reproduction): its target formation itself is closer than 2 r_f (the scenario then
-    derives ``collision_voids_success=False``)."""
-    return ScenarioSpec(name, "platoon_v0", kwargs, description)
-
-
-SCENARIOS: dict[str, ScenarioSpec] = {s.name: s for s in [
-    *[_platoon(f"platoon-{topo}-{dyn}",
-               f"pereira2023 Table I, {topo} topology, {dyn} truth"
-               + (" (chief inclination 51.6 deg)" if dyn == "j2" else "") + f"; {_TABLE1_NOTE}",
-               preset="pereira2023", topology=topo, dynamics=dyn, terminate_on_collision=False,
-               **({"inclination": _ISS_INCLINATION} if dyn == "j2" else {}))
-      for dyn in ("cw", "j2") for topo in ("PLF", "BDL", "TPLF")],
-    _platoon("platoon-random-cw", f"pereira2023 PLF with randomised initial states, cw; {_TABLE1_NOTE}",
-             preset="pereira2023", randomize=True, terminate_on_collision=False),
-    _platoon("platoon-random-j2", f"pereira2023 PLF with randomised initial states, j2 (51.6 deg); "
-             f"{_TABLE1_NOTE}", preset="pereira2023", randomize=True, dynamics="j2",
-             inclination=_ISS_INCLINATION, terminate_on_collision=False),
-    _platoon("platoon-chain-cw", "pereira2023 Table I start, PLF, chain formation (followers 8 m apart, "
-             "collision-free target); a collision ends the episode",
-             preset="pereira2023", formation="chain", terminate_on_collision=True),
-    _platoon("platoon-tplf30-random-cw", "pereira2023 TPLF with E_d = [0, -30, 0] (targets 8-15 m apart) "
-             "and randomised initial states, cw; a collision ends the episode (the shipped "
-             "policy's scenario)", preset="pereira2023",
-             topology="TPLF", desired_error=(0.0, -30.0, 0.0, 0.0, 0.0, 0.0), randomize=True,
-             terminate_on_collision=True),
-    _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, LOS cone "
-             "(collision-free success)", preset="pereira2022"),
-    _platoon("platoon-swarm256-ring-cw", "swarm of 256 followers on a ring 20 m apart, each hearing its "
-             "two ring neighbours (RING), randomised starts within 4 m of the targets, cw; a collision "
-             "ends the episode (satenv.scenarios.platoon.swarm)", **swarm(256, "ring", "RING")),
-    _platoon("platoon-pereira2022-random", "pereira2022 §5.1 with randomised initial states (inside the "
-             "LOS cone, outside the keep-out sphere; the learned policy's scenario)",
-             preset="pereira2022", randomize=True),
-    ScenarioSpec("cluster-case1", "cluster_v0", {"preset": "li2022-case1"},
-                 "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
-    ScenarioSpec("cluster-case2", "cluster_v0", {"preset": "li2022-case2"},
-                 "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
-    ScenarioSpec("cluster-case1-random", "cluster_v0", {"preset": "li2022-case1", "randomize": True},
-                 "li2022 case 1 with randomised starts (±50 m) and target slots (on the 300 m sphere); "
-                 "the learned policy's scenario"),
-    ScenarioSpec("cluster-swarm64-cw", "cluster_v0", _cluster.swarm(64, dynamics="cw"),
-                 "li2022 case-1 physics with 64 satellites and 64 slots (random each reset, Hungarian "
-                 "allocation), cw truth (satenv.scenarios.cluster.swarm)"),
-    ScenarioSpec("servicing-pereira2022", "servicing_v0", {"preset": "pereira2022"},
-                 "pereira2022 §5.2: 6-DOF servicing around a passive object"),
-    ScenarioSpec("servicing-pereira2022-random", "servicing_v0", {"preset": "pereira2022", "randomize": True},
-                 "pereira2022 §5.2 with randomised initial states (the learned policy's scenario)"),
-    ScenarioSpec("formation-kannan2022-position", "formation_v0", {"preset": "kannan2022-position"},
-                 "kannan2022 §5.1: 3 spacecraft to a connected in-plane network"),
-    ScenarioSpec("formation-kannan2022-collision", "formation_v0", {"preset": "kannan2022-collision"},
-                 "kannan2022 §5.2: leader-follower y-spacing of 10 m"),
-    ScenarioSpec("formation-kannan2022-position-random", "formation_v0",
-                 {"preset": "kannan2022-position", "randomize": True},
-                 "kannan2022 §5.1 with randomised starts (±20 m, ±1 m/s around the origin)"),
-    ScenarioSpec("formation-kannan2022-collision-random", "formation_v0",
-                 {"preset": "kannan2022-collision", "randomize": True},
-                 "kannan2022 §5.2 with randomised starts (±20 m, ±1 m/s around the origin)"),
-]}
-"""Every scenario of the scoreboard by name."""
-
-SYSTEMS: dict[str, tuple[str, ...]] = {
-    "platoon, pereira2023": ("platoon-tplf30-random-cw", "platoon-random-cw", "platoon-PLF-cw"),
-    "platoon, pereira2022 §5.1": ("platoon-pereira2022-random", "platoon-pereira2022"),
-    "cluster, li2022": ("cluster-case1-random", "cluster-case1"),
-    "servicing, pereira2022 §5.2": ("servicing-pereira2022-random", "servicing-pereira2022"),
-    "formation, kannan2022 position": ("formation-kannan2022-position-random", "formation-kannan2022-position"),
-    "formation, kannan2022 collision": ("formation-kannan2022-collision-random",
-                                        "formation-kannan2022-collision"),
-}
-"""The papers' systems of the board's summary (:mod:`benchmarks.scoreboard.headline`): each is
-shown on the first of its scenarios that is on the board (first: the one its learned policies are
-ranked on)."""
+SYSTEMS: dict[str, tuple[str, ...]] = {s.label: (s.training_task, s.paper_task) for s in tasks.SYSTEMS.values()}
+"""The papers' systems of the board's summary (:mod:`benchmarks.scoreboard.headline`), from
+:data:`satenv.tasks.SYSTEMS`: each is shown on the first of its scenarios that is on the board
+(first: its training task, the one its learned policies are ranked on; then its paper task)."""
 
 POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
     PolicySpec("zero", "baselines.base:ZeroPolicy", baseline="zero", description="no thrust (coasting)"),

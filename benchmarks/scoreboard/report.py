@@ -28,6 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from satenv.scoring import rank_key
+from satenv.scoring import wilson as _wilson  # the success rate's interval: one home
+from satenv.tasks import CONTROLLERS
+
 __all__ = ["KEY", "METRICS", "PAPER_CONTROLLER", "TIMING_FIELDS", "Board", "aggregate", "jsonable", "machine",
            "rank", "render_markdown", "summarize", "write_outputs", "write_plots"]
 
@@ -52,9 +56,9 @@ _TABLE = [  # (metric, column header) of the markdown table
 _SHIELD_TABLE = [("interventions", "interventions"), ("mean_du", "mean ‖Δu‖"),
                  ("infeasible_steps", "infeasible")]
 """Columns of a scenario with a shielded policy (``+shield``): per episode, agent-steps."""
-PAPER_CONTROLLER: dict[str, str] = {"platoon_v0": "dmpc", "cluster_v0": "tube_rdmpc", "servicing_v0": "nmpc",
-                                    "formation_v0": "cgmres"}
-"""The controller each env's paper proposes: the reference (score 1) of the normalised score."""
+PAPER_CONTROLLER = CONTROLLERS
+"""The controller each env's paper proposes (:data:`satenv.tasks.CONTROLLERS`): the reference
+(score 1) of the normalised score."""
 FLOOR = "zero"
 """The policy that scores 0 on the normalised score (no thrust)."""
 BOOTSTRAP_RESAMPLES = 2000
@@ -113,19 +117,10 @@ def _bootstrap_interval(values: np.ndarray) -> tuple[float, float, float]:
     return mean, float(lo), float(hi)   # (clipped: round-off of resampled means can step outside)
 
 
-def _wilson(successes: int, n: int) -> tuple[float, float, float]:
-    """Success rate and its 95 % Wilson score interval (``scipy.stats.binomtest``)."""
-    from scipy import stats
-
-    if n == 0:
-        return math.nan, math.nan, math.nan
-    ci = stats.binomtest(successes, n).proportion_ci(confidence_level=0.95, method="wilson")
-    return successes / n, float(ci.low), float(ci.high)
-
-
 def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
-    """``{scenario: {policy: {"n", "errors", metric: {"mean", "ci95": [lo, hi], "n"}}}}`` (module
-    docstring: Wilson for the success rate, percentile bootstrap for the rest).
+    """``{scenario: {policy: {"n", "errors", "collision_episodes", "violation_episodes", metric:
+    {"mean", "ci95": [lo, hi], "n"}}}}`` (module docstring: Wilson for the success rate, percentile
+    bootstrap for the rest; episodes with at least one collision, with at least one violation).
 
     Errored episodes count as failures in the success rate and are left out of the other
     metrics; ``None`` (e.g. no convergence) values are left out of that metric's mean.
@@ -136,7 +131,9 @@ def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str
     out: dict[str, dict[str, dict[str, Any]]] = {}
     for (scen, pol), recs in sorted(groups.items()):
         ok = [r for r in recs if r.get("error") is None]
-        entry: dict[str, Any] = {"n": len(recs), "errors": len(recs) - len(ok)}
+        entry: dict[str, Any] = {"n": len(recs), "errors": len(recs) - len(ok),
+                                 "collision_episodes": sum(bool(r.get("collisions")) for r in ok),
+                                 "violation_episodes": sum(bool(r.get("violations")) for r in ok)}
         for m in METRICS:
             if m == "success":
                 mean, lo, hi = _wilson(sum(bool(r.get("success")) for r in recs), len(recs))
@@ -151,13 +148,14 @@ def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str
 
 
 def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
-    """Policies of one scenario, best first: success rate desc, RMSE asc, delta-v asc."""
+    """Policies of one scenario, best first, safety first (:func:`satenv.scoring.rank_key`):
+    success rate, then collision episodes, then violation episodes, then RMSE, then delta-v."""
     def key(item):
         pol, e = item
-        def val(m, sign=1.0):
-            v = e[m]["mean"]
-            return math.inf if v is None else sign * v
-        return (val("success", -1.0), val("rmse"), val("delta_v"), pol)
+        def mean(m):
+            return (e.get(m) or {}).get("mean")
+        return (*rank_key(mean("success"), e.get("collision_episodes"), e.get("violation_episodes"),
+                          mean("rmse"), mean("delta_v")), pol)
     return [pol for pol, _ in sorted(agg.items(), key=key)]
 
 
