@@ -4,6 +4,10 @@
 ``baselines.supporting(env)`` lists the names whose class can control ``env`` (each class's
 ``supports(env)``: by ``env.metadata["name"]`` and scenario properties). The scoreboard
 (``benchmarks.registry``) and the training evaluation (``training.evaluate``) ask this table.
+
+A module is imported only when its class is needed: ``supporting(env, cheap=True)`` imports the
+cheap baselines alone (:data:`CHEAP`), so it works without the ``mpc`` extra's solvers (casadi,
+daqp, osqp), as the ``rllib`` and ``marl`` extras install it.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from typing import Any
 
 from baselines.base import BaselineError, is_satenv_env
 
-__all__ = ["BASELINES", "WRAPPERS", "get", "make", "supporting"]
+__all__ = ["BASELINES", "CHEAP", "WRAPPERS", "get", "make", "supporting"]
 
 BASELINES: dict[str, str] = {
     "zero": "baselines.base:ZeroPolicy",
@@ -25,6 +29,10 @@ BASELINES: dict[str, str] = {
     "cgmres": "baselines.cgmres:CGMRES",
 }
 """Every scripted baseline by name."""
+
+CHEAP: frozenset[str] = frozenset({"zero", "random", "dmpc", "apf"})
+"""The baselines without a per-decision NLP (their class sets ``cheap = True``; a test checks the
+two agree): :func:`supporting` with ``cheap=True`` imports these modules only."""
 
 WRAPPERS: dict[str, str] = {"shield": "baselines.shield:Shield"}
 """Policy wrappers by name: ``make(name, env, policy=...)`` wraps another policy (not baselines on
@@ -49,14 +57,10 @@ def make(name: str, env: Any, **options: Any) -> Any:
 def supporting(env: Any, *, cheap: bool = False) -> list[str]:
     """Names of the baselines that can control ``env`` (registry order).
 
-    ``cheap=True`` keeps only those whose class sets ``cheap = True`` (no per-decision NLP:
-    ``zero``, ``random``, ``dmpc``, ``apf``), for quick evaluations.
+    ``cheap=True`` keeps only those of :data:`CHEAP` (no per-decision NLP: ``zero``, ``random``,
+    ``dmpc``, ``apf``), for quick evaluations, and imports no other baseline module.
     """
     if not is_satenv_env(env):
         return [n for n in ("zero", "random") if get(n).supports(env)]
-    out = []
-    for name in BASELINES:
-        cls = get(name)
-        if cls.supports(env) and (cls.cheap or not cheap):
-            out.append(name)
-    return out
+    names = [n for n in BASELINES if n in CHEAP or not cheap]
+    return [n for n in names if get(n).supports(env)]

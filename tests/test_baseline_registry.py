@@ -8,6 +8,8 @@ bounds, or — for the NLPs — violating the constraint rows). Every fault must
 """
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -34,6 +36,16 @@ def test_registry_names_and_supporting_envs():
         for name in baselines.BASELINES:
             cls = baselines.get(name)
             assert env_id in cls.env_ids or not cls.supports(env)
+
+
+def test_cheap_table_matches_the_classes_and_imports_no_solver():
+    assert {n for n in baselines.BASELINES if baselines.get(n).cheap} == baselines.registry.CHEAP
+    code = ("import sys, satenv, baselines\n"
+            "for e in satenv.ENV_IDS: baselines.supporting(satenv.make(e), cheap=True)\n"
+            "print(sorted(m for m in ('casadi', 'daqp', 'osqp', 'baselines.cgmres', 'baselines.nmpc',"
+            " 'baselines.tube_rdmpc') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 def test_make_builds_and_unknown_names_are_rejected():
