@@ -73,6 +73,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -83,8 +84,8 @@ from satenv.dynamics._checks import all_finite
 from satenv.errors import SatenvError, SatenvTypeError
 from satenv.vector import SatVectorEnv
 
-__all__ = ["CONSTRAINTS", "FilteredVectorEnv", "SafetyConfig", "SafetyError", "SafetyFilter",
-           "SafetyModel", "SafetyRecord", "SafetyTypeError", "Shield", "constraint_rows", "courtesy", "filter_actions",
+__all__ = ["CONSTRAINTS", "FilteredVectorEnv", "MIN_MARGIN", "SafetyConfig", "SafetyError", "SafetyFilter",
+           "SafetyModel", "SafetyRecord", "SafetyTypeError", "SafetyWarning", "Shield", "constraint_rows", "courtesy", "filter_actions",
            "filtered_env", "filtered_vec", "safety_config", "safety_model", "shield", "solve_qp"]
 
 CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "keep-out", "los", "velocity",
@@ -95,6 +96,10 @@ _BIG = 1e30
 _ROW_TOL = 1e-12      # a proposal within this of a row (its own units: m, m/s, rad/s) passes unchanged
 _QP_TOL = 1e-7        # a QP point may violate a row / the box by this much
 _FLOOR = 0.05         # braking authority never below this fraction of the nominal (drift-heavy pairs)
+MIN_MARGIN = 1e-9
+"""The smallest ``margin``, ``los_margin`` and ``velocity_margin`` a :class:`SafetyConfig` takes: a
+margin below it is lost in the float rounding of the gaps it inflates (km-scale distances carry
+relative errors near 1e-13) and would only look like a margin."""
 
 
 class SafetyError(SatenvError):
@@ -103,6 +108,10 @@ class SafetyError(SatenvError):
 
 class SafetyTypeError(SafetyError, SatenvTypeError):
     """Input of the wrong type to the safety filter (a ``TypeError``)."""
+
+
+class SafetyWarning(UserWarning):
+    """The filter was asked for where it enforces less than one may expect (e.g. no separation)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -133,14 +142,20 @@ class SafetyConfig:
         for name, (low, high, high_ok) in limits.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-                raise SafetyTypeError(f"SafetyConfig.{name} must be a real number, got {value!r}")
-            v = float(value)
+                raise SafetyTypeError(f"SafetyConfig.{name} must be a real number, got {value!r:.40}")
+            try:
+                v = float(value)
+            except OverflowError:   # an int beyond the float range, e.g. 10**400
+                v = math.inf
             ok = (math.isfinite(v) and (v >= low if high_ok is None else v > low)
                   and (v <= high if high_ok else v < high))
             if not ok:
                 rng = (f">= {low:g}" if high_ok is None else f"> {low:g}") + (
                     "" if high == math.inf else f" and {'<=' if high_ok else '<'} {high:g}")
-                raise SafetyError(f"SafetyConfig.{name} must be finite and {rng}, got {value!r}")
+                raise SafetyError(f"SafetyConfig.{name} must be finite and {rng}, got {value!r:.40}")
+            if name.endswith("margin") and v < MIN_MARGIN:
+                raise SafetyError(f"SafetyConfig.{name} must be >= MIN_MARGIN = {MIN_MARGIN:g} (a smaller margin "
+                                  f"is lost in float rounding), got {value!r:.40}")
             object.__setattr__(self, name, v)
 
     @classmethod
@@ -160,7 +175,8 @@ class SafetyRecord:
     """What the filter did, per copy and agent ``(B, M)``.
 
     ``intervened`` (the action changed), ``delta`` ``|du|`` (Euclidean norm of the change of the
-    normalised action), ``infeasible`` (QP infeasible or failed: the backup action was applied),
+    normalised action the env applies: the proposal clipped to the action box first, so it is
+    finite and at most the box's diameter for any finite proposal), ``infeasible`` (QP infeasible or failed: the backup action was applied),
     ``active`` (index into :data:`CONSTRAINTS` of the binding constraint, -1 when none).
     """
 
@@ -269,6 +285,11 @@ def safety_model(target: Any) -> SafetyModel:
         accel_max=float(sv.max()) * u_box * math.sqrt(s.shape[1]))
     model = SafetyModel(**fields)
     return dataclasses.replace(model, kinds=_row_kinds(model), budget=_budget(model))
+
+
+def _has_position_rows(m: SafetyModel) -> bool:
+    """Whether the model keeps any distance (agents apart, a body, a chain constraint)."""
+    return m.pair_distance > 0 or bool(m.bodies) or m.n_chain > 0
 
 
 def courtesy(n_agents: int) -> np.ndarray:
@@ -578,7 +599,7 @@ def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarr
             out[:, f], safe[:, f], infeasible[:, f], active[:, f] = _solve_rows(m, rows[:, f], lo_f, a[:, f], kinds)
             eff = _effective(m, out[:, f])
             acc_prev = eff @ s.T if s.ndim == 2 else np.einsum("bij,bj->bi", s[:, f], eff)
-    delta = np.linalg.norm(out - a, axis=-1)
+    delta = np.linalg.norm(_effective(m, out) - _effective(m, a), axis=-1)   # of the applied actions
     return out, SafetyRecord(~safe, delta, infeasible, active)
 
 
@@ -660,15 +681,27 @@ def _backup(m: SafetyModel, rows: np.ndarray, lower: np.ndarray, slack: np.ndarr
     return np.sign(row) * m.u_box, k
 
 
+def _real_array(name: str, value: Any) -> np.ndarray:
+    """``value`` as a float array; text, masked, complex, bool and object input is a
+    :class:`SafetyTypeError` naming ``name`` (never a silent cast that drops a mask or an imaginary
+    part)."""
+    if isinstance(value, (str, bytes)) or np.ma.isMaskedArray(value) or np.iscomplexobj(value):
+        raise SafetyTypeError(f"safety filter: {name} must be a real array, got "
+                              f"{type(value).__name__}{' (complex)' if np.iscomplexobj(value) else ''}")
+    try:
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "fiu":
+            raise TypeError
+        return arr.astype(float, copy=False)
+    except (TypeError, ValueError, OverflowError):
+        kind = getattr(getattr(value, "dtype", None), "name", type(value).__name__)
+        raise SafetyTypeError(f"safety filter: {name} must be a real array, got {kind}") from None
+
+
 def _check_inputs(m: SafetyModel, x: Any, t: Any, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     arrays = []
     for name, value, ndim in (("state", x, 3), ("t", t, 1), ("actions", actions, 3)):
-        if isinstance(value, (str, bytes)) or np.ma.isMaskedArray(value):
-            raise SafetyTypeError(f"safety filter: {name} must be a real array, got {type(value).__name__}")
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise SafetyTypeError(f"safety filter: {name} must be a real array, got {type(value).__name__}") from None
+        arr = _real_array(name, value)
         if arr.ndim != ndim:
             raise SafetyError(f"safety filter: {name} must have {ndim} dimensions, got shape {arr.shape}")
         if not all_finite(arr):
@@ -699,12 +732,24 @@ class SafetyFilter:
         self.config = SafetyConfig.from_options(config, **options)
         self.core = _core_of(target)
         self.model = safety_model(self.core)
+        if not _has_position_rows(self.model):
+            warnings.warn(f"safety filter on {self.model.env_id} ({getattr(self.core.scenario, 'name', '')}): the "
+                          "scenario has no keep-out distance (collision_distance = 0), so the filter enforces "
+                          "no separation, only the thrust box; give the env a collision_distance [m] "
+                          "(e.g. satenv.make('formation_v0', collision_distance=5.0, ...))", SafetyWarning,
+                          stacklevel=2)
 
     def filter(self, actions: Any) -> tuple[np.ndarray, SafetyRecord]:
         """Safe actions ``(B, M, d)`` (or ``(M, d)`` for ``(M, d)`` input) and the record."""
-        a = np.asarray(actions, dtype=float) if not isinstance(actions, (str, bytes)) else actions
-        single = getattr(a, "ndim", 0) == 2
+        a = _real_array("actions", actions)
+        single = a.ndim == 2
         x = self.core.x
+        copies = len(x)
+        if a.ndim == 3 and len(a) != copies:
+            raise SafetyError(f"safety filter: actions has {len(a)} copies (shape {a.shape}) but the env it "
+                              f"filters for has {copies}; expected shape ({copies}, {self.model.n_agents}, "
+                              f"{self.model.action_dim})" + (f" or ({self.model.n_agents}, {self.model.action_dim})"
+                                                              if copies == 1 else ""))
         t = self.core.t * float(self.core.scenario.dt)
         out, rec = filter_actions(self.model, self.config, x, t, a[None] if single else a)
         return (out[0], rec) if single else (out, rec)
@@ -749,7 +794,7 @@ class Shield:
         live = [a for a in self.agents if a in proposed]
         if len(live) != len(self.agents):   # an ended episode: nothing to filter
             return proposed
-        safe, rec = self.filter.filter(np.stack([np.asarray(proposed[a], dtype=float) for a in live]))
+        safe, rec = self.filter.filter(np.stack([_real_array(f"action of {a}", proposed[a]) for a in live]))
         c = self._counts
         c["safety_interventions"] += int(rec.intervened.sum())
         c["safety_delta"] += float(rec.delta.sum())
@@ -799,6 +844,21 @@ def _filtered_class(cls: type) -> type:
 _FILTERED: dict[type, type] = {}
 
 
+def __getattr__(name: str) -> type:
+    """``satenv.safety.Filtered<EnvClass>`` (the class :func:`filtered_env` gives an env), so that a
+    filtered env pickles by reference (e.g. into a Gymnasium ``AsyncVectorEnv`` worker)."""
+    if name.startswith("Filtered"):
+        import importlib
+
+        import satenv
+
+        for env_id in satenv.ENV_IDS:
+            cls = getattr(importlib.import_module(f"satenv.envs.{env_id}"), name[len("Filtered"):], None)
+            if isinstance(cls, type):
+                return _filtered_class(cls)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def filtered_env(env: Any, config: SafetyConfig | None = None, **options: Any) -> Any:
     """``env`` (a ``satenv.make`` env) with its actions filtered at every ``step`` (the same
     object, its class a filtered subclass: every attribute and check of the env still holds)."""
@@ -812,24 +872,26 @@ def filtered_vec(env: Any, num_envs: int, *, seed: int | None = None, autoreset:
                  config: SafetyConfig | None = None, **options: Any) -> Any:
     """A :class:`satenv.vector.SatVectorEnv` over ``env``'s scenario whose ``step`` filters the
     actions first (infos get the record arrays ``safety_*`` ``(B, M)``; rewards
-    ``- penalty * |du|``)."""
-    vec = FilteredVectorEnv(env, num_envs, seed=seed, autoreset=autoreset)
-    vec.safety = SafetyFilter(vec, config, **options)
-    return vec
+    ``- penalty * |du|``). ``config`` and ``options`` as for :class:`SafetyFilter` (default: the
+    config of a filtered ``env``, else ``SafetyConfig()``)."""
+    if config is None and not options and isinstance(getattr(env, "safety", None), SafetyFilter):
+        config = env.safety.config
+    return FilteredVectorEnv(env, num_envs, seed=seed, autoreset=autoreset,
+                             safety_filter=SafetyConfig.from_options(config, **options))
 
 
 class FilteredVectorEnv(SatVectorEnv):
-    """:class:`satenv.vector.SatVectorEnv` with the filter in ``step`` (:func:`filtered_vec`)."""
+    """A :class:`satenv.vector.SatVectorEnv` that is always filtered (:func:`filtered_vec`); the
+    filtering itself is :class:`~satenv.vector.SatVectorEnv`'s (any batch of a filtered env has it)."""
 
     safety: SafetyFilter
 
-    def step(self, actions):
-        safe, rec = self.safety.filter(self._check_actions(actions))
-        obs, rewards, terms, truncs, infos = super().step(safe)
-        infos.update(rec.infos())
-        if self.safety.config.penalty:
-            rewards = rewards - self.safety.config.penalty * rec.delta
-        return obs, rewards, terms, truncs, infos
+    def __init__(self, env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
+                 safety_filter: Any = True) -> None:
+        if safety_filter is False or safety_filter is None:
+            raise SafetyTypeError("FilteredVectorEnv: safety_filter must be True or a SafetyConfig, "
+                                  f"got {safety_filter!r}")
+        super().__init__(env, num_envs, seed=seed, autoreset=autoreset, safety_filter=safety_filter)
 
 
 def safety_config(value: Any) -> SafetyConfig:

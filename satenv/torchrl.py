@@ -43,13 +43,8 @@ def make_env(env_id: str, num_envs: int, *, device: str | torch.device = "cpu", 
     adds ``("agents", "safety_intervened")`` / ``("agents", "safety_delta")`` ``(B, M, 1)``."""
     import satenv
 
-    if safety_filter is not False:
-        from satenv.safety import filtered_vec, safety_config
-
-        vec = filtered_vec(satenv.make(env_id, **env_kwargs), num_envs, seed=seed, autoreset=False,
-                           config=safety_config(safety_filter))
-    else:
-        vec = SatVectorEnv(satenv.make(env_id, **env_kwargs), num_envs, seed=seed, autoreset=False)
+    vec = SatVectorEnv(satenv.make(env_id, safety_filter=safety_filter, **env_kwargs), num_envs, seed=seed,
+                       autoreset=False)
     return SatTorchRLEnv(vec, device=device)
 
 
@@ -75,7 +70,7 @@ class SatTorchRLEnv(EnvBase):
         vec.env.reset(seed=0)  # the template env (never stepped) tells the state size
         state_dim = int(vec.env.state().size)
         f32 = torch.float32
-        self._safety = hasattr(vec, "safety")
+        self._safety = vec.safety is not None   # a filtered batch (satenv.vector: safety_filter)
         extra = ({"safety_intervened": Categorical(2, (b, m, 1), dtype=torch.bool, device=device),
                   "safety_delta": Unbounded((b, m, 1), dtype=f32, device=device)} if self._safety else {})
         self.observation_spec = Composite(

@@ -32,6 +32,11 @@ Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelE
   the new episode's reset for the reset copies;
 * ``SatVectorEnv(env, B, autoreset=False)`` (what the TorchRL env uses) leaves finished copies
   alone: the caller resets them with ``reset(indices=...)`` before the next ``step``;
+* **safety filter**: a filtered template (``satenv.make(..., safety_filter=True)``) gives a
+  filtered batch (its :class:`satenv.safety.SafetyConfig`), as does ``safety_filter=True`` or a
+  config here: every ``step`` filters the actions first (:mod:`satenv.safety`), the infos get the
+  record arrays ``safety_*`` ``(B, M)`` (in ``final_info`` too) and the rewards ``- penalty * |du|``.
+  ``safety_filter=False`` with a filtered template is an error (never a silently unfiltered batch);
 * **seeding**: ``reset(seed=s)`` (or ``make_vec(..., seed=s)``, applied at the first reset) gives
   copy ``b`` its own generator ``np.random.default_rng(s + b)``, used for its initial states and
   for any randomness inside its steps, exactly as the PettingZoo env's ``reset(seed=s + b)``:
@@ -102,10 +107,13 @@ class SatVectorEnv:
         autoreset: reset finished copies inside :meth:`step` (default). With ``False`` the caller
             resets them with ``reset(indices=...)`` (TorchRL's convention); stepping a finished
             copy before that raises.
+        safety_filter: ``None`` (default): filtered iff ``env`` is; ``True`` or a
+            ``satenv.safety.SafetyConfig``: filtered; ``False``: unfiltered (an error for a
+            filtered ``env``). The filter is :attr:`safety` (``None`` when unfiltered).
     """
 
     def __init__(self, env: SatParallelEnv, num_envs: int, *, seed: int | None = None,
-                 autoreset: bool = True) -> None:
+                 autoreset: bool = True, safety_filter: Any = None) -> None:
         if not isinstance(env, SatParallelEnv):
             raise SatenvTypeError(f"SatVectorEnv needs a satenv env (satenv.make(...)), got {type(env).__name__}")
         num_envs = integer(num_envs, "num_envs", minimum=1, maximum=MAX_COPIES,
@@ -125,6 +133,7 @@ class SatVectorEnv:
         self._rngs: CopyGenerators | None = None
         self.autoreset = bool(autoreset)
         self._ended = np.zeros(self.num_envs, dtype=bool)
+        self.safety = _bind_filter(self, env, safety_filter)
 
     def __repr__(self) -> str:
         return f"SatVectorEnv({self.metadata.get('name')}, num_envs={self.num_envs}, n_agents={self.n_agents})"
@@ -195,25 +204,34 @@ class SatVectorEnv:
             raise SatenvError(f"copies {np.flatnonzero(self._ended).tolist()} have ended: call "
                               "reset(indices=...) (or reset()) first")
         a = self._check_actions(actions)
+        record = None
+        if self.safety is not None:
+            a, record = self.safety.filter(a)
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
         res, obs = self.core.step_observe(accel, self._rngs)
         terminated = np.asarray(res.terminated, dtype=bool)
         truncated = (self.core.t >= self.max_steps) & ~terminated
         rewards = np.asarray(res.rewards, dtype=np.float64)
+        step_info = res.info
+        if record is not None:
+            step_info = {**res.info, **record.infos()}
+            if self.safety.config.penalty:
+                rewards = rewards - self.safety.config.penalty * record.delta
         done = terminated | truncated
-        if not (res.finite.all() if res.finite is not None else all_finite(obs, res.info["state"], rewards)):
+        if not (res.finite.all() if res.finite is not None and record is None
+                else all_finite(obs, res.info["state"], rewards)):
             self._ended |= done   # copies that also ended normally wait for a reset too
             self._nonfinite(np.arange(self.num_envs), obs, res.info["state"], rewards)
-        infos: dict[str, Any] = dict(res.info)
+        infos: dict[str, Any] = dict(step_info)
         if not self.autoreset:
             self._ended |= done
         elif done.any():
             idx = np.flatnonzero(done)
             reset_info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx))
-            infos = {k: v.copy() for k, v in res.info.items()}
+            infos = {k: v.copy() for k, v in step_info.items()}
             for k, v in reset_info.items():
                 infos[k][idx] = v
-            infos.update(final_observation=obs, final_info=res.info, _final=done)
+            infos.update(final_observation=obs, final_info=step_info, _final=done)
             if 2 * idx.size <= self.num_envs:   # observe only the copies that reset
                 obs = obs.copy()
                 obs[idx] = self.core.observe_copies(idx)
@@ -264,6 +282,29 @@ class SatVectorEnv:
 
     def close(self) -> None:
         self.env.close()
+
+
+def _bind_filter(vec: SatVectorEnv, env: SatParallelEnv, requested: Any) -> Any:
+    """The ``satenv.safety.SafetyFilter`` of a batch (``SatVectorEnv``'s ``safety_filter``), or ``None``."""
+    template = getattr(env, "safety", None)     # a filtered env (satenv.safety.filtered_env) carries it
+    if template is None and requested in (None, False):
+        return None
+    from satenv.safety import SafetyFilter, safety_config
+
+    if template is not None and not isinstance(template, SafetyFilter):
+        template = None
+    if requested is False:
+        if template is not None:
+            raise SatenvError("safety_filter=False with a filtered env (satenv.make(..., safety_filter=...)): "
+                              "the batch would fly unfiltered; build the env without the filter instead")
+        return None
+    if requested is None or (requested is True and template is not None):
+        if template is None:
+            return None
+        config = template.config
+    else:
+        config = safety_config(requested)
+    return SafetyFilter(vec, config)
 
 
 def check_seed(seed: Any) -> int | None:
