@@ -94,6 +94,8 @@ from satenv.envs.servicing_v0 import unpack_global_state
 __all__ = ["NMPC", "NMPCConfig", "attitude_reference_sym", "build_model", "quaternion_cost_terms"]
 
 _SOLVERS = ("ipopt", "ipopt-jit", "fatrop")
+QUATERNION_ERRORS = ("sign-free", "signed")
+"""``NMPCConfig.quaternion_error`` choices: ours (``1 - |eta~|``) and eq. 39 as printed (``1 - eta~``)."""
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level", "success"}
 
 
@@ -221,13 +223,14 @@ def attitude_reference_sym(scenario, p, v, q, min_sine: float = 0.1):
     return q_d, w_d
 
 
-def quaternion_cost_terms(q, q_d):
-    """``[1 - |eta~|, eps~]`` of ``q~ = q (x) q_d_bar`` (eq. 39), the same for ``q_d`` and ``-q_d``."""
+def quaternion_cost_terms(q, q_d, signed: bool = False):
+    """``[1 - |eta~|, eps~]`` of ``q~ = q (x) q_d_bar`` (eq. 39), the same for ``q_d`` and ``-q_d``;
+    ``signed``: ``[1 - eta~, eps~]`` as eq. 39 prints it (``-q_d`` is then the worst attitude)."""
     import casadi as ca
 
     eta_e = ca.dot(q, q_d)
     eps_e = q_d[0] * q[1:4] - q[0] * q_d[1:4] - ca.cross(q[1:4], q_d[1:4])
-    return ca.vertcat(1 - ca.fabs(eta_e), eps_e)
+    return ca.vertcat(1 - (eta_e if signed else ca.fabs(eta_e)), eps_e)
 
 
 NLP_CONSTRAINT_TOL = 1e-2
@@ -262,6 +265,8 @@ class NMPCConfig:
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
         solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
             flagged failure like any other (``baselines.base.guarded_solve``): a stall guard, the median ipopt solve is 20-40 ms; ipopt's own max_wall_time is set to it.
+        quaternion_error: ``"sign-free"`` (default, ours: ``1 - |eta~|``, blind to the sign of
+            ``q_d``) or ``"signed"`` (``1 - eta~`` as eq. 39 prints it).
     """
 
     horizon: int = 30
@@ -281,9 +286,11 @@ class NMPCConfig:
     solver_options: dict | None = None
     seed: int | None = None
     solve_time_limit: float | None = 10.0
+    quaternion_error: str = "sign-free"
 
     def __post_init__(self) -> None:
         rules: dict[str, Any] = {
+            "quaternion_error": partial(choice, choices=QUATERNION_ERRORS),
             "solve_time_limit": time_limit,
             "horizon": partial(integer, high=MAX_HORIZON), "max_iter": integer,
             "rk4_steps": partial(integer, high=100),
@@ -345,6 +352,7 @@ class NMPC(Baseline):
         self.rk4_steps = cfg.rk4_steps
         self.formulation = cfg.formulation
         self.terminal_attitude_weight = cfg.terminal_attitude_weight
+        self.signed_quaternion_error = cfg.quaternion_error == "signed"
         self.hessian = cfg.hessian or ("exact" if cfg.solver == "fatrop" else "gauss-newton")
         self._f, self._F = build_model(sc, self.rk4_steps)
         self._a_cw = cw_continuous(sc.mean_motion)[0]
@@ -386,7 +394,7 @@ class NMPC(Baseline):
             x, u = xs[k], us[k]
             q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])   # eq. 43-49
             ep, ev, ew = x[0:3] - p_d[:, k], x[3:6] - v_d, x[10:13] - w_d
-            qe = quaternion_cost_terms(x[6:10], q_d)
+            qe = quaternion_cost_terms(x[6:10], q_d, self.signed_quaternion_error)
             cost += (ca.dot(qp, ep**2) + ca.dot(qv, ev**2) + ca.dot(qq, qe**2)
                      + ca.dot(qw, ew**2) + ca.dot(hh, u**2))
             res += [ca.sqrt(qp) * ep, ca.sqrt(qv) * ev, ca.sqrt(qq) * qe, ca.sqrt(qw) * ew, ca.sqrt(hh) * u]
@@ -404,7 +412,7 @@ class NMPC(Baseline):
         if self.terminal_attitude_weight > 0:           # terminal attitude cost (ours; not in eq. 39)
             x = xs[n_h]
             q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])
-            qe, ew = quaternion_cost_terms(x[6:10], q_d), x[10:13] - w_d
+            qe, ew = quaternion_cost_terms(x[6:10], q_d, self.signed_quaternion_error), x[10:13] - w_d
             cost += self.terminal_attitude_weight * (ca.dot(qq, qe**2) + ca.dot(qw, ew**2))
             c = float(np.sqrt(self.terminal_attitude_weight))
             res += [c * ca.sqrt(qq) * qe, c * ca.sqrt(qw) * ew]

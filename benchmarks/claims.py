@@ -192,7 +192,7 @@ def _fmt(v: Any) -> str:
 
 def _verdict(claims: list[dict[str, Any]]) -> str:
     n = count(claims)
-    return (f"paper-valued claims of our run met: {n['gating_met']}/{n['gating']} -> "
+    return (f"paper-valued claims of our run: {n['gating_met']} of {n['gating']} met -> "
             f"{'PASS' if n['gating'] and n['gating_met'] == n['gating'] else 'FAIL'}; "
             f"all rows: {n['met']} met, {n['not met']} not met, {n[NO_VALUE]} without a paper value")
 

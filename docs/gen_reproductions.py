@@ -76,8 +76,8 @@ def table(rows: list[dict], keys: list[str] | None = None) -> str:
 def render(result: dict) -> str:
     """The page body of one reproduction result: verdict, departures, claims, analyses."""
     n = count(result.get("claims", []))
-    verdict = "met" if result.get("pass") else "**not met**"
-    parts = [f"**Verdict:** the paper-valued claims of our run: {n['gating_met']}/{n['gating']} {verdict}. "
+    verdict = "all met" if result.get("pass") else "**not all met**"
+    parts = [f"**Verdict:** the paper-valued claims of our run: {n['gating_met']} of {n['gating']} met ({verdict}). "
              f"All rows (our run, as published, ablations): {n['met']} met, {n['not met']} not met, "
              f"{n['paper gives no value']} where the paper gives no value (reported, never counted as met). "
              "A claim's rule comes from the paper's sentence it quotes: a value is judged as a +-10 % band "

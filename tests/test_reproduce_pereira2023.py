@@ -41,10 +41,11 @@ def test_constraints_respected_and_no_solver_fallbacks(result):
 
 def test_claims_schema_and_verdict(result):
     claims = result["claims"]
-    assert len(claims) == 3 * 12 + 2 * 3
+    ours = [c for c in claims if c["variant"] == "ours"]
+    assert len(ours) == 3 * 12 + 2 * 3 + 8                               # Table II, §IV, the comparative sentences
     for c in claims:
         assert {"claim", "source", "paper", "measured", "rule", "status", "met"} <= set(c)
-    foe = [c for c in claims if c["claim"].startswith("FOE ")]
+    foe = [c for c in ours if c["claim"].startswith("FOE ")]
     assert len(foe) == 12 and all(c["paper"] > 0 and c["measured"] > 0 for c in foe)
     assert all(c["source"].startswith(pereira2023.SOURCE_TABLE) for c in foe)
     assert all("+-10 %" in c["rule"] for c in claims if c["claim"].startswith(("RMSE", "FOE")))
@@ -84,7 +85,7 @@ def test_cli_writes_json_and_figures(tmp_path, capsys):
     assert rc == (0 if data["pass"] else 1)
     assert len(list(plots.glob("*.png"))) == 7
     text = capsys.readouterr().out
-    assert "PLF" in text and "claims of our run met:" in text
+    assert "PLF" in text and "claims of our run:" in text
 
 
 def test_unknown_paper_is_a_clear_error():
@@ -111,3 +112,44 @@ def test_out_never_replaces_a_file_that_is_not_an_earlier_result(tmp_path, capsy
         assert "--out" in capsys.readouterr().err
     assert other.read_text() == '{"keep": 1}'
     assert reproduce._unsafe_out(target) is None and reproduce._unsafe_out(tmp_path / "new.json") is None
+
+
+def _table_ii_rows(**changes):
+    """Rows carrying Table II's own values (``changes``: (topology, follower) -> {metric: value})."""
+    rows = []
+    for topo, cells in pereira2023.TABLE_II.items():
+        for f, (rmse, rmsee, foe) in enumerate(cells, start=1):
+            row = {"topology": topo, "follower": f, "rmse": rmse, "rmsee": rmsee, "foe": foe,
+                   "settling_time_s": 5.0, "overshoot_m": 0.0, "input_sign_changes": 3, "input_sign_changes_x": 1}
+            row.update(changes.get(f"{topo}{f}", {}))
+            rows.append(row)
+    return rows
+
+
+def test_comparative_sentences_hold_on_the_papers_own_table():
+    """Each comparative rule is met by Table II itself (so the rule reads the sentence as the paper
+    meant it), and fails when the winner's numbers are swapped with the loser's."""
+    by = {c["claim"]: c for c in pereira2023.comparative_claims(_table_ii_rows())}
+    stated = [c for c in by.values() if c["status"] != "paper gives no value"]
+    assert len(stated) == 4 and all(c["met"] and c["gating"] for c in stated)
+    most = by["PLF gives the best value in most (follower, metric) cells [cells of 12]"]
+    assert most["paper"] == most["measured"] == 7 and most["table_ii_ordering_reproduced"] == 12
+    assert all(c["source"] in (pereira2023.SOURCE_MOST, pereira2023.SOURCE_F1, pereira2023.SOURCE_F2,
+                               pereira2023.SOURCE_F4) for c in stated)
+    bdl4 = dict(zip(pereira2023.METRICS, pereira2023.TABLE_II["BDL"][3], strict=True))
+    plf4 = dict(zip(pereira2023.METRICS, pereira2023.TABLE_II["PLF"][3], strict=True))
+    swapped = pereira2023.comparative_claims(_table_ii_rows(PLF4=bdl4, BDL4=plf4))
+    f4 = next(c for c in swapped if c["claim"].startswith("follower 4: PLF better than BDL on all"))
+    assert not f4["met"] and f4["measured"] == 0
+
+
+def test_as_published_run_and_its_departures(result):
+    """The as-published row (Algorithm 1's unshifted warm start, (41)-(42), no velocity margin) is
+    judged beside ours and never gates; the warm start is a listed departure with its effect."""
+    pub = [c for c in result["claims"] if c["variant"] == "as published"]
+    assert pub and not any(c["gating"] for c in pub)
+    assert {c["claim"] for c in pub} == {c["claim"] for c in result["claims"] if c["variant"] == "ours"}
+    deps = {d["name"]: d for d in result["departures"]}
+    warm = deps["warm start of Algorithm 1 (line 6)"]
+    assert warm["fields"] == ["warm_start"] and "FOE analysis" in warm["effect"]
+    assert "as-published run" in warm["effect"]

@@ -156,10 +156,24 @@ def departures(variants: dict[str, dict]) -> list[dict[str, Any]]:
               f"eq. 29 as written (coupled): {pub['fallbacks']} fallbacks (infeasible QPs), keep-out violation steps "
               f"{pub['keepout_violation_steps']}, LOS violation steps {pub['los_violation_steps']}, largest final "
               f"pair error {max(pub['final_position_error_m']):.3g} m")
+    ours = variants.get("own_pair")
+    fallback_effect = ("not measured in this result" if pub is None or ours is None else
+                       f"fallbacks to the box-only QP: as published (coupled) {pub['fallbacks']}, ours {ours['fallbacks']}; "
+                       "a fallback step plans without the keep-out and LOS rows")
     return [
         departure("pair constraints each agent imposes (eq. 29)", "every pair its input moves (j and j+1)",
                   "its own target-chaser pair only", "the coupled rows make QPs infeasible (fallbacks)", effect,
                   fields=["coupled_constraints"]),
+        departure("solver fallback", NOT_STATED + " (every QP assumed feasible)",
+                  "an infeasible state-constrained QP is replaced by the input-box-only QP (then the previous "
+                  "iterate)", "an input is needed at every step; the box-only QP is always feasible",
+                  fallback_effect, fields=["fallback"]),
+        departure("terminal set", NOT_STATED + " (no terminal constraint or recursive-feasibility argument; a "
+                  "terminal cost P only)", "none either (terminal cost on the position, as §5.1)",
+                  "the paper gives none; without it nothing keeps the QPs recursively feasible, which is why the "
+                  "coupled rows can become infeasible", fallback_effect, fields=["terminal_set"]),
+        departure("warm start of the convex step", NOT_STATED, "the previous sequence shifted by one step",
+                  "the usual MPC warm start", "not measured separately", fields=["warm_start"]),
         departure("episode length n_k", NOT_STATED, "300 steps (30 s)", "long enough to reach the spacing",
                   "not measured separately"),
         departure("QP solver", "MATLAB (solver not named)", "DAQP", "exact active-set optimum",
