@@ -140,9 +140,10 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
 def headline_figure(rows: list[dict[str, Any]], path: Path) -> Path:
     """Two panels, a pair of bars per system (best scripted, best learned, each named on its bar):
     the success rate with its 95 % Wilson interval, and the share of episodes with a collision."""
-    import matplotlib.pyplot as plt
+    from satenv.render import new_figure
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 0.8 * len(rows) + 1.6), dpi=90, sharey=True)
+    fig = new_figure((11, 0.8 * len(rows) + 1.6), 90, layout="constrained")
+    axes = fig.subplots(1, 2, sharey=True)
     for j, kind in enumerate(("scripted", "learned")):
         for i, row in enumerate(rows):
             e, y = row[kind], i + (0.2 if j else -0.2)
@@ -160,12 +161,10 @@ def headline_figure(rows: list[dict[str, Any]], path: Path) -> Path:
             axes[1].text(share + 1, y, f"{e['collision_episodes']}/{e['episodes']}", va="center", fontsize=7)
     axes[0].set_yticks(range(len(rows)), [f"{r['system']}\n{r['scenario']}" for r in rows], fontsize=8)
     axes[0].invert_yaxis()
-    for ax, title in ((axes[0], "success rate [%] (95 % Wilson interval)"),
-                      (axes[1], "episodes with a collision [%]")):
+    for ax, label in ((axes[0], "success rate [% of episodes] (95 % Wilson interval)"),
+                      (axes[1], "collision episodes [% of episodes]")):
         ax.set_xlim(0, 112)
-        ax.set_title(title, fontsize=9)
+        ax.set_xlabel(label, fontsize=9)
     axes[1].legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
     return path

@@ -388,45 +388,63 @@ def write_outputs(board: Board, plots: bool = True) -> None:
             print(f"warning: plots not written ({type(exc).__name__}: {exc})", file=sys.stderr)
 
 
-def _bars(ax, board: Board, scen: str, metric: str, colors: dict[str, str]) -> None:
-    """One panel: a bar per policy of ``scen`` (ranked order) with its 95 % CI."""
-    names, ys, errs = [], [], [[], []]
+_PLOT_LABELS = {  # metric -> axis label (with its unit) of its bar chart
+    "success": "success rate (fraction of episodes)", "rmse": "RMSE [m]", "rmsee": "RMSEE [m/s²]",
+    "foe": "FOE [m]", "delta_v": "Δv [m/s]", "time_to_converge_s": "t_conv [s] (converged episodes)",
+    "min_separation_m": "min separation [m]", "collisions": "collision flags per episode",
+    "violations": "constraint violations per episode", "compute_ms_per_decision": "act() wall time [ms]",
+}
+
+
+def policy_colors(names: Iterable[str]) -> dict[str, Any]:
+    """One colour per policy, the same in every panel and figure of a board (up to 60 distinct:
+    tab20, tab20b, tab20c; beyond that they repeat)."""
+    from matplotlib import colormaps
+
+    palette = [c for m in ("tab20", "tab20b", "tab20c") for c in colormaps[m].colors]
+    return {n: palette[j % len(palette)] for j, n in enumerate(sorted(set(names)))}
+
+
+def _bar_rows(board: Board, scen: str, metric: str) -> list[tuple[str, float, float, float]]:
+    """``(policy, mean, minus, plus)`` of ``scen`` in ranked order, policies without a value left out."""
+    rows = []
     for pol in board.ranking[scen]:
         stat = board.aggregates[scen][pol][metric]
         mean, (lo, hi) = stat["mean"], stat["ci95"]
-        if mean is None:
+        if mean is None or not math.isfinite(mean):
             continue
-        names.append(pol)
-        ys.append(mean)
-        errs[0].append(0.0 if lo is None else max(0.0, mean - lo))
-        errs[1].append(0.0 if hi is None else max(0.0, hi - mean))
-    if names:
-        ax.bar(range(len(names)), ys, yerr=errs, capsize=3, color=[colors[n] for n in names])
-        ax.set_xticks(range(len(names)))
-        ax.set_xticklabels(names, rotation=20, ha="right", fontsize=8)
-    else:
-        ax.text(0.5, 0.5, "no finite values", ha="center", va="center", transform=ax.transAxes)
-    ax.set_title(scen, fontsize=9)
+        rows.append((pol, mean, 0.0 if lo is None else max(0.0, mean - lo),
+                     0.0 if hi is None else max(0.0, hi - mean)))
+    return rows
 
 
-def _metric_figure(board: Board, metric: str, path: Path) -> Path:
-    """One panel per scenario (own y scale), one bar per policy."""
-    import matplotlib.pyplot as plt
+def _metric_figure(board: Board, metric: str, path: Path, colors: dict[str, Any]) -> Path | None:
+    """One panel per scenario with a value (own x scale), one horizontal bar per policy in ranked
+    order, named on the axis and coloured as in every other panel; ``None`` when no scenario has a
+    value (no empty figure is written)."""
+    from satenv.render import new_figure
 
-    scens = list(board.aggregates)
-    pols = sorted({p for s in scens for p in board.aggregates[s]})
-    colors = {p: f"C{j % 10}" for j, p in enumerate(pols)}
-    ncols = min(3, len(scens))
-    nrows = math.ceil(len(scens) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), dpi=90, squeeze=False)
-    for ax, scen in zip(axes.ravel(), scens, strict=False):
-        _bars(ax, board, scen, metric, colors)
-    for ax in axes.ravel()[len(scens):]:
-        ax.set_visible(False)
-    fig.suptitle(f"{metric} (mean, 95 % CI over seeds)")
-    fig.tight_layout()
+    panels = [(scen, rows) for scen in board.aggregates if (rows := _bar_rows(board, scen, metric))]
+    if not panels:
+        path.unlink(missing_ok=True)
+        return None
+    ncols = min(2, len(panels))
+    nrows = math.ceil(len(panels) / ncols)
+    heights = [max(len(r) for _, r in panels[i * ncols:(i + 1) * ncols]) for i in range(nrows)]
+    fig = new_figure((6.4 * ncols, sum(0.22 * h + 0.9 for h in heights) + 0.6), 90, layout="constrained")
+    grid = fig.add_gridspec(nrows, ncols, height_ratios=[0.22 * h + 0.9 for h in heights])
+    for k, (scen, rows) in enumerate(panels):
+        ax = fig.add_subplot(grid[k // ncols, k % ncols])
+        names = [r[0] for r in rows]
+        ax.barh(range(len(rows)), [r[1] for r in rows], xerr=[[r[2] for r in rows], [r[3] for r in rows]],
+                capsize=2, color=[colors[n] for n in names], ecolor="0.3")
+        ax.set_yticks(range(len(rows)), names, fontsize=7)
+        ax.invert_yaxis()
+        ax.set_xlabel(_PLOT_LABELS.get(metric, metric), fontsize=8)
+        ax.tick_params(axis="x", labelsize=7)
+        ax.set_title(scen, fontsize=9)
+    fig.suptitle(f"{_PLOT_LABELS.get(metric, metric)}: mean over seeds, 95 % interval", fontsize=10)
     fig.savefig(path)
-    plt.close(fig)
     return path
 
 
@@ -447,15 +465,15 @@ def _trajectory_plots(board: Board, pdir: Path) -> list[Path]:
 
 
 def write_plots(board: Board) -> list[Path]:
-    """Bar charts (mean with 95 % CI) per metric, and the example trajectories."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+    """Bar charts (mean with 95 % interval) per metric, and the example trajectories. Figures are
+    drawn on their own canvas (:func:`satenv.render.new_figure`): the caller's matplotlib backend
+    and pyplot state are left alone."""
     pdir = board.out / "plots"
     pdir.mkdir(parents=True, exist_ok=True)
-    written = [_metric_figure(board, metric, pdir / f"{metric}.png") for metric in _PLOTS]
+    colors = policy_colors(p for s in board.aggregates for p in board.aggregates[s])
+    written = [f for metric in _PLOTS if (f := _metric_figure(board, metric, pdir / f"{metric}.png", colors))]
     if board.summary.get("policies"):
-        written.append(_summary_figure(board.summary, pdir / "summary.png"))
+        written.append(_summary_figure(board.summary, pdir / "summary.png", colors))
     if board.headline:
         from benchmarks.scoreboard.headline import FIGURE, headline_figure
 
@@ -463,27 +481,29 @@ def write_plots(board: Board) -> list[Path]:
     return written + _trajectory_plots(board, pdir)
 
 
-def _summary_figure(summary: dict[str, Any], path: Path) -> Path:
-    """IQM of the normalised score and P(improvement over the paper's controller), 95 % CIs."""
-    import matplotlib.pyplot as plt
+def _summary_figure(summary: dict[str, Any], path: Path, colors: dict[str, Any]) -> Path:
+    """IQM of the normalised score and P(improvement over the paper's controller), 95 % intervals,
+    each policy in its board colour."""
+    from satenv.render import new_figure
 
     order = sorted(summary["policies"].items(), key=lambda kv: kv[1]["iqm"])
     names = [p for p, _ in order]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 0.45 * len(names) + 1.6), dpi=90, sharey=True)
-    for ax, key, title, ref in ((axes[0], "iqm", "IQM normalised score (0 = zero thrust, 1 = paper controller)", 1.0),
+    fig = new_figure((11, 0.3 * len(names) + 1.8), 90, layout="constrained")
+    axes = fig.subplots(1, 2, sharey=True)
+    for ax, key, label, ref in ((axes[0], "iqm", "IQM normalised score (0 = zero thrust, 1 = paper controller)", 1.0),
                                 (axes[1], "p_improvement", "P(improvement over the paper's controller)", 0.5)):
-        for y, (_, e) in enumerate(order):
+        for y, (pol, e) in enumerate(order):
             if e[key] is None:
                 continue
             lo, hi = e[f"{key}_ci95"]
-            ax.errorbar(e[key], y, xerr=[[e[key] - lo], [hi - e[key]]], fmt="o", color=f"C{y % 10}", capsize=3)
+            ax.errorbar(e[key], y, xerr=[[e[key] - lo], [hi - e[key]]], fmt="o", color=colors.get(pol, "k"),
+                        capsize=3)
         ax.axvline(ref, color="k", ls="--", lw=0.8)
-        ax.set_title(title, fontsize=9)
-        ax.set_yticks(range(len(names)), names)
-    fig.suptitle(f"across {len(summary['reference'])} scenarios (95 % stratified bootstrap CIs)", fontsize=10)
-    fig.tight_layout()
+        ax.set_xlabel(label, fontsize=8)
+        ax.tick_params(axis="x", labelsize=7)
+        ax.set_yticks(range(len(names)), names, fontsize=7)
+    fig.suptitle(f"across {len(summary['reference'])} scenarios (95 % stratified bootstrap intervals)", fontsize=10)
     fig.savefig(path)
-    plt.close(fig)
     return path
 
 

@@ -379,9 +379,9 @@ class SatParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         if self._fig is not None:
-            import matplotlib.pyplot as plt
+            from satenv.render import close_figure
 
-            plt.close(self._fig)
+            close_figure(self._fig)
             self._fig = None
 
 
