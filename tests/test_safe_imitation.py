@@ -1,0 +1,118 @@
+"""training.safe_imitation: the filter's rows as a differentiable intervention penalty."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from satenv import tasks  # noqa: E402
+from satenv.errors import SatenvError  # noqa: E402
+from satenv.safety import SafetyFilter  # noqa: E402
+from training.safe_imitation import (  # noqa: E402
+    SafeDaggerConfig,
+    _env_action,
+    agent_constraints,
+    barrier_hinge,
+    fit,
+)
+
+
+def _states(system: str, steps: int, seed: int):
+    """(proposed, filtered, intervened, infeasible, rows, lower) along an episode of full thrust
+    in a fixed random direction per agent, reversed 10 steps in 40 (many actions unsafe),
+    stepping the filtered actions."""
+    env = tasks.training_task(system).make_env(terminate_on_collision=False)
+    env.reset(seed=seed)
+    filt = SafetyFilter(env)
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(len(env.possible_agents), 3))
+    d /= np.abs(d).max(axis=1, keepdims=True)
+    out = []
+    for k in range(steps):
+        if len(env.agents) != len(env.possible_agents):
+            break
+        a = d if k % 40 < 30 else -d
+        safe, rec = filt.filter(a)
+        rows, lower = agent_constraints(filt, safe)
+        out.append((a, safe, rec.intervened[0], rec.infeasible[0], rows, lower))
+        env.step(dict(zip(env.possible_agents, safe.astype(np.float32), strict=True)))
+    return out
+
+
+@pytest.mark.parametrize("system", ["platoon-pereira2022", "platoon-pereira2023"])
+def test_hinge_is_zero_exactly_where_the_filter_passes_the_action(system):
+    seen_intervention = seen_pass = False
+    for a, safe, intervened, infeasible, rows, lower in _states(system, 160, 3):
+        h = barrier_hinge(torch.as_tensor(a), torch.as_tensor(rows, dtype=torch.float64),
+                          torch.as_tensor(lower, dtype=torch.float64)).numpy()
+        hs = barrier_hinge(torch.as_tensor(safe), torch.as_tensor(rows, dtype=torch.float64),
+                           torch.as_tensor(lower, dtype=torch.float64)).numpy()
+        for i in range(len(a)):
+            if intervened[i]:
+                seen_intervention = True
+                assert h[i] > 0, "the filter changed an action the hinge calls safe"
+                if not infeasible[i]:
+                    assert hs[i] < 1e-6, "the filter's own output must satisfy its rows"
+            else:
+                seen_pass = True
+                assert h[i] < 1e-8, "the hinge penalises an action the filter passed"
+    assert seen_intervention and seen_pass
+
+
+def test_hinge_grows_with_the_distance_outside_and_has_a_gradient():
+    rows = torch.tensor([[[1.0, 0.0, 0.0]]])
+    lower = torch.tensor([[0.5]])
+    a = torch.tensor([[0.0, 0.0, 0.0]], requires_grad=True)
+    h = barrier_hinge(a, rows, lower)
+    assert h.item() == pytest.approx(0.25)
+    h.sum().backward()
+    assert a.grad[0, 0].item() < 0     # descent moves the action into the safe side
+    assert barrier_hinge(torch.tensor([[0.6, 0.0, 0.0]]), rows, lower).item() == 0.0
+    assert barrier_hinge(torch.tensor([[0.6, 0.0, 0.0]]), rows, lower, margin=0.2).item() == pytest.approx(0.01)
+
+
+def test_env_action_applies_the_action_map():
+    y = torch.tensor([[-2.0, 0.5, -0.5]])
+    assert torch.allclose(_env_action(y, 1.0), torch.tensor([[-1.0, 0.5, -0.5]]))
+    assert torch.allclose(_env_action(y, 3.0), torch.tensor([[-1.0, 0.125, -0.125]]))
+
+
+def test_fit_with_the_barrier_term_removes_interventions_on_its_rows():
+    """A tiny actor fitted on rows whose labels break the filter: the barrier term pulls it inside."""
+    from training.actor import MLPActor
+    from training.policy import LearnedPolicy, ObsNormalizer
+
+    rng = np.random.default_rng(0)
+    n = 256
+    obs = rng.normal(size=(n, 4)).astype(np.float32)
+    rows = np.zeros((n, 2, 3), np.float32)
+    rows[:, 0, 0] = 1.0                               # a_x >= 0.3
+    lower = np.full((n, 2), -10.0, np.float32)
+    lower[:, 0] = 0.3
+    label = np.zeros((n, 3), np.float32)              # the label itself breaks the row
+    data = {"obs": obs, "label": label, "expert": label, "filtered": label,
+            "intervened": np.zeros(n, bool), "rows": rows, "lower": lower}
+    torch.manual_seed(0)
+    actor = MLPActor(4, 3, [32], "tanh", True)
+    pol = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(4,))
+    gen = torch.Generator().manual_seed(0)
+    cfg = SafeDaggerConfig(w_bar=0.0, w_int=0.0, epochs=60, batch_size=64, learning_rate=3e-3)
+    fit(pol, data, cfg, False, gen)
+    assert np.mean(pol.predict(obs)[:, 0] < 0.3) > 0.9        # imitation alone: breaks the row
+    cfg = SafeDaggerConfig(w_bar=100.0, w_int=0.0, bar_margin=0.1, epochs=60, batch_size=64, learning_rate=3e-3)
+    fit(pol, data, cfg, False, gen)
+    assert np.mean(pol.predict(obs)[:, 0] >= 0.3) > 0.95
+
+
+@pytest.mark.parametrize("field,value", [("w_bar", -1.0), ("label", "nope"), ("system", "cluster-li2022"),
+                                         ("learning_rate", float("nan"))])
+def test_config_rejects_bad_values(field, value):
+    with pytest.raises(SatenvError, match=field if field != "system" else "system"):
+        SafeDaggerConfig(**{field: value})
+
+
+def test_a_system_without_expert_needs_self_labels():
+    with pytest.raises(SatenvError, match="label must be 'self'"):
+        SafeDaggerConfig(system="platoon-pereira2023", label="filtered")

@@ -1,0 +1,343 @@
+"""Intervention-aware DAgger: fine-tune an imitation network so that it needs the safety filter less.
+
+    nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m training.safe_imitation \\
+        --system platoon-pereira2022 --warm-start training/policies/platoon_pereira2022_dagger_shield \\
+        --run-dir training/runs/platoon_pereira2022_safe_dagger
+
+The same command resumes the run after its last finished round (``config.json`` of the run; flags
+given again override it). Every round:
+
+1. **collect** — the current network flies the system's training task (train seeds, collisions do
+   not end the episode) *behind the safety filter* (:class:`satenv.safety.SafetyFilter`), so the
+   labelled states are those the filtered policy reaches; at every agent-step the row stores the
+   observation, the system's expert action, the expert action after the filter (the label:
+   ``label="filtered"``), the filter's output for the network's action, whether the filter
+   intervened, and the filter's constraint rows at that state (:func:`agent_constraints`);
+2. **fit** (warm start, all rows of every round) on
+
+   ``L = |pi(o) - y|^2 + w_int * |pi(o) - F(pi_flown(o))|^2 [intervened rows] + w_bar * sum_k relu(l_k + m - r_k . pi(o))^2``
+
+   — imitation of the (filtered) expert, the **intervention term** (distance to the filter's output
+   for the flown action, where it intervened) and the **barrier term**: the filter's rows are the
+   discrete barrier condition on the next state (``h(x+) >= (1 - gamma) h(x)``, linear in the
+   action), so the hinge is zero exactly when the filter would leave the action alone (with the
+   margin ``m`` inside), and differentiable in the network's output;
+3. **validate** on validation seeds only: the network alone (collision and violation episodes,
+   success) and behind the filter (interventions per agent-step); the round is chosen on these.
+
+Rows, labels and history go to ``<run>/labels/round_NNNN.npz``, ``<run>/rounds/NNNN/`` (policy
+folder format) and ``<run>/history.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from satenv.errors import SatenvError
+
+__all__ = ["SafeDaggerConfig", "EXPERTS", "agent_constraints", "barrier_hinge", "run", "main"]
+
+ROW_LOWER_FLOOR = -10.0
+"""Normalised row bounds below this never bind an action in the unit box (stored clipped here)."""
+
+
+def _joint_platoon(env: Any) -> Any:
+    from training.experts import JointPlatoonMPC
+
+    return JointPlatoonMPC(env, coupling="sequential")
+
+
+EXPERTS: dict[str, Any] = {"platoon-pereira2022": _joint_platoon, "platoon-pereira2023": None}
+"""The expert that labels each system's states (a stateless re-planner where there is one;
+``None``: the system has none better than the filtered network, whose own filtered action is the
+label, ``label="self"``)."""
+
+
+@dataclass(frozen=True)
+class SafeDaggerConfig:
+    """One run (every field is a ``--flag`` taking a JSON value)."""
+
+    system: str = "platoon-pereira2022"
+    warm_start: str = "training/policies/platoon_pereira2022_dagger_shield"
+    rounds: int = 8
+    episodes_per_round: int = 12
+    train_seed: int = 610_000
+    val_seeds: int = 100                 # network alone: validation seeds 700000.. (this many)
+    val_shield_seeds: int = 20           # behind the filter (interventions)
+    label: str = "filtered"              # "filtered": F(expert), "expert": raw expert, "self": F(network)
+    w_int: float = 1.0
+    w_bar: float = 10.0
+    bar_margin: float = 0.02
+    epochs: int = 4
+    batch_size: int = 512
+    learning_rate: float = 1e-4
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.system not in EXPERTS:
+            raise SatenvError(f"system must be one of {sorted(EXPERTS)}, got {self.system!r}")
+        if self.label not in ("filtered", "expert", "self"):
+            raise SatenvError(f"label must be 'filtered', 'expert' or 'self', got {self.label!r}")
+        if EXPERTS[self.system] is None and self.label != "self":
+            raise SatenvError(f"system {self.system!r} has no expert here: label must be 'self', got {self.label!r}")
+        for name in ("w_int", "w_bar", "bar_margin", "learning_rate"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise SatenvError(f"{name} must be a finite number >= 0, got {v!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+# --------------------------------------------------------------------------- the filter's rows
+def agent_constraints(filt: Any, applied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each agent's filter constraints at the filter's current state, ``rows (M, K, d)`` and
+    ``lower (M, K)``, in normalised action space and scaled to unit rows: an action ``a`` of
+    agent ``i`` passes the filter untouched iff ``rows[i] @ eff(a) >= lower[i]`` for every ``k``
+    (``eff``: the env's clipping). ``applied (M, d)`` are the actions the filter let through this
+    step: down a chain, a chaser's rows hold its target's applied acceleration, as in the filter.
+    Unused slots get ``lower = ROW_LOWER_FLOOR``."""
+    from satenv.safety import _effective, _omega_rows, constraint_rows
+
+    m, cfg = filt.model, filt.config
+    x = np.asarray(filt.core.x, dtype=float)[:1]
+    t = np.asarray(filt.core.t, dtype=float).reshape(-1)[:1] * float(filt.core.scenario.dt)
+    if m.body_frame:
+        raise SatenvError("agent_constraints: body-frame systems (servicing) are not supported yet")
+    w, lo = constraint_rows(m, cfg, x, t)
+    s = m.S
+    rows = np.einsum("bmki,ij->bmkj", w, s)[0]
+    lo = lo[0].copy()
+    if m.attitude is not None:
+        w_om, lo_om = _omega_rows(m, cfg, x)
+        rows, lo = np.concatenate([rows, w_om[0]], axis=1), np.concatenate([lo, lo_om[0]], axis=1)
+    if m.n_chain:
+        slots = m.budget[0].shape[1]
+        idx = np.r_[slots - m.n_chain:slots, 2 * slots - m.n_chain:2 * slots]
+        acc = _effective(m, np.asarray(applied, dtype=float)) @ s.T
+        for f in range(1, len(lo)):
+            lo[f, idx] += w[0, f, idx] @ acc[f - 1]
+    scale = np.linalg.norm(rows, axis=-1)
+    tiny = scale < 1e-12
+    rows = np.where(tiny[..., None], 0.0, rows / np.where(tiny, 1.0, scale)[..., None])
+    lower = np.where(tiny, ROW_LOWER_FLOOR, lo / np.where(tiny, 1.0, scale))
+    return rows.astype(np.float32), np.clip(lower, ROW_LOWER_FLOOR, 10.0).astype(np.float32)
+
+
+def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm_mode: bool = False) -> Any:
+    """``sum_k relu(lower_k + margin - rows_k . eff(a))^2`` per row of a torch batch: zero where the
+    filter (tightened by ``margin``) would pass the action, growing with the distance outside."""
+    import torch
+
+    eff = torch.clamp(actions, -1.0, 1.0)
+    if norm_mode:
+        eff = eff / torch.clamp(torch.linalg.norm(eff, dim=-1, keepdim=True), min=1.0)
+    slack = torch.einsum("nkd,nd->nk", rows, eff) - lower - margin
+    return (torch.relu(-slack) ** 2).sum(-1)
+
+
+# --------------------------------------------------------------------------- collection
+def collect_episode(env: Any, expert: Any, net: Any, seed: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The network flies ``env`` behind the filter; every agent-step labelled (module docstring).
+    Without an expert (``None``) the expert columns hold the network's own action."""
+    from satenv.safety import SafetyFilter
+
+    obs, _ = env.reset(seed=seed)
+    if expert is not None:
+        expert.reset(seed=seed)
+    net.reset(seed=seed)
+    filt = SafetyFilter(env)
+    agents = list(env.possible_agents)
+    rows: dict[str, list] = {k: [] for k in ("obs", "expert", "label", "filtered", "flown", "intervened",
+                                             "rows", "lower")}
+    collided, interventions, steps, infos = False, 0, 0, {}
+    while env.agents:
+        if len(env.agents) != len(agents):
+            break
+        o = np.stack([obs[a] for a in agents])
+        n = net.predict(o).astype(float)
+        n_f, rec = filt.filter(n)
+        if expert is None:
+            e, e_f = n, n_f
+        else:
+            lab = expert.act(obs)
+            e = np.stack([np.asarray(lab[a], dtype=float) for a in agents])
+            e_f, _ = filt.filter(np.clip(e, -1, 1))
+        r, lo = agent_constraints(filt, n_f)
+        rows["obs"].append(o)
+        rows["expert"].append(e)
+        rows["label"].append(e_f)
+        rows["filtered"].append(n_f)
+        rows["flown"].append(n)
+        rows["intervened"].append(rec.intervened[0])
+        rows["rows"].append(r)
+        rows["lower"].append(lo)
+        interventions += int(rec.intervened.sum())
+        steps += len(agents)
+        obs, _, _, _, infos = env.step({a: n_f[i].astype(np.float32) for i, a in enumerate(agents)})
+        collided |= any(bool(i.get("collision")) for i in infos.values())
+    out = {k: np.concatenate(v).astype(np.float32 if k != "intervened" else bool) for k, v in rows.items()}
+    return out, {"seed": seed, "agent_steps": steps, "interventions": interventions, "collision": collided}
+
+
+# --------------------------------------------------------------------------- fit
+def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mode: bool,
+        generator: Any) -> dict[str, float]:
+    """Adam on the loss of the module docstring (``policy.actor`` in place); the epoch-mean terms."""
+    import torch
+
+    x = torch.as_tensor(policy.normalizer(policy.features(data["obs"].astype(np.float64))
+                                          if policy.features is not None else data["obs"]), dtype=torch.float32)
+    key = {"filtered": "label", "expert": "expert", "self": "filtered"}[cfg.label]
+    y = torch.as_tensor(data[key], dtype=torch.float32).clamp(-1, 1)
+    power = float(policy.action_map.power) if policy.action_map is not None else 1.0
+    f = torch.as_tensor(data["filtered"], dtype=torch.float32)
+    mask = torch.as_tensor(data["intervened"], dtype=torch.float32)
+    rows, lower = torch.as_tensor(data["rows"]), torch.as_tensor(data["lower"])
+    actor = policy.actor
+    opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
+    actor.train()
+    terms = {}
+    for _ in range(cfg.epochs):
+        sums = np.zeros(3)
+        for idx in torch.randperm(len(x), generator=generator).split(cfg.batch_size):
+            a = _env_action(actor(x[idx]), power)
+            imit = ((a - y[idx]) ** 2).sum(-1).mean()
+            inter = (mask[idx] * ((a - f[idx]) ** 2).sum(-1)).mean()
+            bar = barrier_hinge(a, rows[idx], lower[idx], cfg.bar_margin, norm_mode).mean()
+            loss = imit + cfg.w_int * inter + cfg.w_bar * bar
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sums += np.array([imit.item(), inter.item(), bar.item()]) * len(idx)
+        terms = dict(zip(("imitation", "intervention", "barrier"), (sums / len(x)).tolist(), strict=True))
+    actor.eval()
+    return terms
+
+
+def _env_action(out: Any, power: float) -> Any:
+    """The actor's output as the env action (clipped, then the action map ``sign(y)|y|^power``)."""
+    import torch
+
+    y = torch.clamp(out, -1.0, 1.0)
+    return y if power == 1.0 else torch.sign(y) * torch.abs(y).clamp_min(1e-12) ** power
+
+
+# --------------------------------------------------------------------------- validation
+def validate(task: Any, policy: Any, cfg: SafeDaggerConfig) -> dict[str, Any]:
+    """The network alone on ``cfg.val_seeds`` validation seeds and behind the filter on the first
+    ``cfg.val_shield_seeds`` (:func:`satenv.scoring.aggregate` of each)."""
+    from satenv.safety import shield
+    from satenv.scoring import aggregate, run_episodes
+
+    env = task.make_env()
+    alone = aggregate(run_episodes(env, policy, task.seeds("validation", cfg.val_seeds)))
+    shipped = aggregate(run_episodes(env, shield(policy, env), task.seeds("validation", cfg.val_shield_seeds)))
+    return {"alone": alone, "shield": shipped}
+
+
+def selection_key(v: dict[str, Any]) -> tuple[float, ...]:
+    """How rounds are ranked on validation (ascending): collision episodes, violation episodes of
+    the network alone, then its failures, then the filter's interventions per agent-step."""
+    a, s = v["alone"], v["shield"]
+    return (a["collision_episodes"], a["violation_episodes"], -a["success_rate"],
+            s.get("interventions_per_agent_step") or 0.0)
+
+
+# --------------------------------------------------------------------------- run
+def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
+    import torch
+
+    from satenv import tasks
+    from satenv.safety import safety_model
+    from training.policy import load, save_artifacts
+
+    torch.set_num_threads(1)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "labels").mkdir(exist_ok=True)
+    (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
+    task = tasks.training_task(cfg.system)
+    collect_env = task.make_env(terminate_on_collision=False)
+    expert = EXPERTS[cfg.system](collect_env) if EXPERTS[cfg.system] is not None else None
+    norm_mode = safety_model(collect_env).norm_mode if hasattr(collect_env, "core") else False
+    history_path = run_dir / "history.json"
+    history = json.loads(history_path.read_text()) if history_path.is_file() else []
+    done = len(history)
+    start = run_dir / "rounds" / f"{done - 1:04d}" if done else Path(cfg.warm_start)
+    policy = load(start, shielded=False)
+    warm_meta = json.loads((Path(cfg.warm_start) / "env.json").read_text())
+    warm_cfg = json.loads((Path(cfg.warm_start) / "config.json").read_text())
+    if not history:   # round -1: the warm start itself on the same validation seeds
+        history.append({"round": -1, "source": str(cfg.warm_start), "val": validate(task, policy, cfg)})
+        history_path.write_text(json.dumps(history, indent=1) + "\n")
+        done = 1
+    generator = torch.Generator().manual_seed(cfg.seed + done)
+    t_start = time.perf_counter()
+    for k in range(done, cfg.rounds + 1):
+        t0 = time.perf_counter()
+        parts, flown = [], []
+        for j in range(cfg.episodes_per_round):
+            part, stats = collect_episode(collect_env, expert, policy, cfg.train_seed + (k - 1) * cfg.episodes_per_round + j)
+            parts.append(part)
+            flown.append(stats)
+        batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+        np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
+        collect_s = time.perf_counter() - t0
+        data = _load_rows(run_dir)
+        t1 = time.perf_counter()
+        terms = fit(policy, data, cfg, norm_mode, generator)
+        fit_s = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        val = validate(task, policy, cfg)
+        val_s = time.perf_counter() - t2
+        config = {**warm_cfg, "recipe": "training.safe_imitation", "safe_dagger": cfg.to_json(), "round": k}
+        save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=warm_meta, config=config,
+                       source="training.safe_imitation round checkpoint")
+        steps = sum(s["agent_steps"] for s in flown)
+        history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms, "collect_s": round(collect_s, 1),
+                        "fit_s": round(fit_s, 1), "val_s": round(val_s, 1),
+                        "session_wall_s": round(time.perf_counter() - t_start, 1),
+                        "flown_interventions_per_agent_step": sum(s["interventions"] for s in flown) / max(1, steps),
+                        "flown_collisions": sum(s["collision"] for s in flown), "val": val})
+        history_path.write_text(json.dumps(history, indent=1) + "\n")
+        a, s = val["alone"], val["shield"]
+        print(f"round {k}: rows {len(data['obs'])} loss {json.dumps({t: round(v, 5) for t, v in terms.items()})} "
+              f"alone: success {a['success_rate']:.2f} coll {a['collision_episodes']} viol {a['violation_episodes']} "
+              f"| shield: interv/step {s.get('interventions_per_agent_step', 0):.4f} "
+              f"| collect {collect_s:.0f}s fit {fit_s:.0f}s val {val_s:.0f}s", flush=True)
+
+
+def _load_rows(run_dir: Path) -> dict[str, np.ndarray]:
+    parts = []
+    for f in sorted((run_dir / "labels").glob("round_*.npz")):
+        with np.load(f, allow_pickle=False) as d:
+            parts.append({k: d[k] for k in d.files})
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--run-dir", required=True, type=Path)
+    for f in SafeDaggerConfig.__dataclass_fields__.values():
+        parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None, help="a JSON value")
+    ns = parser.parse_args(argv)
+    saved = ns.run_dir / "config.json"
+    base = SafeDaggerConfig(**json.loads(saved.read_text())) if saved.is_file() else SafeDaggerConfig()
+    over = {}
+    for k, v in vars(ns).items():
+        if k == "run_dir" or v is None:
+            continue
+        over[k] = v if k in ("system", "warm_start", "label") else json.loads(v)
+    run(replace(base, **over), ns.run_dir)
+
+
+if __name__ == "__main__":
+    main()
