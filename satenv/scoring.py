@@ -40,7 +40,7 @@ from satenv.errors import SatenvError
 from satenv.metrics import matched_ratios, summary
 
 __all__ = ["DECISION_MS_PER_AGENT_LIMIT", "RATIO_LIMIT", "SUCCESS_MARGIN", "SUCCESS_MIN", "aggregate",
-           "episode_record", "matched_ratios", "rank_key", "targets", "wilson"]
+           "episode_record", "matched_ratios", "rank_key", "run_episodes", "targets", "wilson"]
 
 SUCCESS_MIN = 0.9
 """A learned policy's success rate must be at least this."""
@@ -54,17 +54,29 @@ DECISION_MS_PER_AGENT_LIMIT = 1.0
 SAFETY_COUNTS = ("safety_interventions", "safety_infeasible", "safety_steps")
 
 
-def episode_record(traj: Any, seed: int, n_agents: int, policy_info: Mapping[str, Any] | None = None
-                   ) -> dict[str, Any]:
+def episode_record(traj: Any, seed: int, n_agents: int) -> dict[str, Any]:
     """The one episode record: ``metrics.summary(traj)`` with ``seed``, ``compute_ms_per_agent``
-    and the filter's counts from ``policy_info`` when it has them."""
+    and the filter's counts from the policy's ``info`` (``traj.policy_info``) when it has them."""
     rec = summary(traj)
+    policy_info = traj.policy_info
     rec["seed"] = int(seed)
     rec["compute_ms_per_agent"] = rec["compute_ms_per_decision"] / max(1, int(n_agents))
     for key in SAFETY_COUNTS:
         if policy_info and key in policy_info:
             rec[key] = int(policy_info[key])
     return rec
+
+
+def run_episodes(env: Any, policy: Any, seeds: Iterable[int]) -> list[dict[str, Any]]:
+    """Roll ``policy`` out on ``env`` once per seed (``satenv.rollout.rollout``) and return the
+    :func:`episode_record` of each episode."""
+    from satenv.rollout import rollout
+
+    out = []
+    for seed in seeds:
+        traj = rollout(env, policy, seed=int(seed))
+        out.append(episode_record(traj, int(seed), len(env.possible_agents)))
+    return out
 
 
 def wilson(successes: int, n: int) -> tuple[float, float, float]:

@@ -4,11 +4,14 @@
     python -m training.card NAME       # one folder's evaluation table and its targets
 
 Each row compares the learned policy with the scripted baseline its ``eval.json`` names (the
-``vs_<BASELINE>`` entry: ratios on the same held-out seeds) against issue 15's targets: no
-collision episode, no hard-constraint violation, success >= 90 % and >= the baseline's, RMSE and
-total delta-v within 1.5x of the baseline's. A folder evaluated by ``training.recipes.heldout``
-(issue 27) is held to that issue's success rule instead: >= 90 % and >= the controller's minus
-:data:`ISSUE27_SUCCESS_MARGIN`.
+``vs_<BASELINE>`` entry: ratios on the same held-out seeds) against the targets of
+:func:`satenv.scoring.targets`: no collision episode, no hard-constraint violation, success >=
+:data:`~satenv.scoring.SUCCESS_MIN` and >= the baseline's minus
+:data:`~satenv.scoring.SUCCESS_MARGIN`, RMSE and total delta-v within
+:data:`~satenv.scoring.RATIO_LIMIT` of the baseline's on matched, completed episodes
+(:func:`satenv.metrics.matched_ratios`, the ``matched`` entry). An evaluation written before the
+matched rule has only all-seed ratios (``all_seeds``): the card shows them, marked, and holds
+them to the same limit.
 """
 
 from __future__ import annotations
@@ -18,15 +21,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from satenv import scoring
 from training import POLICIES_DIR
 
 __all__ = ["card", "targets", "shipped_table", "folder_table", "readme"]
 
-RATIO_LIMIT = 1.5
-"""RMSE and delta-v of a learned policy may be at most this multiple of its baseline's."""
-SUCCESS_MIN = 0.9
-ISSUE27_SUCCESS_MARGIN = 0.05
-"""Issue 27: success >= the controller's minus 5 points (``training.recipes.heldout.targets``)."""
 
 
 def card(folder: Path) -> dict[str, Any]:
@@ -42,7 +41,9 @@ def card(folder: Path) -> dict[str, Any]:
     # safety filter) "learned+shield"; the network alone is then reported beside it
     shipped = ratios.get("shipped", "learned")
     own = agg[shipped]
-    shipped_ratios = ratios.get("all", {}) if shipped == "learned" else ratios.get(shipped, {})
+    matched = "matched" in ratios
+    shipped_ratios = (ratios.get("matched", ratios.get("all_seeds", {})) if shipped == "learned"
+                      else ratios.get(shipped, {}))
     return {
         "name": folder.name,
         "scenarios": json.loads(scen.read_text())["scenarios"] if scen.is_file() else [],
@@ -52,6 +53,7 @@ def card(folder: Path) -> dict[str, Any]:
         "success": own["success_rate"],
         "collision_episodes": own["collision_episodes"],
         "violations": own["violations"],
+        "violation_episodes": own.get("violation_episodes", int(bool(own["violations"]))),
         "rmse_ratio": shipped_ratios.get("rmse_ratio"),
         "delta_v_ratio": shipped_ratios.get("delta_v_ratio"),
         "network_alone": None if shipped == "learned" else {
@@ -59,27 +61,29 @@ def card(folder: Path) -> dict[str, Any]:
         "baseline": reference,
         "baseline_success": None if base is None else base["success_rate"],
         "baseline_episodes": None if base is None else base["episodes"],
-        # the held-out recipe of issue 27 writes "random" / "paper" blocks
-        "success_margin": ISSUE27_SUCCESS_MARGIN if "random" in ev else 0.0,
+        "ratios_on": "matched" if matched else "all seeds",
     }
 
 
 def targets(c: dict[str, Any]) -> dict[str, bool]:
-    """Issue 15's (or 27's: ``success_margin``) targets for one card (``True`` = met)."""
-    ratio_ok = [c[k] is not None and c[k] <= RATIO_LIMIT for k in ("rmse_ratio", "delta_v_ratio")]
-    return {
-        "no_collisions": c["collision_episodes"] == 0,
-        "no_violations": c["violations"] == 0,
-        "success": c["success"] >= SUCCESS_MIN and (c["baseline_success"] is None
-                                                   or c["success"] >= c["baseline_success"]
-                                                   - c.get("success_margin", 0.0) - 1e-12),
-        "rmse": ratio_ok[0],
-        "delta_v": ratio_ok[1],
-    }
+    """:func:`satenv.scoring.targets` of one card (``True`` = met)."""
+    met = scoring.targets({"success_rate": c["success"], "collision_episodes": c["collision_episodes"],
+                           "violation_episodes": c["violation_episodes"]},
+                          None if c["baseline_success"] is None else {"success_rate": c["baseline_success"]},
+                          {"rmse_ratio": c["rmse_ratio"], "delta_v_ratio": c["delta_v_ratio"]})
+    return {k: met[k] for k in ("no_collisions", "no_violations", "success", "rmse", "delta_v")}
 
 
 def _f(v: Any, fmt: str = ".2f") -> str:
     return "–" if v is None else format(v, fmt)
+
+
+ALL_SEEDS_MARK = "†"
+"""Marks a ratio taken over every seed (an older evaluation) instead of matched episodes."""
+
+
+def _mark(c: dict[str, Any]) -> str:
+    return "" if c["ratios_on"] == "matched" or c["rmse_ratio"] is None else ALL_SEEDS_MARK
 
 
 def _alone(c: dict[str, Any]) -> str:
@@ -102,12 +106,13 @@ def shipped_table(root: Path = POLICIES_DIR) -> str:
         lines.append(
             f"| `{c['name']}`{_alone(c)} | {', '.join(f'`{s}`' for s in c['scenarios'][:1])} | {c['source']} "
             f"| {_f(c['success'])} | {c['collision_episodes']} | {_f(c['violations'], '.3g')} "
-            f"| {_f(c['rmse_ratio'])} | {_f(c['delta_v_ratio'])} "
+            f"| {_f(c['rmse_ratio'])}{_mark(c)} | {_f(c['delta_v_ratio'])}{_mark(c)} "
             f"| {c['baseline']} {_f(c['baseline_success'])} ({c['baseline_episodes']}) "
             f"| {sum(met.values())}/{len(met)}" + ("" if all(met.values()) else
                                                    f" (not: {', '.join(k for k, v in met.items() if not v)})")
             + " |")
-    return "\n".join(lines)
+    return "\n".join(lines + ["", f"{ALL_SEEDS_MARK} ratio over every test seed: an evaluation written "
+                                    "before the matched-episode rule (an episode that ended early may lower it)."])
 
 
 def folder_table(folder: Path) -> str:

@@ -25,49 +25,18 @@ from typing import Annotated, Any, Literal
 import tyro
 from tyro.constructors import PrimitiveConstructorSpec
 
+from satenv.tasks import MAX_SEEDS, parse_seeds, show_seeds  # the one seed grammar
+
 __all__ = ["RunConfig", "TrainConfig", "parse_args", "parse_seeds", "config_from_json", "load_config",
            "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
-
-MAX_SEEDS = 100_000
-"""The most seeds one ``--*-seeds`` flag may name (a typo such as ``0-10000000`` is an error,
-not hours of evaluation)."""
 
 RENAMED = {"n_copies": "num_envs", "learning_rate": "lr", "num_envs_per_env_runner": "num_envs"}
 """Old config keys (``config.json`` written before the common grammar) -> current field names."""
 DEPRECATED_FLAGS = {"--n-copies": "--num-envs", "--learning-rate": "--lr",
                     "--num-envs-per-env-runner": "--num-envs", "--ray-address": "--address"}
 """Old flags still accepted (aliases), with a ``FutureWarning`` naming the new one."""
-
-
-def parse_seeds(text: str | typing.Iterable[str]) -> tuple[int, ...]:
-    """``"0-9"`` (inclusive), ``"0,3,7"``, ``"0-4,10"`` or several such strings -> the seeds in
-    the order given, duplicates dropped; at least one (``ValueError`` naming what is expected otherwise).
-    ``"a:b"`` (Python's half-open range, the old grammar) is accepted too."""
-    parts = [p.strip() for t in ([text] if isinstance(text, str) else text) for p in t.split(",")]
-    seeds: dict[int, None] = {}
-    try:
-        for part in filter(None, parts):
-            sep = ":" if ":" in part else ("-" if "-" in part[1:] else None)
-            if sep is None:
-                lo, hi = int(part), int(part) + 1
-            else:
-                a, b = part.split(sep, 1)
-                lo, hi = int(a), int(b) + (sep == "-")
-            if lo < 0 or hi <= lo:
-                raise ValueError
-            if len(seeds) + hi - lo > MAX_SEEDS:
-                raise OverflowError
-            seeds.update(dict.fromkeys(range(lo, hi)))
-        if not seeds:
-            raise ValueError
-    except OverflowError:
-        raise ValueError(f"seeds: {text!r} names more than {MAX_SEEDS} seeds") from None
-    except ValueError:
-        raise ValueError(f"seeds must be non-negative integers or ranges like '0-9' (inclusive) or "
-                         f"'0,3,7', got {text!r}") from None
-    return tuple(seeds)
 
 
 def _bool(args: list[str]) -> bool:
@@ -106,13 +75,6 @@ Seeds = Annotated[tuple[int, ...], PrimitiveConstructorSpec(
 Flag = Annotated[bool, PrimitiveConstructorSpec(
     nargs=1, metavar="{true,false}", instance_from_str=_bool, is_instance=lambda x: isinstance(x, bool),
     str_from_instance=lambda x: [str(x).lower()])]
-
-
-def show_seeds(seeds: tuple[int, ...]) -> str:
-    """``A-B`` for a run of consecutive seeds (the flag's range syntax), else comma-separated."""
-    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}-{seeds[-1]}"
-    return ",".join(map(str, seeds))
 
 
 def check_number(name: str, v: Any, lo: float, hi: float) -> None:

@@ -1,8 +1,8 @@
 """Evaluate policies (learned or scripted) on fixed seeds with the PettingZoo env and ``satenv.rollout``.
 
-The same path the scoreboard uses: ``rollout(env, policy, seed=s)`` then
-``satenv.metrics.summary``. :func:`compare` adds the learned-vs-reference ratios of the issue's
-targets (tracking RMSE and total delta-v relative to the DMPC on the same seeds).
+The same path the scoreboard uses: ``rollout(env, policy, seed=s)`` then the episode record and
+aggregate of :mod:`satenv.scoring`. :func:`compare` adds the learned-vs-reference ratios of the
+targets (tracking RMSE and total delta-v relative to the reference on the same seeds).
 
 Every evaluation shows a progress bar with an ETA (tqdm, on stderr; ``progress=False`` hides
 it) and runs its episodes in ``workers`` forked processes when there are several (each episode
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 import baselines
-from satenv import metrics
+from satenv import metrics, scoring
 from satenv.rollout import rollout
 
 __all__ = ["AUTO", "evaluate", "make_baseline", "baseline_names", "compare", "format_table",
@@ -65,10 +65,7 @@ def evaluate(env: Any, policy: Any, seeds: Iterable[int], *, desc: str = "evalua
     ``collision_voids_success`` of ``env.scenario``). ``desc`` labels the progress bar;
     ``workers`` > 1 runs the episodes in that many forked processes (:func:`resolve_workers`).
 
-    Aggregate keys: ``success_rate``, ``collision_episodes`` (episodes with >= 1 collision
-    flag), ``rmse``/``delta_v``/``final_error_m``/``violations``/``min_separation_m``/
-    ``compute_ms_per_decision`` (means over episodes; ``min_separation_m`` is the minimum),
-    ``terminated_rate``, ``episodes``.
+    Aggregate keys: those of :func:`satenv.scoring.aggregate`.
     """
     seeds = [int(s) for s in seeds]
     bar = progress_bar(len(seeds), desc, progress)
@@ -93,9 +90,7 @@ def evaluate(env: Any, policy: Any, seeds: Iterable[int], *, desc: str = "evalua
 
 
 def _episode(env: Any, policy: Any, seed: int) -> dict[str, Any]:
-    s = metrics.summary(rollout(env, policy, seed=seed))
-    s["seed"] = seed
-    return s
+    return scoring.episode_record(rollout(env, policy, seed=seed), seed, len(env.possible_agents))
 
 
 _WORK: tuple[Any, Any] | None = None
@@ -131,61 +126,39 @@ def progress_bar(total: int, desc: str, enabled: bool = True):
                 dynamic_ncols=True, leave=False)
 
 
-def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    def mean(key):
-        return float(np.mean([e[key] for e in episodes])) if episodes else float("nan")
-
-    return {
-        "episodes": len(episodes),
-        "success_rate": mean("success"),
-        "collision_episodes": int(sum(e["collisions"] > 0 for e in episodes)),
-        "terminated_rate": mean("terminated"),
-        "rmse": mean("rmse"),
-        "delta_v": mean("delta_v"),
-        "final_error_m": mean("final_error_m"),
-        "violations": mean("violations"),
-        "min_separation_m": float(min(e["min_separation_m"] for e in episodes)) if episodes else float("nan"),
-        "steps": mean("steps"),
-        "compute_ms_per_decision": mean("compute_ms_per_decision"),
-    }
+aggregate = scoring.aggregate
+"""The one aggregate (:func:`satenv.scoring.aggregate`)."""
 
 
 def compare(results: dict[str, dict[str, Any]], learned: str = "learned",
             reference: str = "dmpc") -> dict[str, Any]:
-    """Ratios learned/reference of mean RMSE and mean delta-v on the seeds both were evaluated on.
+    """Ratios learned/reference of mean RMSE and mean delta-v.
 
-    ``all``: over every common seed; ``reference_ok``: over the common seeds where the reference
-    episode ran to truncation without a collision (a terminated reference episode has a shorter
-    window). A reference evaluated on a subset of the learned policy's seeds (an expensive
-    controller) is compared on that subset (``seeds`` says how many).
+    ``matched``: the one ratio rule (:func:`satenv.metrics.matched_ratios`: seeds where both
+    episodes ran to the end without a collision), what the card reads; ``all_seeds``: over every
+    common seed (an early-terminated episode can lower a ratio), for information. A reference
+    evaluated on a subset of the learned policy's seeds (an expensive controller) is compared on
+    that subset.
     """
     if learned not in results or reference not in results:
         return {}
-    by_seed = {e["seed"]: e for e in results[learned]["episodes"]}
-    pairs = [(by_seed[e["seed"]], e) for e in results[reference]["episodes"] if e["seed"] in by_seed]
+    mine, ref = results[learned]["episodes"], results[reference]["episodes"]
+    by_seed = {e["seed"]: e for e in mine}
+    pairs = [(by_seed[e["seed"]], e) for e in ref if e["seed"] in by_seed]
     if not pairs:
         raise ValueError(f"compare() needs {learned!r} and {reference!r} evaluated on common seeds")
-    out: dict[str, Any] = {"reference": reference}
-    ok = [(le, re) for le, re in pairs if re["collisions"] == 0 and not re["terminated"]]
-    for label, sel in (("all", pairs), ("reference_ok", ok)):
-        if not sel:
-            out[label] = {"seeds": 0}
-            continue
-        le, re = [p[0] for p in sel], [p[1] for p in sel]
-        out[label] = {
-            "seeds": len(sel),
-            "rmse_ratio": float(np.mean([e["rmse"] for e in le]) / np.mean([e["rmse"] for e in re])),
-            "delta_v_ratio": float(np.mean([e["delta_v"] for e in le]) / np.mean([e["delta_v"] for e in re])),
-            "learned_success_rate": float(np.mean([e["success"] for e in le])),
-            "reference_success_rate": float(np.mean([e["success"] for e in re])),
-        }
-    return out
+    le, re = [p[0] for p in pairs], [p[1] for p in pairs]
+    return {"reference": reference, "matched": metrics.matched_ratios(mine, ref),
+            "all_seeds": {"seeds": len(pairs),
+                          "rmse_ratio": float(np.mean([e["rmse"] for e in le]) / np.mean([e["rmse"] for e in re])),
+                          "delta_v_ratio": float(np.mean([e["delta_v"] for e in le])
+                                                 / np.mean([e["delta_v"] for e in re]))}}
 
 
 def format_table(results: dict[str, dict[str, Any]]) -> str:
     """A Markdown table of the aggregates, one row per policy."""
-    cols = ["episodes", "success_rate", "collision_episodes", "terminated_rate", "rmse", "delta_v",
-            "final_error_m", "violations", "min_separation_m", "compute_ms_per_decision"]
+    cols = ["episodes", "success_rate", "collision_episodes", "violation_episodes", "terminated", "rmse",
+            "delta_v", "final_error_m", "min_separation_m", "compute_ms_per_decision"]
     head = "| policy | " + " | ".join(cols) + " |"
     lines = [head, "|" + "---|" * (len(cols) + 1)]
     for name, res in results.items():

@@ -29,7 +29,7 @@ import numpy as np
 from baselines.base import new_info, record_fallback
 from baselines.dmpc import ConvexStepDMPC, DMPCConfig, QPSolver
 
-__all__ = ["JointPlatoonMPC"]
+__all__ = ["EXPERTS", "JointPlatoonMPC", "ReplanningTubeRDMPC", "make"]
 
 
 class JointPlatoonMPC:
@@ -242,3 +242,21 @@ class ReplanningTubeRDMPC:
         actions = inner.act(observations)
         self.info = inner.info
         return actions
+
+
+EXPERTS: dict[str, str] = {"joint_platoon_mpc": "training.experts:JointPlatoonMPC",
+                           "replanning_tube_rdmpc": "training.experts:ReplanningTubeRDMPC"}
+"""The stateless experts of this module by registry name; every other expert name is a scripted
+baseline (``baselines.make``). :data:`satenv.tasks.SYSTEMS` names each system's expert."""
+
+
+def make(name: str, env: Any, **options: Any) -> Any:
+    """The expert called ``name`` (:data:`EXPERTS`, else ``baselines.make(name, ...)``) for ``env``."""
+    if name in EXPERTS:
+        import importlib
+
+        module, _, attr = EXPERTS[name].partition(":")
+        return getattr(importlib.import_module(module), attr)(env, **options)
+    import baselines
+
+    return baselines.make(name, env, **options)

@@ -137,12 +137,13 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
                            progress=cfg.progress, workers=cfg.workers)
             agg = res["aggregate"]
             for key in ("success_rate", "rmse", "delta_v", "final_error_m", "collision_episodes",
-                        "violations", "min_separation_m", "terminated_rate"):
-                self.logger.record(f"eval/{key}", agg[key])
+                        "violation_episodes", "min_separation_m", "terminated"):
+                if agg[key] is not None:
+                    self.logger.record(f"eval/{key}", agg[key])
             ratios = compare({"learned": res, **baseline_eval})
-            if ratios:
-                self.logger.record("eval/rmse_ratio_vs_DMPC", ratios["all"]["rmse_ratio"])
-                self.logger.record("eval/delta_v_ratio_vs_DMPC", ratios["all"]["delta_v_ratio"])
+            for key in ("rmse_ratio", "delta_v_ratio"):
+                if ratios and ratios["matched"].get(key) is not None:
+                    self.logger.record(f"eval/{key}_vs_DMPC", ratios["matched"][key])
             self.logger.dump(n)
             history.append({"step": n, "aggregate": agg, "vs_DMPC": ratios})
             (out / "eval_history.json").write_text(json.dumps(history, indent=1) + "\n")

@@ -43,8 +43,8 @@ def split_names(value: str | Iterable[str] | None) -> list[str] | None:
 
 def parse_seeds(text: str) -> list[int]:
     """``"0-9"``, ``"0,3,7"`` or ``"0-4,10"`` -> sorted unique non-negative ints: the one seeds
-    grammar of every CLI (:func:`training.config.parse_seeds`, capped at its ``MAX_SEEDS``)."""
-    from training.config import parse_seeds as parse
+    grammar of every CLI (:func:`satenv.tasks.parse_seeds`, capped at its ``MAX_SEEDS``)."""
+    from satenv.tasks import parse_seeds as parse
 
     try:
         return sorted(parse(text))

@@ -6,9 +6,9 @@
         --run-dir /work/runs/p22/dagger_shield --round 7 --name platoon_pereira2022_dagger_shield \\
         --heldout eval_heldout.json [--shield]
 
-``select`` rolls every listed round out on validation seeds (700000-700049 by default: disjoint
-from the training seeds 600000+ and from the held-out seeds >= 900000), with and without the
-safety filter, and ranks them (success, then collision episodes, then final error) — the held-out
+``select`` rolls every listed round out on validation seeds (the first 50 of the system's training
+task by default: :data:`satenv.tasks.SEED_SPLITS`, disjoint from the train and test seeds), with
+and without the safety filter, and ranks them (success, then collision episodes, then final error) — the held-out
 seeds are never used to choose. ``ship`` writes ``training/policies/<name>/`` with
 :func:`training.policy.save_artifacts` (``env.json`` gains ``"safety_filter"`` when the policy
 ships behind ``satenv.safety.shield``), the held-out ``eval.json`` and the run's learning curve.
@@ -21,20 +21,20 @@ import json
 from pathlib import Path
 from typing import Any
 
-from training.recipes.dagger import SYSTEMS
-from training.recipes.heldout import aggregate, episodes
+from satenv import tasks
+from satenv.scoring import aggregate
+from satenv.scoring import run_episodes as episodes
+from training.recipes import system_name
 
 __all__ = ["select", "ship", "main"]
 
 
 def select(run_dir: Path, rounds: list[int], seeds: list[int]) -> list[dict[str, Any]]:
-    import satenv
     import training
     from satenv.safety import shield
 
     cfg = json.loads((run_dir / "config.json").read_text())
-    system = SYSTEMS[cfg.get("system", "platoon-pereira2022")]
-    env = satenv.make(system.env_id, **system.scenario)
+    env = tasks.training_task(system_name(cfg.get("system", "platoon-pereira2022"))).make_env()
     rows = []
     for k in rounds:
         folder = run_dir / "rounds" / f"{k:04d}"
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> None:
     s = sub.add_parser("select")
     s.add_argument("--run-dir", type=Path, required=True)
     s.add_argument("--rounds", required=True, help="first-last")
-    s.add_argument("--seeds", default="700000-700049")
+    s.add_argument("--seeds", default=None, help="validation seeds (default: the first 50 of the split)")
     s.add_argument("--out", type=Path, required=True)
     h = sub.add_parser("ship")
     h.add_argument("--run-dir", type=Path, required=True)
@@ -89,14 +89,17 @@ def main(argv: list[str] | None = None) -> None:
     ns = p.parse_args(argv)
 
     def span(text):
-        a, _, b = text.partition("-")
-        return list(range(int(a), int(b or a) + 1))
+        try:
+            return list(tasks.parse_seeds(text))
+        except ValueError as exc:
+            p.error(str(exc))
 
     import torch
 
     torch.set_num_threads(1)
     if ns.cmd == "select":
-        ns.out.write_text(json.dumps(select(ns.run_dir, span(ns.rounds), span(ns.seeds)), indent=1) + "\n")
+        ns.out.write_text(json.dumps(select(ns.run_dir, span(ns.rounds),
+                                             span(ns.seeds) if ns.seeds else list(tasks.SEED_SPLITS["validation"][:50])), indent=1) + "\n")
     else:
         print(ship(ns.run_dir, ns.round, ns.name, ns.heldout, ns.shield))
 
