@@ -27,7 +27,7 @@ def _states(system: str, steps: int, seed: int):
     env.reset(seed=seed)
     filt = SafetyFilter(env)
     rng = np.random.default_rng(seed)
-    d = rng.normal(size=(len(env.possible_agents), 3))
+    d = rng.normal(size=(len(env.possible_agents), filt.model.action_dim))
     d /= np.abs(d).max(axis=1, keepdims=True)
     out = []
     for k in range(steps):
@@ -36,19 +36,19 @@ def _states(system: str, steps: int, seed: int):
         a = d if k % 40 < 30 else -d
         safe, rec = filt.filter(a)
         rows, lower = agent_constraints(filt, safe)
-        out.append((a, safe, rec.intervened[0], rec.infeasible[0], rows, lower))
+        out.append((a, safe, rec.intervened[0], rec.infeasible[0], rows, lower, filt.model.norm_mode))
         env.step(dict(zip(env.possible_agents, safe.astype(np.float32), strict=True)))
     return out
 
 
-@pytest.mark.parametrize("system", ["platoon-pereira2022", "platoon-pereira2023"])
+@pytest.mark.parametrize("system", ["platoon-pereira2022", "platoon-pereira2023", "servicing-pereira2022"])
 def test_hinge_is_zero_exactly_where_the_filter_passes_the_action(system):
     seen_intervention = seen_pass = False
-    for a, safe, intervened, infeasible, rows, lower in _states(system, 160, 3):
+    for a, safe, intervened, infeasible, rows, lower, norm_mode in _states(system, 160, 3):
         h = barrier_hinge(torch.as_tensor(a), torch.as_tensor(rows, dtype=torch.float64),
-                          torch.as_tensor(lower, dtype=torch.float64)).numpy()
+                          torch.as_tensor(lower, dtype=torch.float64), norm_mode=norm_mode).numpy()
         hs = barrier_hinge(torch.as_tensor(safe), torch.as_tensor(rows, dtype=torch.float64),
-                           torch.as_tensor(lower, dtype=torch.float64)).numpy()
+                           torch.as_tensor(lower, dtype=torch.float64), norm_mode=norm_mode).numpy()
         for i in range(len(a)):
             if intervened[i]:
                 seen_intervention = True
@@ -116,3 +116,17 @@ def test_config_rejects_bad_values(field, value):
 def test_a_system_without_expert_needs_self_labels():
     with pytest.raises(SatenvError, match="label must be 'self'"):
         SafeDaggerConfig(system="platoon-pereira2023", label="filtered")
+
+
+def test_terminal_affine_reproduces_the_feedback_blend():
+    from training.shaping import TerminalFeedback
+
+    class P:
+        terminal = TerminalFeedback(radius=30.0)
+
+    rng = np.random.default_rng(1)
+    obs = rng.normal(scale=20.0, size=(50, 9))
+    a = rng.uniform(-1, 1, size=(50, 3))
+    off, slope = __import__("training.safe_imitation", fromlist=["x"]).terminal_affine(P(), obs, 3)
+    assert np.allclose(off + slope * a, P.terminal(obs, a))
+    assert np.any(slope < 0.999)                 # the blend is active on some rows

@@ -43,7 +43,7 @@ import numpy as np
 
 from satenv.errors import SatenvError
 
-__all__ = ["SafeDaggerConfig", "EXPERTS", "agent_constraints", "barrier_hinge", "run", "main"]
+__all__ = ["SafeDaggerConfig", "EXPERTS", "agent_constraints", "barrier_hinge", "terminal_affine", "run", "main"]
 
 ROW_LOWER_FLOOR = -10.0
 """Normalised row bounds below this never bind an action in the unit box (stored clipped here)."""
@@ -105,16 +105,14 @@ def agent_constraints(filt: Any, applied: np.ndarray) -> tuple[np.ndarray, np.nd
     (``eff``: the env's clipping). ``applied (M, d)`` are the actions the filter let through this
     step: down a chain, a chaser's rows hold its target's applied acceleration, as in the filter.
     Unused slots get ``lower = ROW_LOWER_FLOOR``."""
-    from satenv.safety import _effective, _omega_rows, constraint_rows
+    from satenv.safety import _effective, _omega_rows, constraint_rows, quat_to_matrix
 
     m, cfg = filt.model, filt.config
     x = np.asarray(filt.core.x, dtype=float)[:1]
     t = np.asarray(filt.core.t, dtype=float).reshape(-1)[:1] * float(filt.core.scenario.dt)
-    if m.body_frame:
-        raise SatenvError("agent_constraints: body-frame systems (servicing) are not supported yet")
     w, lo = constraint_rows(m, cfg, x, t)
-    s = m.S
-    rows = np.einsum("bmki,ij->bmkj", w, s)[0]
+    s = m.S if not m.body_frame else np.einsum("bmij,jk->bmik", quat_to_matrix(x[..., 6:10]), m.S)
+    rows = (np.einsum("bmki,ij->bmkj", w, s) if s.ndim == 2 else np.einsum("bmki,bmij->bmkj", w, s))[0]
     lo = lo[0].copy()
     if m.attitude is not None:
         w_om, lo_om = _omega_rows(m, cfg, x)
@@ -122,7 +120,7 @@ def agent_constraints(filt: Any, applied: np.ndarray) -> tuple[np.ndarray, np.nd
     if m.n_chain:
         slots = m.budget[0].shape[1]
         idx = np.r_[slots - m.n_chain:slots, 2 * slots - m.n_chain:2 * slots]
-        acc = _effective(m, np.asarray(applied, dtype=float)) @ s.T
+        acc = _effective(m, np.asarray(applied, dtype=float)) @ m.S.T     # chains are never body-frame
         for f in range(1, len(lo)):
             lo[f, idx] += w[0, f, idx] @ acc[f - 1]
     scale = np.linalg.norm(rows, axis=-1)
@@ -199,6 +197,7 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
     key = {"filtered": "label", "expert": "expert", "self": "filtered"}[cfg.label]
     y = torch.as_tensor(data[key], dtype=torch.float32).clamp(-1, 1)
     power = float(policy.action_map.power) if policy.action_map is not None else 1.0
+    offset, slope = (torch.as_tensor(v, dtype=torch.float32) for v in terminal_affine(policy, data["obs"], y.shape[-1]))
     f = torch.as_tensor(data["filtered"], dtype=torch.float32)
     mask = torch.as_tensor(data["intervened"], dtype=torch.float32)
     rows, lower = torch.as_tensor(data["rows"]), torch.as_tensor(data["lower"])
@@ -209,7 +208,7 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
     for _ in range(cfg.epochs):
         sums = np.zeros(3)
         for idx in torch.randperm(len(x), generator=generator).split(cfg.batch_size):
-            a = _env_action(actor(x[idx]), power)
+            a = offset[idx] + slope[idx] * _env_action(actor(x[idx]), power)
             imit = ((a - y[idx]) ** 2).sum(-1).mean()
             inter = (mask[idx] * ((a - f[idx]) ** 2).sum(-1)).mean()
             bar = barrier_hinge(a, rows[idx], lower[idx], cfg.bar_margin, norm_mode).mean()
@@ -221,6 +220,20 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
         terms = dict(zip(("imitation", "intervention", "barrier"), (sums / len(x)).tolist(), strict=True))
     actor.eval()
     return terms
+
+
+def terminal_affine(policy: Any, obs: np.ndarray, act_dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The policy's terminal feedback (:class:`training.shaping.TerminalFeedback`, a blend affine in
+    the network's action) as ``(offset, slope)`` per row: the policy's action is
+    ``offset + slope * a_net`` (``(0, 1)`` without feedback), so the loss acts on what is flown."""
+    n = len(obs)
+    term = getattr(policy, "terminal", None)
+    if term is None or not getattr(term, "active", True):
+        return np.zeros((n, act_dim)), np.ones((n, act_dim))
+    raw = obs.astype(np.float64)
+    c0 = term(raw, np.zeros((n, act_dim)))
+    c1 = term(raw, np.ones((n, act_dim)))
+    return c0, c1 - c0
 
 
 def _env_action(out: Any, power: float) -> Any:

@@ -1,0 +1,158 @@
+"""Are the learned policies safe on their own? The network alone and as shipped, on test seeds.
+
+For each entry ``system=folder`` (a policy folder under ``training/policies``), on the system's
+training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
+
+* ``network alone`` — ``training.load(folder, env=env, shielded=False)``;
+* ``network + filter`` — the same network behind ``satenv.safety.shield`` (what every folder that
+  ships with the filter loads as): interventions and infeasible steps per agent-step;
+* the system's controller (``satenv.tasks.CONTROLLERS``) on the first ``--controller-seeds`` of
+  the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
+
+and writes ``<out>/safety_alone.json`` (aggregates, targets, matched ratios, every episode
+record) and ``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
+interventions per agent-step). Each entry's episodes are cached in ``<out>/cache/`` so an
+interrupted run resumes where it stopped::
+
+    nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m benchmarks.safety_alone \\
+        --entry platoon-pereira2022=training/policies/platoon_pereira2022_safe_dagger \\
+        --entry platoon-pereira2022=training/policies/platoon_pereira2022_dagger_shield \\
+        --seeds 1000 --controller-seeds 200 --out benchmarks/published/safety_alone
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+__all__ = ["VARIANTS", "evaluate_entry", "plot", "main"]
+
+VARIANTS = ("network alone", "network + filter")
+"""The two ways every policy is reported."""
+
+
+def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict[str, Any]]:
+    """:func:`satenv.scoring.run_episodes`, resumable: records already in ``cache`` (JSON lines,
+    one per seed) are reused, new ones appended as they finish."""
+    from satenv.scoring import episode_record
+    from satenv.rollout import rollout
+
+    done: dict[int, dict[str, Any]] = {}
+    if cache.is_file():
+        for line in cache.read_text().splitlines():
+            if line.strip():
+                rec = json.loads(line)
+                done[int(rec["seed"])] = rec
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    with cache.open("a") as fh:
+        for s in seeds:
+            if s in done:
+                continue
+            rec = episode_record(rollout(env, policy, seed=int(s)), int(s), len(env.possible_agents))
+            done[s] = rec
+            fh.write(json.dumps(rec, default=float) + "\n")
+            fh.flush()
+    return [done[s] for s in seeds]
+
+
+def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path) -> dict[str, Any]:
+    """One entry's block of the JSON (module docstring)."""
+    import baselines
+    import training
+    from satenv import tasks
+    from satenv.safety import shield
+    from satenv.scoring import aggregate, matched_ratios, targets
+
+    task = tasks.training_task(system)
+    env = task.make_env()
+    seeds = list(task.seeds("test", n_seeds))
+    net = training.load(folder, env=env, shielded=False)
+    tag = f"{system}__{folder.name}"
+    block: dict[str, Any] = {"system": system, "task": task.name, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
+                             "controller": task.controller}
+    eps = {}
+    for name, pol in ((VARIANTS[0], net), (VARIANTS[1], shield(net, env))):
+        t0 = time.perf_counter()
+        eps[name] = _episodes(env, pol, seeds, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
+        block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1)}
+        print(system, folder.name, name, json.dumps(block[name]["aggregate"], default=float), flush=True)
+    if n_controller:
+        cseeds = seeds[:n_controller]
+        ctrl = _episodes(env, baselines.make(task.controller, env), cseeds,
+                         cache_dir / f"{system}__controller_{task.controller}.jsonl")
+        ref = aggregate(ctrl)
+        block["controller_aggregate"] = ref
+        block["controller_seeds"] = [cseeds[0], cseeds[-1]]
+        for name in VARIANTS:
+            sub = [e for e in eps[name] if e["seed"] in set(cseeds)]
+            r = matched_ratios(sub, ctrl)
+            block[name]["ratios_vs_controller"] = r
+            block[name]["targets"] = targets(block[name]["aggregate"], ref, r)
+    for name in VARIANTS:
+        block[name]["episodes"] = eps[name]
+    return block
+
+
+def plot(result: dict[str, Any], path: Path) -> None:
+    """Collision-free and violation-free episodes [%] of each variant, and interventions per
+    agent-step behind the filter."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    entries = result["entries"]
+    labels = [f"{e['system']}\n{Path(e['policy']).name}" for e in entries]
+    x = np.arange(len(entries))
+    fig, ax = plt.subplots(1, 2, figsize=(max(8, 2.6 * len(entries) + 3), 4.6))
+    width = 0.2
+    for k, (name, key) in enumerate([(v, key) for v in VARIANTS for key in ("collision_episodes", "violation_episodes")]):
+        vals = [100.0 * (1 - e[name]["aggregate"][key] / e[name]["aggregate"]["episodes"]) for e in entries]
+        ax[0].bar(x + (k - 1.5) * width, vals, width, label=f"{name}: {key.split('_')[0]}-free")
+    ax[0].axhline(99, color="k", ls="--", lw=0.8, label="target 99 %")
+    ax[0].set_ylabel("episodes [%]")
+    ax[0].set_ylim(min(50, ax[0].get_ylim()[0]), 100.5)
+    ax[0].set_xticks(x, labels, fontsize=7)
+    ax[0].legend(fontsize=7, loc="lower left")
+    rate = [e[VARIANTS[1]]["aggregate"].get("interventions_per_agent_step") or 0.0 for e in entries]
+    ax[1].bar(x, [100 * r for r in rate], 0.5)
+    ax[1].axhline(1, color="k", ls="--", lw=0.8, label="target 1 %")
+    ax[1].set_ylabel("filter interventions [% of agent-steps]")
+    ax[1].set_xticks(x, labels, fontsize=7)
+    ax[1].legend(fontsize=7)
+    n = entries[0][VARIANTS[0]]["aggregate"]["episodes"] if entries else 0
+    fig.suptitle(f"learned policies alone and behind the filter (test seeds, {n} episodes each)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    import torch
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--entry", action="append", required=True, help="system=policy-folder (repeatable)")
+    p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
+    p.add_argument("--controller-seeds", type=int, default=200, help="the controller on the first n (0: none)")
+    p.add_argument("--out", type=Path, required=True)
+    ns = p.parse_args(argv)
+    torch.set_num_threads(1)
+    entries = []
+    for spec in ns.entry:
+        system, sep, folder = spec.partition("=")
+        if not sep or not folder:
+            raise SystemExit(f"error: --entry must be system=policy-folder, got {spec!r}")
+        entries.append((system, Path(folder)))
+    ns.out.mkdir(parents=True, exist_ok=True)
+    result = {"command": "python -m benchmarks.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
+              "entries": [evaluate_entry(s, f, ns.seeds, ns.controller_seeds, ns.out / "cache") for s, f in entries]}
+    (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
+    plot(result, ns.out / "safety_alone.png")
+
+
+if __name__ == "__main__":
+    main()
