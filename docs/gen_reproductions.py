@@ -9,7 +9,8 @@ as-published / ablation / analysis tables). The reproduction pages include these
 time (``docs/hooks.py``), so nothing on them is typed in: the JSON is the one source.
 ``--render-only`` re-renders the ``.md`` files from the committed JSONs (after a run made by hand,
 e.g. ``reproduce li2022 --case 1``). By default only the fast papers run (seconds); ``--slow`` adds
-the ones that take minutes. A paper's exit status 1 (a paper-valued claim of our run not met) is
+the ones that take minutes. Every call also rewrites the time column of
+``docs/reproductions/index.md`` from the committed JSONs' ``wall_time_s``. A paper's exit status 1 (a paper-valued claim of our run not met) is
 recorded in its JSON (``pass``) and shown on its page, not treated as an error here.
 """
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -89,6 +91,15 @@ def render(result: dict) -> str:
                   "Every setting where our run differs from the paper, with its measured effect on the claims.",
                   markdown_departures(result["departures"])]
     parts += ["### Claims", markdown_claims(result.get("claims", []))]
+    timed = [r for r in result.get("rows", []) if isinstance(r, dict) and r.get("convergence_time_by_tolerance_s")]
+    if timed:
+        tols = list(dict.fromkeys(k for r in timed for k in r["convergence_time_by_tolerance_s"]))
+        parts += ["### Convergence time by criterion",
+                  "The paper states no criterion for its convergence time: the time [s] after which every "
+                  "satellite stays within each distance of its target (`-`: not by the end).",
+                  table([{"case": r["case"], "run": r.get("variant", "ours"), "controller": r["controller"],
+                          **{f"within {k} m": r["convergence_time_by_tolerance_s"].get(k) for k in tols}}
+                         for r in timed])]
     if result.get("ablation"):
         parts += ["### Ablation: ours minus each addition (case 1)",
                   table(result["ablation"], ["variant", "removed", "convergence_time_s", "satellites_within_1m_at_end",
@@ -121,6 +132,35 @@ def render(result: dict) -> str:
     return "\n\n".join(parts) + "\n"
 
 
+INDEX = DOCS / "reproductions" / "index.md"
+_INDEX_ROW = re.compile(r"^\| \[(?P<label>[^\]]+)\]\((?P<page>[\w.-]+)\.md\) \|(?P<middle>.*)\| (?P<time>[^|]*) \|$")
+
+
+def wall_time_text(seconds: float) -> str:
+    """A committed run's wall time as the index shows it (``"2.4 min"``, ``"59 s"``)."""
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min"
+
+
+def index_text(text: str) -> str:
+    """The reproductions index with each row's time column set from the committed JSON's
+    ``wall_time_s`` (the run that wrote the page; the machine's load varies)."""
+    out = []
+    for line in text.splitlines():
+        m = _INDEX_ROW.match(line)
+        if m and m.group("page") in PAPERS and (OUT / f"{m.group('page')}.json").exists():
+            wall = json.loads((OUT / f"{m.group('page')}.json").read_text()).get("wall_time_s")
+            if wall is not None:
+                line = f"| [{m.group('label')}]({m.group('page')}.md) |{m.group('middle')}| {wall_time_text(wall)} |"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def write_index() -> Path:
+    """Rewrite the index's time column from the committed JSONs (:func:`index_text`)."""
+    INDEX.write_text(index_text(INDEX.read_text()))
+    return INDEX
+
+
 def write_page(paper: str) -> Path:
     """Render ``OUT/<paper>.json`` into ``OUT/<paper>.md``."""
     path = OUT / f"{paper}.md"
@@ -145,6 +185,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"rendered {write_page(paper)}")
         else:
             reproduce(paper)
+    print(f"rewrote the run times of {write_index()}")
     return 0
 
 

@@ -45,6 +45,16 @@ def test_kannan_claim_records_judge_collision_avoidance_at_10_m():
     assert not checks["order y1 > y2 > y3 kept (t >= 0.1 s)"]["gating"]
 
 
+def test_smallest_connecting_range_is_the_longest_spanning_tree_edge():
+    """The range the connectivity claim needs: three in a line 100 m apart need 100 m (not 200 m);
+    moving the third to 130 m from the second needs 130 m, at the step where it is there."""
+    from benchmarks.reproductions.kannan2022 import smallest_connecting_range
+
+    line = np.array([[[0, 0, 0], [0, 100, 0], [0, 200, 0]], [[0, 0, 0], [0, 100, 0], [0, 230, 0]]], float)
+    assert smallest_connecting_range(line[:1]) == pytest.approx(100.0)
+    assert smallest_connecting_range(line) == pytest.approx(130.0)
+
+
 @pytest.mark.slow
 def test_full_reproduction():
     result = reproduce()

@@ -58,3 +58,13 @@ def test_committed_servicing_has_the_as_published_row():
     assert set(result["runs"]) == {"ours", "as published"}
     covered = {f for d in result["departures"] for f in d["fields"]}
     assert "terminal_attitude_weight" in covered
+
+
+def test_index_run_times_are_the_committed_runs():
+    """The index's time column is each committed JSON's wall time (rewritten by the generator)."""
+    gen = _gen()
+    index = gen.INDEX.read_text()
+    assert index == gen.index_text(index), "run: python docs/gen_reproductions.py --render-only"
+    for paper in PAPERS:
+        wall = json.loads((OUT / f"{paper}.json").read_text())["wall_time_s"]
+        assert f"({paper}.md) |" in index and f"| {gen.wall_time_text(wall)} |" in index
