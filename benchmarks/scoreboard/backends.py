@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
@@ -32,11 +32,16 @@ __all__ = ["iter_pool", "iter_ray", "iter_serial", "stream", "worker_init"]
 
 PARENT_POLL_S = 0.5
 Record = dict[str, Any]
+Run = Callable[[Any], Record]
+"""What a backend runs on each task (default :func:`~benchmarks.scoreboard.runner.run_episode`;
+another grid passes its own picklable top-level function, e.g. ``benchmarks.learning``'s)."""
+Lost = Callable[[Any, str], Record]
+"""The record of a task whose worker died (default :func:`~benchmarks.scoreboard.runner.error_record`)."""
 
 
-def iter_serial(tasks: list[Task]) -> Iterator[Record]:
+def iter_serial(tasks: list[Task], run: Run = run_episode) -> Iterator[Record]:
     for task in tasks:
-        yield run_episode(task)
+        yield run(task)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -80,8 +85,8 @@ def _new_pool(workers: int) -> ProcessPoolExecutor:
 class _Pool:
     """A process pool with at most ``workers`` episodes in flight, rebuilt when a worker dies."""
 
-    def __init__(self, tasks: list[Task], workers: int) -> None:
-        self.workers = workers
+    def __init__(self, tasks: list[Task], workers: int, run: Run = run_episode, lost: Lost = error_record) -> None:
+        self.workers, self.run, self.lost = workers, run, lost
         self.pending: deque[Task] = deque(tasks)
         self.suspects: deque[Task] = deque()      # in flight when a worker died: rerun alone
         self.inflight: dict[Future, tuple[Task, bool]] = {}
@@ -90,7 +95,7 @@ class _Pool:
     def _submit(self, queue: deque[Task], alone: bool) -> bool:
         """Start the next task of ``queue``; False (task kept) if the pool broke meanwhile."""
         try:
-            fut = self.pool.submit(run_episode, queue[0])
+            fut = self.pool.submit(self.run, queue[0])
         except BrokenProcessPool:   # a worker died after the last collect: rebuild first
             return False
         self.inflight[fut] = (queue.popleft(), alone)
@@ -124,7 +129,7 @@ class _Pool:
 
     def _lost(self, task: Task, alone: bool) -> Iterator[Record]:
         if alone:   # died again, running alone: this episode kills its worker
-            yield error_record(task, "WorkerDied: the worker process running this episode died "
+            yield self.lost(task, "WorkerDied: the worker process running this episode died "
                                      "(killed, or crashed in native code) twice, the second time alone")
         else:
             self.suspects.append(task)
@@ -140,9 +145,10 @@ class _Pool:
         self.pool.shutdown(wait=True, cancel_futures=True)
 
 
-def iter_pool(tasks: list[Task], workers: int) -> Iterator[Record]:
+def iter_pool(tasks: list[Task], workers: int, run: Run = run_episode, lost: Lost = error_record
+              ) -> Iterator[Record]:
     """Records of ``tasks`` run on ``workers`` spawn processes (see the module docstring)."""
-    pool = _Pool(tasks, workers)
+    pool = _Pool(tasks, workers, run, lost)
     try:
         while pool.pending or pool.suspects or pool.inflight:
             pool.fill()
@@ -169,10 +175,10 @@ def _ray_init(workers: int, address: str | None):
     return ray
 
 
-def iter_ray(tasks: list[Task], workers: int, address: str | None) -> Iterator[Record]:
+def iter_ray(tasks: list[Task], workers: int, address: str | None, run: Run = run_episode) -> Iterator[Record]:
     """Records of ``tasks`` run as Ray tasks (a local Ray, or the cluster at ``address``)."""
     ray = _ray_init(workers, address)
-    remote = ray.remote(num_cpus=1)(run_episode)
+    remote = ray.remote(num_cpus=1)(run)
     pending = [remote.remote(t) for t in tasks]
     try:
         while pending:
@@ -183,10 +189,12 @@ def iter_ray(tasks: list[Task], workers: int, address: str | None) -> Iterator[R
             ray.cancel(ref)
 
 
-def stream(tasks: list[Task], backend: str, workers: int, ray_address: str | None) -> Iterator[Record]:
-    """The records of ``tasks`` from the chosen backend."""
+def stream(tasks: list[Task], backend: str, workers: int, ray_address: str | None, run: Run = run_episode,
+           lost: Lost = error_record) -> Iterator[Record]:
+    """The records of ``tasks`` from the chosen backend (``run`` on each task; ``lost`` for a task
+    whose worker died twice)."""
     if backend == "ray":
-        return iter_ray(tasks, workers, ray_address)
+        return iter_ray(tasks, workers, ray_address, run)
     if workers > 1 and len(tasks) > 1:
-        return iter_pool(tasks, workers)
-    return iter_serial(tasks)
+        return iter_pool(tasks, workers, run, lost)
+    return iter_serial(tasks, run)

@@ -93,17 +93,17 @@ def run_episode(task: Task) -> dict[str, Any]:
 # ----------------------------------------------------------------------------------------------
 # The episode log: one JSON line per finished episode.
 # ----------------------------------------------------------------------------------------------
-def _parse(line: bytes) -> dict[str, Any] | None:
-    """The record on one log line, or ``None`` if the line is not a whole episode record."""
+def _parse(line: bytes, key: tuple[str, ...] = KEY) -> dict[str, Any] | None:
+    """The record on one log line, or ``None`` if the line is not a whole record with ``key``."""
     try:
         rec = json.loads(line)
-        tuple(rec[k] for k in KEY)
+        tuple(rec[k] for k in key)
     except (ValueError, KeyError, TypeError):
         return None
     return rec if isinstance(rec, dict) else None
 
 
-def _split_log(data: bytes) -> tuple[list[bytes], list[tuple[int, bytes]]]:
+def _split_log(data: bytes, key: tuple[str, ...] = KEY) -> tuple[list[bytes], list[tuple[int, bytes]]]:
     """Good lines and ``(line number, bad line)``; a last line without newline is torn (bad)."""
     good, bad = [], []
     lines = data.split(b"\n")
@@ -111,7 +111,7 @@ def _split_log(data: bytes) -> tuple[list[bytes], list[tuple[int, bytes]]]:
         if not line.strip():
             continue
         torn = lineno == len(lines)           # after the last newline: never finished
-        (bad.append((lineno, line)) if torn or _parse(line) is None else good.append(line))
+        (bad.append((lineno, line)) if torn or _parse(line, key) is None else good.append(line))
     return good, bad
 
 
@@ -128,8 +128,9 @@ def _quarantine(path: Path, good: list[bytes], bad: list[tuple[int, bytes]]) -> 
                   "again", ScoreboardWarning, stacklevel=3)
 
 
-def read_episodes(path: str | Path, repair: bool = False) -> list[dict[str, Any]]:
-    """Records of ``episodes.jsonl`` (first occurrence per key); torn or corrupt lines are skipped.
+def read_episodes(path: str | Path, repair: bool = False, key: tuple[str, ...] = KEY) -> list[dict[str, Any]]:
+    """Records of ``episodes.jsonl`` (first occurrence per ``key``, the board's ``KEY`` by default;
+    another log of this format passes its own); torn or corrupt lines are skipped.
 
     With ``repair`` those lines are moved to ``episodes.jsonl.corrupt`` (with a warning) and the
     log keeps every good line, so that appending to it continues a clean file.
@@ -137,14 +138,14 @@ def read_episodes(path: str | Path, repair: bool = False) -> list[dict[str, Any]
     path = Path(path)
     if not path.exists():
         return []
-    good, bad = _split_log(path.read_bytes())
+    good, bad = _split_log(path.read_bytes(), key)
     if bad and repair:
         _quarantine(path, good, bad)
     records, seen = [], set()
-    for rec in map(_parse, good):
-        key = tuple(rec[k] for k in KEY)
-        if key not in seen:
-            seen.add(key)
+    for rec in (_parse(line, key) for line in good):
+        k = tuple(rec[name] for name in key)
+        if k not in seen:
+            seen.add(k)
             records.append(rec)
     return records
 
