@@ -10,7 +10,8 @@ training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
   the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
 
 and writes ``<out>/safety_alone.json`` (aggregates, targets, matched ratios, every episode
-record) and ``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
+record; with ``--perturbation-seeds``, every perturbation of the task too) and
+``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
 interventions per agent-step). Each entry's episodes are cached in ``<out>/cache/`` so an
 interrupted run resumes where it stopped::
 
@@ -28,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["VARIANTS", "evaluate_entry", "plot", "main"]
+__all__ = ["VARIANTS", "evaluate_entry", "evaluate_perturbed", "plot", "main"]
 
 VARIANTS = ("network alone", "network + filter")
 """The two ways every policy is reported."""
@@ -56,6 +57,36 @@ def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict
             fh.write(json.dumps(rec, default=float) + "\n")
             fh.flush()
     return [done[s] for s in seeds]
+
+
+def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path) -> dict[str, Any]:
+    """Every perturbation of the system's training task (:mod:`satenv.perturbations`; a navigation
+    error is read by the filter too): the network alone and behind the filter on the first
+    ``n_seeds`` test seeds, the controller on the first ``n_controller``; aggregates only."""
+    import baselines
+    import training
+    from satenv import perturbations, tasks
+    from satenv.safety import shield
+    from satenv.scoring import aggregate
+
+    task = tasks.training_task(system)
+    seeds = list(task.seeds("test", n_seeds))
+    out: dict[str, Any] = {"seeds": [seeds[0], seeds[-1]]}
+    for name in task.perturbations:
+        env = perturbations.make_env(task, name)
+        net = training.load(folder, env=env, shielded=False)
+        row: dict[str, Any] = {}
+        for variant, pol in ((VARIANTS[0], net), (VARIANTS[1], shield(net, env))):
+            cache = cache_dir / f"{system}__{folder.name}__{name}__{variant.replace(' ', '_').replace('+', 'plus')}.jsonl"
+            row[variant] = aggregate(_episodes(env, pol, seeds, cache))
+        if n_controller:
+            ctrl = baselines.make(task.controller, env)
+            row["controller"] = aggregate(_episodes(env, ctrl, seeds[:n_controller],
+                                                    cache_dir / f"{system}__controller_{task.controller}__{name}.jsonl"))
+        print(system, folder.name, name, json.dumps({k: {m: v.get(m) for m in ("success_rate", "collision_episodes",
+              "violation_episodes", "delta_v", "interventions_per_agent_step")} for k, v in row.items()}), flush=True)
+        out[name] = row
+    return out
 
 
 def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path) -> dict[str, Any]:
@@ -138,6 +169,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--entry", action="append", required=True, help="system=policy-folder (repeatable)")
     p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
     p.add_argument("--controller-seeds", type=int, default=200, help="the controller on the first n (0: none)")
+    p.add_argument("--perturbation-seeds", type=int, default=0,
+                   help="also run every perturbation of the task on the first n test seeds (0: none)")
     p.add_argument("--out", type=Path, required=True)
     ns = p.parse_args(argv)
     torch.set_num_threads(1)
@@ -150,6 +183,10 @@ def main(argv: list[str] | None = None) -> None:
     ns.out.mkdir(parents=True, exist_ok=True)
     result = {"command": "python -m benchmarks.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
               "entries": [evaluate_entry(s, f, ns.seeds, ns.controller_seeds, ns.out / "cache") for s, f in entries]}
+    if ns.perturbation_seeds:
+        for block, (s, f) in zip(result["entries"], entries, strict=True):
+            block["perturbations"] = evaluate_perturbed(s, f, ns.perturbation_seeds,
+                                                        min(ns.controller_seeds, ns.perturbation_seeds), ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     plot(result, ns.out / "safety_alone.png")
 

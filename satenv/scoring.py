@@ -3,7 +3,9 @@ policy card and the scoreboard.
 
 * **Episode record** (:func:`episode_record`): :func:`satenv.metrics.summary` of a trajectory, plus
   ``seed``, ``compute_ms_per_agent`` and, for a policy behind the safety filter, its counts
-  ``safety_interventions``, ``safety_infeasible`` and ``safety_steps`` (agent-steps seen).
+  ``safety_interventions`` and ``safety_infeasible`` (agent-steps), ``safety_steps`` (decisions
+  filtered, as :class:`satenv.safety.Shield` counts them) and ``safety_agent_steps`` (decisions x
+  agents: the denominator of ``interventions_per_agent_step``).
 * **Aggregate** (:func:`aggregate`) of a list of records, keys:
 
   ================================  =============================================================
@@ -64,6 +66,8 @@ def episode_record(traj: Any, seed: int, n_agents: int) -> dict[str, Any]:
     for key in SAFETY_COUNTS:
         if policy_info and key in policy_info:
             rec[key] = int(policy_info[key])
+    if "safety_steps" in rec:   # the filter counts decisions; an intervention is one agent's action
+        rec["safety_agent_steps"] = rec["safety_steps"] * max(1, int(n_agents))
     return rec
 
 
@@ -121,8 +125,9 @@ def aggregate(episodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
     if any("safety_interventions" in e for e in ok):
         for key in SAFETY_COUNTS:
             out[key] = int(sum(e.get(key, 0) for e in ok))
-        out["interventions_per_agent_step"] = (out["safety_interventions"] / out["safety_steps"]
-                                               if out["safety_steps"] else None)
+        agent_steps = int(sum(e.get("safety_agent_steps", e.get("safety_steps", 0)) for e in ok))
+        out["safety_agent_steps"] = agent_steps
+        out["interventions_per_agent_step"] = out["safety_interventions"] / agent_steps if agent_steps else None
     return out
 
 

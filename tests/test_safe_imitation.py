@@ -130,3 +130,23 @@ def test_terminal_affine_reproduces_the_feedback_blend():
     off, slope = __import__("training.safe_imitation", fromlist=["x"]).terminal_affine(P(), obs, 3)
     assert np.allclose(off + slope * a, P.terminal(obs, a))
     assert np.any(slope < 0.999)                 # the blend is active on some rows
+
+
+def test_interventions_are_counted_per_agent_step():
+    """The filter counts decisions; the rate divides agent-actions changed by decisions x agents."""
+    from satenv.safety import shield
+    from satenv.scoring import aggregate, run_episodes
+
+    class FullThrust:
+        def reset(self, seed=None):
+            pass
+
+        def act(self, obs):
+            return {a: np.ones(3, np.float32) for a in obs}
+
+    env = tasks.training_task("platoon-pereira2022").make_env()
+    agg = aggregate(run_episodes(env, shield(FullThrust(), env), [700_000]))
+    n = len(env.possible_agents)
+    assert agg["safety_agent_steps"] == n * agg["safety_steps"]
+    assert agg["interventions_per_agent_step"] == pytest.approx(agg["safety_interventions"] / (n * agg["safety_steps"]))
+    assert 0 < agg["interventions_per_agent_step"] <= 1.0
