@@ -137,10 +137,9 @@ def test_trusted_sb3_zip_loads_with_a_warning_and_converts(tmp_path):
 
 def test_a_folder_shipped_behind_the_safety_filter_loads_as_shipped(tmp_path):
     """``env.json`` ``safety_filter``: ``training.load(folder, env=env)`` returns the filtered
-    policy, ``shielded=False`` the network, no env a warning; the entry is data (never imported)."""
+    policy, ``shielded=False`` the network, no env an error; the entry is data (never imported)."""
     import json
     import shutil
-    import warnings
 
     import satenv
     from satenv.safety import Shield
@@ -151,10 +150,9 @@ def test_a_folder_shipped_behind_the_safety_filter_loads_as_shipped(tmp_path):
     env = satenv.platoon_v0(preset="pereira2022", randomize=True)
     assert isinstance(training.load(src, env=env), Shield)
     assert not isinstance(training.load(src, env=env, shielded=False), Shield)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        assert not isinstance(training.load(src), Shield)
-    assert any("ships behind the safety filter" in str(w.message) for w in caught)
+    with pytest.raises(PolicyLoadError, match="ships behind the safety filter"):
+        training.load(src)      # fails closed: never the bare network by accident
+    assert not isinstance(training.load(src, shielded=False), Shield)
     c = card(src)
     assert c["shipped"] == "learned+shield" and c["network_alone"] is not None
     bad = tmp_path / "bad"

@@ -170,7 +170,7 @@ def seed_actor(policy: Any, folder: str, init_std: float, n_agents: int) -> None
 
     from training.policy import load
 
-    seed = load(folder)
+    seed = load(folder, shielded=False)   # the network is the seed, never its filter
     spec, norm = seed.actor.spec, seed.normalizer
     if not spec["squash"] or spec["activation"] != "tanh" or seed.features is not None or seed.action_map is not None:
         raise ValueError(f"init_actor {folder!r}: needs a tanh MLP with squash=True and no feature/action maps, "

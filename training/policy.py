@@ -31,6 +31,7 @@ a scripted baseline is (``satenv.rollout.rollout``, the scoreboard).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -57,7 +58,7 @@ from training.trust import (
     sha256_file,
 )
 
-__all__ = ["LearnedPolicy", "PolicyLoadError", "load", "save_artifacts", "ObsNormalizer", "from_sb3",
+__all__ = ["INFERENCE_THREADS", "LearnedPolicy", "PolicyLoadError", "ShippedFilterError", "load", "policy_folder", "save_artifacts", "ObsNormalizer", "from_sb3",
            "convert_sb3", "convert_weights_pt", "write_manifest"]
 
 FORMAT = "satenv-policy/1"
@@ -82,6 +83,28 @@ def max_weights_bytes() -> int:
 
 class PolicyLoadError(SatenvError):
     """A learned policy cannot be loaded or does not fit the environment."""
+
+
+INFERENCE_THREADS = 1
+"""Torch threads of a loaded policy's forward pass: a small MLP on a few agents is fastest on one
+(more threads only add synchronisation, and on a busy machine wait for cores)."""
+
+
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """Run the block with ``torch.set_num_threads(n)`` and restore the caller's count after it
+    (nothing is set when it is already ``n``)."""
+    import torch
+
+    before = torch.get_num_threads()
+    if before == n:
+        yield
+        return
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 class ObsNormalizer:
@@ -176,7 +199,7 @@ class LearnedPolicy:
         raw = obs
         if self.features is not None:
             obs = self.features(obs)
-        with torch.no_grad():
+        with torch.no_grad(), torch_threads(INFERENCE_THREADS):
             y = self.actor(torch.as_tensor(self.normalizer(obs))).numpy()
         actions = np.clip(y.astype(np.float64), -1.0, 1.0)
         if self.action_map is not None:
@@ -332,11 +355,19 @@ def _check_manifest(root: Path, table: dict[str, str], blobs: dict[str, bytes]) 
 def load(path: str | Path, env: Any = None, *, trusted: bool = False, shielded: bool = True) -> Any:
     """Load the policy in artefact folder ``path``; if ``env`` is given, check its spaces fit.
 
+    ``path`` is a policy folder or a run folder (``--out-dir`` of a trainer), whose ``final/``
+    is then loaded.
+
     A folder whose ``env.json`` has ``"safety_filter"`` ships behind the safety filter: with
     ``env`` given (and ``shielded``, the default) it is returned as shipped,
     ``satenv.safety.shield(network, env, **options)``; ``shielded=False`` returns the network
-    alone (its own numbers, reported beside the shipped ones); without ``env`` the filter cannot
-    be built (it reads the env's state), so the network is returned with a ``UserWarning``.
+    alone (its own numbers, reported beside the shipped ones). Without ``env`` the filter cannot
+    be built (it reads the env's state), so loading fails closed: :class:`ShippedFilterError`
+    unless ``shielded=False`` asks for the network alone.
+
+    Inference runs on one torch thread (:data:`INFERENCE_THREADS`, set around each forward pass
+    and restored after it, so the caller's ``torch.get_num_threads()`` is unchanged): a small MLP
+    is fastest on one thread, and much slower with the default threads on a busy machine.
 
     The folder is untrusted data (module docstring, :mod:`training.trust`): nothing in it runs,
     nothing outside it is read, sizes are capped before reading, and ``manifest.json`` must list
@@ -350,11 +381,9 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False, shielded: 
     if not isinstance(path, str | PathLike) or not isinstance(trusted, bool):
         raise PolicyLoadError(f"load(path, env=None, *, trusted=False): path must be a str or os.PathLike "
                               f"and trusted a bool, got path={path!r:.80}, trusted={trusted!r:.40}")
-    root = Path(path)
-    if not root.is_dir():
-        raise PolicyLoadError(f"learned policy path {str(path)!r:.200} is not a directory; expected an "
-                              f"artefact folder with {list(POLICY_FILES)} (e.g. runs/<run>/final or "
-                              "training/policies/<name>)")
+    if not isinstance(shielded, bool):
+        raise PolicyLoadError(f"shielded must be a bool, got {shielded!r:.40}")
+    root = policy_folder(path)
     try:
         if not os.path.lexists(root / WEIGHTS) and not os.path.lexists(root / LEGACY_WEIGHTS) \
                 and os.path.lexists(root / "model.zip"):
@@ -369,19 +398,41 @@ def load(path: str | Path, env: Any = None, *, trusted: bool = False, shielded: 
             raise PolicyLoadError(f"env must be a PettingZoo env (possible_agents, observation_space), "
                                   f"got {type(env).__name__}")
         policy.check_env(env)
-    if not isinstance(shielded, bool):
-        raise PolicyLoadError(f"shielded must be a bool, got {shielded!r:.40}")
     config = shipped_filter(root, getattr(policy, "meta", {}))
     if config is None or not shielded:
         return policy
     if env is None:
-        warnings.warn(f"{root}: this policy ships behind the safety filter (env.json 'safety_filter'); "
-                      f"pass env= to load it as shipped, filter included; returning the network alone",
-                      UserWarning, stacklevel=2)
-        return policy
+        raise ShippedFilterError(
+            f"{root}: this policy ships behind the safety filter (env.json 'safety_filter'), which needs "
+            f"the env it flies in: load it with training.load(path, env=env) to get it as shipped, "
+            f"filter included, or with shielded=False for the network alone (not safe to fly by itself)")
     from satenv.safety import shield
 
     return shield(policy, env, config)
+
+
+class ShippedFilterError(PolicyLoadError):
+    """A policy that ships behind its safety filter was loaded without the env the filter needs."""
+
+
+def policy_folder(path: str | PathLike) -> Path:
+    """The artefact folder ``path`` names: ``path`` itself, or its ``final/`` when ``path`` is a
+    run folder (no network of its own — ``policy.json``, weights, ``model.zip`` — and a
+    ``final/`` folder inside; a run folder's ``config.json`` is its own). A path the OS cannot
+    look up (too long, a loop, no permission) is a :class:`PolicyLoadError`."""
+    root = Path(path)
+    shown = f"{str(path)!r:.200}"
+    try:
+        if not root.is_dir():
+            raise PolicyLoadError(f"learned policy path {shown} is not a directory; expected an artefact "
+                                  f"folder with {list(POLICY_FILES)} (e.g. runs/<run>/final or "
+                                  "training/policies/<name>) or a run folder holding final/")
+        own = any(os.path.lexists(root / name) for name in ("policy.json", WEIGHTS, LEGACY_WEIGHTS, "model.zip"))
+        if not own and (root / "final").is_dir() and not (root / "final").is_symlink():
+            return root / "final"
+    except OSError as err:
+        raise PolicyLoadError(f"learned policy path {shown}: cannot be looked up ({err.strerror or err})") from None
+    return root
 
 
 SHIELD_WRAPPER = "satenv.safety.shield"
@@ -490,12 +541,17 @@ def _load_safe(root: Path, trusted: bool) -> LearnedPolicy:
                               f"expects ({actor.spec['obs_dim']},); the folder mixes files of different runs")
     features = _parsed(root, "config.json", features_from_config, config)
     obs_shape = meta.get("observation_shape", [actor.spec["obs_dim"]])
-    fits = (isinstance(obs_shape, list) and len(obs_shape) == 1 and isinstance(obs_shape[0], int)
-            and not isinstance(obs_shape[0], bool) and 1 <= obs_shape[0] <= 2**31
-            and (features.out_dim(obs_shape[0]) if features else obs_shape[0]) == actor.spec["obs_dim"])
-    if not fits:
-        raise PolicyLoadError(f"{root / 'env.json'}: observation_shape does not fit the actor's obs_dim "
-                              f"{actor.spec['obs_dim']} (with the config's features)")
+    if not (isinstance(obs_shape, list) and len(obs_shape) == 1 and isinstance(obs_shape[0], int)
+            and not isinstance(obs_shape[0], bool) and 1 <= obs_shape[0] <= 2**31):
+        raise PolicyLoadError(f"{root / 'env.json'}: observation_shape must be [n] with n an int in "
+                              f"[1, 2**31], got a {type(obs_shape).__name__}")
+    inputs = _parsed(root, "config.json", features.out_dim, obs_shape[0]) if features else obs_shape[0]
+    if inputs != actor.spec["obs_dim"]:
+        feats = (f" through the features of {root / 'config.json'} (obs_symlog_scale, obs_symlog_dims, "
+                 f"obs_drop_dims)" if features else "")
+        raise PolicyLoadError(f"{root / 'env.json'}: observation_shape [{obs_shape[0]}] gives {inputs} "
+                              f"network inputs{feats}, but the actor of {root / 'policy.json'} has obs_dim "
+                              f"{actor.spec['obs_dim']}; the folder mixes files of different runs")
     action_map = _parsed(root, "config.json", action_map_from_config, config)
     terminal = _parsed(root, "config.json", terminal_from_config, config)
     return LearnedPolicy(actor, normalizer, obs_shape=tuple(obs_shape), features=features,
