@@ -14,3 +14,24 @@ def _keep_multiprocessing_start_method():
     yield
     if multiprocessing.get_start_method(allow_none=True) != before:
         multiprocessing.set_start_method(before, force=True)
+
+
+@pytest.fixture(scope="session")
+def docs_site(tmp_path_factory):
+    """The documentation site built once per test session, exactly as the README's
+    ``mkdocs build --strict`` builds it (into a temporary folder): ``(site folder, build output)``.
+    Skips where mkdocs (the ``docs`` extra) is not installed."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if importlib.util.find_spec("mkdocs") is None:
+        pytest.skip("mkdocs is not installed (the 'docs' extra: pip install -e '.[docs]')")
+    root = Path(__file__).resolve().parent.parent
+    site = tmp_path_factory.mktemp("docs") / "site"
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "PYTHONPATH": str(root)}
+    out = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(site)],
+                         cwd=root, capture_output=True, text=True, env=env, timeout=600)
+    return site, out
