@@ -108,9 +108,9 @@ def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, safety_filt
 
 GYM_MAX_EPISODE_STEPS: dict[str, int] = {"platoon_v0": 300, "cluster_v0": 400, "servicing_v0": 1200,
                                           "formation_v0": 2000}
-"""``max_episode_steps`` of the registered Gymnasium ids: the longest ``max_steps`` of each env's
-presets (tests/test_env_surface.py checks it), so the ``TimeLimit`` never cuts a preset's episode
-short; the env truncates at its own ``max_steps`` first."""
+"""The longest ``max_steps`` of each env's presets (tests/test_env_surface.py checks it). The
+registered Gymnasium ids add no ``TimeLimit``: the env truncates at its own ``max_steps`` (a
+``max_steps=`` above this runs to its end) and ``spec.max_episode_steps`` reports it."""
 
 
 def _register_gymnasium() -> None:
@@ -121,9 +121,8 @@ def _register_gymnasium() -> None:
 
     for gym_id, env_id in GYM_IDS.items():
         if gym_id not in registry:
-            register(id=gym_id, entry_point="satenv.gym_env:CentralisedEnv",
-                     vector_entry_point="satenv.gym_vector:CentralisedVectorEnv",
-                     max_episode_steps=GYM_MAX_EPISODE_STEPS[env_id], kwargs={"env": env_id})
+            register(id=gym_id, entry_point="satenv.gym_env:make_centralised",
+                     vector_entry_point="satenv.gym_vector:CentralisedVectorEnv", kwargs={"env": env_id})
 
 
 _register_gymnasium()

@@ -14,14 +14,18 @@ agents' rewards. Terminated/truncated follow the team. It passes
     env = gym.make("satenv/Platoon-v0", topology="BDL", max_steps=100)   # env kwargs as in satenv.make
     vec = gym.make_vec("satenv/Platoon-v0", num_envs=64)    # one batched core (satenv.gym_vector)
 
-The registered ids carry ``max_episode_steps`` (``satenv.GYM_MAX_EPISODE_STEPS``: the longest
-``max_steps`` of the env's presets; the env truncates at its own ``max_steps`` first); a
-``max_steps`` above it needs ``max_episode_steps=`` too, as any Gymnasium ``TimeLimit``. ``render()`` without a
-``render_mode`` warns and returns ``None``.
+Episode length: the env truncates at its own ``max_steps`` (the preset's, or the ``max_steps=``
+given), so ``gymnasium.make("satenv/Platoon-v0", max_steps=500)`` runs 500 steps; the registered
+ids add no ``TimeLimit`` of their own and ``env.spec.max_episode_steps`` reports that
+``max_steps``. ``gymnasium.make(..., max_episode_steps=n)`` still adds a ``TimeLimit`` of ``n``.
+``render_mode`` is checked by the env (a :class:`~satenv.errors.SatenvError` naming it, e.g. for
+``render_mode=3``); ``"rgb_array_list"`` gives Gymnasium's ``RenderCollection``. ``render()``
+without a ``render_mode`` warns and returns ``None``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from typing import Any
 
@@ -31,7 +35,7 @@ from gymnasium import spaces
 
 from satenv.envs.base import SatenvError, SatParallelEnv
 
-__all__ = ["CentralisedEnv"]
+__all__ = ["CentralisedEnv", "make_centralised"]
 
 
 class CentralisedEnv(gym.Env):
@@ -71,6 +75,18 @@ class CentralisedEnv(gym.Env):
         self.observation_space = spaces.Box(-np.inf, np.inf, (m * self.obs_dim,), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (m * self.act_dim,), np.float32)
 
+    @property
+    def spec(self) -> Any:
+        """The ``EnvSpec`` ``gymnasium.make`` gave this env, with ``max_episode_steps`` the env's own
+        ``max_steps`` (where it truncates) when the spec gives none."""
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, value: Any) -> None:
+        if value is not None and getattr(value, "max_episode_steps", 0) is None:
+            value = dataclasses.replace(value, max_episode_steps=int(self.env.scenario.max_steps))
+        self.__dict__["_spec"] = value
+
     def _flat(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         return np.concatenate([obs[a] for a in self.agents]).astype(np.float32)
 
@@ -99,3 +115,25 @@ class CentralisedEnv(gym.Env):
 
     def close(self) -> None:
         self.env.close()
+
+
+LIST_SUFFIX = "_list"
+"""A ``render_mode`` ending in it (``"rgb_array_list"``) collects frames (Gymnasium's convention)."""
+
+
+def make_centralised(env: str = "platoon_v0", *, render_mode: Any = None, **kwargs: Any) -> gym.Env:
+    """The registered entry point of ``satenv.GYM_IDS``: a :class:`CentralisedEnv`.
+
+    A function without ``metadata``, so that ``gymnasium.make`` hands ``render_mode`` to the env's
+    own check (a typed error naming it, whatever its type) instead of testing it itself;
+    ``"rgb_array_list"`` is ``"rgb_array"`` inside Gymnasium's ``RenderCollection``, as
+    ``gymnasium.make`` does for an env that declares its modes.
+    """
+    collect = isinstance(render_mode, str) and render_mode.endswith(LIST_SUFFIX) \
+        and render_mode[:-len(LIST_SUFFIX)] in CentralisedEnv.metadata["render_modes"]
+    base = CentralisedEnv(env, render_mode=render_mode[:-len(LIST_SUFFIX)] if collect else render_mode, **kwargs)
+    if collect:
+        from gymnasium.wrappers import RenderCollection
+
+        return RenderCollection(base)
+    return base

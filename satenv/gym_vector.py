@@ -15,9 +15,8 @@ last step). The other ``infos`` entries are the env's per-agent physical quantit
 ``(num_envs, n_agents, ...)`` arrays. ``reset(seed=s)`` seeds copy ``b`` with ``s + b``, as
 ``gymnasium.make("satenv/Platoon-v0").reset(seed=s + b)``.
 
-``max_episode_steps`` (registered: the longest ``max_steps`` of the env's presets) caps the
-episode length of every copy (the scenario's own ``max_steps`` when that is shorter); pass it with
-a ``max_steps`` above it, as for ``gymnasium.make``.
+Each copy truncates at the scenario's ``max_steps`` (``max_steps=`` sets it); a
+``max_episode_steps`` given to ``gymnasium.make_vec`` caps it further (the registered ids give none).
 """
 
 from __future__ import annotations

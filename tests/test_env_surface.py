@@ -176,16 +176,20 @@ def test_gymnasium_ids_have_max_episode_steps_and_render_warns(gym_id):
     env_id = satenv.GYM_IDS[gym_id]
     presets = importlib.import_module(f"satenv.scenarios.{env_id.removesuffix('_v0')}").PRESETS
     env = gym.make(gym_id)
-    assert env.spec.max_episode_steps == satenv.GYM_MAX_EPISODE_STEPS[env_id] == \
-        max(p.max_steps for p in presets.values())   # no preset's episode is cut short
-    if env_id == "platoon_v0":  # the longer pereira2022 preset runs to its own truncation (300 steps)
-        long = gym.make(gym_id, preset="pereira2022", terminate_on_collision=False)
-        long.reset(seed=0)
-        steps, done = 0, False
-        while not done:
-            _, _, term, trunc, _ = long.step(np.zeros(long.action_space.shape, np.float32))
-            steps, done = steps + 1, term or trunc
-        assert steps == 300
+    assert satenv.GYM_MAX_EPISODE_STEPS[env_id] == max(p.max_steps for p in presets.values())
+    assert env.spec.max_episode_steps == env.unwrapped.env.scenario.max_steps   # where it truncates
+    if env_id == "platoon_v0":  # each runs to its own truncation: the preset's, or max_steps= above it
+        for kwargs, expected in (({}, 300), ({"max_steps": 500}, 500)):
+            long = gym.make(gym_id, preset="pereira2022", terminate_on_collision=False, **kwargs)
+            assert long.spec.max_episode_steps == expected
+            long.reset(seed=0)
+            steps, done = 0, False
+            while not done:
+                _, _, term, trunc, _ = long.step(np.zeros(long.action_space.shape, np.float32))
+                steps, done = steps + 1, term or trunc
+            assert steps == expected
+        capped = gym.make(gym_id, max_episode_steps=7)      # an explicit TimeLimit still applies
+        assert capped.spec.max_episode_steps == 7
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None
@@ -193,6 +197,26 @@ def test_gymnasium_ids_have_max_episode_steps_and_render_warns(gym_id):
     penv.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert penv.render() is None
+
+
+@pytest.mark.parametrize("mode", [3, 1.5, "rgb", b"human", ["human"]])
+def test_gymnasium_make_checks_render_mode_as_the_env_does(mode):
+    """``gymnasium.make(id, render_mode=...)``: any bad mode is the env's typed error naming it."""
+    import gymnasium as gym
+
+    with pytest.raises(SatenvError, match="render_mode"):
+        gym.make("satenv/Servicing-v0", render_mode=mode)
+
+
+def test_gymnasium_make_rgb_array_list_collects_frames():
+    import gymnasium as gym
+
+    env = gym.make("satenv/Platoon-v0", render_mode="rgb_array_list")
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape, np.float32))
+    frames = env.render()
+    assert len(frames) == 2 and frames[0].ndim == 3
+    env.close()
 
 
 @pytest.mark.parametrize("gym_id", ["satenv/Platoon-v0", "satenv/Servicing-v0"])
