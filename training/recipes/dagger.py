@@ -179,16 +179,45 @@ def collect_episode(env, expert, learner, seed: int, beta: float, noise: float,
     return {k: np.asarray(v, dtype=np.float32 if k in ("obs", "act") else None) for k, v in rows.items()}, stats
 
 
-def load_labels(run: Path) -> tuple[np.ndarray, np.ndarray, int]:
-    files = sorted((run / "labels").glob("round_*.npz"))
+def load_labels(run: Path, rounds: int) -> tuple[np.ndarray, np.ndarray]:
+    """The observations and clipped expert actions of rounds ``0 .. rounds - 1`` (the rounds
+    ``history.json`` records as complete; a label file of a later, unfinished round is ignored)."""
+    from training.runfolder import RunFolderError
+
     xs, ys = [], []
-    for f in files:
-        with np.load(f, allow_pickle=False) as d:
-            xs.append(d["obs"])
-            ys.append(d["act"])
+    for k in range(rounds):
+        path = label_path(run, k)
+        try:
+            with np.load(path, allow_pickle=False) as d:
+                xs.append(d["obs"])
+                ys.append(d["act"])
+        except (OSError, KeyError, ValueError) as err:
+            raise RunFolderError(f"{path}: the labels of round {k}, recorded complete in history.json, cannot be "
+                                 f"read ({type(err).__name__}: {str(err)[:80]})") from None
     if not xs:
-        return np.zeros((0, 1)), np.zeros((0, 3)), 0
-    return np.concatenate(xs), np.clip(np.concatenate(ys), -1, 1), len(files)
+        return np.zeros((0, 1)), np.zeros((0, 3))
+    return np.concatenate(xs), np.clip(np.concatenate(ys), -1, 1)
+
+
+def label_path(run: Path, k: int) -> Path:
+    """Where round ``k``'s labels are saved."""
+    return run / "labels" / f"round_{k:04d}.npz"
+
+
+def read_history(run: Path) -> list[dict[str, Any]]:
+    """The complete rounds of a run (``history.json``, written last in each round: the run's record
+    of progress); ``[]`` for a new run. A malformed file is a :class:`training.runfolder.RunFolderError`."""
+    from training.runfolder import RunFolderError, read_json
+
+    path = run / "history.json"
+    if not path.exists():
+        return []
+    history = read_json(path, "a list of finished DAgger rounds")
+    if not isinstance(history, list) or any(not isinstance(h, dict) or h.get("round") != k
+                                            for k, h in enumerate(history)):
+        raise RunFolderError(f"{path}: expected a list of rounds 0, 1, ... (objects with 'round'), got "
+                             f"{str(history)[:80]}")
+    return history
 
 
 def fit(actor, normalizer, feats, x, y, cfg: DaggerConfig, generator, epochs: int) -> float:
@@ -242,6 +271,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     import torch
 
     from satenv.safety import shield
+    from training import runfolder
     from training.actor import MLPActor
     from training.envs import policy_env_meta
     from training.policy import (
@@ -255,7 +285,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     torch.set_num_threads(1)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "labels").mkdir(exist_ok=True)
-    (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
+    runfolder.write_json(run_dir / "config.json", cfg.to_json(), indent=2)
     system = SYSTEMS[cfg.system]
     collect, paper, ev, paper_ev = make_envs(system)
     experts = {id(collect): make_expert(system, collect, cfg.expert_options),
@@ -267,20 +297,25 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
                            dict(system.scenario))
     policy_cfg = {**cfg.to_json(), "recipe": "training.recipes.dagger", "expert": system.expert}
     history_path = run_dir / "history.json"
-    history = json.loads(history_path.read_text()) if history_path.is_file() else []
-    x, y, done = load_labels(run_dir)
+    history = read_history(run_dir)          # resume after the last round it records, never by counting files
+    done = len(history)
+    x, y = load_labels(run_dir, done)
     act_dim = collect.action_space(collect.possible_agents[0]).shape[0]
+    torch.manual_seed(cfg.seed)              # the initial weights: the same in every session
     actor = MLPActor(feats.out_dim(obs_dim), act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     normalizer = None
     if history:
-        last = load(run_dir / "rounds" / f"{len(history) - 1:04d}")
+        runfolder.recover_folder(round_folder(run_dir, done - 1))   # a swap a kill interrupted
+        last = load(round_folder(run_dir, done - 1))
         actor.load_state_dict(last.actor.state_dict())
         normalizer = last.normalizer
-    generator = torch.Generator().manual_seed(cfg.seed + done)
-    rng = np.random.default_rng([cfg.seed, done])
     t_start = time.perf_counter()
     episode = sum(cfg.round0_episodes if k == 0 else cfg.episodes_per_round for k in range(done))
     for k in range(done, cfg.rounds):
+        # every round's randomness from (seed, round): a resumed run flies exactly the rounds of an
+        # uninterrupted one
+        generator = torch.Generator().manual_seed(cfg.seed + k)
+        rng = np.random.default_rng([cfg.seed, k])
         net = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats,
                                                 terminal=term)
         learners = {id(e): (shield(net, e) if cfg.learner_shield and net is not None else net)
@@ -298,7 +333,7 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
             print(f"  episode {json.dumps(flown[-1])} at {time.perf_counter() - t0:.0f}s", flush=True)
             episode += 1
         batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-        np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
+        runfolder.save_with(label_path(run_dir, k), lambda tmp: _savez(tmp, batch))  # noqa: B023 - called at once
         collect_s = time.perf_counter() - t0
         x = batch["obs"] if len(x) == 0 else np.concatenate([x, batch["obs"]])
         y = np.clip(batch["act"], -1, 1) if len(y) == 0 else np.concatenate([y, np.clip(batch["act"], -1, 1)])
@@ -317,16 +352,29 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
                         "beta": cfg.beta ** k, "collect_s": round(collect_s, 1), "fit_s": round(fit_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap, "collected": flown,
                         **({"shield": shielded} if cfg.learner_shield else {})})
-        save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=meta, config=policy_cfg,
-                       source="training.recipes.dagger round checkpoint")
-        history_path.write_text(json.dumps(history, indent=1) + "\n")
-        plot_curve(history, run_dir / "learning_curve.png")
+        # the round's files, each whole or absent, then history.json: the round is complete
+        staged = runfolder.staging(round_folder(run_dir, k))
+        save_artifacts(staged, policy, env_meta=meta, config=policy_cfg, source="training.recipes.dagger round checkpoint")
+        runfolder.replace_folder(staged, round_folder(run_dir, k))
+        runfolder.write_json(history_path, history)
+        runfolder.save_with(run_dir / "learning_curve.png", lambda tmp: plot_curve(history, tmp))  # noqa: B023
+
         if cfg.learner_shield:
             print(f"  +shield: val success {shielded['val']['success_rate']:.2f} coll "
                   f"{shielded['val']['collision_episodes']} fe {shielded['val']['final_error_m']:.2f}", flush=True)
         print(f"round {k}: labels {len(x)} loss {loss:.4f} val success {val['success_rate']:.2f} "
               f"coll {val['collision_episodes']} fe {val['final_error_m']:.2f} paper {pap['success_rate']:.0f} "
               f"collect {collect_s:.0f}s fit {fit_s:.0f}s", flush=True)
+
+
+def round_folder(run: Path, k: int) -> Path:
+    """Round ``k``'s policy folder."""
+    return run / "rounds" / f"{k:04d}"
+
+
+def _savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    with open(path, "wb") as fh:     # a file object: numpy adds no ".npz" to the temporary name
+        np.savez_compressed(fh, **arrays)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -340,7 +388,13 @@ def main(argv: list[str] | None = None) -> None:
     ns = parser.parse_args(argv)
     saved = ns.run_dir / "config.json"
     if saved.is_file():
-        base = _config(json.loads(saved.read_text()))
+        from training.runfolder import RunFolderError, read_json
+
+        try:
+            base = _config(read_json(saved, "the run's DaggerConfig"))
+        except (RunFolderError, TypeError, ValueError) as err:
+            raise SystemExit(f"error: cannot resume {ns.run_dir}: {str(err)[:300]}") from None
+
     else:
         name = ns.system or DaggerConfig.system
         base = _config({"system": name, **SYSTEMS[name].defaults})
