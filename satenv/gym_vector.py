@@ -30,6 +30,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from satenv.errors import SatenvError
+from satenv.vector import FINAL_ALIASES
+
+FINAL_KEYS = ("final_obs", "_final_obs", "final_info", "_final_info")
+"""The batched core's auto-reset keys, rebuilt here per Gymnasium (``final_obs`` an object array)."""
 
 __all__ = ["CentralisedVectorEnv"]
 
@@ -88,10 +92,10 @@ class CentralisedVectorEnv(VectorEnv):
             raise SatenvError(f"actions must have shape {self.action_space.shape} (num_envs x agents*act_dim), "
                               f"got {a.shape}")
         obs, rew, term, trunc, infos = self.vec.step(a.reshape(self._act_shape))
-        out = {k: v for k, v in infos.items() if k not in ("final_observation", "final_info", "_final")}
-        if "_final" in infos:
-            mask = np.asarray(infos["_final"], dtype=bool)
-            last = self._flat(infos["final_observation"])
+        out = {k: v for k, v in infos.items() if k not in (*FINAL_KEYS, *FINAL_ALIASES)}
+        if "_final_obs" in infos:
+            mask = np.asarray(infos["_final_obs"], dtype=bool)
+            last = self._flat(infos["final_obs"])
             final_obs = np.full(self.num_envs, None, dtype=object)
             for b in np.flatnonzero(mask):
                 final_obs[b] = last[b]

@@ -23,11 +23,13 @@ Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelE
   collision or leaving the allowed region ends the copy for every agent), truncation is the step
   limit ``scenario.max_steps`` (never both);
 * **auto-reset, same step**: a copy that ends is reset inside the same ``step``. The returned
-  ``obs`` row is then the first observation of its next episode; ``infos["_final"]`` ``(B,)``
-  marks those copies, ``infos["final_observation"]`` ``(B, M, obs_dim)`` holds the last
-  observation of the finished episode and ``infos["final_info"]`` the info arrays of that last
-  step (both are full-batch arrays, meaningful where ``_final`` is true; the keys are present
-  only in a step where some copy ended). The other ``infos`` entries are the per-agent physical
+  ``obs`` row is then the first observation of its next episode. Gymnasium 1.x's names:
+  ``infos["_final_obs"]`` ``(B,)`` marks those copies, ``infos["final_obs"]`` ``(B, M, obs_dim)``
+  holds the last observation of the finished episode, ``infos["final_info"]`` the info arrays
+  of that last step and ``infos["_final_info"]`` the same mask (full-batch arrays, meaningful
+  where the mask is true; the keys are present only in a step where some copy ended). The
+  former names ``final_observation`` and ``_final`` (:data:`FINAL_ALIASES`) are kept, same
+  arrays, for one release. The other ``infos`` entries are the per-agent physical
   quantities (``satenv.envs.base.INFO_KEYS`` and the env's own) as ``(B, M, ...)`` arrays, of
   the new episode's reset for the reset copies;
 * ``SatVectorEnv(env, B, autoreset=False)`` (what the TorchRL env uses) leaves finished copies
@@ -57,7 +59,11 @@ from satenv.dynamics._checks import MAX_COPIES, all_finite, first_nonfinite, int
 from satenv.envs.base import SatParallelEnv
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["SatVectorEnv", "make_vec"]
+__all__ = ["FINAL_ALIASES", "SatVectorEnv", "make_vec"]
+
+FINAL_ALIASES = {"final_observation": "final_obs", "_final": "_final_obs"}
+"""The auto-reset ``infos`` keys of earlier releases -> Gymnasium 1.x's names (both present, the
+same arrays, for one release; read the new ones)."""
 
 
 def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, **env_kwargs: Any) -> SatVectorEnv:
@@ -231,7 +237,8 @@ class SatVectorEnv:
             infos = {k: v.copy() for k, v in step_info.items()}
             for k, v in reset_info.items():
                 infos[k][idx] = v
-            infos.update(final_observation=obs, final_info=step_info, _final=done)
+            infos.update(final_obs=obs, _final_obs=done, final_info=step_info, _final_info=done.copy())
+            infos.update({old: infos[new] for old, new in FINAL_ALIASES.items()})
             if 2 * idx.size <= self.num_envs:   # observe only the copies that reset
                 obs = obs.copy()
                 obs[idx] = self.core.observe_copies(idx)

@@ -5,7 +5,7 @@ import pytest
 
 import satenv
 from satenv.envs.base import SatenvError
-from satenv.vector import SatVectorEnv
+from satenv.vector import FINAL_ALIASES, SatVectorEnv
 
 B = 3
 
@@ -46,14 +46,14 @@ def test_copy_b_reproduces_the_pettingzoo_env_across_an_auto_reset(env_id, kwarg
             o, r, te, tr, inf = env.step({a: act[b, i] for i, a in enumerate(agents)})
             np.testing.assert_array_equal(rew[b], [r[a] for a in agents])
             assert term[b].tolist() == [te[a] for a in agents] and trunc[b].tolist() == [tr[a] for a in agents]
-            step_info = infos["final_info"] if "_final" in infos else infos
+            step_info = infos["final_info"] if "_final_obs" in infos else infos
             np.testing.assert_array_equal(step_info["state"][b], _stack({a: inf[a]["state"] for a in agents}, agents))
             if te[agents[0]] or tr[agents[0]]:
-                assert infos["_final"][b]
-                np.testing.assert_array_equal(infos["final_observation"][b], _stack(o, agents))
+                assert infos["_final_obs"][b] and infos["_final_info"][b]
+                np.testing.assert_array_equal(infos["final_obs"][b], _stack(o, agents))
                 o, _ = env.reset()  # the PettingZoo env continues its own stream
             pz_obs[b] = o
-        assert ((k + 1) % steps == 0) == ("_final" in infos)
+        assert ((k + 1) % steps == 0) == ("_final_obs" in infos)
 
 
 def test_auto_reset_infos_and_partial_termination():
@@ -65,12 +65,14 @@ def test_auto_reset_infos_and_partial_termination():
     vec.core.x[1, :, 0] = [0.0, 0.05, 3.0]
     obs, _, term, trunc, infos = vec.step(np.zeros(vec.action_shape))
     assert term.tolist() == [[False] * 3, [True] * 3, [False] * 3, [False] * 3] and not trunc.any()
-    assert infos["_final"].tolist() == [False, True, False, False]
+    assert infos["_final_obs"].tolist() == infos["_final_info"].tolist() == [False, True, False, False]
+    for old, new in FINAL_ALIASES.items():     # the former names: the same arrays, for one release
+        assert infos[old] is infos[new]
     assert infos["final_info"]["collision"][1].any()
     assert not infos["collision"][1].any()  # the reset info of copy 1's new episode
     assert vec.core.t.tolist() == [1, 0, 1, 1]
     np.testing.assert_array_equal(obs, vec.core.observe())
-    assert not np.allclose(obs[1], infos["final_observation"][1])
+    assert not np.allclose(obs[1], infos["final_obs"][1])
 
 
 def test_seeding_reset_without_seed_continues_and_fresh_entropy():

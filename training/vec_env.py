@@ -116,14 +116,14 @@ class SatVecEnv(VecEnv):
         if self.action_fn is not None:
             a = self.action_fn(a)
         obs, rewards, term, trunc, infos = self.vec.step(a)
-        final = infos.get("_final")
+        final = infos.get("_final_obs")
         self.last_info = infos["final_info"] if final is not None else infos
         if self.reward_fn is not None:
             rewards = self.reward_fn(rewards, self.last_info)
         rewards = np.asarray(rewards, dtype=np.float32).reshape(self.num_envs)
         row_infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if final is not None:
-            last = self._rows(infos["final_observation"])
+            last = self._rows(infos["final_obs"])
             idx = np.flatnonzero(final)
             self.episode_count += len(idx)
             for b in idx:
