@@ -31,7 +31,9 @@ def test_learning_section_smoke(monkeypatch):
 
 def test_dagger_end_to_end_splits_expert_env_and_learner():
     row = learning.end_to_end("dagger", "platoon_v0", 64)
-    assert row["expert"] == "dmpc" and row["agent_steps"] > 0
+    from satenv import tasks
+
+    assert row["expert"] == tasks.system(learning.DAGGER_TASKS["platoon_v0"]).expert and row["agent_steps"] > 0
     shares = [row[f"{k}_share"] for k in ("env", "expert", "learner")]
     assert all(s > 0 for s in shares) and sum(shares) < 1
 

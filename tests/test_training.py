@@ -69,7 +69,9 @@ def test_cli_flags_parse_into_the_config(capsys):
                          "--eval-seeds", "5-7", "--progress", "false", "--gamma", "0.98", "--lr", "0.01",
                          "--num-envs", "4"])
     assert (cfg.algo, cfg.net_arch, cfg.env_kwargs, cfg.eval_seeds, cfg.progress, cfg.gamma, cfg.lr,
-            cfg.num_envs) == ("sac", (32, 32), {"randomize": True}, (5, 6, 7), False, 0.98, 0.01, 4)
+            cfg.num_envs) == ("sac", (32, 32), {"preset": "pereira2022", "randomize": True}, (5, 6, 7), False,
+                              0.98, 0.01, 4)
+    assert cfg.task == "platoon-pereira2022-random"       # the default task, its kwargs under the flag's
     # the old spellings are deprecated aliases
     with pytest.warns(FutureWarning, match="--n-copies is deprecated: use --num-envs"):
         old, _ = parse_args(["--n-copies", "4", "--learning-rate", "0.01", "--eval-seeds", "5:8"])
@@ -80,6 +82,22 @@ def test_cli_flags_parse_into_the_config(capsys):
         with pytest.raises(SystemExit):
             parse_args(argv)
         assert match in _text(capsys.readouterr().err)
+
+
+def test_task_flag_sets_the_env_and_the_splits_seeds(capsys):
+    from satenv import tasks
+
+    cfg, _ = parse_args(["--task", "cluster-case1-random", "--env-kwargs", '{"max_steps": 10}'])
+    task = tasks.get("cluster-case1-random")
+    assert (cfg.env_id, cfg.env_kwargs) == ("cluster_v0", {**task.env_kwargs, "max_steps": 10})
+    assert set(cfg.test_seeds) <= set(task.seeds("test")) and len(set(cfg.test_seeds)) == 20
+    assert set(cfg.eval_seeds) <= set(task.seeds("validation"))
+    custom, _ = parse_args(["--env-id", "platoon_v0"])          # a deterministic env: one seed each
+    assert (custom.task, custom.eval_seeds, custom.test_seeds) == (None, (700_000,), (900_000,))
+    for argv in (["--task", "nope"], ["--task", "cluster-case1", "--env-id", "platoon_v0"]):
+        with pytest.raises(SystemExit):
+            parse_args(argv)
+        assert "task" in _text(capsys.readouterr().err)
 
 
 def test_cli_config_replay_and_readable_help(tmp_path, capsys):
@@ -94,7 +112,7 @@ def test_cli_config_replay_and_readable_help(tmp_path, capsys):
         parse_args(["--help"], resume=True)
     out = _text(capsys.readouterr().out)
     assert out.count("(default: 32)") == 1 and "--resume" in out and "--config FILE" in out
-    assert "(default: 20000-20019)" in out and "{ppo,sac}" in out and "{constant,linear}" in out
+    assert "(default: 900000-900019)" in out and "{ppo,sac}" in out and "{constant,linear}" in out
     assert "Scenario copies stepped together" in out  # the field's docstring is its help
 
 

@@ -25,7 +25,7 @@ from typing import Annotated, Any, Literal
 import tyro
 from tyro.constructors import PrimitiveConstructorSpec
 
-from satenv.tasks import MAX_SEEDS, parse_seeds, show_seeds  # the one seed grammar
+from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
 __all__ = ["RunConfig", "TrainConfig", "parse_args", "parse_seeds", "config_from_json", "load_config",
            "planned_timesteps", "MAX_SEEDS"]
@@ -83,13 +83,23 @@ def check_number(name: str, v: Any, lo: float, hi: float) -> None:
         raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {v!r}")
 
 
+DEFAULT_TASK = "platoon-pereira2022-random"
+"""The task a run trains on when neither ``--task`` nor ``--env-id`` is given (randomised starts)."""
+DEFAULT_EVAL_SEEDS = tuple(SEED_SPLITS["validation"][:5])
+DEFAULT_TEST_SEEDS = tuple(SEED_SPLITS["test"][:20])
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """The fields every training CLI shares (same flag, same meaning, same grammar)."""
 
-    env_id: str = "platoon_v0"
+    task: str | None = None
+    """A task of ``satenv.tasks`` (e.g. ``cluster-case1-random``): its env id and kwargs
+    (``env_kwargs`` given are applied on top). Without ``--task`` and ``--env-id``:
+    :data:`DEFAULT_TASK`."""
+    env_id: str | None = None
     """satenv env name (``platoon_v0``, ``cluster_v0``, ``servicing_v0``, ``formation_v0``) or
-    ``package.module:callable``."""
+    ``package.module:callable`` (default: the task's)."""
     env_kwargs: JsonDict = field(default_factory=dict)
     """Keyword arguments of the training env, a JSON object (e.g. ``'{"randomize": true}'``)."""
     eval_env_kwargs: JsonDict = field(default_factory=dict)
@@ -100,10 +110,13 @@ class RunConfig:
     """Hidden layer sizes of the networks (``64,64`` or ``64 64``)."""
     lr: Annotated[float, tyro.conf.arg(aliases=("--learning-rate",))] = 3e-4
     """Learning rate (``--learning-rate`` is a deprecated alias)."""
-    eval_seeds: Seeds = tuple(range(10_000, 10_005))
-    """Seeds of the evaluations during training (``A-B`` inclusive, or a list ``1,5,9``)."""
-    test_seeds: Seeds = tuple(range(20_000, 20_020))
-    """Held-out seeds of the final ``eval.json`` (never used for selection)."""
+    eval_seeds: Seeds = DEFAULT_EVAL_SEEDS
+    """Seeds of the evaluations during training (``A-B`` inclusive, or a list ``1,5,9``); default:
+    the first 5 validation seeds of ``satenv.tasks.SEED_SPLITS`` (one for a deterministic env)."""
+    test_seeds: Seeds = DEFAULT_TEST_SEEDS
+    """Held-out seeds of the final ``eval.json`` (never used for selection); default: the first 20
+    test seeds of ``satenv.tasks.SEED_SPLITS`` (one for a deterministic env: every seed gives the
+    same episode)."""
     eval_baselines: Names = ("auto",)
     """Scripted baselines evaluated beside the learned policy (names of ``baselines.BASELINES``;
     ``auto``: ``zero`` and the cheap controllers that support the env; the NLP controllers
@@ -119,6 +132,7 @@ class RunConfig:
     """Processes for evaluation episodes (0: one per idle core, at most 2; 1: in this process)."""
 
     def __post_init__(self) -> None:
+        self._resolve_task()
         check_run_fields(self, ("env_kwargs", "eval_env_kwargs"))
         check_int("seed", self.seed, minimum=0)
         check_int("torch_threads", self.torch_threads, minimum=1)
@@ -127,6 +141,27 @@ class RunConfig:
         check_number("lr", self.lr, 0.0, math.inf)
         if not isinstance(self.progress, bool):
             raise ValueError(f"progress must be a bool, got {self.progress!r}")
+
+    def _resolve_task(self) -> None:
+        """Fill ``env_id`` and ``env_kwargs`` from the task (or :data:`DEFAULT_TASK` when neither
+        is given); one seed each for a satenv env that does not randomise its start."""
+        from satenv import ENV_IDS, tasks
+
+        task = self.task if self.task is not None or self.env_id is not None else DEFAULT_TASK
+        if task is not None:
+            t = tasks.get(task)
+            if self.env_id not in (None, t.env_id):
+                raise ValueError(f"env_id {self.env_id!r} does not match task {t.name!r} (env {t.env_id}); "
+                                 "give one of --task and --env-id, or the task's env")
+            object.__setattr__(self, "task", t.name)
+            object.__setattr__(self, "env_id", t.env_id)
+            if isinstance(self.env_kwargs, dict):
+                object.__setattr__(self, "env_kwargs", {**t.env_kwargs, **self.env_kwargs})
+        if (self.env_id in ENV_IDS and isinstance(self.env_kwargs, dict) and isinstance(self.eval_env_kwargs, dict)
+                and not self.resolved_eval_env_kwargs.get("randomize", False)):
+            for name, default in (("eval_seeds", DEFAULT_EVAL_SEEDS), ("test_seeds", DEFAULT_TEST_SEEDS)):
+                if getattr(self, name) == default:
+                    object.__setattr__(self, name, default[:1])
 
     @property
     def resolved_eval_env_kwargs(self) -> dict[str, Any]:
@@ -361,7 +396,9 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
                 "checkpoint (flags given override it)." if resume else ""))
     text = "\n\n".join(filter(None, [description or (cls.__doc__ or "").strip(), extra]))
     opts_ = {"description": text, "prog": prog, "config": (tyro.conf.FlagConversionOff,)}
-    cfg = tyro.cli(cls, args=argv, default=base or cls(), **opts_)
+    # without a base the field defaults (not a resolved instance: the default task's env must not
+    # stick to a run given another --task)
+    cfg = tyro.cli(cls, args=argv, **({"default": base} if base is not None else {}), **opts_)
     if opts.resume and base is None:
         saved = f"{cfg.out_dir}/config.json"
         try:

@@ -1,6 +1,6 @@
 """Train a shared policy for a satenv scenario with stable-baselines3 (PPO or SAC).
 
-    python -m training.train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
+    python -m training.train --task platoon-pereira2022-random \\
         --algo ppo --total-timesteps 2000000 --num-envs 32 --out-dir runs/platoon_ppo
     python -m training.train --out-dir runs/platoon_ppo --resume [--total-timesteps 3000000]
     tensorboard --logdir runs/platoon_ppo/tb
@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from training import runfolder
 from training.config import TrainConfig, parse_args, planned_timesteps, round_timesteps
 from training.envs import make_env, policy_env_meta
 from training.evaluate import cached_baselines, compare, evaluate, learning_curve, test_summary
@@ -46,6 +47,7 @@ from training.policy import (
     from_sb3,
     save_artifacts,
 )
+from training.runfolder import RunFolderError
 from training.shaping import RewardShaping
 from training.trust import MAX_CHECKPOINT_BYTES, member, read_json
 
@@ -140,20 +142,23 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
                         "violation_episodes", "min_separation_m", "terminated"):
                 if agg[key] is not None:
                     self.logger.record(f"eval/{key}", agg[key])
-            ratios = compare({"learned": res, **baseline_eval})
+            ref = _reference(cfg)
+            ratios = compare({"learned": res, **baseline_eval}, reference=ref)
             for key in ("rmse_ratio", "delta_v_ratio"):
                 if ratios and ratios["matched"].get(key) is not None:
-                    self.logger.record(f"eval/{key}_vs_DMPC", ratios["matched"][key])
+                    self.logger.record(f"eval/{key}_vs_{ref.upper()}", ratios["matched"][key])
             self.logger.dump(n)
-            history.append({"step": n, "aggregate": agg, "vs_DMPC": ratios})
-            (out / "eval_history.json").write_text(json.dumps(history, indent=1) + "\n")
+            history.append({"step": n, "aggregate": agg, f"vs_{ref.upper()}": ratios})
+            runfolder.write_json(out / "eval_history.json", history)
             self.bar.set_postfix(success=f"{agg['success_rate']:.2f}", rmse=f"{agg['rmse']:.3g}",
                                  dv=f"{agg['delta_v']:.3g}", refresh=False)
             if self.best is None or _score(agg) > self.best:
                 self.best = _score(agg)
-                save_artifacts(out / "best", policy, env_meta={**meta, "step": n}, config=cfg.to_json(),
+                staged = runfolder.staging(out / "best")          # whole or not at all
+                save_artifacts(staged, policy, env_meta={**meta, "step": n}, config=cfg.to_json(),
                                evaluation={"eval_seeds": list(cfg.eval_seeds), "learned": agg},
                                source=f"stable-baselines3 {cfg.algo.upper()}")
+                runfolder.replace_folder(staged, out / "best")
 
         def _on_training_end(self) -> None:
             self.bar.close()
@@ -178,10 +183,7 @@ def save_checkpoint(model, venv, out: Path, steps: int) -> Path:
     from stable_baselines3.common.save_util import recursive_getattr
 
     folder = out / "checkpoints" / f"step_{steps}"
-    tmp = folder.with_name(folder.name + ".tmp")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
+    tmp = runfolder.staging(folder)
     state_dicts, tensors = model._get_torch_save_params()
     state = {"num_timesteps": int(model.num_timesteps), "n_updates": int(getattr(model, "_n_updates", 0)),
              "state_dicts": {name: recursive_getattr(model, name).state_dict() for name in state_dicts},
@@ -192,14 +194,26 @@ def save_checkpoint(model, venv, out: Path, steps: int) -> Path:
     if buffer is not None:
         arrays = {k: getattr(buffer, k) for k in _BUFFER_ARRAYS if getattr(buffer, k, None) is not None}
         np.savez(tmp / "replay_buffer.npz", pos=np.array(buffer.pos), full=np.array(buffer.full), **arrays)
-    if folder.exists():
-        shutil.rmtree(folder)
-    tmp.rename(folder)  # a checkpoint folder is complete or absent
-    return folder
+    return runfolder.replace_folder(tmp, folder)  # a checkpoint folder is complete or absent
 
 
 def load_checkpoint(model, folder: Path) -> None:
-    """Restore :func:`save_checkpoint`'s model state into a freshly built ``model`` (no pickle)."""
+    """Restore :func:`save_checkpoint`'s model state into a freshly built ``model`` (no pickle); a
+    malformed checkpoint is a :class:`training.runfolder.RunFolderError` naming the folder."""
+    import pickle
+
+    try:
+        _load_checkpoint(model, folder)
+    except RunFolderError:
+        raise
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError, EOFError, OSError,
+            pickle.UnpicklingError) as err:
+        raise RunFolderError(f"--resume: the checkpoint {folder} is malformed ({type(err).__name__}: "
+                             f"{str(err).splitlines()[0][:120] if str(err) else ''}); expected the files of "
+                             f"save_checkpoint ({CHECKPOINT_STATE}, vecnormalize.json) for this config") from None
+
+
+def _load_checkpoint(model, folder: Path) -> None:
     import torch
     from stable_baselines3.common.save_util import recursive_getattr
 
@@ -229,13 +243,22 @@ def vecnormalize_state(venv) -> dict[str, Any]:
 
 
 def restore_vecnormalize(venv, data: dict[str, Any]) -> None:
-    """Load :func:`vecnormalize_state` data into ``venv`` (shapes checked)."""
+    """Load :func:`vecnormalize_state` data into ``venv`` (shapes checked; a malformed entry is a
+    :class:`training.runfolder.RunFolderError`)."""
     for key in ("obs_rms", "ret_rms"):
         r = getattr(venv, key)
-        mean, var = np.asarray(data[key]["mean"], dtype=np.float64), np.asarray(data[key]["var"], dtype=np.float64)
+        try:
+            mean = np.asarray(data[key]["mean"], dtype=np.float64)
+            var = np.asarray(data[key]["var"], dtype=np.float64)
+            count = float(data[key]["count"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise RunFolderError(f"vecnormalize.json: {key} must hold numbers 'mean', 'var' and 'count' "
+                                 f"({type(err).__name__}: {str(err)[:80]})") from None
         if mean.shape != np.shape(r.mean) or var.shape != np.shape(r.var):
             raise ValueError(f"vecnormalize.json: {key} has shape {mean.shape}, expected {np.shape(r.mean)}")
-        r.mean, r.var, r.count = mean, var, float(data[key]["count"])
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0) and count > 0):
+            raise RunFolderError(f"vecnormalize.json: {key} must be finite with var >= 0 and count > 0")
+        r.mean, r.var, r.count = mean, var, count
 
 
 # --------------------------------------------------------------------------- training
@@ -254,6 +277,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     if not resume and latest_checkpoint(out) is not None:
         raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
     out.mkdir(parents=True, exist_ok=True)
+    for name in ("best", "final"):   # a folder swap a kill interrupted: the old content or the new, whole
+        runfolder.recover_folder(out / name)
 
     # 2. seeding
     torch.set_num_threads(cfg.torch_threads)
@@ -273,7 +298,10 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     venv = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, clip_obs=cfg.clip_obs,
                         gamma=cfg.gamma)
     if ckpt:
-        restore_vecnormalize(venv, read_json(ckpt[1], "vecnormalize.json"))
+        try:
+            restore_vecnormalize(venv, read_json(ckpt[1], "vecnormalize.json"))
+        except RunFolderError as err:
+            raise RunFolderError(f"--resume: {ckpt[1]}/{err}") from None
 
     # 4. scripted baselines on the evaluation seeds (cached; only when there are periodic evaluations)
     periodic = 0 < cfg.eval_every <= max(cfg.total_timesteps, planned_timesteps(cfg, len(env.possible_agents)))
@@ -285,8 +313,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         load_checkpoint(model, ckpt[1])
     model.tensorboard_log = str(out / "tb")
     history_path = out / "eval_history.json"
-    history = [h for h in json.loads(history_path.read_text()) if h["step"] <= start_steps] \
-        if (resume and history_path.is_file()) else []
+    history = _read_history(history_path, start_steps) if (resume and history_path.is_file()) else []
 
     # 6. learn (the budget actually run is the one saved)
     target = planned_timesteps(cfg, len(env.possible_agents))
@@ -294,7 +321,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         print(f"total_timesteps {cfg.total_timesteps} -> {target}: whole collection rounds of "
               f"{round_timesteps(cfg, len(env.possible_agents))} agent-steps", file=sys.stderr)
         cfg = cfg.replace(total_timesteps=target)
-    (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
+    runfolder.write_json(out / "config.json", cfg.to_json(), indent=2)
     remaining = target - model.num_timesteps
     t0 = time.perf_counter()
     if remaining > 0:
@@ -305,19 +332,20 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         if cfg.checkpoint_every:
             save_checkpoint(model, venv, out, model.num_timesteps)
     wall = time.perf_counter() - t0
-    ref = "dmpc" if "dmpc" in baseline_eval else next(iter(baseline_eval), None)
+    ref = _reference(cfg) if _reference(cfg) in baseline_eval else next(iter(baseline_eval), None)
     if history:
-        learning_curve(history, baseline_eval.get(ref), ref or "", out / "learning_curve.png",
-                       x_key="step", x_label="agent-steps")
+        runfolder.save_with(out / "learning_curve.png", lambda tmp: learning_curve(
+            history, baseline_eval.get(ref), ref or "", tmp, x_key="step", x_label="agent-steps"))
 
     # 7. artefacts with the held-out evaluation
     test_baselines = _cached_baselines(out / "baselines_test.json", eval_env, cfg, cfg.test_seeds)
     final_policy = export_policy(model, venv, meta, {"features": features, "action_map": action_map})
     summary = _summary(cfg, eval_env, final_policy, test_baselines, model.num_timesteps, wall)
-    final = save_artifacts(out / "final", final_policy, env_meta={**meta, "step": model.num_timesteps},
-                           config=cfg.to_json(), evaluation=summary, source=f"stable-baselines3 {cfg.algo.upper()}")
+    staged = save_artifacts(runfolder.staging(out / "final"), final_policy, env_meta={**meta, "step": model.num_timesteps},
+                            config=cfg.to_json(), evaluation=summary, source=f"stable-baselines3 {cfg.algo.upper()}")
     if (out / "learning_curve.png").is_file():
-        shutil.copyfile(out / "learning_curve.png", final / "learning_curve.png")
+        shutil.copyfile(out / "learning_curve.png", staged / "learning_curve.png")
+    final = runfolder.replace_folder(staged, out / "final")
     print(f"final policy ({model.num_timesteps} steps, {wall / 60:.1f} min this session) on "
           f"{len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
     if (out / "best" / "manifest.json").is_file():
@@ -325,15 +353,32 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
         best = load(out / "best")
         best_summary = _summary(cfg, eval_env, best, test_baselines, best.meta.get("step"), wall)
-        (out / "best" / "eval.json").write_text(json.dumps(best_summary, indent=2) + "\n")
+        runfolder.write_json(out / "best" / "eval.json", best_summary, indent=2)
         print(f"best-on-eval-seeds policy (step {best.meta.get('step')}):\n{best_summary['table']}")
     venv.close()
     return final
 
 
+def _read_history(path: Path, upto: int) -> list[dict[str, Any]]:
+    """The evaluations of ``eval_history.json`` up to step ``upto`` (the checkpoint resumed from;
+    later ones are run again); a malformed file is a :class:`training.runfolder.RunFolderError`."""
+    history = runfolder.read_json(path, "the list of periodic evaluations ({'step': ..., 'aggregate': ...})")
+    if not isinstance(history, list) or any(not isinstance(h, dict) or not isinstance(h.get("step"), int)
+                                            for h in history):
+        raise RunFolderError(f"{path}: expected a list of evaluations with an int 'step', got {str(history)[:80]}")
+    return [h for h in history if h["step"] <= upto]
+
+
 def _summary(cfg: TrainConfig, eval_env, policy, baselines: dict[str, Any], steps, wall: float) -> dict[str, Any]:
-    return test_summary(eval_env, policy, baselines, cfg.test_seeds, reference="dmpc", steps=steps,
+    return test_summary(eval_env, policy, baselines, cfg.test_seeds, reference=_reference(cfg), steps=steps,
                         train_wall_s_this_session=round(wall, 1), progress=cfg.progress, workers=cfg.workers)
+
+
+def _reference(cfg: TrainConfig) -> str:
+    """The comparator of the ratios: the env's paper controller (``satenv.tasks.CONTROLLERS``)."""
+    from satenv.tasks import CONTROLLERS
+
+    return CONTROLLERS.get(cfg.env_id, "dmpc")
 
 
 def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str, Any]:

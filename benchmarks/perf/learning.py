@@ -33,12 +33,15 @@ from ._common import AGENTS
 
 ENV_IDS = ("platoon_v0", "cluster_v0", "servicing_v0", "formation_v0")
 TRAINERS = ("sb3_ppo", "benchmarl_mappo", "dagger")
-DAGGER_EXPERTS = {"platoon_v0": "dmpc", "cluster_v0": "apf", "servicing_v0": "nmpc", "formation_v0": "cgmres"}
-"""The scripted expert DAgger imitates on each env in the measurement."""
-DAGGER_LABEL_FRACTION = {"platoon_v0": 1 / 16, "cluster_v0": 1 / 16, "servicing_v0": 1 / 256,
+DAGGER_TASKS = {"platoon_v0": "platoon-pereira2022", "cluster_v0": "cluster-li2022",
+                "servicing_v0": "servicing-pereira2022", "formation_v0": "formation-kannan2022-position"}
+"""The system whose training task and expert (:data:`satenv.tasks.SYSTEMS`) DAgger runs on each env
+in the measurement."""
+DAGGER_LABEL_FRACTION = {"platoon_v0": 1 / 16, "cluster_v0": 1 / 256, "servicing_v0": 1 / 256,
                          "formation_v0": 1 / 16}
-"""DAgger's labels as a fraction of the section's agent-steps: the scripted experts, not the
-learner, set its pace (the servicing NMPC labels about 4 agent-steps/s at the episode start)."""
+"""DAgger's labels as a fraction of the section's agent-steps: the experts, not the learner, set its
+pace (the servicing NMPC labels about 4 agent-steps/s at the episode start, the cluster's
+re-planning tube-RDMPC a few per second)."""
 
 FAST_CONFIGS: dict[str, dict[str, Any]] = {
     "sb3_ppo": {"num_envs": 64, "n_steps": 32, "batch_size": 4096, "n_epochs": 2, "net_arch": (64, 64),
@@ -130,19 +133,22 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -
     rounds hold about ``agent_steps`` labels; evaluation and saving left out."""
     import torch
 
-    import baselines
+    from satenv import tasks
     from training.actor import MLPActor
     from training.envs import make_env
+    from training.experts import make as make_expert
     from training.imitate import ImitationConfig, collect_episode, fit
     from training.policy import LearnedPolicy, ObsNormalizer
 
     m = len(_agents(env_id))
     max_steps = max(2, agent_steps // (2 * ImitationConfig(**fast).episodes_per_round * m))
-    cfg = ImitationConfig(env_id=env_id, env_kwargs={"max_steps": max_steps}, out_dir=out_dir,
-                          expert=DAGGER_EXPERTS[env_id], **fast)
+    system = tasks.system(DAGGER_TASKS[env_id])
+    task = tasks.get(system.training_task)
+    cfg = ImitationConfig(env_id=env_id, env_kwargs={**task.env_kwargs, "max_steps": max_steps}, out_dir=out_dir,
+                          expert=system.expert, **fast)
     torch.set_num_threads(cfg.torch_threads)
     env = make_env(env_id, **cfg.env_kwargs)
-    expert = baselines.make(cfg.expert, env)
+    expert = make_expert(cfg.expert, env)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
     actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
