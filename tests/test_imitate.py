@@ -91,10 +91,10 @@ def test_policy_cards_read_every_shipped_folder_and_judge_the_targets():
     assert c["baseline"].lower() == "dmpc" and c["episodes"] == 50
 
 
-def test_readme_lists_every_shipped_policy_with_its_current_numbers():
+def test_training_page_lists_every_shipped_policy_with_its_current_numbers():
     from pathlib import Path
 
     from training.card import shipped_table
 
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    assert shipped_table() in readme, "README's shipped-policies table is stale: paste `python -m training.card`"
+    page = (Path(__file__).parents[1] / "docs" / "training.md").read_text()
+    assert shipped_table() in page, "docs/training.md's shipped-policies table is stale: paste `python -m training.card`"

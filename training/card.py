@@ -1,6 +1,6 @@
 """Policy cards: the shipped policies' numbers, read from their ``eval.json`` (one source).
 
-    python -m training.card            # the README's shipped-policies table
+    python -m training.card            # the shipped-policies table of docs/training.md
     python -m training.card NAME       # one folder's evaluation table and its targets
 
 Each row compares the learned policy with the scripted baseline its ``eval.json`` names (the
