@@ -620,7 +620,8 @@ def run(case: int | None = None, out: str | Path | None = None, plots_dir: str |
         _preset(c)
     for v in variants:
         variant_setup(v)
-    start = time.perf_counter()
+    # wall_time_s: the runs behind the rows, the earlier result's included (a resume adds its own)
+    start = time.perf_counter() - float((earlier or {}).get("wall_time_s") or 0.0)
     rows = list((earlier or {}).get("rows", []))
     state: dict[str, Any] = {"tube": (earlier or {}).get("tube_experiment"),
                              "sensitivity": (earlier or {}).get("sensitivity"),
