@@ -6,8 +6,8 @@ stronger disturbance, model mismatch.
 
 A :class:`Perturbation` changes the truth, never the nominal model: the env's ``scenario`` stays the
 task's nominal one (what a controller or a filter built from the env plans with), while the core
-integrates the perturbed physics (``truth`` overrides) and applies ``thrust_scale`` times the
-commanded thrust. **Navigation error** is what everyone on board reads: between two steps the
+integrates the perturbed physics (``truth`` overrides: a weaker thruster is the truth's smaller
+``u_max`` under the nominal one the commands are normalised by). **Navigation error** is what everyone on board reads: between two steps the
 core's agent states are replaced by a noisy estimate (Gaussian, ``sigma_position`` [m] and
 ``sigma_velocity`` [m/s] per axis, drawn from the episode's seed), so the policy's observation,
 ``env.state()``, the scripted controllers and the safety filter wrapped around a policy
@@ -18,6 +18,7 @@ built into the env (``safety_filter=True``) runs inside the step and reads the t
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -36,16 +37,22 @@ NAV_SEED_KEY = 0x6E6176
 
 @dataclass(frozen=True)
 class Perturbation:
-    """One named perturbation: ``truth(scenario) -> overrides`` of the truth env's scenario,
-    ``thrust_scale`` on the commanded thrust, navigation error ``sigma_position`` [m] and
-    ``sigma_velocity`` [m/s]."""
+    """One named perturbation: ``truth(scenario) -> overrides`` of the truth env's scenario (the
+    nominal scenario stays what ``env.scenario`` shows), navigation error ``sigma_position`` [m]
+    and ``sigma_velocity`` [m/s]."""
 
     name: str
     description: str
     truth: Callable[[Any], Mapping[str, Any]] = field(default=lambda sc: {})
-    thrust_scale: float = 1.0
     sigma_position: float = 0.0
     sigma_velocity: float = 0.0
+
+
+def _scaled_thrust(k: float) -> Callable[[Any], Mapping[str, Any]]:
+    def truth(sc: Any) -> Mapping[str, Any]:
+        u = np.asarray(sc.u_max, dtype=float) * k
+        return {"u_max": float(u) if u.ndim == 0 else tuple(u.tolist())}
+    return truth
 
 
 def _scaled_inertia(k: float) -> Callable[[Any], Mapping[str, Any]]:
@@ -57,7 +64,8 @@ PERTURBATIONS: Mapping[str, Perturbation] = MappingProxyType({p.name: p for p in
                  sigma_position=0.1, sigma_velocity=0.001),
     Perturbation("nav-1m", "navigation error 1 m, 1 cm/s (1 sigma per axis), read by everyone on board",
                  sigma_position=1.0, sigma_velocity=0.01),
-    Perturbation("thrust-80", "actuator degradation: 80 % of the commanded thrust is applied", thrust_scale=0.8),
+    Perturbation("thrust-80", "actuator degradation: 80 % of the commanded thrust is applied (after the "
+                 "nominal saturation)", truth=_scaled_thrust(0.8)),
     Perturbation("disturbance-x2", "the disturbance force doubled",
                  truth=lambda sc: {"disturbance_force": 2.0 * sc.disturbance_force}),
     Perturbation("model-j2", "model mismatch: J2 truth (chief inclination 51.6 deg) under a CW nominal model",
@@ -135,9 +143,6 @@ class PerturbedEnv(BaseParallelWrapper):
 
     def step(self, actions: dict[str, Any]):
         self._restore()
-        k = self.perturbation.thrust_scale
-        if k != 1.0 and isinstance(actions, dict):
-            actions = {a: np.clip(np.asarray(v, dtype=float), -1.0, 1.0) * k for a, v in actions.items()}
         obs, rewards, terms, truncs, infos = self.env.step(actions)
         return self._estimate(obs), rewards, terms, truncs, infos
 
@@ -153,4 +158,10 @@ def make_env(task: Any, perturbation: str | None, **overrides: Any) -> Any:
         return nominal
     p = get(perturbation)
     truth = task.make_env(**{**overrides, **p.truth(nominal.scenario)})
-    return PerturbedEnv(truth, p, nominal.scenario)
+    return _wrapper_class(type(truth))(truth, p, nominal.scenario)
+
+
+@functools.lru_cache(maxsize=None)
+def _wrapper_class(env_class: type) -> type:
+    """:class:`PerturbedEnv` with the env class's ``metadata`` (what the baselines check)."""
+    return type(f"Perturbed{env_class.__name__}", (PerturbedEnv,), {"metadata": env_class.metadata})

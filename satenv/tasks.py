@@ -9,7 +9,7 @@ evaluated under::
     task = tasks.get("cluster-case1-random")
     env = task.make_env()                       # satenv.make(task.env_id, **task.env_kwargs)
     test = task.seeds("test")                   # the held-out seeds every published number uses
-    tasks.training_task("cluster-li2022").name  # 'cluster-case1-random'
+    tasks.training_task("cluster-li2022").name  # 'cluster-case1-random' (a system's training task)
 
 Seed splits (:data:`SEED_SPLITS`) are the same bands for every task and disjoint by construction
 (:func:`check_splits` runs at import): train seeds for training runs, validation seeds for every
@@ -321,12 +321,9 @@ def names() -> tuple[str, ...]:
 
 
 def get(name: str) -> Task:
-    """The task called ``name`` (a system name means its training task)."""
-    if isinstance(name, str) and name in SYSTEMS and name not in TASKS:
-        name = SYSTEMS[name].training_task
+    """The task called ``name`` (a system's tasks: :func:`training_task`, :func:`paper_task`)."""
     if not isinstance(name, str) or name not in TASKS:
-        raise SatenvError(f"unknown task {name!r:.80}; expected one of {list(TASKS)} or a system "
-                          f"({list(SYSTEMS)})")
+        raise SatenvError(f"unknown task {name!r:.80}; expected one of {list(TASKS)}")
     return TASKS[name]
 
 
