@@ -161,7 +161,7 @@ def make_env(task: Any, perturbation: str | None, **overrides: Any) -> Any:
     return _wrapper_class(type(truth))(truth, p, nominal.scenario)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _wrapper_class(env_class: type) -> type:
     """:class:`PerturbedEnv` with the env class's ``metadata`` (what the baselines check)."""
     return type(f"Perturbed{env_class.__name__}", (PerturbedEnv,), {"metadata": env_class.metadata})
