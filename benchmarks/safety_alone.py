@@ -80,9 +80,13 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
             cache = cache_dir / f"{system}__{folder.name}__{name}__{variant.replace(' ', '_').replace('+', 'plus')}.jsonl"
             row[variant] = aggregate(_episodes(env, pol, seeds, cache))
         if n_controller:
-            ctrl = baselines.make(task.controller, env)
-            row["controller"] = aggregate(_episodes(env, ctrl, seeds[:n_controller],
-                                                    cache_dir / f"{system}__controller_{task.controller}__{name}.jsonl"))
+            try:
+                ctrl = baselines.make(task.controller, env)
+            except (baselines.BaselineError, baselines.BaselineTypeError) as exc:   # refuses the wrapped env
+                row["controller"] = {"error": f"{type(exc).__name__}: {exc}"}
+            else:
+                row["controller"] = aggregate(_episodes(env, ctrl, seeds[:n_controller],
+                                                        cache_dir / f"{system}__controller_{task.controller}__{name}.jsonl"))
         print(system, folder.name, name, json.dumps({k: {m: v.get(m) for m in ("success_rate", "collision_episodes",
               "violation_episodes", "delta_v", "interventions_per_agent_step")} for k, v in row.items()}), flush=True)
         out[name] = row

@@ -106,7 +106,7 @@ def test_fit_with_the_barrier_term_removes_interventions_on_its_rows():
     assert np.mean(pol.predict(obs)[:, 0] >= 0.3) > 0.95
 
 
-@pytest.mark.parametrize("field,value", [("w_bar", -1.0), ("label", "nope"), ("system", "cluster-li2022"),
+@pytest.mark.parametrize("field,value", [("w_bar", -1.0), ("label", "nope"), ("system", "formation-kannan2022-collision"),
                                          ("learning_rate", float("nan"))])
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(SatenvError, match=field if field != "system" else "system"):

@@ -55,7 +55,8 @@ def _joint_platoon(env: Any) -> Any:
     return JointPlatoonMPC(env, coupling="sequential")
 
 
-EXPERTS: dict[str, Any] = {"platoon-pereira2022": _joint_platoon, "platoon-pereira2023": None}
+EXPERTS: dict[str, Any] = {"platoon-pereira2022": _joint_platoon, "platoon-pereira2023": None,
+                           "cluster-li2022": None, "servicing-pereira2022": None}
 """The expert that labels each system's states (a stateless re-planner where there is one;
 ``None``: the system has none better than the filtered network, whose own filtered action is the
 label, ``label="self"``)."""
@@ -315,7 +316,9 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=warm_meta, config=config,
                        source="training.safe_imitation round checkpoint")
         steps = sum(s["agent_steps"] for s in flown)
-        history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms, "collect_s": round(collect_s, 1),
+        history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
+                        "weights": {f: getattr(cfg, f) for f in ("label", "w_int", "w_bar", "bar_margin",
+                                                                 "learning_rate", "epochs")}, "collect_s": round(collect_s, 1),
                         "fit_s": round(fit_s, 1), "val_s": round(val_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1),
                         "flown_interventions_per_agent_step": sum(s["interventions"] for s in flown) / max(1, steps),
