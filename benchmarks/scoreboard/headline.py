@@ -118,13 +118,13 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
              "Per system of the papers, on the scenario its learned policies are ranked on, the best "
              "scripted and the best learned policy by this board's safety-first ranking (success rate, "
              "then collision episodes, then violation episodes, then RMSE, then Δv), so the best learned "
-             "policy is the best *safe* one among equally successful ones. Collisions, violations: episodes with at least one collision, with at least "
+             "policy is the best *safe* one among equally successful ones. Collision episodes, violation episodes: episodes with at least one collision, with at least "
              "one hard-constraint violation counted by the env. RMSE and Δv ratios: "
              "learned / scripted, ratio of the means over the *matched, completed* episodes (seeds "
              "where both episodes ran to the end without a collision), so an episode that ends "
              "early cannot improve a ratio; `matched`: how many seeds; – when none.", "",
-             "| system | scenario | best scripted | success | collisions | violations | best learned | "
-             "success | collisions | violations | RMSE ratio | Δv ratio | matched |",
+             "| system | scenario | best scripted | success | collision episodes | violation episodes | best learned | "
+             "success | collision episodes | violation episodes | RMSE ratio | Δv ratio | matched |",
              "|---|---|---|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|"]
     for row in rows:
         r = row["ratios"]

@@ -50,7 +50,7 @@ TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "wall_s")
 _TABLE = [  # (metric, column header) of the markdown table
     ("success", "success"), ("rmse", "RMSE"), ("rmsee", "RMSEE"), ("foe", "FOE"),
     ("delta_v", "Δv [m/s]"), ("time_to_converge_s", "t_conv [s]*"),
-    ("min_separation_m", "min sep [m]"), ("collisions", "collisions"), ("violations", "violations"),
+    ("min_separation_m", "min sep [m]"), ("collisions", "collision flags"), ("violations", "violations"),
     ("safety_cost", "cost"), ("fallbacks", "fallbacks"), ("compute_ms_per_decision", "ms/decision"),
 ]
 _SHIELD_TABLE = [("interventions", "interventions"), ("mean_du", "mean ‖Δu‖"),
@@ -278,7 +278,7 @@ def _preamble(h: dict[str, Any]) -> list[str]:
         "commanded acceleration; **FOE** [m] final tracking error; **Δv** [m/s] total velocity change, "
         "summed over agents; **t_conv** [s]* time until every agent stays converged (mean over the "
         "episodes that converged, n in scoreboard.json); **min sep** [m] smallest distance between "
-        "any agent and any other body; **collisions** (step, agent) collision flags; **violations** "
+        "any agent and any other body; **collision flags** (step, agent) collision flags per episode; **violations** "
         "constraint violations counted by the env (speed, keep-out, line of sight, ... as the "
         "scenario defines them); **cost** the env's safety cost summed over the episode; "
         "**fallbacks** solver failures replaced by a safe action; **ms/decision** wall time of one "
