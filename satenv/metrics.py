@@ -66,7 +66,15 @@ def _info(traj, key: str) -> np.ndarray:
         bad = np.argwhere(~np.isfinite(a))[0]
         raise SatenvError(f"{field} holds NaN/inf (first at index {tuple(int(i) for i in bad)}); the "
                           "metrics of a corrupt trajectory would be NaN")
+    if key in NONNEGATIVE_INFO and (a < 0).any():
+        bad = np.argwhere(a < 0)[0]
+        raise SatenvError(f"{field} holds a negative entry (first at index {tuple(int(i) for i in bad)}); "
+                          f"it is a magnitude or a count (>= 0): the trajectory is corrupt")
     return a
+
+
+NONNEGATIVE_INFO = frozenset({"delta_v", "min_separation", "violations", "cost"})
+"""Info keys that are magnitudes or counts: a negative entry is a corrupt record, not a metric."""
 
 
 def _positive(name: str, value: Any) -> float:

@@ -142,10 +142,11 @@ class ObsNormalizer:
         return cls(venv.obs_rms.mean.copy(), venv.obs_rms.var.copy(), venv.clip_obs, venv.epsilon)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        if self.mean is None:
-            return obs.astype(np.float32)
-        out = (obs - self.mean) / np.sqrt(self.var + self.epsilon)
-        return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
+        with np.errstate(over="ignore", invalid="ignore"):   # beyond float32: inf, flagged by predict
+            if self.mean is None:
+                return obs.astype(np.float32)
+            out = (obs - self.mean) / np.sqrt(self.var + self.epsilon)
+            return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
 
     def to_json(self) -> dict[str, Any]:
         if self.mean is None:
@@ -260,8 +261,14 @@ class LearnedPolicy:
             if not same:
                 mismatched.append(f"{key}={have!r} (trained with {value!r})")
         if mismatched:
-            warnings.warn("env scenario differs from the policy's training/evaluation setting: "
-                          + ", ".join(mismatched), stacklevel=3)
+            message = "env scenario differs from the policy's training/evaluation setting: " + ", ".join(mismatched)
+            if message not in _WARNED_SETTINGS:   # once per process, however many policies or loads
+                _WARNED_SETTINGS.add(message)
+                warnings.warn(message, stacklevel=3)
+
+
+_WARNED_SETTINGS: set[str] = set()
+"""The scenario-mismatch warnings :meth:`LearnedPolicy.check_env` has given in this process."""
 
 
 def features_from_config(config: dict[str, Any]):

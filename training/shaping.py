@@ -50,6 +50,11 @@ import numpy as np
 
 __all__ = ["RewardShaping", "ObsFeatures", "ActionMap", "TerminalFeedback"]
 
+BEYOND_FLOAT_RANGE = {"over": "ignore", "invalid": "ignore", "divide": "ignore"}
+"""``np.errstate`` of the shaping arithmetic: an observation or state near the float range gives
+inf/NaN quietly, and that value is what is checked (the policy's non-finite check flags the
+action, the env's guard the state), instead of a numpy ``RuntimeWarning`` per call."""
+
 
 @dataclass(frozen=True)
 class RewardShaping:
@@ -95,6 +100,10 @@ class RewardShaping:
                 or self.collision > 0 or self.effort > 0 or self.violation > 0 or self.anticipation > 0)
 
     def __call__(self, rewards: np.ndarray, info: dict[str, np.ndarray]) -> np.ndarray:
+        with np.errstate(**BEYOND_FLOAT_RANGE):
+            return self._shaped(rewards, info)
+
+    def _shaped(self, rewards: np.ndarray, info: dict[str, np.ndarray]) -> np.ndarray:
         out = self.env_weight * np.asarray(rewards, dtype=np.float64)
         if self.tracking > 0:
             e = info["tracking_error"]
@@ -170,7 +179,8 @@ class ObsFeatures:
         if not self.symlog_scale > 0:
             return obs
         x = obs[..., : self.symlog_dims]
-        extra = np.sign(x) * np.log1p(np.abs(x) * self.symlog_scale)
+        with np.errstate(**BEYOND_FLOAT_RANGE):
+            extra = np.sign(x) * np.log1p(np.abs(x) * self.symlog_scale)
         return np.concatenate([obs, extra.astype(obs.dtype)], axis=-1)
 
 
@@ -245,6 +255,10 @@ class TerminalFeedback:
         """Blend the feedback into ``action`` (n, act_dim) for raw observations ``obs`` (n, obs_dim)."""
         if not self.active:
             return action
+        with np.errstate(**BEYOND_FLOAT_RANGE):
+            return self._blend(obs, action)
+
+    def _blend(self, obs: np.ndarray, action: np.ndarray) -> np.ndarray:
         if max(self.error_at, self.velocity_at) + 3 > obs.shape[-1] or self.action_at + 3 > action.shape[-1]:
             raise ValueError(f"terminal feedback indices (error_at={self.error_at}, velocity_at="
                              f"{self.velocity_at}, action_at={self.action_at}) do not fit observations "

@@ -66,7 +66,11 @@ def real(value: Any, name: str, expected: str = "a finite real number") -> float
         raise SatenvTypeError(f"{name} must be {expected}, got {why or type(value).__name__}: "
                               f"{show(value)}")
     try:
-        v = float(value)
+        if isinstance(value, np.generic | np.ndarray) and value.dtype.itemsize > 8:
+            with np.errstate(over="ignore"):  # a long double beyond float64 is inf: rejected below
+                v = float(value)
+        else:
+            v = float(value)
     except (OverflowError, ValueError, TypeError):
         raise SatenvError(f"{name} must be {expected}, got {show(value)} "
                           "(too large for a float)") from None
@@ -118,7 +122,11 @@ def numeric(value: Any, name: str) -> np.ndarray:
         arr = np.array([real(v, f"{name} entry") for v in raw.ravel()], dtype=np.float64)
         arr = arr.reshape(raw.shape)
     elif kind in "iuf":
-        arr = raw.astype(np.float64)
+        if raw.dtype.itemsize > 8:    # long double: beyond the float64 range is inf, reported below
+            with np.errstate(over="ignore"):
+                arr = raw.astype(np.float64)
+        else:
+            arr = raw.astype(np.float64)
     else:
         what = {"b": "bools", "c": "complex numbers", "U": "strings", "S": "bytes"}.get(kind, raw.dtype)
         raise SatenvTypeError(f"{name} must be a real numeric array, got an array of {what}: {show(value)}")
@@ -172,7 +180,7 @@ def all_finite(*arrays: np.ndarray) -> bool:
         zeros = _ZEROS.get(key)
         if zeros is None:
             zeros = _ZEROS[key] = np.zeros(flat.size, flat.dtype)
-        total += float(flat.dot(zeros))
+        total += float(np.vdot(flat, zeros))   # vdot: no "invalid value" RuntimeWarning for 0 * inf
     return total == 0.0
 
 
@@ -195,7 +203,8 @@ def first_nonfinite(quantities: dict[str, np.ndarray], labels: list[str]) -> str
     """Describe the non-finite entries of ``quantities`` (arrays ``(M, ...)``, row i = ``labels[i]``)."""
     parts = []
     for key, arr in quantities.items():
-        arr = np.asarray(arr, dtype=float)
+        with np.errstate(over="ignore"):      # a long double beyond float64 is inf: reported as such
+            arr = np.asarray(arr, dtype=float)
         rows = ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1) if arr.ndim else [True]
         bad = [labels[i] if i < len(labels) else str(i) for i in np.flatnonzero(rows)]
         if bad:

@@ -157,6 +157,9 @@ class SatParallelEnv(ParallelEnv):
     render_speedup: ClassVar[float] = 1.0
     """Playback speed of rendered episodes relative to real time (``render_fps = speedup / dt``)."""
     reset_option_keys: ClassVar[frozenset[str]] = frozenset({"initial_state"})
+    api_probe_option_keys: ClassVar[frozenset[str]] = frozenset({"options"})
+    """Reset options passed only to check that ``reset`` takes ``options`` (PettingZoo's
+    ``parallel_api_test`` passes ``{"options": 1}``): ignored without a warning."""
 
     def __init__(self, scenario: Any, *, render_mode: str | None = None) -> None:
         if render_mode is not None and (not isinstance(render_mode, str)
@@ -260,8 +263,9 @@ class SatParallelEnv(ParallelEnv):
         options = {} if options is None else options
         if not isinstance(options, dict):
             raise SatenvTypeError(f"options must be a dict or None, got {type(options).__name__}")
-        unknown = set(options) - self.reset_option_keys
-        if unknown:  # a warning, not an error: PettingZoo's own API test passes a dummy option
+        unknown = set(options) - self.reset_option_keys - self.api_probe_option_keys
+        if unknown and not unknown <= self.__dict__.setdefault("_warned_options", set()):
+            self._warned_options |= unknown    # once per env and key, not once per episode
             warnings.warn(f"ignoring unknown reset option(s) {sorted(unknown)}; "
                           f"known keys: {sorted(self.reset_option_keys)}", stacklevel=2)
         x0 = None  # every check before any change: a rejected reset leaves the env as it was
