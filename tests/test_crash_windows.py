@@ -232,3 +232,140 @@ def test_dagger_killed_for_real_at_every_write_boundary(tmp_path):
         assert go(out, **{runfolder.CRASH_ENV: str(k)}) == runfolder.CRASH_EXIT_CODE
         assert go(out) == 0
         assert dagger_result(out) == reference, f"killed at boundary {k}"
+
+
+# ------------------------------------------------------------------------ training.train
+def tiny_train_config(out: Path):
+    """A PPO run of seconds on the toy env (tests/test_env_base.py): 4 rollouts, an evaluation
+    and a checkpoint every rollout."""
+    from training.config import TrainConfig
+
+    return TrainConfig(env_id="test_env_base:ToyEnv", env_kwargs={"max_steps": 10}, num_envs=2,
+                       total_timesteps=192, n_steps=8, batch_size=48, n_epochs=1, net_arch=(8,),
+                       eval_every=48, checkpoint_every=48, eval_seeds=(1,), test_seeds=(3,),
+                       eval_baselines=("zero",), out_dir=str(out), progress=False)
+
+
+def train_result(out: Path) -> tuple[list[int], dict, bytes, dict]:
+    """What a finished training run leaves: its evaluation steps, the final folder's evaluation
+    (times aside) and weights, and ``best/``'s step (the folders are loaded: whole and consistent)."""
+    import training
+
+    for name in ("final", "best"):
+        training.load(out / name)
+    steps = [h["step"] for h in json.loads((out / "eval_history.json").read_text())]
+    final = untimed(json.loads((out / "final" / "eval.json").read_text()))
+    final.pop("table", None)
+    best = json.loads((out / "best" / "env.json").read_text())["step"]
+    return steps, final, (out / "final" / "weights.safetensors").read_bytes(), {"best_step": best}
+
+
+def _train_sweep(tmp_path, monkeypatch, picks) -> dict[str, int]:
+    from training.train import latest_checkpoint, train
+
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path / "cache"))
+    ref = tmp_path / "ref"
+    labels = boundaries(lambda: train(tiny_train_config(ref)), tmp_path, monkeypatch)
+    reference = train_result(ref)
+    assert reference[0] == [48, 96, 144, 192]
+    last_ckpt = _first(labels, "in place step_192/")
+    counts = {"kills": 0, "unfinished": 0, "lost": 0, "duplicated": 0, "bitwise_equal": 0, "after_last_checkpoint": 0}
+    for k in picks(labels):
+        out = tmp_path / f"k{k}"
+        cfg = tiny_train_config(out)
+        monkeypatch.setattr(runfolder, "crash", _raise_killed)
+        monkeypatch.setenv(runfolder.CRASH_ENV, str(k))
+        runfolder.reset_boundaries()
+        with pytest.raises(Killed):
+            train(cfg)
+        counts["kills"] += 1
+        monkeypatch.delenv(runfolder.CRASH_ENV)
+        try:   # the user's next command: --resume from the last checkpoint (a new run if none was written)
+            train(cfg, resume=latest_checkpoint(out) is not None)
+            steps, final, weights, best = train_result(out)
+        except Exception:                              # noqa: BLE001 - counted, then reported below
+            counts["unfinished"] += 1
+            continue
+        counts["lost"] += len(set(reference[0]) - set(steps))
+        counts["duplicated"] += len(steps) - len(set(steps))
+        same = (final, weights) == reference[1:3]
+        counts["bitwise_equal"] += same
+        if k > last_ckpt:        # nothing left to train: the resumed run must equal the reference
+            counts["after_last_checkpoint"] += 1
+            assert same, f"killed at boundary {k} ({labels[k - 1]}) after the last checkpoint"
+    assert (counts["unfinished"], counts["lost"], counts["duplicated"]) == (0, 0, 0), counts
+    return counts
+
+
+def _first(labels: list[str], text: str, after: int = 0) -> int:
+    """The 1-based index of the first boundary label ending with ``text`` after boundary ``after``."""
+    return next(i for i, label in enumerate(labels, 1) if i > after and label.endswith(text))
+
+
+def test_train_killed_at_the_unrecoverable_windows_resumes_to_the_end(tmp_path, monkeypatch, capsys):
+    """The windows that blocked every resume (a torn eval_history.json, best/ half written) and a
+    checkpoint half swapped, then every kind of write after the last checkpoint (nothing left to
+    train: the result must be bitwise the uninterrupted run's)."""
+    def picks(labels):
+        ckpt = _first(labels, "in place step_48/")
+        last = _first(labels, "in place step_192/")
+        return [_first(labels, "written eval_history.json", ckpt), _first(labels, "moved aside best/", ckpt),
+                _first(labels, "staged step_96/"), _first(labels, "staged step_192/"),
+                _first(labels, "written learning_curve.png", last), _first(labels, "staged final/", last),
+                _first(labels, "written eval.json", last)]
+
+    counts = _train_sweep(tmp_path, monkeypatch, picks)
+    assert counts["kills"] == 7 and counts["after_last_checkpoint"] == 3
+    capsys.readouterr()
+
+
+@pytest.mark.slow
+def test_train_killed_at_every_write_boundary_resumes_to_the_end(tmp_path, monkeypatch, capsys):
+    counts = _train_sweep(tmp_path, monkeypatch, lambda labels: range(1, len(labels) + 1))
+    print(counts)
+
+
+def test_bad_training_input_is_a_named_value_error(tmp_path, monkeypatch, capsys):
+    """Accepted-then-fatal inputs are refused up front; --resume on a malformed folder names the file."""
+    from training.config import MAX_LAYER_WIDTH, TrainConfig
+    from training.train import main, train
+
+    with pytest.raises(ValueError, match="lr must be a finite number"):
+        TrainConfig(lr=float("inf"))
+    with pytest.raises(ValueError, match=f"wider than MAX_LAYER_WIDTH = {MAX_LAYER_WIDTH}"):
+        TrainConfig(net_arch=(100_000_000, 100_000_000))
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "run"
+    cfg = tiny_train_config(out).replace(total_timesteps=48, eval_every=0)
+    train(cfg)
+    ckpt = out / "checkpoints" / "step_48"
+    args = ["--out-dir", str(out), "--resume", "--allow-code-env-id"]
+    state = (ckpt / "sb3_state.pt").read_bytes()
+    for name, data, match in [("sb3_state.pt", b"\x80\x04garbage", "checkpoint .*step_48 is malformed"),
+                              ("sb3_state.pt", state[: len(state) // 2], "checkpoint .*step_48 is malformed"),
+                              ("vecnormalize.json", b'{"obs_rms": {}}', "vecnormalize.json: obs_rms must hold"),
+                              ("vecnormalize.json", b'{"obs_rms": ', "vecnormalize.json")]:
+        original = (ckpt / name).read_bytes()
+        (ckpt / name).write_bytes(data)
+        with pytest.raises(SystemExit, match=match):
+            main(args)
+        (ckpt / name).write_bytes(original)
+    (out / "eval_history.json").write_text('[{"step": 48, "aggr')
+    with pytest.raises(SystemExit, match="eval_history.json: not valid JSON"):
+        main(args)
+    capsys.readouterr()
+
+
+def test_dagger_starts_for_every_system_name(tmp_path, capsys):
+    """``--system platoon-tplf30`` crashed at start-up (an env keyword given twice): every system,
+    old names included, builds its envs and experts (a run of 0 rounds)."""
+    import warnings
+
+    from training.recipes import LEGACY_SYSTEM_NAMES, dagger
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        for name in ("platoon-tplf30", *LEGACY_SYSTEM_NAMES.values()):
+            dagger.main(["--run-dir", str(tmp_path / name), "--system", name, "--rounds", "0"])
+            assert json.loads((tmp_path / name / "config.json").read_text())["rounds"] == 0
+    capsys.readouterr()

@@ -139,6 +139,8 @@ class RunConfig:
         check_int("workers", self.workers, minimum=0)
         object.__setattr__(self, "net_arch", check_net_arch(self.net_arch))
         check_number("lr", self.lr, 0.0, math.inf)
+        if not math.isfinite(self.lr):
+            raise ValueError(f"lr must be a finite number > 0, got {self.lr!r}")
         if not isinstance(self.progress, bool):
             raise ValueError(f"progress must be a bool, got {self.progress!r}")
 
@@ -317,11 +319,20 @@ def check_int(name: str, v: Any, minimum: int) -> None:
         raise ValueError(f"{name} must be an int >= {minimum}, got {v!r}")
 
 
+MAX_LAYER_WIDTH = 8192
+"""The widest hidden layer ``net_arch`` takes: an 8192 x 8192 layer has 67 M weights (256 MB in
+float32); a wider one is a typo, not a network, and would fail in the allocator."""
+
+
 def check_net_arch(value: Any) -> tuple[int, ...]:
-    """Hidden layer sizes as a non-empty tuple of positive ints (``ValueError`` otherwise)."""
+    """Hidden layer sizes as a non-empty tuple of ints in ``[1, MAX_LAYER_WIDTH]`` (``ValueError``
+    otherwise)."""
     arch = tuple(value)
     if not arch or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in arch):
         raise ValueError(f"net_arch must be a non-empty tuple of positive ints (e.g. 64,64), got {value!r}")
+    if max(arch) > MAX_LAYER_WIDTH:
+        raise ValueError(f"net_arch: a layer of {max(arch)} units is wider than MAX_LAYER_WIDTH = "
+                         f"{MAX_LAYER_WIDTH}, got {value!r:.80}")
     return arch
 
 

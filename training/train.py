@@ -56,7 +56,10 @@ __all__ = ["main", "train", "latest_checkpoint"]
 
 # --------------------------------------------------------------------------- helpers
 def latest_checkpoint(out_dir: Path) -> tuple[int, Path] | None:
-    """``(steps, folder)`` of the newest complete ``checkpoints/step_<N>``, or ``None``."""
+    """``(steps, folder)`` of the newest complete ``checkpoints/step_<N>``, or ``None`` (a
+    checkpoint swap a kill interrupted is finished or undone first: :func:`training.runfolder.recover_folder`)."""
+    for aside in (out_dir / "checkpoints").glob("step_*.old"):
+        runfolder.recover_folder(aside.with_name(aside.name[:-len(".old")]))
     found = []
     for p in (out_dir / "checkpoints").glob("step_*"):
         m = re.fullmatch(r"step_(\d+)", p.name)
@@ -127,10 +130,16 @@ def make_callback(cfg: TrainConfig, out: Path, venv, eval_env, baseline_eval: di
             if self.next_eval is not None and n >= self.next_eval:
                 self.next_eval += cfg.eval_every
                 self.evaluate_now()
-            if self.next_ckpt is not None and n >= self.next_ckpt:
-                self.next_ckpt += cfg.checkpoint_every
-                save_checkpoint(self.model, venv, out, n)
             return True
+
+        def _on_rollout_start(self) -> None:
+            # checkpoints between rollouts, after the update of the last one: a checkpoint at step
+            # N holds every update of the first N steps (one taken inside a rollout would hold the
+            # weights before its update, and resuming from it would skip that update)
+            n = self.model.num_timesteps
+            if self.next_ckpt is not None and n >= self.next_ckpt:
+                self.next_ckpt = (n // cfg.checkpoint_every + 1) * cfg.checkpoint_every
+                save_checkpoint(self.model, venv, out, n)
 
         def evaluate_now(self) -> None:
             n = self.model.num_timesteps
