@@ -31,7 +31,7 @@ from satenv.dynamics._checks import show
 
 __all__ = [
     "Baseline", "BaselineError", "BaselineTypeError", "Policy", "RandomPolicy", "ZeroPolicy", "check_env",
-    "config_from_options", "flag", "choice", "guarded_solve", "is_satenv_env", "new_info", "nlpsol_cached",
+    "config_from_options", "flag", "choice", "guard_nonfinite", "guarded_solve", "is_satenv_env", "new_info", "nlpsol_cached",
     "number", "integer", "record_fallback", "row_violation", "weights",
 ]
 
@@ -99,6 +99,12 @@ class Baseline:
     env_ids: tuple[str, ...] = ()
     cheap: bool = True
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        act = cls.__dict__.get("act")
+        if act is not None and not getattr(act, "guards_nonfinite", False):
+            cls.act = guard_nonfinite(act)
+
     @classmethod
     def supports(cls, env: Any) -> bool:
         """True when this baseline can control ``env`` (by env id and scenario)."""
@@ -108,6 +114,39 @@ class Baseline:
     def supported(cls) -> str:
         """What :meth:`supports` accepts, for error messages."""
         return f"satenv envs {list(cls.env_ids)}"
+
+
+NONFINITE_STATE = "non-finite env state: zero action (the solver is not run)"
+"""``info["solver_status"]`` of a decision skipped because ``env.state()`` held NaN/inf."""
+NONFINITE_ACTION = "non-finite action: zero action"
+"""``info["solver_status"]`` of an agent whose computed action held NaN/inf."""
+
+
+def guard_nonfinite(act: Callable[..., dict[str, np.ndarray]]) -> Callable[..., dict[str, np.ndarray]]:
+    """``act`` of a :class:`Baseline` behind the non-finite guard (applied to every subclass's
+    ``act``): when the env's true state (``self.env.state()``) holds NaN/inf the solver is not run
+    and every agent gets the zero action (no thrust); an agent whose computed action holds NaN/inf
+    gets the zero action too. Each such agent counts one ``info["fallbacks"]`` and
+    ``info["solver_status"]`` says why: the flagged safe action, never a NaN thrust."""
+    from functools import wraps
+
+    @wraps(act)
+    def guarded(self: Any, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        env = getattr(self, "env", None)
+        state = env.state() if env is not None and callable(getattr(env, "state", None)) else None
+        if state is not None and not np.isfinite(np.asarray(state, dtype=float)).all():
+            for _ in observations:
+                record_fallback(self.info, NONFINITE_STATE)
+            return {a: np.zeros(env.action_space(a).shape, np.float32) for a in observations}
+        actions = act(self, observations)
+        for a, u in actions.items():
+            if not np.isfinite(u).all():
+                actions[a] = np.zeros_like(u)
+                record_fallback(self.info, NONFINITE_ACTION)
+        return actions
+
+    guarded.guards_nonfinite = True   # type: ignore[attr-defined]
+    return guarded
 
 
 # ---------------------------------------------------------------------------------------------
