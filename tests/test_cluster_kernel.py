@@ -1,10 +1,12 @@
 """The cluster core's fused step (compiled truth kernel + compiled separations, issue 25) against
 its physics-step loop on the numpy truth model (the reference).
 
-Tolerance 1e-10 relative (states, rewards, distances): the fused step integrates the same ODE
-with the same RK4 steps; it differs from the loop only in rounding (frame round trips skipped,
-``delta_v`` as one product instead of a sum of 20 equal terms), ~1e-15 relative per decision.
-Integer and boolean outputs (violations, collisions, terminations) must be equal.
+Tolerance 1e-10 relative (states, rewards, distances): the fused step integrates the same ODE,
+with one DOP853 step per decision (the disturbance's staircase inside it exactly, the positions
+at the physics steps interpolated: ``tests/test_dynamics_dop853.py``), or with the same RK4 steps
+for the random disturbance (then it differs from the loop only in rounding: frame round trips
+skipped, ``delta_v`` as one product instead of a sum of 20 equal terms, ~1e-15 relative per
+decision). Integer and boolean outputs (violations, collisions, terminations) must be equal.
 """
 
 from __future__ import annotations

@@ -218,6 +218,19 @@ def _rk4_deputies(yd, u, h, p, track, i, k1, k2, k3, k4, tmp):
 
 
 @_jit
+def _new_chief(chief, b, last):
+    """Whether copy ``b``'s chief differs from ``last`` (the previous copy's; then ``last`` takes
+    it): copies with the same chief share its track."""
+    same = True
+    for c in range(6):
+        same = same and chief[b, c] == last[c]
+    if not same:
+        for c in range(6):
+            last[c] = chief[b, c]
+    return not same
+
+
+@_jit
 def propagate(x, chief, u, substeps, h, p, x_out, chief_out, path):
     """Propagate LVLH states ``x`` (B, M, 6) and chief ECI states ``chief`` (B, 6) over
     ``u.shape[0]`` steps of ``substeps`` RK4 sub-steps of ``h`` seconds, the LVLH inputs ``u[s]``
@@ -235,13 +248,8 @@ def propagate(x, chief, u, substeps, h, p, x_out, chief_out, path):
     last = np.full(6, np.nan)
     recording = path.shape[0] > 0
     for b in range(nb):
-        shared = True
-        for c in range(6):
-            shared = shared and chief[b, c] == last[c]
-        if not shared:
+        if _new_chief(chief, b, last):
             _chief_track(chief[b], n_sub, h, p, track, ends)
-            for c in range(6):
-                last[c] = chief[b, c]
         _to_eci(x, b, chief, p, e, y)
         for c in range(6):
             for j in range(m):

@@ -6,6 +6,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ._dop853 import STAGES, A, B, C
+
 Derivative = Callable[[float, np.ndarray], np.ndarray]
 
 
@@ -23,9 +25,27 @@ def rk4_step(f: Derivative, t: float, y: np.ndarray, dt: float) -> np.ndarray:
     return y + (dt / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
+def dop853_step(f: Derivative, t: float, y: np.ndarray, dt: float) -> np.ndarray:
+    """One fixed step of DOP853's eighth-order solution (twelve stages, :mod:`._dop853`; no
+    error estimate, no step control)."""
+    k = [f(t, y)]
+    for i in range(1, STAGES):
+        acc = A[i, 0] * k[0]
+        for j in range(1, i):
+            if A[i, j] != 0.0:
+                acc = acc + A[i, j] * k[j]
+        k.append(f(t + C[i] * dt, y + dt * acc))
+    acc = B[0] * k[0]
+    for j in range(1, STAGES):
+        if B[j] != 0.0:
+            acc = acc + B[j] * k[j]
+    return y + dt * acc
+
+
 INTEGRATORS: dict[str, Callable[[Derivative, float, np.ndarray, float], np.ndarray]] = {
     "euler": euler_step,
     "rk4": rk4_step,
+    "dop853": dop853_step,
 }
 """Integrators by name; the relative propagator uses ``"rk4"`` by default."""
 

@@ -167,8 +167,9 @@ class ClusterCore(BatchedCore):
     at every physics step, so ``pair_distance`` and ``min_separation`` stay exact.
 
     ``fused`` (default, with numba): a decision's physics steps run in one call of the compiled
-    truth kernel and the separation minima in one compiled pass (:meth:`_step_fused`, when no
-    inner loop is registered), and the dense path's graph and observation are compiled
+    truth kernel, one DOP853 step over the decision (``decision_model``; RK4 physics steps with
+    the random disturbance), and the separation minima in one compiled pass (:meth:`_step_fused`,
+    when no inner loop is registered), and the dense path's graph and observation are compiled
     (:mod:`satenv.envs._cluster_kernel`); ``fused=False`` is the numpy reference.
     """
 
@@ -187,6 +188,10 @@ class ClusterCore(BatchedCore):
         self.obs_dim = N_FIXED_OBS + 7 * self.n_slots
         self.orbit = sc.orbit
         self.model = RelativeModel(sc.dynamics, self.orbit, sc.physics_dt)
+        # the fused step's: one DOP853 step over a decision's physics steps (their inputs exactly;
+        # RK4 steps for the random disturbance, a new draw at every physics step: satenv.dynamics)
+        self.decision_model = (self.model if sc.disturbance == "random" else
+                               RelativeModel(sc.dynamics, self.orbit, sc.physics_dt, integrator="dop853"))
         self.all_targets = np.tile(sc.targets_array(), (self.batch, 1, 1))  # (B, T, 3) slots
         self.q_r = np.asarray(sc.target_spacecraft, dtype=float)
         self.p_obs = np.asarray(sc.obstacle_velocity, dtype=float)
@@ -384,21 +389,24 @@ class ClusterCore(BatchedCore):
 
     def _step_fused(self, accel: np.ndarray, rng) -> StepResult:
         """:meth:`step` without an inner loop: the command is constant over the decision, so the
-        physics steps run in one call of the compiled truth kernel (frames converted once) and the
+        physics steps run in one call of the compiled truth kernel (frames converted once; one
+        DOP853 step with the disturbance's staircase inside it integrated exactly) and the
         separation minima in one call of :func:`satenv.envs._cluster_kernel.separations`. The same
-        numbers as the physics-step loop up to rounding (``tests/test_cluster_kernel.py``)."""
+        numbers as the physics-step loop to 1e-10 (``tests/test_cluster_kernel.py``)."""
         sc = self.scenario
         h, n_sub = sc.physics_dt, sc.substeps
         u = saturate_norm(accel, sc.u_max)
         ts = self.time() + h * np.arange(n_sub)[:, None]                       # (S, B)
-        if sc.disturbance == "sinusoid":
-            u_steps = u + sinusoid_disturbance(ts, sc.disturbance_amplitude)[:, :, None, :]
-        elif sc.disturbance == "random":   # drawn step by step: the generator's stream as the loop's
+        common = None   # the sinusoid: one staircase for every satellite (satenv.dynamics._span_kernel)
+        if sc.disturbance == "random":     # drawn step by step: the generator's stream as the loop's
             u_steps = u + np.stack([self._disturbance(t, rng) for t in ts])
         else:
             u_steps = np.broadcast_to(u, (n_sub, *u.shape))
+            if sc.disturbance == "sinusoid":
+                common = sinusoid_disturbance(ts, sc.disturbance_amplitude)
         start = self.x[..., :3]
-        self.x, self.chief, path = self.model.propagate(self.x, u_steps, self.chief, positions=True)
+        self.x, self.chief, path = self.decision_model.propagate(self.x, u_steps, self.chief, positions=True,
+                                                                 common=common)
         pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
         self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
         if not self.dense:
