@@ -29,7 +29,7 @@ from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from satenv.errors import SatenvError
 
-__all__ = ["PERTURBATIONS", "Perturbation", "PerturbedEnv", "make_env", "names"]
+__all__ = ["PERTURBATIONS", "Perturbation", "PerturbedEnv", "get", "make_env", "names", "perturbed"]
 
 NAV_SEED_KEY = 0x6E6176
 """Mixed with the episode seed to seed the navigation error (independent of the env's own draws)."""
@@ -153,11 +153,17 @@ class PerturbedEnv(BaseParallelWrapper):
 def make_env(task: Any, perturbation: str | None, **overrides: Any) -> Any:
     """The task's env under the named perturbation (``None``: the nominal env), with
     ``overrides`` applied to both the nominal and the truth scenario."""
-    nominal = task.make_env(**overrides)
+    return perturbed(lambda **kw: task.make_env(**{**overrides, **kw}), perturbation)
+
+
+def perturbed(build: Callable[..., Any], perturbation: str | None) -> Any:
+    """``build(**scenario_overrides)`` (a satenv env) under the named perturbation: the nominal env
+    is ``build()``, the truth ``build(**truth overrides)``."""
+    nominal = build()
     if perturbation is None:
         return nominal
     p = get(perturbation)
-    truth = task.make_env(**{**overrides, **p.truth(nominal.scenario)})
+    truth = build(**p.truth(nominal.scenario))
     return _wrapper_class(type(truth))(truth, p, nominal.scenario)
 
 

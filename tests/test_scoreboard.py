@@ -349,7 +349,7 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "training.train", "--total-timesteps", "256", "--num-envs", "2",
                            "--n-steps", "32", "--batch-size", "64", "--eval-every", "0", "--test-seeds", "0",
                            "--eval-baselines", "zero", "--checkpoint-every", "0", "--progress", "false",
-                           "--env-kwargs", '{"randomize": true}', "--out-dir", str(run)],
+                           "--env-id", "platoon_v0", "--env-kwargs", '{"randomize": true}', "--out-dir", str(run)],
                           capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
     assert proc.returncode == 0, proc.stderr[-2000:]
     scen = registry.SCENARIOS["platoon-random-cw"]
@@ -531,3 +531,21 @@ def test_cli_shares_the_training_grammar():
     parse = build_parser().parse_args
     assert parse(["--out-dir", "a"]).out == parse(["--out", "a"]).out == "a"
     assert parse(["--address", "h:1"]).ray_address == parse(["--ray-address", "h:1"]).ray_address == "h:1"
+
+
+def test_perturbed_scenarios_run_and_fill_the_robustness_table(tmp_path):
+    """``<task>@<perturbation>`` selects the task under each of its perturbations that match; the
+    board's robustness section lists them beside the nominal task."""
+    from benchmarks.scoreboard.report import robustness
+    from satenv import tasks
+
+    name = "platoon-pereira2022-random"
+    task = tasks.get(name)
+    reg = {name: ScenarioSpec(name, task.env_id, {**task.env_kwargs, "max_steps": 5})}
+    board = _board(tmp_path / "b", seeds="900000-900001", scenario_registry=reg, policies="zero",
+                   scenarios=f"{name},{name}@nav-*,{name}@thrust-80")
+    table = robustness(board)[name]["zero"]
+    assert set(table) == {"nominal", "nav-0.1m", "nav-1m", "thrust-80"}
+    assert all(cell["n"] == 2 for cell in table.values())
+    assert "## Robustness" in board.markdown and f"{name}@nav-1m" in board.aggregates
+    assert all("@" not in s for s in board.summary.get("reference", {}))   # perturbed ones stay out

@@ -11,7 +11,15 @@ from typing import Any
 
 from benchmarks.scoreboard.backends import stream
 from benchmarks.scoreboard.headline import headline
-from benchmarks.scoreboard.plan import Plan, Selection, board_seeds, make_plan, select, split_names
+from benchmarks.scoreboard.plan import (
+    PERTURBATION_SEP,
+    Plan,
+    Selection,
+    board_seeds,
+    make_plan,
+    select,
+    split_names,
+)
 from benchmarks.scoreboard.registry import (
     POLICIES,
     QUICK,
@@ -184,7 +192,8 @@ def _finish(out: Path, header: dict[str, Any], records: list[Record], notes: lis
     agg = aggregate(records)
     agg = {s: agg[s] for s in dict.fromkeys(r["scenario"] for r in records)}
     board = Board(out, header, records, agg, {s: rank(agg[s]) for s in agg}, notes)
-    board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg})
+    board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg  # nominal scenarios only
+                                        if PERTURBATION_SEP not in s})
     board.headline = headline(records, board.ranking)
     board.markdown = render_markdown(board, plots=plots)
     write_outputs(board, plots=plots)

@@ -66,8 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{QUICK['seeds']} (a few minutes on 2 cores)")
     p.add_argument("--scenarios", help="comma-separated scenario names or globs (default: all available)")
     p.add_argument("--policies", help="comma-separated policy names or globs (default: all available)")
-    p.add_argument("--seeds", help=f"seeds: '0-9', '0,3,7' (default: {FULL['seeds']} with fewer for "
-                                   f"{sorted(FULL['scenario_seeds'])}; quick: {QUICK['seeds']})")
+    p.add_argument("--seeds", help=f"seeds: '0-9', '0,3,7' (default: the test seeds {FULL['seeds']} with fewer for "
+                                   f"{sorted(FULL['scenario_seeds'])} and one for a deterministic task; "
+                                   f"quick: {QUICK['seeds']})")
     p.add_argument("--policy", action="append", default=[], metavar="PATH",
                    help="also run a trained policy folder (training.load(PATH)), named after its run "
                         "folder (runs/a/final -> user:a); repeatable. Safe for folders from anyone: "

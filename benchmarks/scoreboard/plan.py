@@ -11,12 +11,12 @@ from __future__ import annotations
 import difflib
 import fnmatch
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from benchmarks.scoreboard.registry import FULL, QUICK
+from benchmarks.scoreboard.registry import DETERMINISTIC_SEEDS, FULL, QUICK
 from benchmarks.scoreboard.specs import (
     NETWORK_SUFFIX,
     SHIELD_SUFFIX,
@@ -65,6 +65,8 @@ def board_seeds(seeds: list[int] | str | None, quick: bool,
     if scenario_seeds is None:
         scenario_seeds = {} if user_seeds else dict(preset.get("scenario_seeds", {}))
     caps = {name: [s for s in seeds if s in set(lst)] or seeds[:1] for name, lst in scenario_seeds.items()}
+    for name in DETERMINISTIC_SEEDS:      # one episode of a deterministic task: no interval on copies
+        caps[name] = caps.get(name, seeds)[:1]
     return seeds, caps
 
 
@@ -109,6 +111,8 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
     for pat in requested if requested is not None else ["*"]:
         if pat.endswith(SHIELD_SUFFIX) and kind == "policy":
             _add_shielded(pat[:-len(SHIELD_SUFFIX)], registry)
+        if PERTURBATION_SEP in pat and kind == "scenario":
+            _add_perturbed(pat, registry)
         matches = [n for n in registry if fnmatch.fnmatchcase(n, pat)]
         if not matches and kind == "policy" and pat.endswith(SHIELD_SUFFIX) \
                 and pat[:-len(SHIELD_SUFFIX)] + NETWORK_SUFFIX in registry:
@@ -122,6 +126,26 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
         for name in (n for n in matches if n not in sel.names):
             _add(sel, name, registry[name], strict and pat == name, kind, notes)
     return sel
+
+
+PERTURBATION_SEP = "@"
+"""``<scenario>@<perturbation>``: a scenario under a named perturbation (:mod:`satenv.perturbations`)."""
+
+
+def _add_perturbed(pattern: str, registry: Any) -> None:
+    """Register ``<scenario>@<perturbation>`` for every scenario matching the part before ``@``
+    and every perturbation matching the part after it that the scenario's task lists
+    (``Task.perturbations``; a scenario that is no task takes none)."""
+    from satenv import tasks
+
+    base, _, pert = pattern.partition(PERTURBATION_SEP)
+    for name in [n for n in registry if fnmatch.fnmatchcase(n, base) and PERTURBATION_SEP not in n]:
+        spec = registry[name]
+        for p in tasks.TASKS[name].perturbations if name in tasks.TASKS else ():
+            if fnmatch.fnmatchcase(p, pert):
+                registry.setdefault(f"{name}{PERTURBATION_SEP}{p}", replace(
+                    spec, name=f"{name}{PERTURBATION_SEP}{p}", perturbation=p,
+                    description=f"{spec.description}; under {p}"))
 
 
 def _add_shielded(base: str, registry: Any) -> None:

@@ -16,7 +16,7 @@ from typing import Any
 from benchmarks.scoreboard.specs import NETWORK_SUFFIX, PolicySpec, ScenarioSpec, ScoreboardError
 from satenv import tasks
 
-__all__ = ["FULL", "POLICIES", "QUICK", "SCENARIOS", "SYSTEMS", "discover_trained_policies", "user_policy",
+__all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "SCENARIOS", "SYSTEMS", "discover_trained_policies", "user_policy",
            "user_policy_name"]
 
 SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
@@ -53,23 +53,26 @@ QUICK: dict[str, Any] = {
                   "platoon-pereira2022", "formation-kannan2022-position", "cluster-case1",
                   "servicing-pereira2022"],
     "policies": ["zero", "random", "dmpc", "apf", "cgmres", "trained:*"],   # no NMPC: minutes an episode
-    "seeds": [0, 1, 2],
-    # cluster ~10 s per episode; servicing: one seed of the paper's start
-    "scenario_seeds": {"cluster-case1": [0], "servicing-pereira2022": [0]},
+    "seeds": tasks.show_seeds(tasks.SEED_SPLITS["test"][:3]),
+    "scenario_seeds": {},
 }
-"""The ``--quick`` board (the README's first command): a few minutes on 2 cores at most."""
+"""The ``--quick`` board (the README's first command): a few minutes on 2 cores at most. Seeds are
+the first test seeds of :data:`satenv.tasks.SEED_SPLITS`; a deterministic task runs one."""
 
 FULL: dict[str, Any] = {
-    "seeds": "0-9",
+    "seeds": tasks.show_seeds(tasks.SEED_SPLITS["test"][:10]),
     # the costliest pairs: tube-RDMPC ~0.6 s x 400 decisions per cluster episode, NMPC ~0.8 s x
-    # 1200 decisions per servicing episode (measured on 2 shared cores)
-    "scenario_seeds": {"cluster-case1": [0, 1, 2, 3, 4], "cluster-case2": [0, 1, 2, 3, 4],
-                       "servicing-pereira2022": [0, 1, 2],
-                       # 256 agents: the DMPC takes ~0.5 s per decision of the whole swarm
-                       "platoon-swarm256-ring-cw": [0, 1, 2], "cluster-swarm64-cw": [0, 1, 2],
-                       "cluster-case1-random": [0, 1, 2, 3, 4], "servicing-pereira2022-random": [0, 1, 2]},
+    # 1200 decisions per servicing episode (measured on 2 shared cores); 256 agents: the DMPC
+    # takes ~0.5 s per decision of the whole swarm
+    "scenario_seeds": {name: list(tasks.get(name).seeds("test", n)) for name, n in (
+        ("platoon-swarm256-ring-cw", 3), ("cluster-swarm64-cw", 3), ("cluster-case1-random", 5),
+        ("servicing-pereira2022-random", 3))},
 }
-"""The full (published) board: every scenario x fitting policy x these seeds."""
+"""The full (published) board: every scenario x fitting policy x these test seeds (a deterministic
+task runs one)."""
+
+DETERMINISTIC_SEEDS = {name: [t.seeds("test")[0]] for name, t in tasks.TASKS.items() if not t.randomized}
+"""A task that does not randomise its start runs one seed (every seed gives the same episode)."""
 
 
 def _folder_env(path: Path) -> dict[str, Any]:

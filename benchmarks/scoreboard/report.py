@@ -328,6 +328,46 @@ def _summary_section(summary: dict[str, Any]) -> list[str]:
     return lines + [""]
 
 
+def robustness(board: Board) -> dict[str, dict[str, dict[str, dict[str, Any]]]]:
+    """``{scenario: {policy: {perturbation: {"n", "successes", "collision_episodes",
+    "violation_episodes"}}}}`` of the board's ``<scenario>@<perturbation>`` scenarios, with the
+    nominal scenario as perturbation ``"nominal"`` when it is on the board."""
+    perturbed = {s.partition("@")[0] for s in board.aggregates if "@" in s}
+    out: dict[str, dict[str, dict[str, dict[str, Any]]]] = {}
+    for rec in board.records:
+        base, _, pert = rec["scenario"].partition("@")
+        if base not in perturbed:
+            continue
+        cell = out.setdefault(base, {}).setdefault(rec["policy"], {}).setdefault(
+            pert or "nominal", {"n": 0, "successes": 0, "collision_episodes": 0, "violation_episodes": 0})
+        cell["n"] += 1
+        cell["successes"] += bool(rec.get("success"))
+        cell["collision_episodes"] += bool(rec.get("collisions"))
+        cell["violation_episodes"] += bool(rec.get("violations"))
+    return out
+
+
+def _robustness_section(board: Board) -> list[str]:
+    table = robustness(board)
+    if not table:
+        return []
+    lines = ["## Robustness: each task under its perturbations", "",
+             "Per policy and perturbation (`satenv.perturbations`; navigation error is read by the "
+             "policy, the controllers and a filter wrapped around the policy alike; the truth is "
+             "scored): successes / episodes, then collision episodes and violation episodes. "
+             "`nominal`: the task itself on the same board.", ""]
+    for base, pols in table.items():
+        perts = sorted({p for cells in pols.values() for p in cells}, key=lambda p: (p != "nominal", p))
+        lines += [f"### `{base}`", "", "| policy | " + " | ".join(perts) + " |",
+                  "|---|" + "--:|" * len(perts)]
+        for pol, cells in sorted(pols.items()):
+            row = [f"{c['successes']}/{c['n']} · {c['collision_episodes']} · {c['violation_episodes']}"
+                   if (c := cells.get(p)) else "–" for p in perts]
+            lines.append(f"| `{pol}` | " + " | ".join(row) + " |")
+        lines.append("")
+    return lines
+
+
 def render_markdown(board: Board, plots: bool = True) -> str:
     """``scoreboard.md``: header, the headline (``plots``: with its figure), the aggregates across
     scenarios, one ranked table per scenario, notes."""
@@ -336,6 +376,7 @@ def render_markdown(board: Board, plots: bool = True) -> str:
     lines = _preamble(board.header)
     lines += headline_section(board.headline, figure=plots)
     lines += _summary_section(board.summary)
+    lines += _robustness_section(board)
     for scen in board.aggregates:
         lines += _scenario_section(board, scen)
     if board.notes:

@@ -77,6 +77,8 @@ class ScenarioSpec:
         kwargs: keyword arguments of the env.
         description: one line for the scoreboard header.
         requires: optional third-party modules the env needs.
+        perturbation: a name of :data:`satenv.perturbations.PERTURBATIONS` the env runs under
+            (``<task>@<perturbation>`` scenarios of the robustness table).
 
     Success is the env scenario's own rule (``success_tol``, ``collision_voids_success``;
     :func:`satenv.metrics.success`), set through ``kwargs`` like any scenario field.
@@ -87,6 +89,7 @@ class ScenarioSpec:
     kwargs: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
     requires: tuple[str, ...] = ()
+    perturbation: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -104,7 +107,11 @@ class ScenarioSpec:
         import satenv
 
         self.check_available()
-        return satenv.make(self.env_id, **dict(self.kwargs))
+        if self.perturbation is None:
+            return satenv.make(self.env_id, **dict(self.kwargs))
+        from satenv.perturbations import perturbed
+
+        return perturbed(lambda **truth: satenv.make(self.env_id, **{**self.kwargs, **truth}), self.perturbation)
 
     def success_rule(self) -> dict[str, Any]:
         """The env scenario's success rule, as the board's header and fingerprint record it."""
@@ -116,9 +123,16 @@ class ScenarioSpec:
         # the payload keeps the format of logs written before env ids and before the scenario
         # owned its success rule, so that those logs stay resumable: the same definition
         rule = self.success_rule()
-        return _fingerprint({"targets": [f"satenv.envs.{self.env_id}:parallel_env"],
-                             "kwargs": dict(self.kwargs), "success_tol": rule["success_tol_m"],
-                             "collision_free_success": rule["collision_free_success"]})
+        payload = {"targets": [f"satenv.envs.{self.env_id}:parallel_env"],
+                   "kwargs": dict(self.kwargs), "success_tol": rule["success_tol_m"],
+                   "collision_free_success": rule["collision_free_success"]}
+        if self.perturbation is not None:
+            from satenv.perturbations import get
+
+            p = get(self.perturbation)
+            payload["perturbation"] = {"name": p.name, "description": p.description,
+                                       "sigma": [p.sigma_position, p.sigma_velocity]}
+        return _fingerprint(payload)
 
 
 @dataclass(frozen=True)
