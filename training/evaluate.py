@@ -280,17 +280,16 @@ def learning_curve(history: list[dict[str, Any]], expert: dict[str, Any] | None,
     """Success rate, RMSE and total Δv on the evaluation seeds at each entry of ``history``
     (``x_key``: ``"labels"`` for DAgger rounds, ``"step"`` for RL), a scripted reference's as
     dashed lines; skipped without matplotlib."""
-    try:
-        import matplotlib
+    from satenv.render import new_figure  # own canvas: the caller's backend is left alone
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:  # plotting is optional (the render extra)
+    try:
+        fig = new_figure((11, 3.2), 100, layout="constrained")
+    except ImportError:  # plotting is optional
         return
     labels = [h[x_key] for h in history]
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
-    for ax, key, title in zip(axes, ("success_rate", "rmse", "delta_v"), ("success rate", "RMSE", "total Δv"),
-                              strict=True):
+    axes = fig.subplots(1, 3)
+    for ax, key, title in zip(axes, ("success_rate", "rmse", "delta_v"),
+                              ("success rate", "RMSE [m]", "total Δv [m/s]"), strict=True):
         ax.plot(labels, [h["aggregate"][key] for h in history], "o-", label="learned")
         if expert:
             ax.axhline(expert["aggregate"][key], color="k", ls="--", label=expert_name)
@@ -298,6 +297,4 @@ def learning_curve(history: list[dict[str, Any]], expert: dict[str, Any] | None,
         ax.set_title(title)
     axes[0].set_ylim(-0.05, 1.05)
     axes[0].legend(loc="lower right")
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
