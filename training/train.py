@@ -49,7 +49,7 @@ from training.policy import (
 )
 from training.runfolder import RunFolderError
 from training.shaping import RewardShaping
-from training.trust import MAX_CHECKPOINT_BYTES, member, read_json
+from training.trust import MAX_CHECKPOINT_BYTES, npz_headers, read_json, stored_zip
 
 __all__ = ["main", "train", "latest_checkpoint"]
 
@@ -222,12 +222,31 @@ def load_checkpoint(model, folder: Path) -> None:
                              f"save_checkpoint ({CHECKPOINT_STATE}, vecnormalize.json) for this config") from None
 
 
+CHECKPOINT_STATE_SLACK = 2**20
+"""Bytes of ``sb3_state.pt`` beyond its tensors (the pickled structure, zip headers)."""
+ADAM_COPIES = 3
+"""Tensors per parameter in ``sb3_state.pt``: the parameter and Adam's two moment estimates."""
+
+
+def checkpoint_state_cap(model) -> int:
+    """The largest ``sb3_state.pt`` the freshly built ``model`` can have written: every tensor of
+    its saved state dicts :data:`ADAM_COPIES` times, plus :data:`CHECKPOINT_STATE_SLACK` (the
+    policy folder's rule: the size the architecture allows, known before reading)."""
+    from stable_baselines3.common.save_util import recursive_getattr
+
+    names, tensors = model._get_torch_save_params()
+    params = sum(t.numel() * t.element_size() for name in names
+                 for t in recursive_getattr(model, name).state_dict().values() if hasattr(t, "numel"))
+    params += sum(recursive_getattr(model, name).numel() * 8 for name in tensors)
+    return ADAM_COPIES * params + CHECKPOINT_STATE_SLACK
+
+
 def _load_checkpoint(model, folder: Path) -> None:
     import torch
     from stable_baselines3.common.save_util import recursive_getattr
 
-    state = torch.load(member(folder, CHECKPOINT_STATE, MAX_CHECKPOINT_BYTES)[0], map_location="cpu",
-                       weights_only=True)  # member: no link, size capped (training.trust)
+    state = torch.load(stored_zip(folder, CHECKPOINT_STATE, checkpoint_state_cap(model)), map_location="cpu",
+                       weights_only=True)  # no link, nothing compressed, at most the model's own size
     model.set_parameters(state["state_dicts"], exact_match=True, device="cpu")
     for name, value in state["tensors"].items():
         recursive_getattr(model, name).data.copy_(value)
@@ -236,7 +255,13 @@ def _load_checkpoint(model, folder: Path) -> None:
     buffer_path = folder / "replay_buffer.npz"
     if buffer_path.is_file() and getattr(model, "replay_buffer", None) is not None:
         buffer = model.replay_buffer
-        with np.load(member(folder, "replay_buffer.npz", MAX_CHECKPOINT_BYTES)[0], allow_pickle=False) as d:
+        path = stored_zip(folder, "replay_buffer.npz", MAX_CHECKPOINT_BYTES)
+        for k, (shape, dtype) in npz_headers(path).items():   # sizes from the headers first
+            want = getattr(buffer, k, None) if k in _BUFFER_ARRAYS else np.empty(())
+            if want is None or tuple(shape) != want.shape or np.dtype(dtype).itemsize > want.dtype.itemsize:
+                raise RunFolderError(f"--resume: {path}: array {k!r:.40} does not fit the replay buffer "
+                                     f"(expected {_BUFFER_ARRAYS} of the buffer's shapes, pos and full scalars)")
+        with np.load(path, allow_pickle=False) as d:
             for k in _BUFFER_ARRAYS:
                 if k in d:
                     getattr(buffer, k)[...] = d[k]

@@ -34,8 +34,9 @@ import numpy as np
 
 from satenv.errors import SatenvError
 
-__all__ = ["CODE_FLAG", "MAX_CHECKPOINT_BYTES", "MAX_HEADER_BYTES", "MAX_JSON_BYTES", "UntrustedDataError", "check_replayed_config",
-           "member", "read_json", "read_member", "safetensors_arrays", "sha256_file"]
+__all__ = ["CODE_FLAG", "MAX_CHECKPOINT_BYTES", "MAX_HEADER_BYTES", "MAX_JSON_BYTES", "MAX_ZIP_ENTRIES",
+           "UntrustedDataError", "check_replayed_config", "member", "npz_headers", "read_json", "read_member",
+           "safetensors_arrays", "sha256_file", "stored_zip"]
 
 MAX_JSON_BYTES = 2 * 2**20
 """Cap on one JSON member (``policy.json``, ``obs_norm.json``, ``env.json``, ``config.json``,
@@ -46,6 +47,9 @@ MAX_CHECKPOINT_BYTES = 2**33
 """Cap on one file of a run's checkpoint (``--resume``): 8 GiB (a SAC replay buffer can be large)."""
 CHUNK = 2**20
 """Bytes read (and hashed) at a time."""
+MAX_ZIP_ENTRIES = 100_000
+"""Cap on the entries of a checkpoint zip (``torch.save`` writes one per tensor, ``np.savez`` one
+per array)."""
 
 
 class UntrustedDataError(SatenvError):
@@ -188,6 +192,57 @@ def safetensors_arrays(data: bytearray, expected: Mapping[str, tuple[int, ...]],
         raise bad("the tensors do not fill the data section back to back")
     return {name: np.frombuffer(data, dtype=_DTYPES["F32"], count=(b - a) // 4, offset=8 + n + a).reshape(shape)
             for a, b, name, shape in spans}
+
+
+def stored_zip(root: str | Path, name: str, cap: int) -> Path:
+    """Member ``name`` of ``root`` (:func:`member`, at most ``cap`` bytes) after checking, from its
+    zip central directory and before anything is read from the entries, that it is what
+    ``torch.save`` and ``np.savez`` write: at most :data:`MAX_ZIP_ENTRIES` entries, every one
+    stored without compression, with plain names and sizes inside the file. So nothing inflates:
+    reading it costs at most its size on disk (a 4 MiB zip that inflates to 4 GiB is refused)."""
+    import zipfile
+
+    path, st = member(root, name, cap)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            entries = zf.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as err:
+        raise UntrustedDataError(f"{path}: not a readable zip ({type(err).__name__})") from None
+    if len(entries) > MAX_ZIP_ENTRIES:
+        raise UntrustedDataError(f"{path}: {len(entries)} zip entries, more than {MAX_ZIP_ENTRIES}")
+    total = 0
+    for i, e in enumerate(entries):
+        if e.compress_type != zipfile.ZIP_STORED or e.file_size != e.compress_size:
+            raise UntrustedDataError(f"{path}: entry {i} is compressed; a "
+                                     "checkpoint's entries are stored as written (torch.save, np.savez), so "
+                                     "a compressed one is refused before it is inflated")
+        if e.filename.startswith("/") or ".." in e.filename.split("/"):
+            raise UntrustedDataError(f"{path}: an entry name leaves the archive")
+        total += e.file_size
+    if total > st.st_size:
+        raise UntrustedDataError(f"{path}: its entries declare {total} bytes, more than the file's {st.st_size}")
+    return path
+
+
+def npz_headers(path: str | Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """``{array name: (shape, dtype)}`` of an ``np.savez`` file, read from each ``.npy`` header
+    only (no array is built); call :func:`stored_zip` first."""
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    out: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for entry in zf.infolist():
+                with zf.open(entry) as f:
+                    version = npy.read_magic(f)
+                    read = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+                    shape, _, dtype = read(f, max_header_size=MAX_HEADER_BYTES)
+                out[entry.filename.removesuffix(".npy")] = (tuple(shape), dtype)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, SyntaxError) as err:
+        raise UntrustedDataError(f"{path}: an .npy header is malformed ({type(err).__name__})") from None
+    return out
 
 
 CODE_FLAG = "--allow-code-env-id"
