@@ -43,12 +43,12 @@ TEST_SEEDS_PER_CHECKPOINT = 5
 """Test seeds of each evaluation: the first five of the task's test split (900000-900004)."""
 
 BUDGET_AGENT_STEPS: dict[str, int] = {
-    "platoon-pereira2023": 500_000,
-    "platoon-pereira2022": 500_000,
-    "formation-kannan2022-position": 300_000,
-    "formation-kannan2022-collision": 300_000,
-    "cluster-li2022": 300_000,
-    "servicing-pereira2022": 300_000,
+    "platoon-pereira2023": 200_000,
+    "platoon-pereira2022": 200_000,
+    "formation-kannan2022-position": 200_000,
+    "formation-kannan2022-collision": 200_000,
+    "cluster-li2022": 200_000,
+    "servicing-pereira2022": 200_000,
 }
 """RL budget of each system's training task [agent-steps]."""
 

@@ -79,10 +79,9 @@ def train_ppo(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
 
 
 def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
-    import satenv
     from benchmarl.experiment.callback import Callback
 
-    from training.actor import MLPActor  # noqa: F401  (the exported actor's class)
+    import satenv
     from training.benchmarl_train import BenchMARLConfig, build_experiment, export_actor
     from training.envs import policy_env_meta
     from training.policy import LearnedPolicy, ObsNormalizer

@@ -1,0 +1,241 @@
+"""Demonstration datasets in Minari: the controller's episodes on each paper system's training task.
+
+    python -m benchmarks.learning.datasets write --systems platoon-pereira2023 --episodes 50
+    python -m benchmarks.learning.datasets read  --systems platoon-pereira2023
+    python -m benchmarks.learning.datasets write --systems all --root /data/minari   # every system
+
+Each dataset (id ``satenv/<system>/<controller>-v0``, e.g. ``satenv/platoon-pereira2023/dmpc-v0``)
+holds the system controller's episodes (:data:`satenv.tasks.CONTROLLERS`) on the first
+``--episodes`` **train** seeds of the system's training task (:func:`satenv.tasks.training_task`),
+recorded through the centralised Gymnasium view ``satenv/<Env>-v0`` (:class:`satenv.gym_env.CentralisedEnv`)
+and written by Minari (``minari.create_dataset_from_buffers``, the storage of its ``DataCollector``). Datasets live in Minari's folder (``MINARI_DATASETS_PATH``,
+default ``~/.minari/datasets``; ``--root`` sets it), never in git: this command regenerates them.
+
+**Layout of the multi-agent data** (also in each dataset's description, the dataset card):
+
+* ``observations[t]``: every agent's observation concatenated in ``possible_agents`` order
+  (``M x obs_dim``), ``actions[t]``: every agent's normalised action concatenated the same way
+  (``M x act_dim``, in ``[-1, 1]``);
+* ``rewards[t]``: the team sum of the agents' rewards; ``terminations``/``truncations``: the team's;
+* ``infos``: per agent (arrays of length ``M``, agent order) the safety fields ``collision``,
+  ``violations``, ``cost``, ``min_separation`` and ``delta_v``; ``tracking_error`` ``(M, d)``;
+  and ``state``: the env's full state (``env.state()``), from which an episode replays exactly
+  (:func:`replay`).
+
+The episode's seed is Minari's episode ``seed``: ``env.reset(seed=seed)`` and the recorded actions
+reproduce the recorded observations and states (``tests/test_datasets.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from satenv import tasks
+
+__all__ = ["INFO_FIELDS", "SafetyInfos", "dataset_id", "episode_seed", "make_env", "read", "record_episode", "replay", "write"]
+
+INFO_FIELDS = {"collision": bool, "violations": np.int64, "cost": np.float64, "min_separation": np.float64,
+               "delta_v": np.float64}
+"""Per-agent safety fields kept in ``infos`` (and their dtype)."""
+MANIFEST = Path(__file__).resolve().parent / "datasets.json"
+"""What was generated (id, task, seeds, size, wall time; committed, the datasets are not): the docs
+page's dataset table."""
+GYM_ID = {"platoon_v0": "satenv/Platoon-v0", "cluster_v0": "satenv/Cluster-v0",
+          "servicing_v0": "satenv/Servicing-v0", "formation_v0": "satenv/Formation-v0"}
+
+
+class DatasetError(ValueError):
+    """A bad dataset request (names the field, the value and what is expected)."""
+
+
+class SafetyInfos(gym.Wrapper):
+    """The centralised view with fixed-layout infos (module docstring): what Minari stores."""
+
+    def _infos(self, info: dict[str, Any]) -> dict[str, Any]:
+        pz = self.env.unwrapped.env
+        per = [info["agents"][a] for a in pz.possible_agents]
+        out = {k: np.asarray([p[k] for p in per], dtype=t) for k, t in INFO_FIELDS.items()}
+        out["tracking_error"] = np.asarray([p["tracking_error"] for p in per], dtype=np.float64)
+        out["state"] = np.asarray(pz.state(), dtype=np.float64)
+        return out
+
+    def reset(self, **kwargs: Any):
+        obs, info = self.env.reset(**kwargs)
+        return obs, self._infos(info)
+
+    def step(self, action: Any):
+        obs, reward, term, trunc, info = self.env.step(action)
+        return obs, reward, term, trunc, self._infos(info)
+
+
+def dataset_id(system: str) -> str:
+    """``satenv/<system>/<controller>-v0``."""
+    return f"satenv/{system}/{tasks.system(system).controller.replace('_', '-')}-v0"
+
+
+def make_env(system: str) -> gym.Env:
+    """The training task of ``system`` as its centralised Gymnasium view with :class:`SafetyInfos`."""
+    import satenv  # noqa: F401  (registers the gymnasium ids)
+
+    task = tasks.training_task(system)
+    return SafetyInfos(gym.make(GYM_ID[task.env_id], **dict(task.env_kwargs)))
+
+
+def _card(system: str, seeds: list[int], steps: int) -> str:
+    sysdef, task = tasks.system(system), tasks.training_task(system)
+    env = task.make_env()
+    m = len(env.possible_agents)
+    o, a = env.observation_space(env.possible_agents[0]).shape[0], env.action_space(env.possible_agents[0]).shape[0]
+    return (f"satenv {sysdef.label}: the controller {sysdef.controller!r} (baselines.make) flying the training "
+            f"task {task.name!r} ({task.description}) on train seeds {tasks.show_seeds(seeds)} "
+            f"({len(seeds)} episodes, {steps} steps, {steps * m} agent-steps). Env: {GYM_ID[task.env_id]} with "
+            f"kwargs {dict(task.env_kwargs)} (satenv.gym_env.CentralisedEnv). Layout: {m} agents in "
+            f"possible_agents order {list(env.possible_agents)}; observation = the {m} agents' observations "
+            f"concatenated ({m} x {o}); action = their normalised actions concatenated ({m} x {a}, in [-1, 1]); "
+            f"reward = team sum; infos: per agent {sorted(INFO_FIELDS)} (length {m}), tracking_error ({m}, d), "
+            f"state = env.state() (replay: reset(seed=episode seed) then the actions). "
+            f"Written by python -m benchmarks.learning.datasets.")
+
+
+def record_episode(env: gym.Env, controller: Any, seed: int) -> Any:
+    """One controller episode on ``env`` (:func:`make_env`) as a Minari ``EpisodeBuffer``."""
+    from minari.data_collector.episode_buffer import EpisodeBuffer
+
+    pz = env.unwrapped.env
+    m, act_dim = len(pz.possible_agents), env.action_space.shape[0] // len(pz.possible_agents)
+    obs, info = env.reset(seed=int(seed))
+    controller.reset(seed=int(seed))
+    data: dict[str, list] = {"observations": [obs], "actions": [], "rewards": [], "terminations": [], "truncations": []}
+    infos = {k: [v] for k, v in info.items()}
+    done = False
+    while not done:
+        split = obs.reshape(m, -1)
+        acts = controller.act({a: split[i] for i, a in enumerate(pz.possible_agents)})
+        action = np.clip(np.concatenate([np.asarray(acts[a], dtype=np.float32).reshape(act_dim)
+                                         for a in pz.possible_agents]), -1, 1)
+        obs, reward, term, trunc, info = env.step(action)
+        for key, value in (("observations", obs), ("actions", action), ("rewards", reward),
+                           ("terminations", term), ("truncations", trunc)):
+            data[key].append(value)
+        for k, v in info.items():
+            infos[k].append(v)
+        done = term or trunc
+    return EpisodeBuffer(seed=int(seed), infos=infos, **data)
+
+
+def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, manifest: Path | None = None) -> Any:
+    """Record ``episodes`` controller episodes (train seeds ``seed0 ...``) as the system's dataset
+    (replacing an existing one) with Minari's writer (``minari.create_dataset_from_buffers``: the
+    storage ``DataCollector`` writes, without its ``jax`` dependency) and return the ``MinariDataset``;
+    its entry goes to ``manifest`` when given."""
+    import minari
+
+    import baselines
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise DatasetError(f"episodes must be a positive int, got {episodes!r}")
+    task = tasks.training_task(system)
+    seeds = list(task.seeds("train"))[seed0:seed0 + episodes]
+    env = make_env(system)
+    controller = baselines.make(tasks.system(system).controller, env.unwrapped.env)
+    buffers, t0 = [], time.perf_counter()
+    for k, seed in enumerate(seeds):
+        buffers.append(record_episode(env, controller, seed))
+        if progress:
+            print(f"{system}: episode {k + 1}/{len(seeds)} (seed {seed}) at {time.perf_counter() - t0:.0f}s", flush=True)
+    did = dataset_id(system)
+    if did in minari.list_local_datasets():
+        minari.delete_dataset(did)
+    steps = sum(len(b.actions) for b in buffers)
+    ds = minari.create_dataset_from_buffers(
+        did, buffers, env=env.unwrapped.spec, eval_env=env.unwrapped.spec, algorithm_name=f"scripted controller {tasks.system(system).controller}",
+        author="satenv", code_permalink="benchmarks/learning/datasets.py", description=_card(system, seeds, steps),
+        data_format="arrow", observation_space=env.observation_space, action_space=env.action_space)
+    env.close()
+    if manifest is not None:
+        _record(manifest, system, seeds, buffers, time.perf_counter() - t0)
+    return ds
+
+
+def _record(manifest: Path, system: str, seeds: list[int], buffers: list[Any], wall_s: float) -> None:
+    import minari
+
+    entries = json.loads(manifest.read_text()) if manifest.is_file() else {}
+    m = len(buffers[0].infos["collision"][0])
+    steps = sum(len(b.actions) for b in buffers)
+    entries[system] = {"dataset_id": dataset_id(system), "task": tasks.training_task(system).name,
+                       "controller": tasks.system(system).controller, "train_seeds": tasks.show_seeds(seeds),
+                       "episodes": len(buffers), "steps": steps, "agent_steps": steps * m,
+                       "collision_episodes": int(sum(bool(np.any(b.infos["collision"])) for b in buffers)),
+                       "violation_episodes": int(sum(bool(np.any(b.infos["violations"])) for b in buffers)),
+                       "wall_s": round(wall_s, 1), "minari": minari.__version__}
+    manifest.write_text(json.dumps(entries, indent=1, sort_keys=True) + "\n")
+
+
+def read(system: str) -> Any:
+    """The system's dataset, loaded by Minari's own loader (``minari.load_dataset``)."""
+    import minari
+
+    return minari.load_dataset(dataset_id(system))
+
+
+def episode_seed(dataset: Any, episode_id: int) -> int:
+    """The seed an episode was recorded with (Minari's episode metadata)."""
+    return int(next(iter(dataset.storage.get_episode_metadata([int(episode_id)])))["seed"])
+
+
+def replay(system: str, episode: Any, seed: int) -> dict[str, float]:
+    """Fly a recorded episode's actions from ``seed`` (:func:`episode_seed`); the largest
+    differences to the recorded observations and states (0 when it replays exactly)."""
+    env = make_env(system)
+    obs, info = env.reset(seed=int(seed))
+    obs_err = float(np.max(np.abs(obs - episode.observations[0])))
+    state_err = float(np.max(np.abs(info["state"] - episode.infos["state"][0])))
+    for t, action in enumerate(episode.actions):
+        obs, _, _, _, info = env.step(action)
+        obs_err = max(obs_err, float(np.max(np.abs(obs - episode.observations[t + 1]))))
+        state_err = max(state_err, float(np.max(np.abs(info["state"] - episode.infos["state"][t + 1]))))
+    env.close()
+    return {"observation": obs_err, "state": state_err}
+
+
+def _systems(text: str) -> list[str]:
+    if text == "all":
+        return list(tasks.SYSTEMS)
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    for n in names:
+        tasks.system(n)
+    return names
+
+
+def main(argv: Iterable[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.learning.datasets", description=__doc__.split("\n\n")[0])
+    p.add_argument("command", choices=("write", "read"))
+    p.add_argument("--systems", default="all", help="comma-separated systems or 'all'")
+    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--root", default=None, help="Minari's dataset folder (MINARI_DATASETS_PATH)")
+    p.add_argument("--manifest", default=str(MANIFEST), help="JSON file of what was written ('' for none)")
+    ns = p.parse_args(None if argv is None else list(argv))
+    if ns.root:
+        os.environ["MINARI_DATASETS_PATH"] = ns.root
+    for system in _systems(ns.systems):
+        ds = (write(system, ns.episodes, manifest=Path(ns.manifest) if ns.manifest else None)
+              if ns.command == "write" else read(system))
+        ep = next(ds.iterate_episodes())
+        print(f"{dataset_id(system)}: {ds.total_episodes} episodes, {ds.total_steps} steps; episode 0: "
+              f"{len(ep.actions)} steps, replay max |obs diff| {replay(system, ep, episode_seed(ds, ep.id))['observation']:.3g}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

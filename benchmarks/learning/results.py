@@ -1,0 +1,118 @@
+"""``results.json`` from the evaluation log: one record per complete run, the controllers, the grid.
+
+A run is complete when every one of its checkpoints is logged; its record has
+
+* ``system``, ``task``, ``algorithm``, ``filter`` (trained with the safety filter), ``seed``;
+* ``budget_agent_steps`` (the grid's budget: agent-steps, or expert labels for DAgger) and
+  ``agent_steps`` (what was run, whole collection rounds or episodes);
+* ``wall_s``: training wall time (evaluations excluded) on the machine that ran it;
+* ``curve``: ``[agent_steps, success_rate, mean_return, collision_episodes]`` per checkpoint, on
+  the run's test seeds;
+* ``test``: the last checkpoint's :func:`satenv.scoring.aggregate` fields (success, collision
+  and violation episodes, RMSE, delta-v, interventions per agent-step when filtered) and the RMSE
+  and delta-v ratios to the controller on matched episodes (:func:`satenv.scoring.matched_ratios`);
+* ``command``: the command that reproduces it.
+
+Runs with some checkpoints missing are listed in ``incomplete`` (with what they have), crashed
+runs in ``errors``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.learning import grid as G
+from satenv import scoring, tasks
+
+__all__ = ["build_results", "command", "write_results"]
+
+TEST_FIELDS = ("episodes", "success_rate", "collision_episodes", "violation_episodes", "safe_success_rate",
+               "rmse", "delta_v", "final_error_m", "compute_ms_per_agent", "interventions_per_agent_step")
+
+
+def command(system: str, algorithm: str, filtered: bool, seed: int) -> str:
+    """The command that reproduces one row (a filtered row runs with its unfiltered twin)."""
+    filt = f" --filter-systems {system}" if filtered else " --filter-systems ''"
+    if algorithm == "controller":
+        filt = ""
+    return (f"python -m benchmarks.learning run --systems {system} --algorithms {algorithm} --seeds {seed}"
+            f"{filt}")
+
+
+def _round(x: Any, nd: int = 4) -> Any:
+    return None if x is None else (round(float(x), nd) if isinstance(x, (float, np.floating)) else x)
+
+
+def _test_block(episodes: list[dict[str, Any]], ref: list[dict[str, Any]] | None) -> dict[str, Any]:
+    agg = scoring.aggregate(episodes)
+    out = {k: _round(agg.get(k)) for k in TEST_FIELDS if k in agg}
+    if ref:
+        out.update({k: _round(v) for k, v in scoring.matched_ratios(episodes, ref).items()})
+    return out
+
+
+def _point(rec: dict[str, Any]) -> list[Any]:
+    eps = rec["episodes"]
+    return [int(rec["agent_steps"]), _round(float(np.mean([bool(e["success"]) for e in eps]))),
+            _round(float(np.mean([e["episode_return"] for e in eps])), 3),
+            int(sum(bool(e["collisions"]) for e in eps))]
+
+
+def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """The ``results.json`` data of the log ``records``."""
+    runs: dict[tuple, dict[int, dict[str, Any]]] = defaultdict(dict)
+    errors = []
+    for rec in records:
+        if rec.get("error") is not None:
+            errors.append({k: rec.get(k) for k in ("system", "algorithm", "filter", "seed", "error")})
+            continue
+        runs[(rec["system"], rec["algorithm"], rec["filter"], rec["seed"])][rec["checkpoint"]] = rec
+    controllers = {}
+    for (system, algo, _, _), cps in runs.items():
+        if algo == "controller" and 0 in cps:
+            rec = cps[0]
+            controllers[system] = {"controller": tasks.system(system).controller, "task": rec["task"],
+                                   "test_seeds": rec["test_seeds"], "test": _test_block(rec["episodes"], None),
+                                   "mean_return": _point(rec)[2], "eval_s": rec.get("eval_s"),
+                                   "command": command(system, "controller", False, 0)}
+    out, incomplete = [], []
+    order = {s: i for i, s in enumerate(tasks.SYSTEMS)}
+    for key in sorted(runs, key=lambda k: (order[k[0]], G.ALGORITHMS.index(k[1]), k[2], k[3])):
+        system, algo, filtered, seed = key
+        if algo == "controller":
+            continue
+        cps = runs[key]
+        n = len(G.Run(system, algo, filtered, seed).checkpoints)
+        if any(k not in cps for k in range(n)):
+            incomplete.append({"system": system, "algorithm": algo, "filter": filtered, "seed": seed,
+                               "checkpoints_logged": sorted(cps)})
+            continue
+        last = cps[n - 1]
+        ref = None
+        for r in records:
+            if r.get("error") is None and r["system"] == system and r["algorithm"] == "controller":
+                ref = r["episodes"]
+                break
+        out.append({"system": system, "task": last["task"], "algorithm": algo, "filter": filtered, "seed": seed,
+                    "budget_agent_steps": int(last["budget_agent_steps"]), "agent_steps": int(last["agent_steps"]),
+                    "wall_s": _round(last["wall_s"], 1), "test_seeds": last["test_seeds"],
+                    "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref),
+                    "command": command(system, algo, filtered, seed)})
+    return {"grid": {"checkpoints": G.CHECKPOINTS, "test_seeds_per_checkpoint": G.TEST_SEEDS_PER_CHECKPOINT,
+                     "budget_agent_steps": G.BUDGET_AGENT_STEPS, "dagger_labels": G.DAGGER_LABELS,
+                     "filter_penalty": G.FILTER_PENALTY,
+                     "curve_fields": ["agent_steps", "success_rate", "mean_return", "collision_episodes"]},
+            "controllers": controllers, "records": out, "incomplete": incomplete, "errors": errors}
+
+
+def write_results(log: Path, out: Path) -> Path:
+    """Write ``results.json`` from the log (sorted keys, stable order: a re-run changes only what changed)."""
+    from benchmarks.learning.runner import read_log
+
+    out.write_text(json.dumps(build_results(read_log(log)), indent=1, sort_keys=True) + "\n")
+    return out

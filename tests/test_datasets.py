@@ -1,0 +1,51 @@
+"""Minari datasets of the controllers' episodes: written, read by Minari's loader, replayed exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+minari = pytest.importorskip("minari")
+
+from benchmarks.learning import datasets  # noqa: E402
+
+SYSTEM = "platoon-pereira2023"   # the DMPC flies it in a fraction of a second per episode
+
+
+@pytest.fixture
+def tiny(tmp_path, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    datasets.write(SYSTEM, 2, progress=False)
+    return datasets.read(SYSTEM)
+
+
+def test_written_dataset_is_read_by_minari(tiny):
+    assert tiny.total_episodes == 2
+    assert datasets.dataset_id(SYSTEM) in minari.list_local_datasets()
+    ep = next(tiny.iterate_episodes())
+    m = 4   # TPLF: four followers
+    assert ep.observations.shape[0] == len(ep.actions) + 1
+    assert ep.actions.shape[1] == m * 3 and np.all(np.abs(ep.actions) <= 1)
+    for key in datasets.INFO_FIELDS:
+        assert ep.infos[key].shape == (len(ep.actions) + 1, m)
+    assert "possible_agents order" in tiny.storage.metadata["description"]   # the dataset card
+    assert [datasets.episode_seed(tiny, i) for i in range(2)] == [0, 1]   # the training task's train seeds
+
+
+def test_a_recorded_episode_replays_to_the_same_states(tiny):
+    for ep in tiny.iterate_episodes():
+        err = datasets.replay(SYSTEM, ep, datasets.episode_seed(tiny, ep.id))
+        assert err == {"observation": 0.0, "state": 0.0}
+
+
+def test_replay_detects_other_actions(tiny):
+    ep = next(tiny.iterate_episodes())
+    ep.actions[0] = -ep.actions[0] if np.any(ep.actions[0]) else ep.actions[0] + 0.5
+    err = datasets.replay(SYSTEM, ep, datasets.episode_seed(tiny, ep.id))
+    assert err["state"] > 0.0
+
+
+def test_bad_episode_count_is_an_error(tmp_path, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    with pytest.raises(datasets.DatasetError, match="episodes"):
+        datasets.write(SYSTEM, 0)
