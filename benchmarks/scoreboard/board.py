@@ -28,6 +28,7 @@ from benchmarks.scoreboard.registry import (
     user_policies,
 )
 from benchmarks.scoreboard.report import (
+    RANKING,
     Board,
     aggregate,
     git_revision,
@@ -158,7 +159,7 @@ def _header(plan: Plan, scen_reg, pol_reg, pol_names: list[str], notes: list[str
                          **({"checkpoint": pol_reg[n].checkpoint} if pol_reg[n].checkpoint else {})}
                      for n in pol_names},
         "episodes_planned": len(plan.keys), "episodes_resumed": done,
-        "ranking": "success rate (desc), then RMSE (asc), then delta-v (asc)",
+        "ranking": RANKING,
         "notes": notes,
     }
 
@@ -218,6 +219,7 @@ def reaggregate(out: str | Path, plots: bool = True) -> Board:
             r["policy"], r["seed"]
 
     records = sorted((r for r in read_episodes(out / EPISODES_FILE) if r["scenario"] in scen), key=order)
+    header["ranking"] = RANKING       # re-ranked by the current rule
     return _finish(out, header, records, list(header.get("notes", [])), plots)
 
 

@@ -147,6 +147,11 @@ def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str
     return jsonable(out)
 
 
+RANKING = ("success rate (desc), then collision episodes (asc), then violation episodes (asc), then RMSE "
+           "(asc), then delta-v (asc): safety first")
+"""The board's ranking rule in words (:func:`rank`)."""
+
+
 def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
     """Policies of one scenario, best first, safety first (:func:`satenv.scoring.rank_key`):
     success rate, then collision episodes, then violation episodes, then RMSE, then delta-v."""
@@ -270,7 +275,7 @@ def _preamble(h: dict[str, Any]) -> list[str]:
         lines += ["Fewer seeds for the expensive scenarios: "
                   + ", ".join(f"{n}: {v}" for n, v in h["scenario_seeds"].items()), ""]
     return lines + [
-        f"Ranked by {h['ranking']}. Cells: mean over seeds [95 % interval]: success rate with the "
+        f"Ranked by {RANKING}. Cells: mean over seeds [95 % interval]: success rate with the "
         "Wilson score interval, every other metric with a percentile bootstrap of the mean (inside "
         "the observed values).", "",
         "Definitions (satenv.metrics; per episode, then averaged over seeds): **RMSE** [m] root mean "
