@@ -87,6 +87,14 @@ def _seeds(recs: list[dict[str, Any]]) -> str:
     return tasks.show_seeds(sorted(r["seed"] for r in recs))
 
 
+def _load_note(results: dict[str, Any]) -> str:
+    loads = [r["load_avg_1m"] for r in results["records"] if r.get("load_avg_1m") is not None]
+    if not loads:
+        return "on two CPU cores shared with other jobs"
+    return (f"on two CPU cores shared with other jobs (1-minute load average {min(loads):.0f}-{max(loads):.0f} "
+            "at the checkpoints)")
+
+
 def _says(system: str, groups: dict[tuple[str, bool], list[dict[str, Any]]], ctrl: dict[str, Any] | None) -> str:
     """What the curves say, from the numbers (the rule is written on the page)."""
     learned, partial, none = [], [], []
@@ -109,6 +117,26 @@ def _says(system: str, groups: dict[tuple[str, bool], list[dict[str, Any]]], ctr
     if none:
         parts.append("No success on any seed at the budget: " + ", ".join(none) + ".")
     return " ".join(parts)
+
+
+def _summary(results: dict[str, Any], groups: dict[str, Any]) -> list[str]:
+    """Final success per system and row: IQM over seeds (number of seeds)."""
+    cols = [(a, f) for a in G.ALGORITHMS if a != "controller" for f in (False, True)
+            if any((a, f) in groups.get(s, {}) for s in tasks.SYSTEMS)]
+    lines = ["## Summary", "",
+             "Final test success rate per system (IQM over seeds, number of seeds in brackets; `–`: not run "
+             "yet). The sections below have the curves, every test metric and the commands.", "",
+             "| system | controller | " + " | ".join(_label(a, f) for a, f in cols) + " |",
+             "|---" * (len(cols) + 2) + "|"]
+    for name, sysdef in tasks.SYSTEMS.items():
+        ctrl = results["controllers"].get(name)
+        cells = [f"{ctrl['test']['success_rate']:.2f}" if ctrl else "–"]
+        for key in cols:
+            recs = groups.get(name, {}).get(key)
+            cells.append(f"{iqm(np.array([r['test']['success_rate'] for r in recs])):.2f} ({len(recs)})"
+                         if recs else "–")
+        lines.append(f"| {sysdef.label} | " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 def _datasets_section(manifest: dict[str, Any]) -> list[str]:
@@ -165,9 +193,11 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "table). Each evaluation flies the deterministic policy on the task's **first "
         f"{n_test} test seeds** (900000-{900000 + n_test - 1}); the controller flies the same seeds. "
         "The last checkpoint is the test result.",
-        "- **Seeds**: training seeds 0-2 per row (three runs); curves show the interquartile mean "
-        "(IQM) over seeds and its 95 % stratified bootstrap interval (seeds resampled; "
-        f"{BOOTSTRAP_REPS} resamples), rliable's estimator.",
+        "- **Seeds**: training seeds 0-2 per row (the table's `seeds` column says how many have run); "
+        "curves show the interquartile mean (IQM) over seeds and its 95 % stratified bootstrap interval "
+        f"(seeds resampled, {BOOTSTRAP_REPS} resamples): rliable's estimator, computed with numpy and "
+        "scipy (rliable's `arch` dependency does not import beside this project's pandas).",
+        f"- **Wall time**: training only (evaluations excluded), mean over seeds, {_load_note(results)}.",
         "- **Algorithms**, each at its trainer's documented defaults plus the fast configuration "
         "(`benchmarks.perf.learning.FAST_CONFIGS`, [Training](training.md#fast-configurations)): "
         "SB3 PPO with parameter sharing (`training.train`), BenchMARL MAPPO and MASAC "
@@ -191,6 +221,7 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "",
         "`--backend ray --address HOST:PORT` runs the grid on a Ray cluster (the scoreboard's backends).",
         "",
+        *_summary(results, groups),
     ]
     for name, sysdef in tasks.SYSTEMS.items():
         task = tasks.get(sysdef.training_task)

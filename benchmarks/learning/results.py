@@ -101,6 +101,7 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
         out.append({"system": system, "task": last["task"], "algorithm": algo, "filter": filtered, "seed": seed,
                     "budget_agent_steps": int(last["budget_agent_steps"]), "agent_steps": int(last["agent_steps"]),
                     "wall_s": _round(last["wall_s"], 1), "test_seeds": last["test_seeds"],
+                    "load_avg_1m": last.get("load_avg_1m"),
                     "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref),
                     "command": command(system, algo, filtered, seed)})
     return {"grid": {"checkpoints": G.CHECKPOINTS, "test_seeds_per_checkpoint": G.TEST_SEEDS_PER_CHECKPOINT,

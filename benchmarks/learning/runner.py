@@ -70,7 +70,8 @@ def run_one(run: Run) -> dict[str, Any]:
         t0 = time.perf_counter()
         episodes = evaluate_policy(run.task.make_env, make_policy, seeds, filtered=run.filter)
         rec = {**_base(run), "checkpoint": k, "agent_steps": int(agent_steps), "wall_s": round(wall_s, 2),
-               "eval_s": round(time.perf_counter() - t0, 2), "test_seeds": list(seeds), "episodes": episodes,
+               "eval_s": round(time.perf_counter() - t0, 2), "load_avg_1m": round(os.getloadavg()[0], 2),
+               "test_seeds": list(seeds), "episodes": episodes,
                "error": None}
         records.append(rec)
         if log is not None:
