@@ -40,7 +40,7 @@ DOCS = ROOT / "docs"
 MOUNTS = {"scoreboard/plots": ROOT / "benchmarks" / "published" / "plots"}
 """Site folder -> repository folder served there."""
 
-_MARKER = re.compile(r"^<!-- (docstring|env-figure|reproduction|include|gallery): (\S+) -->$", re.M)
+_MARKER = re.compile(r"^<!-- (docstring|env-figure|reproduction|include|gallery|tasks): (\S+) -->$", re.M)
 
 
 # --- reST-flavoured docstrings -> Markdown --------------------------------------------------------
@@ -277,6 +277,28 @@ def check_source_refs(markdown: str, page_src: str) -> None:
             raise PluginError(f"{page_src}: {qualname} is not defined in {path}")
 
 
+def task_table(what: str) -> str:
+    """``<!-- tasks: systems -->``: the paper systems; ``<!-- tasks: all -->``: every task of
+    ``satenv.tasks``, with its env, system, role, seeds, perturbations and cost budget."""
+    from satenv import tasks
+
+    if what == "systems":
+        rows = ["| system | controller | expert | training task | paper task |", "|---|---|---|---|---|"]
+        rows += [f"| {s.label} (`{s.name}`) | `{s.controller}` | `{s.expert}` | `{s.training_task}` | "
+                 f"`{s.paper_task}` |" for s in tasks.SYSTEMS.values()]
+        return "\n".join(rows)
+    if what != "all":
+        raise PluginError(f"<!-- tasks: {what} -->: expected 'all' or 'systems'")
+    rows = ["| task | env | system, role | test seeds | perturbations | cost budget | description |",
+            "|---|---|---|---|---|--:|---|"]
+    for t in tasks.TASKS.values():
+        test = tasks.show_seeds(t.seeds("test"))
+        budget = "none (no safety constraint)" if t.cost_budget is None else f"{t.cost_budget:g}"
+        rows.append(f"| `{t.name}` | `{t.env_id}` | {t.system or '–'}, {t.role} | {test} | "
+                    f"{', '.join(f'`{p}`' for p in t.perturbations) or '–'} | {budget} | {t.description} |")
+    return "\n".join(rows)
+
+
 # --- MkDocs events ------------------------------------------------------------------------------
 
 def on_files(files, config):
@@ -299,6 +321,8 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
             return reproduction(arg, src)
         if kind == "include":
             return include(arg, src)
+        if kind == "tasks":
+            return task_table(arg)
         return gallery(arg, src)
 
     check_source_refs(markdown, src)
