@@ -186,8 +186,10 @@ class PolicySpec:
                                       f"strings or None, got {value!r}")
 
     def ranked_on(self, scenario: str) -> bool:
-        """Whether the board runs this policy on the scenario named ``scenario`` (if it fits)."""
-        return self.scenarios is None or any(fnmatch.fnmatchcase(scenario, p) for p in self.scenarios)
+        """Whether the board runs this policy on the scenario named ``scenario`` (if it fits); a
+        perturbed scenario ``<task>@<perturbation>`` counts as its task."""
+        base = scenario.partition("@")[0]
+        return self.scenarios is None or any(fnmatch.fnmatchcase(base, p) for p in self.scenarios)
 
     def factory(self) -> Callable[..., Any]:
         return resolve(self.target, self.requires)
