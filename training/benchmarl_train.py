@@ -1,13 +1,15 @@
 """Train a satenv env with BenchMARL (MAPPO, IPPO, MASAC, ISAC, MADDPG, IDDPG) and export the actor.
 
-    python -m training.benchmarl_train --algorithm mappo --env-id platoon_v0 \\
-        --env-kwargs '{"randomize": true}' --max-frames 3000000 --out-dir runs/platoon_mappo
+    python -m training.benchmarl_train --algo mappo --env-id platoon_v0 \\
+        --env-kwargs '{"randomize": true}' --budget 12000000 --out-dir runs/platoon_mappo
     python -m benchmarks.scoreboard --policy runs/platoon_mappo/final      # rank it
 
 Needs the ``marl`` extra (``pip install -c constraints.txt -e ".[marl]"``). The env is the native
 TorchRL env (:mod:`satenv.torchrl`, batched numpy core) as the BenchMARL task
-:class:`training.benchmarl_task.SatenvTask`; frames count env steps of one copy (all agents at
-once), BenchMARL's convention. One actor shared by every agent (``share_policy_params``).
+:class:`training.benchmarl_task.SatenvTask`. ``--budget`` counts agent-steps, as for every
+trainer; BenchMARL counts frames, env steps of one copy (all agents at once), so the run
+collects ``budget / agents`` frames (``--max-frames``, the old flag, gives frames directly). One
+actor shared by every agent (``share_policy_params``).
 
 ``--out-dir`` holds ``config.json`` (the run's config, with the frame budget actually run),
 ``final/``: the exported policy (the safe format of :mod:`training.policy`: ``policy.json``,
@@ -25,7 +27,9 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
+
+import tyro
 
 from training.config import RunConfig, check_int, check_number, parse_args
 
@@ -39,10 +43,15 @@ ALGORITHMS = ("mappo", "ippo", "masac", "isac", "maddpg", "iddpg")
 class BenchMARLConfig(RunConfig):
     """One BenchMARL run (``python -m training.benchmarl_train``; frames are env steps of one copy)."""
 
-    algorithm: Literal["mappo", "ippo", "masac", "isac", "maddpg", "iddpg"] = "mappo"
-    """BenchMARL algorithm (continuous actions)."""
+    algorithm: Annotated[Literal["mappo", "ippo", "masac", "isac", "maddpg", "iddpg"],
+                         tyro.conf.arg(name="algo")] = "mappo"
+    """BenchMARL algorithm (continuous actions; ``algorithm`` in ``config.json``)."""
+    budget: int | None = None
+    """The budget: agent-steps to train for; the run collects ``ceil(budget / agents)`` frames,
+    rounded up to whole batches (printed and saved). None: ``max_frames``."""
     max_frames: int = 1_000_000
-    """Frames to collect, rounded up to whole batches (the rounded figure is printed and saved)."""
+    """The old budget flag, in frames (env steps of one copy: agent-steps / agents), used when
+    ``--budget`` is not given; rounded up to whole batches (the rounded figure is printed and saved)."""
     frames_per_batch: int = 6000
     """Frames per collection batch (capped at ``max_frames``, rounded up to a multiple of ``num_envs``)."""
     num_envs: int = 10
@@ -71,6 +80,8 @@ class BenchMARLConfig(RunConfig):
             raise ValueError(f"algorithm must be one of {ALGORITHMS} (continuous actions), got {self.algorithm!r}")
         for name in ("max_frames", "frames_per_batch", "num_envs", "minibatch_size", "minibatch_iters"):
             check_int(name, getattr(self, name), minimum=1)
+        if self.budget is not None:
+            check_int("budget", self.budget, minimum=1)
         check_int("checkpoint_every", self.checkpoint_every, minimum=0)
         if not isinstance(self.init_actor, str):
             raise ValueError(f"init_actor must be a policy folder path or '', got {self.init_actor!r}")
@@ -78,11 +89,17 @@ class BenchMARLConfig(RunConfig):
             raise ValueError(f"init_std must be a number in (0, 10), got {self.init_std!r}")
         check_number("gamma", self.gamma, 0.0, 1.0)
 
-    def planned(self) -> BenchMARLConfig:
-        """The config actually run: ``frames_per_batch`` capped at ``max_frames`` and rounded up to
-        whole env steps of ``num_envs`` copies; ``max_frames`` rounded up to whole batches."""
-        per_batch = -(-min(self.frames_per_batch, self.max_frames) // self.num_envs) * self.num_envs
-        return self.replace(frames_per_batch=per_batch, max_frames=-(-self.max_frames // per_batch) * per_batch)
+    def planned(self, n_agents: int | None = None) -> BenchMARLConfig:
+        """The config actually run: ``max_frames`` from ``budget`` (``ceil(budget / n_agents)``;
+        ``n_agents`` needed then), ``frames_per_batch`` capped at ``max_frames`` and rounded up to
+        whole env steps of ``num_envs`` copies, ``max_frames`` rounded up to whole batches."""
+        frames = self.max_frames
+        if self.budget is not None:
+            if n_agents is None:
+                raise ValueError("planned(n_agents): the budget is in agent-steps; give the env's agent count")
+            frames = -(-self.budget // n_agents)
+        per_batch = -(-min(self.frames_per_batch, frames) // self.num_envs) * self.num_envs
+        return self.replace(frames_per_batch=per_batch, max_frames=-(-frames // per_batch) * per_batch)
 
 
 def build_experiment(cfg: BenchMARLConfig):
@@ -223,14 +240,16 @@ def run(cfg: BenchMARLConfig) -> Path:
 
     torch.set_num_threads(cfg.torch_threads)
     out = Path(cfg.out_dir)
-    planned = cfg.planned()
+    env = satenv.make(cfg.env_id, **cfg.env_kwargs)
+    planned = cfg.planned(len(env.possible_agents))
     if planned != cfg:
-        print(f"max_frames {cfg.max_frames} -> {planned.max_frames}, frames_per_batch {cfg.frames_per_batch} -> "
-              f"{planned.frames_per_batch} (whole batches of whole env steps)", file=sys.stderr)
+        given = f"budget {cfg.budget} agent-steps" if cfg.budget is not None else f"max_frames {cfg.max_frames}"
+        print(f"{given} -> max_frames {planned.max_frames} ({planned.max_frames * len(env.possible_agents)} "
+              f"agent-steps), frames_per_batch {cfg.frames_per_batch} -> {planned.frames_per_batch} (whole "
+              "batches of whole env steps)", file=sys.stderr)
         cfg = planned
     experiment = build_experiment(cfg)
     (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
-    env = satenv.make(cfg.env_id, **cfg.env_kwargs)
     if cfg.init_actor:
         seed_actor(experiment.policy, cfg.init_actor, cfg.init_std, len(env.possible_agents))
     experiment.run()

@@ -27,16 +27,24 @@ from tyro.constructors import PrimitiveConstructorSpec
 
 from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
-__all__ = ["RunConfig", "TrainConfig", "parse_args", "parse_seeds", "config_from_json", "load_config",
-           "planned_timesteps", "MAX_SEEDS"]
+__all__ = ["BUDGET_FLAG", "RunConfig", "TrainConfig", "canonical_flags", "parse_args", "parse_seeds",
+           "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
 
 RENAMED = {"n_copies": "num_envs", "learning_rate": "lr", "num_envs_per_env_runner": "num_envs"}
 """Old config keys (``config.json`` written before the common grammar) -> current field names."""
 DEPRECATED_FLAGS = {"--n-copies": "--num-envs", "--learning-rate": "--lr",
-                    "--num-envs-per-env-runner": "--num-envs", "--ray-address": "--address"}
-"""Old flags still accepted (aliases), with a ``FutureWarning`` naming the new one."""
+                    "--num-envs-per-env-runner": "--num-envs", "--ray-address": "--address",
+                    "--total-timesteps": "--budget", "--algorithm": "--algo"}
+"""Old flags still accepted (renamed to the canonical flag before parsing, with a
+``FutureWarning`` naming it); ``--help`` lists only the canonical names."""
+BUDGET_FLAG = "--budget"
+"""Every trainer's training budget, in agent-steps (one agent's one decision)."""
+OLD_BUDGET_FLAGS = {"--max-frames": "frames: env steps of one copy, all agents at once (budget / agents)",
+                    "--iterations": "RLlib iterations of about train_batch_size env steps"}
+"""Old budget flags in their own units, still accepted (``FutureWarning``): the trainer converts
+``--budget`` to them; giving one with ``--budget`` is an error."""
 
 
 def _bool(args: list[str]) -> bool:
@@ -108,8 +116,8 @@ class RunConfig:
     """Seed of the networks, the optimiser and the training env copies."""
     net_arch: Ints = (64, 64)
     """Hidden layer sizes of the networks (``64,64`` or ``64 64``)."""
-    lr: Annotated[float, tyro.conf.arg(aliases=("--learning-rate",))] = 3e-4
-    """Learning rate (``--learning-rate`` is a deprecated alias)."""
+    lr: float = 3e-4
+    """Learning rate."""
     eval_seeds: Seeds = DEFAULT_EVAL_SEEDS
     """Seeds of the evaluations during training (``A-B`` inclusive, or a list ``1,5,9``); default:
     the first 5 validation seeds of ``satenv.tasks.SEED_SPLITS`` (one for a deterministic env)."""
@@ -182,13 +190,14 @@ class TrainConfig(RunConfig):
     """One stable-baselines3 run (``python -m training.train``). Timesteps count agent-steps
     (SB3 rows: ``num_envs * n_agents`` per env step)."""
 
-    num_envs: Annotated[int, tyro.conf.arg(aliases=("--n-copies",))] = 32
-    """Scenario copies stepped together in one batched core (``--n-copies`` is a deprecated alias)."""
     algo: Literal["ppo", "sac"] = "ppo"
     """The algorithm."""
-    total_timesteps: int = 1_000_000
-    """Agent-steps to train for, rounded up to whole collection rounds (PPO: ``n_steps *
-    num_envs * n_agents``; SAC: ``num_envs * n_agents``); the rounded figure is printed and saved."""
+    total_timesteps: Annotated[int, tyro.conf.arg(name="budget")] = 1_000_000
+    """The budget: agent-steps to train for, rounded up to whole collection rounds (PPO: ``n_steps
+    * num_envs * n_agents``; SAC: ``num_envs * n_agents``); the rounded figure is printed and
+    saved (``total_timesteps`` in ``config.json``)."""
+    num_envs: int = 32
+    """Scenario copies stepped together in one batched core."""
     lr_schedule: Literal["constant", "linear"] = "constant"
     """``linear`` decays to 5 % of ``lr`` at ``total_timesteps``."""
     gamma: float = 0.99
@@ -392,11 +401,7 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     """
     import sys
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    for arg in argv:
-        if arg.split("=", 1)[0] in DEPRECATED_FLAGS:
-            old = arg.split("=", 1)[0]
-            warnings.warn(f"{old} is deprecated: use {DEPRECATED_FLAGS[old]}", FutureWarning, stacklevel=2)
+    argv = canonical_flags(list(sys.argv[1:] if argv is None else argv))
     argv, opts = _split_options(argv, resume)
     if base is None and opts.config is not None:
         base = load_config(opts.config, cls, allow_code_env_id=opts.allow_code_env_id)
@@ -405,6 +410,8 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
              "a 'module:callable' env id, which imports and runs that code (only for a file you trust)."
              + ("\n--resume continues the run in --out-dir from its saved config.json and last "
                 "checkpoint (flags given override it)." if resume else ""))
+    old_flags = ", ".join(f"{o} (now {n})" for o, n in DEPRECATED_FLAGS.items())
+    extra += f"\nOld flags still accepted, with a FutureWarning: {old_flags}."
     text = "\n\n".join(filter(None, [description or (cls.__doc__ or "").strip(), extra]))
     opts_ = {"description": text, "prog": prog, "config": (tyro.conf.FlagConversionOff,)}
     # without a base the field defaults (not a resolved instance: the default task's env must not
@@ -419,6 +426,28 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
                              "--resume)") from None
         cfg = tyro.cli(cls, args=argv, default=saved_cfg, **opts_)
     return cfg, opts
+
+
+def canonical_flags(argv: list[str]) -> list[str]:
+    """``argv`` with every old flag (:data:`DEPRECATED_FLAGS`, also as ``--old=value``) renamed to
+    its canonical name, one ``FutureWarning`` per old flag; an old budget flag
+    (:data:`OLD_BUDGET_FLAGS`) is kept (its unit differs) with a ``FutureWarning``, and giving
+    two budget flags is an error (``SystemExit``)."""
+    out, budgets = [], []
+    for arg in argv:
+        flag, sep, value = arg.partition("=")
+        if flag in DEPRECATED_FLAGS:
+            warnings.warn(f"{flag} is deprecated: use {DEPRECATED_FLAGS[flag]}", FutureWarning, stacklevel=3)
+            flag = DEPRECATED_FLAGS[flag]
+        elif flag in OLD_BUDGET_FLAGS:
+            warnings.warn(f"{flag} is the old budget flag ({OLD_BUDGET_FLAGS[flag]}); use {BUDGET_FLAG} N, "
+                          "N in agent-steps, as for every trainer", FutureWarning, stacklevel=3)
+        if flag == BUDGET_FLAG or flag in OLD_BUDGET_FLAGS:
+            budgets.append(flag)
+        out.append(flag + sep + value)
+    if len(budgets) > 1:
+        raise SystemExit(f"error: give one budget flag, got {' and '.join(budgets)} ({BUDGET_FLAG} N: agent-steps)")
+    return out
 
 
 def _split_options(argv: list[str], resume: bool) -> tuple[list[str], CliOptions]:

@@ -80,8 +80,8 @@ class ImitationConfig(RunConfig):
     """Regression epochs (mean squared error on the actions, Adam) after each round, warm-started."""
     batch_size: int = 512
     """Regression minibatch size."""
-    lr: Annotated[float, tyro.conf.arg(aliases=("--learning-rate",))] = 1e-3
-    """Learning rate of the regression (``--learning-rate`` is a deprecated alias)."""
+    lr: float = 1e-3
+    """Learning rate of the regression."""
     weight_decay: float = 0.0
     """Adam weight decay."""
     clip_obs: float = 10.0

@@ -1,7 +1,7 @@
 """Train a satenv scenario with Ray RLlib: multi-agent PPO, one policy shared by every agent.
 
     python -m training.rllib_train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
-        --iterations 50 --num-env-runners 2 --out-dir runs/rllib_platoon
+        --budget 800000 --num-env-runners 2 --out-dir runs/rllib_platoon
     python -m benchmarks.scoreboard --policy runs/rllib_platoon/final      # rank it
     # on an existing Ray cluster (started with `ray start --head` on the head node and
     # `ray start --address=<head>:6379` on the workers):
@@ -9,6 +9,8 @@
 
 The env goes through RLlib's PettingZoo wrapper (``ParallelPettingZooEnv``); every agent maps to
 the policy ``"shared"``. Without ``--address`` Ray starts locally (``num_cpus`` = ``--num-cpus``).
+``--budget`` counts agent-steps, as for every trainer: ``ceil(budget / (train_batch_size *
+agents))`` iterations (``--iterations``, the old flag, gives them directly).
 RLlib runs are only reproducible with a fixed ``PYTHONHASHSEED`` (set it before starting
 Python, e.g. ``PYTHONHASHSEED=0 python -m training.rllib_train ...``).
 
@@ -33,9 +35,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
-
-import tyro
+from typing import Any
 
 from training.config import RunConfig, check_int, check_number, parse_args
 
@@ -63,8 +63,12 @@ def require_ray():
 class RLlibConfig(RunConfig):
     """One RLlib run (``python -m training.rllib_train``)."""
 
+    budget: int | None = None
+    """The budget: agent-steps to train for; runs ``ceil(budget / (train_batch_size * agents))``
+    iterations (printed and saved). None: ``iterations``."""
     iterations: int = 20
-    """``Algorithm.train()`` iterations (each about ``train_batch_size`` env steps)."""
+    """The old budget flag: ``Algorithm.train()`` iterations (each about ``train_batch_size`` env
+    steps of every agent), used when ``--budget`` is not given."""
     gamma: float = 0.99
     """Discount factor."""
     train_batch_size: int = 4000
@@ -75,11 +79,11 @@ class RLlibConfig(RunConfig):
     """PPO epochs per iteration."""
     num_env_runners: int = 0
     """Remote env runners (0: sample in the driver)."""
-    num_envs: Annotated[int, tyro.conf.arg(aliases=("--num-envs-per-env-runner",))] = 1
-    """Env copies per env runner (``--num-envs-per-env-runner`` is a deprecated alias)."""
+    num_envs: int = 1
+    """Env copies per env runner."""
     num_cpus: int = 2
     """CPUs of the local Ray instance (ignored with ``--address``)."""
-    address: Annotated[str | None, tyro.conf.arg(aliases=("--ray-address",))] = None
+    address: str | None = None
     """An existing Ray cluster, e.g. ``10.0.0.1:6379`` (default: start Ray locally)."""
     out_dir: str = "runs/rllib"
     """Run folder: ``config.json``, ``checkpoint/``, ``tb/``, ``progress.json``, ``final/``
@@ -90,10 +94,18 @@ class RLlibConfig(RunConfig):
         for name in ("iterations", "train_batch_size", "minibatch_size", "num_epochs", "num_envs", "num_cpus"):
             check_int(name, getattr(self, name), minimum=1)
         check_int("num_env_runners", self.num_env_runners, minimum=0)
+        if self.budget is not None:
+            check_int("budget", self.budget, minimum=1)
         check_number("gamma", self.gamma, 0.0, 1.0)
         if self.minibatch_size > self.train_batch_size:
             raise ValueError(f"minibatch_size ({self.minibatch_size}) must be <= train_batch_size "
                              f"({self.train_batch_size})")
+
+    def planned(self, n_agents: int) -> RLlibConfig:
+        """The config actually run: ``iterations`` from ``budget`` (agent-steps) when given."""
+        if self.budget is None:
+            return self
+        return self.replace(iterations=-(-self.budget // (self.train_batch_size * n_agents)))
 
 
 def _env_creator(env_id: str, env_kwargs: dict[str, Any]):
@@ -135,6 +147,13 @@ def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
     torch.set_num_threads(cfg.torch_threads)
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    from training.envs import make_env
+
+    planned = cfg.planned(len(make_env(cfg.env_id, **cfg.env_kwargs).possible_agents))
+    if planned != cfg:
+        print(f"budget {cfg.budget} agent-steps -> {planned.iterations} iterations of "
+              f"{cfg.train_batch_size} env steps", file=sys.stderr)
+        cfg = planned
     (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     started = False
     if not ray.is_initialized():

@@ -1,15 +1,15 @@
 """Train a shared policy for a satenv scenario with stable-baselines3 (PPO or SAC).
 
     python -m training.train --task platoon-pereira2022-random \\
-        --algo ppo --total-timesteps 2000000 --num-envs 32 --out-dir runs/platoon_ppo
-    python -m training.train --out-dir runs/platoon_ppo --resume [--total-timesteps 3000000]
+        --algo ppo --budget 2000000 --num-envs 32 --out-dir runs/platoon_ppo
+    python -m training.train --out-dir runs/platoon_ppo --resume [--budget 3000000]
     tensorboard --logdir runs/platoon_ppo/tb
 
 Every agent of every env copy is one row of the SB3 batch (``training.vec_env.SatVecEnv``,
 parameter sharing); timesteps count agent-steps. Read top to bottom:
 
 1. configuration (``training.config.TrainConfig``; flags given with ``--resume`` override the
-   saved ``config.json``, e.g. a larger ``--total-timesteps``);
+   saved ``config.json``, e.g. a larger ``--budget``);
 2. seeding: ``torch``/``numpy``/SB3 from ``seed``; the training env copies from ``seed``;
 3. environment: ``SatVecEnv`` -> ``VecMonitor`` -> ``VecNormalize``;
 4. reference: the scripted baselines on the evaluation seeds (``baselines_eval.json``);
