@@ -96,9 +96,10 @@ formation_v0 = EnvModule("formation_v0", "Connected in-plane network formations 
 
 def make_vec(env_id: str, num_envs: int, *, seed: int | None = None, safety_filter: Any = False, **kwargs: Any):
     """``num_envs`` batched copies of ``make(env_id, **kwargs)`` (numpy); see ``satenv.vector``.
-    ``safety_filter``: as in :func:`make` (:func:`satenv.safety.filtered_vec`)."""
+    ``safety_filter``: as in :func:`make` (:func:`satenv.vector.filtered_vec`)."""
     if safety_filter is not False:
-        from satenv.safety import filtered_vec, safety_config
+        from satenv.safety import safety_config
+        from satenv.vector import filtered_vec
 
         return filtered_vec(make(env_id, **kwargs), num_envs, seed=seed, config=safety_config(safety_filter))
     from satenv.vector import make_vec as _make_vec

@@ -82,11 +82,10 @@ import numpy as np
 from satenv.dynamics import attitude_step, cw_matrices, quat_to_matrix, thruster_matrices
 from satenv.dynamics._checks import all_finite
 from satenv.errors import SatenvError, SatenvTypeError
-from satenv.vector import SatVectorEnv
 
-__all__ = ["CONSTRAINTS", "FilteredVectorEnv", "MIN_MARGIN", "SafetyConfig", "SafetyError", "SafetyFilter",
+__all__ = ["CONSTRAINTS", "MIN_MARGIN", "SafetyConfig", "SafetyError", "SafetyFilter",
            "SafetyModel", "SafetyRecord", "SafetyTypeError", "SafetyWarning", "Shield", "constraint_rows", "courtesy", "filter_actions",
-           "filtered_env", "filtered_vec", "safety_config", "safety_model", "shield", "solve_qp"]
+           "filtered_env", "safety_config", "safety_model", "shield", "solve_qp"]
 
 CONSTRAINTS: tuple[str, ...] = ("separation", "leader", "obstacle", "target", "keep-out", "los", "velocity",
                                  "angular-velocity")
@@ -866,32 +865,6 @@ def filtered_env(env: Any, config: SafetyConfig | None = None, **options: Any) -
     env.__class__ = _filtered_class(type(env))
     env.safety = filt
     return env
-
-
-def filtered_vec(env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
-                 config: SafetyConfig | None = None, **options: Any) -> Any:
-    """A :class:`satenv.vector.SatVectorEnv` over ``env``'s scenario whose ``step`` filters the
-    actions first (infos get the record arrays ``safety_*`` ``(B, M)``; rewards
-    ``- penalty * |du|``). ``config`` and ``options`` as for :class:`SafetyFilter` (default: the
-    config of a filtered ``env``, else ``SafetyConfig()``)."""
-    if config is None and not options and isinstance(getattr(env, "safety", None), SafetyFilter):
-        config = env.safety.config
-    return FilteredVectorEnv(env, num_envs, seed=seed, autoreset=autoreset,
-                             safety_filter=SafetyConfig.from_options(config, **options))
-
-
-class FilteredVectorEnv(SatVectorEnv):
-    """A :class:`satenv.vector.SatVectorEnv` that is always filtered (:func:`filtered_vec`); the
-    filtering itself is :class:`~satenv.vector.SatVectorEnv`'s (any batch of a filtered env has it)."""
-
-    safety: SafetyFilter
-
-    def __init__(self, env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
-                 safety_filter: Any = True) -> None:
-        if safety_filter is False or safety_filter is None:
-            raise SafetyTypeError("FilteredVectorEnv: safety_filter must be True or a SafetyConfig, "
-                                  f"got {safety_filter!r}")
-        super().__init__(env, num_envs, seed=seed, autoreset=autoreset, safety_filter=safety_filter)
 
 
 def safety_config(value: Any) -> SafetyConfig:

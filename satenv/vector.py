@@ -59,7 +59,7 @@ from satenv.dynamics._checks import MAX_COPIES, all_finite, first_nonfinite, int
 from satenv.envs.base import SatParallelEnv
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["FINAL_ALIASES", "SatVectorEnv", "make_vec"]
+__all__ = ["FINAL_ALIASES", "FilteredVectorEnv", "SatVectorEnv", "filtered_vec", "make_vec"]
 
 FINAL_ALIASES = {"final_observation": "final_obs", "_final": "_final_obs"}
 """The auto-reset ``infos`` keys of earlier releases -> Gymnasium 1.x's names (both present, the
@@ -321,3 +321,33 @@ def check_seed(seed: Any) -> int | None:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise SatenvError(f"seed must be a non-negative int or None, got {seed!r}")
     return int(seed)
+
+
+def filtered_vec(env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
+                 config: Any = None, **options: Any) -> Any:
+    """A :class:`SatVectorEnv` over ``env``'s scenario whose ``step`` filters the
+    actions first (infos get the record arrays ``safety_*`` ``(B, M)``; rewards
+    ``- penalty * |du|``). ``config`` and ``options`` as for :class:`SafetyFilter` (default: the
+    config of a filtered ``env``, else ``SafetyConfig()``)."""
+    from satenv.safety import SafetyConfig, SafetyFilter
+
+    if config is None and not options and isinstance(getattr(env, "safety", None), SafetyFilter):
+        config = env.safety.config
+    return FilteredVectorEnv(env, num_envs, seed=seed, autoreset=autoreset,
+                             safety_filter=SafetyConfig.from_options(config, **options))
+
+
+class FilteredVectorEnv(SatVectorEnv):
+    """A :class:`SatVectorEnv` that is always filtered (:func:`filtered_vec`); the filtering itself
+    is :class:`SatVectorEnv`'s (any batch of a filtered env has it)."""
+
+    safety: Any    # satenv.safety.SafetyFilter
+
+    def __init__(self, env: Any, num_envs: int, *, seed: int | None = None, autoreset: bool = True,
+                 safety_filter: Any = True) -> None:
+        if safety_filter is False or safety_filter is None:
+            from satenv.safety import SafetyTypeError
+
+            raise SafetyTypeError("FilteredVectorEnv: safety_filter must be True or a SafetyConfig, "
+                                  f"got {safety_filter!r}")
+        super().__init__(env, num_envs, seed=seed, autoreset=autoreset, safety_filter=safety_filter)
