@@ -66,3 +66,15 @@ def test_the_budget_is_agent_steps_in_every_trainer():
     assert rl.planned(n_agents=4).iterations == 4 and RLlibConfig().planned(4).iterations == 20
     with pytest.raises(ValueError, match="budget"):
         BenchMARLConfig(budget=0)
+
+
+def test_the_scoreboard_booleans_are_in_the_trainers_style():
+    from benchmarks.scoreboard.cli import build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["--plots", "false", "--progress", "true"])
+    assert (args.plots, args.progress) == (False, True)
+    args = parser.parse_args(["--no-plots", "--no-progress"])          # the former style still works
+    assert (args.plots, args.progress) == (False, False)
+    assert (parser.parse_args([]).plots, parser.parse_args([]).progress) == (True, True)
+    assert "--no-plots" not in parser.format_help()

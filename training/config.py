@@ -47,11 +47,16 @@ OLD_BUDGET_FLAGS = {"--max-frames": "frames: env steps of one copy, all agents a
 ``--budget`` to them; giving one with ``--budget`` is an error."""
 
 
-def _bool(args: list[str]) -> bool:
-    low = args[0].lower()
+def parse_bool(text: str) -> bool:
+    """A boolean flag's value, the trainers' style: ``true``/``false`` (also ``1``/``0``, ``yes``/``no``)."""
+    low = text.lower()
     if low not in ("true", "false", "1", "0", "yes", "no"):
-        raise ValueError(f"expected true or false, got {args[0]!r}")
+        raise ValueError(f"expected true or false, got {text!r}")
     return low in ("true", "1", "yes")
+
+
+def _bool(args: list[str]) -> bool:
+    return parse_bool(args[0])
 
 
 def _json_object(args: list[str]) -> dict[str, Any]:

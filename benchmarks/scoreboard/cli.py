@@ -21,6 +21,7 @@ from benchmarks.scoreboard.registry import (
     discover_trained_policies,
 )
 from benchmarks.scoreboard.specs import SHIELD_SUFFIX, ScoreboardError, Unavailable
+from training.config import parse_bool  # the trainers' boolean style: --flag true|false
 
 __all__ = ["build_parser", "main", "with_shield"]
 
@@ -86,8 +87,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--address", "--ray-address", dest="ray_address", default=None,
                    help="address of an existing Ray cluster (default: start a local one); "
                         "--ray-address is the same option")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots and trajectories")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--plots", type=parse_bool, default=True, metavar="{true,false}",
+                   help="draw the PNG plots and trajectories (default: true)")
+    p.add_argument("--progress", type=parse_bool, default=True, metavar="{true,false}",
+                   help="show the progress bar (default: true)")
+    for old in ("plots", "progress"):   # the former style, still accepted
+        p.add_argument(f"--no-{old}", dest=old, action="store_false", help=argparse.SUPPRESS)
     p.add_argument("--shield", action="store_true",
                    help="rank every selected policy also behind the safety filter (satenv.safety), as "
                         "<name>+shield beside it; a policy name ending in +shield selects one alone")
@@ -138,8 +143,8 @@ def main(argv: list[str] | None = None) -> int:
         board = run_scoreboard(out, scenarios=args.scenarios, policies=policies, seeds=args.seeds,
                                checkpoints=args.policy, quick=args.quick, workers=args.workers,
                                backend=args.backend, ray_address=args.ray_address, resume=args.resume,
-                               overwrite=args.overwrite, plots=not args.no_plots,
-                               progress=not args.no_progress, argv=args_list)
+                               overwrite=args.overwrite, plots=args.plots,
+                               progress=args.progress, argv=args_list)
     except ScoreboardError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -150,4 +155,4 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\ninterrupted: finished episodes are in {out}/{EPISODES_FILE}; "
               "rerun with --resume to continue", file=sys.stderr)
         return 130
-    return _report(board, not args.no_plots)
+    return _report(board, args.plots)
