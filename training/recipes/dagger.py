@@ -1,9 +1,10 @@
-"""DAgger of a stateless expert, resumable, for the systems of issue 27 (one driver, a table of systems).
+"""DAgger of a system's stateless expert on its training task, resumable (one driver for every
+system of :data:`satenv.tasks.SYSTEMS`).
 
     nice -n 5 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python -m training.recipes.dagger --system platoon-pereira2022 --run-dir /work/runs/p22/dagger
+        python -m training.recipes.dagger --system platoon-pereira2022 --run-dir runs/p22/dagger
     nice -n 5 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python -m training.recipes.dagger --system cluster-case1 --run-dir /work/runs/cluster/dagger
+        python -m training.recipes.dagger --system cluster-li2022 --run-dir runs/cluster/dagger
 
 The same command resumes a run at any time: labels go to ``<run>/labels/round_NNNN.npz``
 (observations, expert actions, the env state, agent and step of every row), the network to
@@ -13,7 +14,7 @@ after the last finished round (``config.json`` of the run; flags given again ove
 
 Recipe (read top to bottom):
 
-1. expert (:data:`SYSTEMS`): re-planned from the current state at every decision, so its label in
+1. expert (the system's, ``training.experts.make``): re-planned from the current state at every decision, so its label in
    a state the learner flew into is what it would do there — :class:`training.experts.JointPlatoonMPC`
    (pereira2022 §5.1, sequential coupling: follower j's action depends only on followers 1..j,
    which its PLF observation holds) or :class:`training.experts.ReplanningTubeRDMPC` (li2022);
@@ -24,7 +25,8 @@ Recipe (read top to bottom):
 3. the network (one MLP shared by every agent, own observation only; the clock entry is zeroed
    and symlog features of the tracking error appended, :class:`training.shaping.ObsFeatures`)
    is refitted on all labels after every round (warm start) and evaluated on validation seeds
-   (never the held-out seeds >= 900000).
+   (``val_seeds``, in the validation split; episodes are collected on train seeds from
+   ``train_seed``; the test split is never touched).
 """
 
 from __future__ import annotations
@@ -38,53 +40,33 @@ from typing import Any
 
 import numpy as np
 
+from satenv import scoring, tasks
+from training.recipes import system_name
+
 __all__ = ["DaggerConfig", "run", "main"]
 
-@dataclass(frozen=True)
-class System:
-    """A system of issue 27: its env, the paper's start, its stateless expert and defaults."""
-
-    env_id: str
-    scenario: dict[str, Any]            # the scoreboard's randomised scenario kwargs (evaluation)
-    paper: dict[str, Any]               # the paper's own start
-    expert: str                         # "module:Class" built as Class(env, **expert_options)
-    defaults: dict[str, Any]            # DaggerConfig fields for this system
-
-
-SYSTEMS: dict[str, System] = {
-    "platoon-pereira2022": System(
-        "platoon_v0", {"preset": "pereira2022", "randomize": True}, {"preset": "pereira2022"},
-        "training.experts:JointPlatoonMPC", {}),
-    "cluster-case1": System(
-        "cluster_v0", {"preset": "li2022-case1", "randomize": True}, {"preset": "li2022-case1"},
-        "training.experts:ReplanningTubeRDMPC",
-        {"round0_episodes": 6, "episodes_per_round": 4, "val_seeds": (700_000, 700_001, 700_002),
-         "expert_options": {}, "obs_drop_dims": (18,), "obs_symlog_scale": 300.0,
-         "noise_std": 0.1, "epochs": 20}),
+SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {
+    "platoon-pereira2022": {},
+    "cluster-li2022": {"round0_episodes": 6, "episodes_per_round": 4, "val_seeds": (700_000, 700_001, 700_002),
+                       "expert_options": {}, "obs_drop_dims": (18,), "obs_symlog_scale": 300.0,
+                       "noise_std": 0.1, "epochs": 20},
     # the cooperative NMPC (N = 30) warm-starts and plans against the other spacecraft's previous
-    # plan, so its shadow labels are close to, not exactly, what it would do (run in session 7:
-    # training/runs/servicing_pereira2022_dagger)
-    "servicing-pereira2022": System(
-        "servicing_v0", {"preset": "pereira2022", "randomize": True}, {"preset": "pereira2022"},
-        "baselines:NMPC",
-        {"round0_episodes": 4, "episodes_per_round": 2, "val_seeds": (700_000, 700_001, 700_002),
-         "expert_options": {}, "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05,
-         "epochs": 20}),
-    # held-out evaluation only so far (their policies came from training.imitate / training.train):
-    # C/GMRES continues its previous solution and the pereira2023 DMPC warm-starts, so neither is
-    # a stateless expert
-    "formation-kannan2022-collision": System(
-        "formation_v0", {"preset": "kannan2022-collision", "randomize": True},
-        {"preset": "kannan2022-collision"}, "baselines:CGMRES",
-        {"expert_options": {}, "obs_drop_dims": (), "val_seeds": (700_000, 700_001, 700_002)}),
-    "platoon-tplf30": System(
-        "platoon_v0", {"preset": "pereira2023", "topology": "TPLF", "desired_error": (0.0, -30.0, 0.0, 0.0, 0.0, 0.0),
-                       "randomize": True, "terminate_on_collision": True},
-        {"preset": "pereira2023", "topology": "TPLF", "desired_error": (0.0, -30.0, 0.0, 0.0, 0.0, 0.0),
-         "terminate_on_collision": True}, "baselines:DMPC",
-        {"expert_options": {}, "obs_drop_dims": (14,), "val_seeds": (700_000, 700_001, 700_002)}),
+    # plan, so its shadow labels are close to, not exactly, what it would do
+    # (training/runs/servicing_pereira2022_dagger)
+    "servicing-pereira2022": {"round0_episodes": 4, "episodes_per_round": 2,
+                              "val_seeds": (700_000, 700_001, 700_002), "expert_options": {},
+                              "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05, "epochs": 20},
+    # C/GMRES continues its previous solution and the pereira2023 DMPC warm-starts, so neither is a
+    # stateless expert: these run, but their labels are the shadow plans' (see the module docstring)
+    "formation-kannan2022-collision": {"expert_options": {}, "obs_drop_dims": (),
+                                       "val_seeds": (700_000, 700_001, 700_002)},
+    "formation-kannan2022-position": {"expert_options": {}, "obs_drop_dims": (),
+                                      "val_seeds": (700_000, 700_001, 700_002)},
+    "platoon-pereira2023": {"expert_options": {}, "obs_drop_dims": (14,),
+                            "val_seeds": (700_000, 700_001, 700_002)},
 }
-"""The systems this driver trains (names follow the scoreboard scenarios)."""
+"""This recipe's hyper-parameters per system of :data:`satenv.tasks.SYSTEMS` (the env, the expert and
+the seeds come from the task registry: the system's training and paper tasks)."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +74,7 @@ class DaggerConfig:
     """One DAgger run (every field is a ``--flag``)."""
 
     system: str = "platoon-pereira2022"
+    """A system of :data:`satenv.tasks.SYSTEMS` (old names: :data:`training.recipes.LEGACY_SYSTEM_NAMES`)."""
     learner_shield: bool = False
     rounds: int = 1000
     round0_episodes: int = 40
@@ -121,20 +104,18 @@ class DaggerConfig:
 
 
 # --------------------------------------------------------------------------- pieces
-def make_envs(system: System):
-    """Collection envs (random and paper start, collisions do not end them) and evaluation envs."""
-    import satenv
-
-    make = satenv.make
-    return (make(system.env_id, **system.scenario, terminate_on_collision=False),
-            make(system.env_id, **system.paper, terminate_on_collision=False),
-            make(system.env_id, **system.scenario), make(system.env_id, **system.paper))
+def make_envs(system: tasks.System):
+    """Collection envs (the training task's random starts and the paper task's start, collisions do
+    not end them) and the evaluation envs of the same two tasks."""
+    train, paper = tasks.get(system.training_task), tasks.get(system.paper_task)
+    return (train.make_env(terminate_on_collision=False), paper.make_env(terminate_on_collision=False),
+            train.make_env(), paper.make_env())
 
 
-def make_expert(system: System, env, options: dict[str, Any]):
-    from benchmarks.scoreboard.specs import resolve
+def make_expert(system: tasks.System, env, options: dict[str, Any]):
+    from training.experts import make
 
-    return resolve(system.expert)(env, **options)
+    return make(system.expert, env, **options)
 
 
 def features(cfg: DaggerConfig):
@@ -229,11 +210,8 @@ def fit(actor, normalizer, feats, x, y, cfg: DaggerConfig, generator, epochs: in
 
 
 def evaluate(env, policy, seeds) -> dict[str, Any]:
-    """Aggregate of ``satenv.metrics.summary`` over seeds (the scoreboard's episode rule):
-    :func:`training.recipes.heldout.aggregate` of its episodes."""
-    from training.recipes.heldout import aggregate, episodes
-
-    return aggregate(episodes(env, policy, seeds))
+    """:func:`satenv.scoring.aggregate` of the episodes on ``seeds``."""
+    return scoring.aggregate(scoring.run_episodes(env, policy, seeds))
 
 
 def plot_curve(history: list[dict[str, Any]], path: Path) -> None:
@@ -286,15 +264,20 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "labels").mkdir(exist_ok=True)
     runfolder.write_json(run_dir / "config.json", cfg.to_json(), indent=2)
-    system = SYSTEMS[cfg.system]
+    system = tasks.system(cfg.system)
+    train_task = tasks.get(system.training_task)
+    wrong = [s for s in cfg.val_seeds if train_task.split_of(s) != "validation"]
+    if wrong or train_task.split_of(cfg.train_seed) != "train":
+        raise SystemExit(f"error: val_seeds must be validation seeds and train_seed a train seed "
+                         f"(satenv.tasks.SEED_SPLITS); got val_seeds {wrong[:3]}..., train_seed {cfg.train_seed}")
     collect, paper, ev, paper_ev = make_envs(system)
     experts = {id(collect): make_expert(system, collect, cfg.expert_options),
                id(paper): make_expert(system, paper, cfg.expert_options)}
     feats = features(cfg)
     term = terminal_from_config(cfg.to_json())      # part of the learner, as at inference
     obs_dim = collect.observation_space(collect.possible_agents[0]).shape[0]
-    meta = policy_env_meta(system.env_id, collect, {**system.scenario, "terminate_on_collision": False},
-                           dict(system.scenario))
+    meta = policy_env_meta(train_task.env_id, collect, {**train_task.env_kwargs, "terminate_on_collision": False},
+                           dict(train_task.env_kwargs))
     policy_cfg = {**cfg.to_json(), "recipe": "training.recipes.dagger", "expert": system.expert}
     history_path = run_dir / "history.json"
     history = read_history(run_dir)          # resume after the last round it records, never by counting files
@@ -344,10 +327,11 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
         loss = fit(actor, normalizer, feats, x, y, cfg, generator, cfg.epochs * (4 if k == 0 else 1))
         fit_s = time.perf_counter() - t1
         policy = LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats, meta=meta, terminal=term)
-        val, pap = evaluate(ev, policy, cfg.val_seeds), evaluate(paper_ev, policy, [0])
+        paper_seeds = tasks.get(system.paper_task).seeds("validation", 1)
+        val, pap = evaluate(ev, policy, cfg.val_seeds), evaluate(paper_ev, policy, paper_seeds)
         if cfg.learner_shield:
             shielded = {"val": evaluate(ev, shield(policy, ev), cfg.val_seeds),
-                        "paper": evaluate(paper_ev, shield(policy, paper_ev), [0])}
+                        "paper": evaluate(paper_ev, shield(policy, paper_ev), paper_seeds)}
         history.append({"system": cfg.system, "round": k, "labels": int(len(x)), "episodes": episode, "loss": loss,
                         "beta": cfg.beta ** k, "collect_s": round(collect_s, 1), "fit_s": round(fit_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1), "val": val, "paper": pap, "collected": flown,
@@ -358,7 +342,6 @@ def run(cfg: DaggerConfig, run_dir: Path) -> None:
         runfolder.replace_folder(staged, round_folder(run_dir, k))
         runfolder.write_json(history_path, history)
         runfolder.save_with(run_dir / "learning_curve.png", lambda tmp: plot_curve(history, tmp))  # noqa: B023
-
         if cfg.learner_shield:
             print(f"  +shield: val success {shielded['val']['success_rate']:.2f} coll "
                   f"{shielded['val']['collision_episodes']} fe {shielded['val']['final_error_m']:.2f}", flush=True)
@@ -380,7 +363,7 @@ def _savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--run-dir", required=True, type=Path)
-    parser.add_argument("--system", choices=sorted(SYSTEMS), default=None)
+    parser.add_argument("--system", default=None, help=f"one of {', '.join(SYSTEM_DEFAULTS)}")
     for f in DaggerConfig.__dataclass_fields__.values():
         if f.name != "system":
             parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None,
@@ -394,15 +377,16 @@ def main(argv: list[str] | None = None) -> None:
             base = _config(read_json(saved, "the run's DaggerConfig"))
         except (RunFolderError, TypeError, ValueError) as err:
             raise SystemExit(f"error: cannot resume {ns.run_dir}: {str(err)[:300]}") from None
-
     else:
-        name = ns.system or DaggerConfig.system
-        base = _config({"system": name, **SYSTEMS[name].defaults})
-    over = {k: (v if k == "system" else json.loads(v)) for k, v in vars(ns).items()
+        name = system_name(ns.system or DaggerConfig.system)
+        if name not in SYSTEM_DEFAULTS:
+            raise SystemExit(f"error: --system must be one of {sorted(SYSTEM_DEFAULTS)}, got {name!r}")
+        base = _config({"system": name, **SYSTEM_DEFAULTS[name]})
+    over = {k: (system_name(v) if k == "system" else json.loads(v)) for k, v in vars(ns).items()
             if k != "run_dir" and v is not None}
-    cfg = replace(base, **_config_fields(over))
-    if cfg.system not in SYSTEMS:
-        raise SystemExit(f"error: system must be one of {sorted(SYSTEMS)}, got {cfg.system!r}")
+    cfg = replace(base, **_config_fields({**over, "system": system_name(over.get("system", base.system))}))
+    if cfg.system not in SYSTEM_DEFAULTS:
+        raise SystemExit(f"error: system must be one of {sorted(SYSTEM_DEFAULTS)}, got {cfg.system!r}")
     run(cfg, ns.run_dir)
 
 
