@@ -2,6 +2,14 @@
 (not a pytest module; ``tests/test_scoreboard.py`` has the single-kill test).
 
     python tests/kill_resume.py [--kills 17] [--seeds 0-149] [--seed 0]
+    python tests/kill_resume.py --target dagger     # or train: a real kill at every write boundary
+
+``--target dagger`` / ``--target train`` run the tiny DAgger / PPO runs of
+``tests/test_crash_windows.py`` in fresh interpreters: once uninterrupted (counting its write
+boundaries, :mod:`training.runfolder`), then, for every boundary ``k``, one run ended there by
+``os._exit`` (``SATENV_CRASH_AT_WRITE=k``: the disk as a ``kill -9`` leaves it) and one resume to
+the end; it prints the runs that could not finish, the rounds / evaluations lost or duplicated and
+how many resumed runs equal the uninterrupted one (timings aside).
 
 Each round starts ``run_scoreboard(..., resume=True)`` on the toy board of
 ``tests/test_scoreboard.py`` (platoon, 20 steps, ``zero`` and ``random``) in a fresh interpreter
@@ -45,12 +53,80 @@ def round_script(out: Path, seeds: str, kill_after: int | None) -> str:
     """)
 
 
+RUN_SCRIPTS = {
+    "dagger": """
+import sys
+sys.path.insert(0, {tests!r})
+from pathlib import Path
+from test_crash_windows import tiny_dagger
+run, cfg = tiny_dagger(lambda obj, name, value: setattr(obj, name, value))
+run(cfg, Path({out!r}))
+""",
+    "train": """
+import sys
+sys.path.insert(0, {tests!r})
+from pathlib import Path
+from test_crash_windows import tiny_train_config
+from training.train import latest_checkpoint, train
+out = Path({out!r})
+train(tiny_train_config(out), resume=latest_checkpoint(out) is not None)
+""",
+}
+
+
+def sweep(target: str) -> int:
+    """Kill ``target`` at every write boundary in a subprocess, resume, compare (module docstring)."""
+    from test_crash_windows import dagger_result, train_result
+
+    from training import runfolder
+
+    tmp = Path(tempfile.mkdtemp(prefix=f"kill_{target}_"))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS.parent), str(TESTS)]),
+           "OMP_NUM_THREADS": "1", "SATENV_CACHE_DIR": str(tmp / "cache")}
+
+    def go(out: Path, **extra: str) -> int:
+        code = RUN_SCRIPTS[target].format(tests=str(TESTS), out=str(out))
+        return subprocess.run([sys.executable, "-c", code], env={**env, **extra}, cwd=TESTS.parent,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=900).returncode
+
+    result = dagger_result if target == "dagger" else train_result
+    log = tmp / "boundaries.log"
+    assert go(tmp / "ref", **{runfolder.LOG_ENV: str(log)}) == 0
+    labels = log.read_text().splitlines()
+    reference = result(tmp / "ref")
+    ref_steps = [h["round"] for h in reference[0]] if target == "dagger" else reference[0]
+    kills = unfinished = lost = duplicated = equal = 0
+    for k in range(1, len(labels) + 1):
+        out = tmp / f"k{k}"
+        kills += go(out, **{runfolder.CRASH_ENV: str(k)}) == runfolder.CRASH_EXIT_CODE
+        if go(out) != 0:
+            unfinished += 1
+            print(f"boundary {labels[k - 1]}: the resume did not finish", flush=True)
+            continue
+        got = result(out)
+        steps = [h["round"] for h in got[0]] if target == "dagger" else got[0]
+        lost += len(set(ref_steps) - set(steps))
+        duplicated += len(steps) - len(set(steps))
+        same = got == reference if target == "dagger" else got[1:3] == reference[1:3]
+        equal += same
+        print(f"boundary {labels[k - 1]}: resumed, {'equal to' if same else 'differs from'} the uninterrupted run",
+              flush=True)
+    print(f"{target}: {kills} kills at {len(labels)} write boundaries; {unfinished} runs could not finish, "
+          f"{lost} {'rounds' if target == 'dagger' else 'evaluations'} lost, {duplicated} duplicated; "
+          f"{equal} of {len(labels)} resumed runs equal to the uninterrupted one")
+    return 0 if (kills == len(labels) and unfinished == lost == duplicated == 0
+                 and (target == "train" or equal == len(labels))) else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kills", type=int, default=17)
     ap.add_argument("--seeds", default="0-149")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--target", choices=("scoreboard", "dagger", "train"), default="scoreboard")
     args = ap.parse_args(argv)
+    if args.target != "scoreboard":
+        return sweep(args.target)
     from test_scoreboard import _board, _strip
 
     from benchmarks.scoreboard import EPISODES_FILE, read_episodes
