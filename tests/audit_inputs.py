@@ -8,8 +8,16 @@ Entry points: the four env constructors (random fields of random kinds and magni
 shapes, dtypes and values), ``baselines.make`` (every baseline, random options, on envs it does
 and does not support and on non-envs; an accepted one acts once) and ``training.load`` (a good
 policy folder with random corruptions: random bytes, random JSON, truncation, deleted files,
-edited fields, bad tensors, with and without a re-hashed manifest). Each call runs under a
-SIGALRM timeout and is counted as one of:
+edited fields, bad tensors, with and without a re-hashed manifest); and the newest parts: the
+filtered envs (``satenv.make(env_id, safety_filter=True)`` and a filtered ``make_vec`` stepped
+with actions far outside the box -- 1e300, the most negative float -- and bad actions), the
+safety API (``SafetyConfig.from_options``, ``SafetyFilter`` on non-envs and ``filter`` with
+actions of other shapes, dtypes and values, ``shield`` with non-policies), every NLP/QP
+baseline deciding after its env's true state went non-finite, ``training.load`` of unusable
+paths and of a folder shipped behind its filter without ``env``, ``gymnasium.make`` with bad
+``render_mode``/``max_steps``, and ``--resume`` (``training.train.load_checkpoint``) of corrupted
+checkpoints (zip bombs, oversized or torn files). With the default ``--n 600`` that is 40 entry
+points, 24,000 cases. Each call runs under a SIGALRM timeout and is counted as one of:
 
 ``clear``     a ``ValueError``/``TypeError`` raised in satenv code whose message names the field;
 ``vague``     the same, but the message does not name the field that was changed;
@@ -20,7 +28,13 @@ SIGALRM timeout and is counted as one of:
 ``nonfinite`` silent garbage: a result (state, observation, reward, trajectory) is NaN/inf;
 ``obscure``   any other exception (``OverflowError``, ``ZeroDivisionError``, ``AttributeError``,
               a ``TypeError`` from ``int(None)``, an error from numpy/scipy internals, ...);
-``hang``      the call did not finish within the timeout.
+``hang``      the call did not finish within the timeout;
+``out_of_box`` a safety filter returned a finite action outside ``[-1, 1]`` (its box constraint).
+
+A baseline's finite action on a non-finite state that is not flagged (``info["fallbacks"]`` 0)
+counts ``vague``; a shipped filtered folder loaded without ``env`` as the bare network counts
+``nonfinite`` (silently unsafe); a ``--resume`` whose peak memory grows past ``OVER_CAP_MB``
+counts ``over_cap``.
 
 Then two checks of issue 13 beyond bad inputs: **solver faults** (each baseline's solver replaced
 by one that raises, returns a wrong shape, a NaN point or an infeasible point reported as a
@@ -55,7 +69,7 @@ from satenv.dynamics import Orbit, simulate
 
 ENVS = ("platoon_v0", "cluster_v0", "servicing_v0", "formation_v0")
 CATEGORIES = ("clear", "vague", "accepted", "late", "nonfinite", "obscure", "hang", "outside_read",
-              "over_cap", "code_ran")
+              "over_cap", "code_ran", "out_of_box")
 
 
 class Hang(Exception):
@@ -77,7 +91,10 @@ def time_limit(seconds: float):
 
 def raised_in_satenv(exc: BaseException) -> bool:
     """True when the innermost frame that raised ``exc`` is the project's own code (satenv,
-    baselines, training)."""
+    baselines, training), or ``exc`` is one of the project's own error classes re-raised by a
+    library (``gymnasium.make`` re-raises an env's ``TypeError`` as ``type(e)(message + ...)``)."""
+    if type(exc).__module__.split(".")[0] in ("satenv", "baselines", "training"):
+        return True
     tb = traceback.extract_tb(exc.__traceback__)
     return bool(tb) and any(f"{os.sep}{pkg}{os.sep}" in tb[-1].filename
                             for pkg in ("satenv", "baselines", "training"))
@@ -926,11 +943,11 @@ def audit_metrics(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
     if kind == "array":
         key = str(rng.choice(keys))
         a = np.asarray(traj.info[key])
-        how = str(rng.choice(["nan", "inf", "huge", "empty", "one", "ndim", "complex", "object", "str",
-                              "bool", "rows", "cols", "list", "masked"]))
-        if how in ("nan", "inf", "huge"):
+        how = str(rng.choice(["nan", "inf", "huge", "negative", "empty", "one", "ndim", "complex", "object",
+                              "str", "bool", "rows", "cols", "list", "masked"]))
+        if how in ("nan", "inf", "huge", "negative"):
             a = a.astype(float).copy()
-            a.flat[int(rng.integers(a.size))] = {"nan": np.nan, "inf": -np.inf, "huge": 1e300}[how]
+            a.flat[int(rng.integers(a.size))] = {"nan": np.nan, "inf": -np.inf, "huge": 1e300, "negative": -1e300}[how]
         else:
             a = {"empty": lambda: a[:0], "one": lambda: a[:1], "ndim": lambda: a.reshape(-1),
                  "complex": lambda: a + 1j, "object": lambda: a.astype(object), "str": lambda: a.astype(str),
@@ -1075,6 +1092,333 @@ def audit_cli_paths(tmp: str, rng: np.random.Generator, timeout: float) -> tuple
     return ("clear" if code not in (0, None) and "error" in err.getvalue() else "vague"), field
 
 
+# ------------------------------------------------------------------------------- safety filter
+EXTREMES = (1e300, -1e300, float(np.finfo(float).max), -float(np.finfo(float).max), 1e10, -1e10, 1e154)
+"""Finite action values far outside ``[-1, 1]`` (the filtered env must clip or reject them)."""
+SAFETY_FIELDS = ("margin", "los_margin", "velocity_margin", "gamma", "penalty")
+
+
+def extreme_actions(rng: np.random.Generator, agents: list, shape: tuple) -> dict:
+    """Every agent (or one) at one extreme finite value, or random huge values per entry."""
+    r = rng.random()
+    if r < 0.4:
+        v = EXTREMES[int(rng.integers(len(EXTREMES)))]
+        return {a: np.full(shape, v) for a in agents}
+    actions = {a: rng.uniform(-1, 1, shape) for a in agents}
+    if r < 0.7:
+        actions[agents[int(rng.integers(len(agents)))]] = np.full(shape, EXTREMES[int(rng.integers(len(EXTREMES)))])
+    else:
+        for a in agents:
+            actions[a] = rng.choice(EXTREMES, size=shape)
+    return actions
+
+
+def audit_filtered_step(env, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``step`` of ``satenv.make(env_id, safety_filter=True)``: half the time finite actions far
+    outside the box (1e300, the most negative float, ... for every agent or one), else the plain
+    step audit's bad actions; the observations, rewards, states and filter records must stay finite."""
+    if not env.agents:
+        env.reset(seed=int(rng.integers(1000)))
+    shape = env.action_space(env.agents[0]).shape
+    if rng.random() < 0.5:
+        actions = extreme_actions(rng, list(env.agents), shape)
+    else:
+        actions = {a: rng.uniform(-1, 1, shape) for a in env.agents}
+        actions[env.agents[int(rng.integers(len(env.agents)))]] = bad_value(rng, np.ones(shape))
+    try:
+        with time_limit(timeout):
+            obs, rew, _, _, infos = env.step(actions)
+    except BaseException as exc:  # noqa: BLE001
+        env.reset(seed=0)
+        return classify_error(exc, "action actions agent"), "action"
+    ok = finite(obs, rew, *[{k: v for k, v in i.items() if k != "safety_active"} for i in infos.values()])
+    if not ok:
+        LAST_ERROR[0] = "non-finite observation/reward/info after a filtered step"
+        env.reset(seed=0)
+    return ("accepted" if ok else "nonfinite"), "action"
+
+
+def audit_filtered_vec(vecs: dict, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``step`` of a filtered ``satenv.make_vec(env_id, 2, safety_filter=True)`` with extreme or bad actions."""
+    vec = vecs[str(rng.choice(sorted(vecs)))]
+    vec.reset(seed=0)
+    if rng.random() < 0.5:
+        shape = vec.action_shape
+        v = EXTREMES[int(rng.integers(len(EXTREMES)))]
+        actions = np.full(shape, v) if rng.random() < 0.5 else rng.choice(EXTREMES, size=shape)
+    else:
+        actions = bad_value(rng, np.zeros(vec.action_shape))
+    try:
+        with time_limit(timeout):
+            obs, rew, _, _, infos = vec.step(actions)
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, "actions"), "actions"
+    ok = finite(obs, rew, infos["state"], *[infos[k] for k in infos if k.startswith("safety_") and k != "safety_active"])
+    return ("accepted" if ok else "nonfinite"), "actions"
+
+
+def audit_safety_api(envs: dict, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """The safety API: ``SafetyConfig.from_options`` with bad or unknown fields, ``SafetyFilter``
+    on non-envs, ``SafetyFilter(env).filter(actions)`` with actions of other shapes (a batch of 2
+    for one env, missing agents), dtypes and values, and ``shield(policy, env, ...)`` with
+    non-policies; a filtered action must be finite and inside the box."""
+    import baselines
+    from satenv.safety import SafetyConfig, SafetyFilter, shield
+
+    env = envs[str(rng.choice(ENVS))]
+    kind = str(rng.choice(["config", "config", "target", "filter", "filter", "filter", "shield"]))
+    try:
+        with time_limit(timeout):
+            if kind == "config":
+                picks = [str(n) for n in rng.choice(SAFETY_FIELDS + ("no_such_option",),
+                                                    size=int(rng.integers(1, 3)), replace=False)]
+                options = {n: bad_value(rng, 0.05) for n in picks}
+                if rng.random() < 0.3:
+                    options[picks[0]] = [10**400, -(10**400), 1e-300, 2**63, np.float64(1e308)][int(rng.integers(5))]
+                field = " ".join(picks)
+                SafetyConfig.from_options(**options)
+                return "accepted", field
+            if kind == "target":
+                field = "target env"
+                SafetyFilter(NON_ENVS[int(rng.integers(len(NON_ENVS)))])
+                return "accepted", field
+            if kind == "shield":
+                field = "policy config"
+                policy = [None, object(), 3, "zero", baselines.make("zero", env)][int(rng.integers(5))]
+                config = [None, SafetyConfig(), {"margin": 0.1}, 0.1, "x"][int(rng.integers(5))]
+                wrapped = shield(policy, env, config)
+                obs, _ = env.reset(seed=0)
+                act = wrapped.act(obs)
+                ok = finite(act) and all(np.all(np.abs(a) <= 1.0) for a in act.values())
+                return ("accepted" if ok else "nonfinite"), field
+            field = "actions"
+            env.reset(seed=0)
+            filt = SafetyFilter(env)
+            m, d = len(env.possible_agents), env.action_space(env.possible_agents[0]).shape[0]
+            shape = [(m, d), (1, m, d), (2, m, d), (m - 1, d), (m, d + 1), (d,), (1, 1, m, d)][int(rng.integers(7))]
+            r = rng.random()
+            if r < 0.4:
+                actions = rng.choice(EXTREMES + (0.5, -0.5), size=shape)
+            elif r < 0.8:
+                actions = bad_value(rng, np.zeros(shape))
+            else:
+                actions = bad_value(rng, None)
+            safe, _ = filt.filter(actions)
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, field), field
+    if not finite(safe):
+        return "nonfinite", field
+    if not np.all(np.abs(np.asarray(safe, dtype=float)) <= 1.0):
+        LAST_ERROR[0] = f"a filtered action outside [-1, 1] (max |u| {np.max(np.abs(safe)):.3g})"
+        return "out_of_box", field
+    return "accepted", field
+
+
+# ------------------------------------------------------------------------------- corrupted env states
+CORRUPTED_BASELINES = (("apf", "cluster_v0"), ("dmpc", "platoon_v0"), ("nmpc", "servicing_v0"),
+                       ("tube_rdmpc", "cluster_v0"), ("cgmres", "formation_v0"))
+_CORRUPT: dict = {}
+
+
+def audit_corrupted_state(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """A scripted baseline deciding after its env's true state went non-finite (NaN/inf at random
+    entries of random agents, as an integration blow-up leaves it): the action must be finite, in
+    the box, and flagged (``info["fallbacks"]`` > 0) -- never a NaN thrust."""
+    import baselines
+
+    name, env_id = CORRUPTED_BASELINES[int(rng.integers(len(CORRUPTED_BASELINES)))]
+    if name not in _CORRUPT:
+        env = satenv.make(env_id)
+        env.reset(seed=0)
+        _CORRUPT[name] = (env, baselines.make(name, env))
+    env, policy = _CORRUPT[name]
+    obs, _ = env.reset(seed=int(rng.integers(100)))
+    policy.reset(seed=0)
+    x = env.core.x
+    for _ in range(int(rng.integers(1, 4))):
+        x[0, int(rng.integers(x.shape[1])), int(rng.integers(x.shape[2]))] = float(rng.choice([np.nan, np.inf, -np.inf]))
+    field = f"{name} state"
+    try:
+        with time_limit(timeout):
+            act = policy.act(obs)
+    except BaseException as exc:  # noqa: BLE001
+        env.reset(seed=0)
+        return classify_error(exc, field), field
+    env.reset(seed=0)
+    ok = finite(act) and all(np.all(np.abs(a) <= 1.0) for a in act.values())
+    if ok and not policy.info.get("fallbacks", 0):
+        LAST_ERROR[0] = "a decision on a non-finite state was not flagged (fallbacks == 0)"
+        return "vague", field
+    return ("accepted" if ok else "nonfinite"), field
+
+
+# ------------------------------------------------------------------------------- load paths, gymnasium ids, --resume
+def audit_load_paths(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``training.load`` of unusable paths (names too long, NUL bytes, missing, a file, a run
+    folder without ``final/``), of a shipped filtered folder without ``env`` (must raise, never
+    the bare network), and with bad ``env``/``shielded``/``trusted`` arguments."""
+    import training
+
+    shipped = sorted(p for p in training.POLICIES_DIR.iterdir() if (p / "manifest.json").is_file())
+    filtered = [p for p in shipped if "safety_filter" in (p / "env.json").read_text()]
+    kind = int(rng.integers(8))
+    kwargs: dict = {}
+    if kind == 0:
+        path, field = "x" * int(rng.integers(256, 6000)), "path"
+    elif kind == 1:
+        path, field = os.path.join(tmp, "a\0b"), "path"
+    elif kind == 2:
+        path, field = os.path.join(tmp, "missing", "final"), "path"
+    elif kind == 3:
+        path, field = secret_file(), "path"
+    elif kind == 4:
+        path, field = tmp, "path final"
+    elif kind == 5:
+        path, field = str(filtered[int(rng.integers(len(filtered)))]), "shielded filter env"
+    elif kind == 6:
+        path = str(shipped[int(rng.integers(len(shipped)))])
+        env = NON_ENVS[int(rng.integers(len(NON_ENVS)))]
+        kwargs, field = {"env": object() if env is None else env}, "env"
+    else:
+        path = str(shipped[int(rng.integers(len(shipped)))])
+        key = str(rng.choice(["shielded", "trusted"]))
+        kwargs, field = {key: scalar_pool()[int(rng.integers(len(scalar_pool())))]}, key
+        if isinstance(kwargs[key], bool):
+            kwargs[key] = "yes"
+    try:
+        with time_limit(timeout):
+            policy = training.load(path, **kwargs)
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, field), field
+    if kind == 5 and type(policy).__name__ != "Shield":
+        LAST_ERROR[0] = "a folder shipped behind its filter loaded as the bare network"
+        return "nonfinite", field
+    return "accepted", field
+
+
+RENDER_MODES = ("human", "rgb_array", "rgb_array_list", "ansi", "rgb", "", "human_list", "HUMAN")
+
+
+def audit_gym_make(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``gymnasium.make`` of a registered id with a bad ``render_mode`` (any type) or ``max_steps``."""
+    import gymnasium as gym
+
+    gym_id = str(rng.choice(sorted(satenv.GYM_IDS)))
+    if rng.random() < 0.6:
+        pool = list(RENDER_MODES) + scalar_pool()
+        kwargs, field = {"render_mode": pool[int(rng.integers(len(pool)))]}, "render_mode"
+        if kwargs["render_mode"] in ("human", "HUMAN", "human_list"):
+            kwargs["render_mode"] = None        # no window in the audit
+    else:
+        kwargs, field = {"max_steps": bad_value(rng, 300)}, "max_steps"
+    try:
+        with time_limit(timeout):
+            env = gym.make(gym_id, **kwargs)
+            obs, _ = env.reset(seed=0)
+            out = env.step(np.zeros(env.action_space.shape, np.float32))
+            env.close()
+    except BaseException as exc:  # noqa: BLE001
+        return classify_error(exc, field), field
+    return ("accepted" if finite(obs, out[0], out[1]) else "nonfinite"), field
+
+
+RESUME_EDITS = ("bomb", "stored_big", "truncate", "bytes", "not_zip", "tensors", "npz_bomb", "npz_shape")
+_RESUME: dict = {}
+
+
+def _resume_model(tmp: str):
+    """A small PPO model (and SAC with a replay buffer) on platoon_v0 and a checkpoint of each."""
+    if not _RESUME:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        from training.config import TrainConfig
+        from training.envs import make_env
+        from training.train import build_model, save_checkpoint
+        from training.vec_env import SatVecEnv
+
+        for algo in ("ppo", "sac"):
+            cfg = TrainConfig(env_id="platoon_v0", num_envs=2, net_arch=(16, 16), algo=algo, buffer_size=64,
+                              out_dir=os.path.join(tmp, f"resume_{algo}"), progress=False)
+            venv = VecNormalize(SatVecEnv(make_env("platoon_v0"), 2, seed=0))
+            model = build_model(cfg, venv)
+            folder = save_checkpoint(model, venv, __import__("pathlib").Path(cfg.out_dir), 0)
+            _RESUME[algo] = (model, folder, {n: (folder / n).read_bytes() for n in os.listdir(folder)})
+    return _RESUME
+
+
+BOMB_MB = 1024
+"""A zip bomb's inflated size [MiB] (about 1 MiB on disk): past ``OVER_CAP_MB``, so reading it
+whole is counted ``over_cap``."""
+_BOMB: list[bytes] = []
+
+
+def _zip_bomb(path) -> None:
+    """Write the zip bomb (built once: one deflated entry of :data:`BOMB_MB` MiB of zeros)."""
+    import io
+    import zipfile
+
+    if not _BOMB:
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf, \
+                zf.open("archive/data.pkl", "w") as f:
+            for _ in range(BOMB_MB):
+                f.write(bytes(2**20))
+        _BOMB.append(buf.getvalue())
+    with open(path, "wb") as f:
+        f.write(_BOMB[0])
+
+
+def audit_resume(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``training.train.load_checkpoint`` (what ``--resume`` runs) of a checkpoint with one
+    corruption: ``sb3_state.pt`` a zip bomb (:data:`BOMB_MB` inflated), a stored zip beyond the model's
+    size, truncated, random bytes, not a zip, other tensors; ``replay_buffer.npz`` a zip bomb or
+    arrays of other shapes. Must end in a clear error within the caps (``over_cap`` otherwise)."""
+    import zipfile
+
+    import torch
+
+    from training.train import CHECKPOINT_STATE, load_checkpoint
+
+    algo = "sac" if rng.random() < 0.3 else "ppo"
+    model, folder, good = _resume_model(tmp)[algo]
+    for name, data in good.items():
+        (folder / name).write_bytes(data)
+    kind = str(rng.choice(RESUME_EDITS))
+    state, buffer = folder / CHECKPOINT_STATE, folder / "replay_buffer.npz"
+    if kind == "bomb":
+        _zip_bomb(state)
+    elif kind == "stored_big":
+        with zipfile.ZipFile(state, "w") as zf:
+            zf.writestr("archive/data.pkl", bytes(int(rng.integers(8, 64)) * 2**20))
+    elif kind == "truncate":
+        state.write_bytes(good[CHECKPOINT_STATE][:int(rng.integers(len(good[CHECKPOINT_STATE])))])
+    elif kind == "bytes":
+        state.write_bytes(rng.bytes(int(rng.integers(0, 4096))))
+    elif kind == "not_zip":
+        state.write_bytes(b"{}")
+    elif kind == "tensors":
+        torch.save({"num_timesteps": 1, "n_updates": 0, "state_dicts": {"policy": {"x": torch.zeros(3)}},
+                    "tensors": {}}, state)
+    elif kind == "npz_bomb" and algo == "sac":
+        _zip_bomb(buffer)
+    elif kind == "npz_shape" and algo == "sac":
+        np.savez(buffer, observations=np.zeros((10**6, 3), np.float32), pos=np.array(0), full=np.array(False))
+    field = f"{kind} {CHECKPOINT_STATE} replay_buffer checkpoint"
+    with watched(None) as seen:
+        try:
+            with time_limit(timeout):
+                load_checkpoint(model, folder)
+            err = None
+        except BaseException as exc:  # noqa: BLE001
+            err = exc
+    if seen["grew_mb"] > OVER_CAP_MB:
+        LAST_ERROR[0] = f"peak memory grew {seen['grew_mb']:.0f} MB"
+        return "over_cap", field
+    if err is not None:
+        return classify_error(err, field), field
+    return "accepted", field
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=600, help="inputs per entry point")
@@ -1089,6 +1433,10 @@ def main(argv: list[str] | None = None) -> dict:
     only = [w for w in args.only.split(",") if w]
     warnings.simplefilter("ignore")
     np.seterr(all="ignore")
+    import torch  # noqa: F401  (heavy imports first: an alarm inside an import would leave it half done)
+
+    import training.policy  # noqa: F401
+    import training.train  # noqa: F401
     rng = np.random.default_rng(args.seed)
     counts: dict[str, Counter] = {}
     examples: dict[str, dict[str, list[str]]] = {}
@@ -1111,6 +1459,18 @@ def main(argv: list[str] | None = None) -> dict:
                 for e in ENVS]
     entries += [("torchrl device", lambda r: audit_device(r, args.timeout)),
                 ("CLI paths", lambda r: audit_cli_paths(tmp, r, args.timeout))]
+    filtered = {e: satenv.make(e, safety_filter=True) for e in ENVS}
+    for env in filtered.values():
+        env.reset(seed=0)
+    entries += [(f"{e} filtered.step", lambda r, e=e: audit_filtered_step(filtered[e], r, args.timeout))
+                for e in ENVS]
+    fvecs = {e: satenv.make_vec(e, 2, seed=0, safety_filter=True) for e in ENVS}
+    entries += [("filtered vec.step", lambda r: audit_filtered_vec(fvecs, r, args.timeout)),
+                ("safety API", lambda r: audit_safety_api(envs, r, args.timeout)),
+                ("baselines, bad state", lambda r: audit_corrupted_state(r, args.timeout)),
+                ("training.load paths", lambda r: audit_load_paths(tmp, r, args.timeout)),
+                ("gymnasium.make", lambda r: audit_gym_make(r, args.timeout)),
+                ("train --resume", lambda r: audit_resume(tmp, r, args.timeout))]
     slow = ("baselines.make", "torchrl device", "CLI paths")
     t0 = time.time()
     entries = [(n, f) for n, f in entries if not only or any(w in n for w in only)]
