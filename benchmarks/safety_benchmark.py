@@ -24,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
-HELD_OUT = 900_000
-"""First held-out seed (no training run used seeds from here on)."""
+from satenv.tasks import SEED_SPLITS
+
+HELD_OUT = SEED_SPLITS["test"].start
+"""First held-out seed: the test split of :data:`satenv.tasks.SEED_SPLITS`."""
 SKIP = {"platoon-swarm256-ring-cw": "256 followers: the pairwise rows of 100 copies do not fit the "
                                     "benchmark's time budget (the filter itself handles them)"}
 

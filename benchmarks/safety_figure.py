@@ -15,8 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from satenv.tasks import SEED_SPLITS
+
 POLICY = "cluster_li2022_dagger"
-SEED = 900_000
+SEED = SEED_SPLITS["test"].start
+"""The episode's seed: the first of the test split."""
 
 
 def episode(policy: Any, env_kwargs: dict[str, Any], filtered: bool, seed: int) -> dict[str, np.ndarray]:
