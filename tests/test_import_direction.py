@@ -5,6 +5,7 @@ hides a cycle, it does not remove it)."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -35,6 +36,7 @@ def _imports(path: Path, module: str) -> set[str]:
     return {m for m in out if m.split(".")[0] in LAYERS}
 
 
+@functools.cache
 def _graph() -> dict[str, set[str]]:
     files = [p for layer in LAYERS for p in (ROOT / layer).rglob("*.py")]
     modules = {_module(p): p for p in files}
