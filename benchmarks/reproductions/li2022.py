@@ -691,9 +691,14 @@ def _assemble(rows: list[dict], state: dict, opts: dict, variants, wall: float) 
     }
     result["pass"] = passed(result)
     missing = [c for c in CASES if c not in result["cases"]]
-    if missing:
-        result["not_run"] = [f"case {c}: python -m benchmarks.reproduce li2022 --case {c} --with li2022.json "
-                             f"--out li2022.json --plots figs/" for c in missing]
+    not_run = [f"case {c}: python -m benchmarks.reproduce li2022 --case {c} --with li2022.json "
+               f"--out li2022.json --plots figs/" for c in missing]
+    ablated = {r["variant"] for r in rows if r["case"] == 1}
+    if 1 in result["cases"] and (absent := [LABELS[f"ours-no-{a}"] for a in ADDITIONS if f"ours-no-{a}" not in ablated]):
+        not_run.append(f"ablation {', '.join(absent)}: python -m benchmarks.reproduce li2022 --case 1 --with "
+                       "li2022.json --out li2022.json")
+    if not_run:
+        result["not_run"] = not_run
     if state["sensitivity"] is not None:
         result["sensitivity"] = state["sensitivity"]
     if state["tube"] is not None:
