@@ -44,6 +44,9 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
 * ``safety``  issue 26's safety filter (:mod:`benchmarks.perf.safety`): its ms per agent decision
               beside the env step on the same states (cluster_v0 N = 10 at 1 and 64 copies, targets
               0.1 / 0.02 ms; pereira2022 platoon and servicing).
+* ``policy_threads`` a loaded policy's decision time with every core busy: torch's default
+              threads, one thread (the peer) and ``training.load``'s one-thread guard
+              (:mod:`benchmarks.perf.policy_threads`, target guard <= 2x one thread).
 * ``learning`` the native TorchRL env (``satenv.torchrl.make_env``, 256 copies) against TorchRL's
               generic ``PettingZooWrapper`` over the same ``platoon_v0`` (env only), and end-to-end
               training agent-steps/s of SB3 PPO, BenchMARL MAPPO and DAgger on each env with its
@@ -79,7 +82,7 @@ from typing import Any
 
 from benchmarks._env import single_thread_blas
 
-from . import cgmres, envs, learning, reproductions, safety, scaling, training
+from . import cgmres, envs, learning, policy_threads, reproductions, safety, scaling, training
 from ._common import AGENTS, PettingZooLoop, _loadavg, _machine, _rate
 from .api import api_loops
 from .batched import batched_core, batched_dynamics
@@ -97,7 +100,8 @@ __all__ = ["AGENTS", "API_VS_MPE2", "CORE_VS_VMAS", "EXTRA_SECTIONS", "FAST_SOLV
 
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard", "envs")
 """The default sections."""
-EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions", "safety")
+EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions", "safety",
+                  "policy_threads")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -147,6 +151,7 @@ REGISTRY: dict[str, Callable[[Options, Log], Any]] = {
     "envs": lambda o, log: envs.env_speed(o.min_time, o.api_time, log=log),
     "reproductions": lambda o, log: reproductions.reproduction_times(log),
     "safety": safety.run,
+    "policy_threads": policy_threads.run,
     "cgmres_ipopt": _cgmres,
     "training": _training,
     "scaling": _scaling,

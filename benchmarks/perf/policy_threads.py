@@ -1,0 +1,84 @@
+"""The ``policy_threads`` section: a loaded policy's decision time on a busy machine.
+
+``training.load`` runs each forward pass on one torch thread (``training.policy.INFERENCE_THREADS``,
+set around the pass and restored after it). Measured in one run, with busy-loop processes on
+every core (a busy machine): the decision time (``LearnedPolicy.act`` on ``formation_v0``'s
+observations) with torch's default thread count and no guard, with one thread set globally (the
+peer), and with the guard while the caller keeps its default count. Target: the guard within
+:data:`GUARD_VS_ONE_THREAD` of the one-thread time.
+
+    python -m benchmarks.perf --sections policy_threads --out perf_policy_threads.json
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import time
+from typing import Any
+
+GUARD_VS_ONE_THREAD = 2.0
+"""The guarded decision time may be at most this multiple of the one-thread time."""
+POLICY = "formation_position_dagger"
+"""The shipped policy measured (an MLP on formation_v0's observations)."""
+
+
+def _spin(stop: Any) -> None:
+    while not stop.is_set():
+        pass
+
+
+def _ms_per_decision(policy: Any, obs: dict, seconds: float) -> float:
+    """Best of 3 blocks of at least ``seconds`` each: ms per ``act`` call."""
+    best = float("inf")
+    for _ in range(3):
+        n, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds or n < 20:
+            policy.act(obs)
+            n += 1
+        best = min(best, (time.perf_counter() - start) / n * 1e3)
+    return best
+
+
+def run(options: Any = None, log=print, seconds: float = 0.5) -> dict[str, Any]:
+    """The three decision times (module docstring), the busy processes' count and the target."""
+    import torch
+
+    import satenv
+    import training
+    from training import policy as tp
+
+    env = satenv.make("formation_v0", randomize=True)
+    policy = training.load(training.POLICIES_DIR / POLICY, env=env)
+    obs, _ = env.reset(seed=0)
+    before = torch.get_num_threads()
+    busy = os.cpu_count() or 1
+    default = max(2, busy)     # torch's own default is the core count (this run's harness sets 1)
+    stop = mp.Event()
+    spinners = [mp.Process(target=_spin, args=(stop,), daemon=True) for _ in range(busy)]
+    for p in spinners:
+        p.start()
+    try:
+        torch.set_num_threads(default)
+        tp.INFERENCE_THREADS = default                       # no guard: torch's default count
+        unguarded = _ms_per_decision(policy, obs, seconds)
+        tp.INFERENCE_THREADS = 1
+        torch.set_num_threads(1)                             # the peer: one thread, set globally
+        one = _ms_per_decision(policy, obs, seconds)
+        torch.set_num_threads(default)                       # the guard, the caller at its default
+        guarded = _ms_per_decision(policy, obs, seconds)
+    finally:
+        stop.set()
+        for p in spinners:
+            p.join(timeout=5)
+        tp.INFERENCE_THREADS = 1
+        torch.set_num_threads(before)
+    ratio = guarded / one
+    log(f"policy decision on a busy machine ({busy} busy processes, torch default {default} threads): "
+        f"default {unguarded:.3f} ms, one thread {one:.3f} ms, guard {guarded:.3f} ms (x{ratio:.2f})")
+    return {"policy": POLICY, "busy_processes": busy, "torch_default_threads": default,
+            "ms_default_threads": unguarded, "ms_one_thread": one, "ms_guard": guarded,
+            "guard_vs_one_thread": ratio,
+            "targets": [{"name": "policy decision after training.load on a busy machine: guard / one thread",
+                         "value": ratio, "target": GUARD_VS_ONE_THREAD, "op": "<=",
+                         "met": ratio <= GUARD_VS_ONE_THREAD}]}
