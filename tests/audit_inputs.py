@@ -991,9 +991,19 @@ def audit_metrics(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
     try:
         ok = all(k in ("time_to_converge", "time_to_converge_s") or not isinstance(v, float | int | np.ndarray)
                  or np.isfinite(np.asarray(v, dtype=float)).all() for k, v in items)
+        negative = [k for k, v in items if k in NONNEGATIVE_METRICS and np.any(np.asarray(v, dtype=float) < 0)]
     except (OverflowError, TypeError, ValueError):
-        ok = False  # a result no float can hold
+        ok, negative = False, []  # a result no float can hold
+    if negative:
+        LAST_ERROR[0] = f"negative {negative} (a magnitude or count): garbage from a corrupt trajectory"
+        ok = False
     return ("accepted" if ok else "nonfinite"), field
+
+
+NONNEGATIVE_METRICS = frozenset({"delta_v_total", "delta_v", "min_separation", "min_separation_m", "violations",
+                                 "safety_cost", "collisions", "rmse", "rmsee", "foe", "final_position_error",
+                                 "final_error_m"})
+"""Metrics that are magnitudes or counts: a negative value is silent garbage."""
 
 
 # ------------------------------------------------------------------------------- ids, indices, device, CLIs
@@ -1434,6 +1444,7 @@ def main(argv: list[str] | None = None) -> dict:
     warnings.simplefilter("ignore")
     np.seterr(all="ignore")
     import torch  # noqa: F401  (heavy imports first: an alarm inside an import would leave it half done)
+    import torch._dynamo  # noqa: F401  (imported lazily by the first optimiser torch builds)
 
     import training.policy  # noqa: F401
     import training.train  # noqa: F401
