@@ -24,9 +24,12 @@ the legacy formats — ``weights.pt`` (:func:`convert_weights_pt` converts it) a
 ``model.zip``, whose unpickling runs any code it contains (:func:`convert_sb3`) — with a
 ``UserWarning`` saying what was skipped.
 
-``load(path)`` returns a :class:`LearnedPolicy` with ``reset(seed=None)`` and
-``act(observations) -> actions`` (dicts keyed by agent, actions in ``[-1, 1]``), usable anywhere
-a scripted baseline is (``satenv.rollout.rollout``, the scoreboard).
+``load(path)`` (a policy folder, or a run folder holding ``final/``) returns a
+:class:`LearnedPolicy` with ``reset(seed=None)`` and ``act(observations) -> actions`` (dicts
+keyed by agent, actions in ``[-1, 1]``), usable anywhere a scripted baseline is
+(``satenv.rollout.rollout``, the scoreboard); a folder that ships behind its safety filter needs
+``load(path, env=env)`` (returned filtered) or ``shielded=False`` (the network alone), else it is
+refused (:class:`ShippedFilterError`).
 """
 
 from __future__ import annotations
