@@ -6,7 +6,7 @@ checkpoints (``make_policy(env)`` gives the current policy for an env; ``wall_s`
 wall time so far, evaluations excluded). Each uses the project's own trainer at its documented
 defaults plus the fast configuration (:data:`benchmarks.perf.learning.FAST_CONFIGS`):
 
-* ``ppo``: ``training.train.train`` (SB3 PPO, parameter sharing) run to each checkpoint's budget
+* ``ppo``: ``training.train.train`` (SB3 PPO, parameter sharing, ``task=``) run to each checkpoint's budget
   in turn, resuming from its own checkpoint (``--resume`` semantics: the env copies are re-seeded
   at each resume); the filter-in-training row trains on ``satenv.make(..., safety_filter=
   SafetyConfig(penalty=FILTER_PENALTY))`` through :func:`filtered_task_env`;
@@ -61,13 +61,11 @@ def train_ppo(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     from training.train import train
 
     task = run.task
-    if run.filter:
-        env_id, env_kwargs = "benchmarks.learning.trainers:filtered_task_env", {"task": task.name}
-    else:
-        env_id, env_kwargs = task.env_id, dict(task.env_kwargs)
+    env = ({"env_id": "benchmarks.learning.trainers:filtered_task_env", "env_kwargs": {"task": task.name}}
+           if run.filter else {"task": task.name})
     wall = 0.0
     for k, target in enumerate(run.checkpoints):
-        cfg = TrainConfig(env_id=env_id, env_kwargs=env_kwargs, seed=run.seed, total_timesteps=target,
+        cfg = TrainConfig(**env, seed=run.seed, total_timesteps=target,
                           eval_every=0, checkpoint_every=run.budget, eval_baselines=("zero",),
                           test_seeds=task.seeds("validation", 1), out_dir=str(workdir), progress=False,
                           workers=1, **_fast("sb3_ppo"))
@@ -91,7 +89,7 @@ def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     n_agents = len(env.possible_agents)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
-    cfg = BenchMARLConfig(algorithm=run.algorithm, env_id=task.env_id, env_kwargs=dict(task.env_kwargs),
+    cfg = BenchMARLConfig(algorithm=run.algorithm, task=task.name,
                           seed=run.seed, max_frames=math.ceil(run.budget / n_agents), out_dir=str(workdir),
                           progress=False, workers=1, **_fast("benchmarl_mappo")).planned()
     experiment = build_experiment(cfg)
