@@ -1,4 +1,4 @@
-"""The ``guard`` section: the finiteness guard's cost (issue 13) in the PettingZoo step and the
+"""The ``guard`` section: the finiteness guard's cost in the PettingZoo step and the
 ``make_vec`` step."""
 
 from __future__ import annotations

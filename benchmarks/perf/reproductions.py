@@ -12,8 +12,8 @@ REPRODUCTION_TARGETS_S: dict[str, tuple[list[str], float]] = {
     "pereira2022-servicing": (["pereira2022-servicing", "--variant", "ours"], 20.0),
 }
 """The reproduction commands (``benchmarks.reproduce`` arguments; our variant only, without the
-as-published rows and the ablation) and wall-time targets [s]: li2022 case 1 <= 120 s (issue 25),
-servicing <= 20 s (issue 17)."""
+as-published rows and the ablation) and wall-time targets [s]: li2022 case 1 <= 120 s,
+servicing <= 20 s."""
 
 
 def reproduction_times(log: Callable[[str], None] = print) -> dict[str, dict]:

@@ -1,11 +1,11 @@
-"""The ``safety`` section (issue 26): the safety filter's cost, beside the env step in the same run.
+"""The ``safety`` section: the safety filter's cost, beside the env step in the same run.
 
 ``run(options, log)`` -> dict: for each case (env, copies ``B``), the filter's wall time per agent decision
 (``ms_per_agent``: one ``filter`` call over ``B`` copies x ``M`` agents, divided by ``B M``) on the
 states and proposals of a random-policy episode under the filter (so its QPs run as often as the
 random policy makes them), the same for an all-safe proposal (zero thrust: the row check only), the
 env step on the same states (``step_ms_per_agent``: PettingZoo dict step for ``B = 1``, the
-``make_vec`` batched step otherwise) and their ratio. Targets (issue 26): at N = 10 (cluster_v0)
+``make_vec`` batched step otherwise) and their ratio. Targets: at N = 10 (cluster_v0)
 <= 0.1 ms per agent decision, and <= 0.02 ms per agent over 64 copies.
 
     python -m benchmarks.perf --sections safety --out perf_safety.json
@@ -23,7 +23,7 @@ CASES: tuple[tuple[str, dict[str, Any], int], ...] = (
     ("platoon_v0", {"preset": "pereira2022"}, 64), ("servicing_v0", {}, 1), ("servicing_v0", {}, 64),
 )
 TARGETS = {("cluster_v0", 1): 0.1, ("cluster_v0", 64): 0.02}
-"""ms per agent decision (issue 26)."""
+"""ms per agent decision."""
 
 
 def _record(env_id: str, kwargs: dict[str, Any], copies: int, decisions: int, seed: int) -> tuple[list, Any]:

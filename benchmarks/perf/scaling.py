@@ -1,4 +1,4 @@
-"""The ``scaling`` section of ``benchmarks.perf`` (issue 19): per-agent cost of swarms of N spacecraft.
+"""The ``scaling`` section of ``benchmarks.perf``: per-agent cost of swarms of N spacecraft.
 
 For N in :data:`SIZES` on two swarm families (cw truth):
 
@@ -20,7 +20,7 @@ it times
   resetting and stepping the ``COPIES``-copy core,
 
 and fits the growth exponent ``c`` of ``cost per agent ~ N^c`` (0: flat) by least squares on
-log-log. :func:`scaling_targets` lists issue 19's targets; :func:`plot` draws the table.
+log-log. :func:`scaling_targets` lists the swarm targets; :func:`plot` draws the table.
 """
 
 from __future__ import annotations
@@ -186,7 +186,7 @@ def scaling(sizes: tuple[int, ...] = SIZES, copies: int = COPIES, min_time: floa
 
 
 def scaling_targets(result: dict) -> list[tuple[str, float, float, str]]:
-    """``(name, value, goal, op)`` of issue 19's targets that the table covers."""
+    """``(name, value, goal, op)`` of the swarm targets that the table covers."""
     out = []
     for key in ("platoon", "cluster"):
         if key not in result:

@@ -65,7 +65,7 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
 
 
 FAST_SOLVER_TARGETS_MS = {"tube_rdmpc@cluster-case1": 5.0, "nmpc@servicing-pereira2022": 10.0}
-"""Issue 17's targets: ms per agent decision of the fast solver path."""
+"""The fast solver path's targets: ms per agent decision."""
 
 
 def _record(scen_name: str, make: Callable, hook: str, decisions: int) -> tuple[Any, list[tuple]]:

@@ -7,9 +7,9 @@ from typing import Any
 from .scaling import scaling_targets
 
 API_VS_MPE2 = 10.0
-"""Issue 17: the PettingZoo API at least 10x mpe2 ``simple_spread`` per agent-step."""
+"""The PettingZoo API at least 10x mpe2 ``simple_spread`` per agent-step."""
 CORE_VS_VMAS = 20.0
-"""Issue 17: the batched ``platoon_v0`` core (cw) at least 20x VMAS ``navigation`` at every batch
+"""The batched ``platoon_v0`` core (cw) at least 20x VMAS ``navigation`` at every batch
 size (the truth models' cores, e.g. j2, are bounded by their RK4 propagation: target 1x)."""
 
 
