@@ -30,9 +30,9 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
               ``solver="ipopt-jit"`` with ``warm_duals``; one gcc compile, about 1 min) and NMPC
               (ipopt with its default Gauss-Newton Hessian) against the ipopt reference (primal
               warm start only; exact Hessian) on the same recorded decision problems (ms per agent
-              decision, medians, issue 17's targets 5 ms / 10 ms), and each one's closed-loop
+              decision, medians, targets 5 ms / 10 ms), and each one's closed-loop
               decision time; ``--solvers`` selects which;
-* ``scaling`` issue 19's swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 spacecraft of
+* ``scaling`` the swarm table (:mod:`benchmarks.scaling`): for N = 4 ... 1024 spacecraft of
               the platoon and cluster swarms the PettingZoo step, the 64-copy batched core, its
               memory and the distributed baselines' decision per agent (DMPC; APF, tube-RDMPC up
               to 16), with fitted growth exponents and a plot next to ``--out`` (``*_scaling.png``);
@@ -41,7 +41,7 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
               problem along the closed loop on both kannan2022 scenarios, and the first-input gap;
 * ``training`` SB3 PPO ``learn()`` on satenv's batched ``SatVecEnv`` against SB3's
               ``DummyVecEnv`` of one PettingZoo env per copy (env-steps/s, learning and raw);
-* ``safety``  issue 26's safety filter (:mod:`benchmarks.perf.safety`): its ms per agent decision
+* ``safety``  the safety filter (:mod:`benchmarks.perf.safety`): its ms per agent decision
               beside the env step on the same states (cluster_v0 N = 10 at 1 and 64 copies, targets
               0.1 / 0.02 ms; pereira2022 platoon and servicing).
 * ``policy_threads`` a loaded policy's decision time with every core busy: torch's default
@@ -56,7 +56,7 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
 
 The default sections also include
 
-* ``envs``    issue 25's comparisons (:mod:`benchmarks.perf.envs`): ``cluster_v0`` and
+* ``envs``    the envs' comparisons (:mod:`benchmarks.perf.envs`): ``cluster_v0`` and
               ``servicing_v0`` PettingZoo steps beside mpe2, ``make_vec("cluster_v0")`` at 1024
               copies beside VMAS ``navigation``, and the ring swarm core at N = 1024 against N = 4.
 
