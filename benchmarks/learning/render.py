@@ -263,16 +263,16 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
     """One learning-curve figure per system: success rate (IQM and 95 % band over seeds) and mean
     return against agent-steps for the RL rows; DAgger against expert labels; the controller as a
     horizontal line."""
-    import matplotlib
+    from matplotlib.ticker import EngFormatter
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from satenv.render import new_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for name, groups in _groups(results).items():
         ctrl = results["controllers"].get(name)
-        fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
+        fig = new_figure(figsize=(14, 3.8), dpi=80)
+        axes = fig.subplots(1, 3)
         for (algo, filtered), recs in sorted(groups.items(), key=lambda kv: (G.ALGORITHMS.index(kv[0][0]), kv[0][1])):
             curves = np.array([r["curve"] for r in recs], dtype=float)    # seeds x checkpoints x 4
             x = np.median(curves[:, :, 0], axis=0)
@@ -289,6 +289,7 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
                                    (axes[1], "mean episode return", "agent-steps"),
                                    (axes[2], "success rate (test seeds)", "expert labels (DAgger)")):
             ax.set_xlabel(xlabel)
+            ax.xaxis.set_major_formatter(EngFormatter(sep=" "))
             ax.set_ylabel(ylabel)
             ax.grid(alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
@@ -298,8 +299,7 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
         fig.suptitle(f"{tasks.SYSTEMS[name].label}: IQM over seeds, 95 % bootstrap band")
         fig.tight_layout()
         path = folder / f"{name}.png"
-        fig.savefig(path, dpi=80)
-        plt.close(fig)
+        fig.savefig(path)
         paths.append(path)
     return paths
 
