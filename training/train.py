@@ -203,6 +203,8 @@ def save_checkpoint(model, venv, out: Path, steps: int) -> Path:
     if buffer is not None:
         arrays = {k: getattr(buffer, k) for k in _BUFFER_ARRAYS if getattr(buffer, k, None) is not None}
         np.savez(tmp / "replay_buffer.npz", pos=np.array(buffer.pos), full=np.array(buffer.full), **arrays)
+    if getattr(model, "_last_obs", None) is not None:
+        np.savez(tmp / ENV_STATE, **env_state(model, venv))
     return runfolder.replace_folder(tmp, folder)  # a checkpoint folder is complete or absent
 
 
@@ -266,6 +268,70 @@ def _load_checkpoint(model, folder: Path) -> None:
                 if k in d:
                     getattr(buffer, k)[...] = d[k]
             buffer.pos, buffer.full = int(d["pos"]), bool(d["full"])
+
+
+ENV_STATE = "env_state.npz"
+"""The checkpoint's record of everything the next rollout reads besides the weights
+(:func:`env_state`): with it a resumed run continues the uninterrupted one bit for bit."""
+
+
+def env_state(model, venv) -> dict[str, np.ndarray]:
+    """The episodes in flight (the batched core and its generators, :meth:`SatVecEnv.get_state`),
+    the wrappers' running sums, the model's last observation and the torch / numpy random states,
+    as arrays (saved with ``np.savez``: no pickle)."""
+    import torch
+
+    monitor, sat = venv.venv, venv.venv.venv
+    state = {f"env.{k}": v for k, v in sat.get_state().items()}
+    rng = np.random.get_state()  # noqa: NPY002 - SB3 draws its minibatches from the legacy global state
+    state.update({"monitor.episode_returns": monitor.episode_returns, "monitor.episode_lengths": monitor.episode_lengths,
+                  "normalize.returns": np.asarray(venv.returns), "last_obs": np.asarray(model._last_obs),
+                  "last_episode_starts": np.asarray(model._last_episode_starts),
+                  "torch_rng": torch.get_rng_state().numpy(), "numpy_rng.keys": rng[1],
+                  "numpy_rng.pos": np.array(rng[2]), "numpy_rng.has_gauss": np.array(rng[3]),
+                  "numpy_rng.cached_gaussian": np.array(rng[4])})
+    if getattr(model, "_last_original_obs", None) is not None:
+        state["last_original_obs"] = np.asarray(model._last_original_obs)
+    space_rng = getattr(model.action_space, "np_random", None)
+    if isinstance(space_rng, np.random.Generator):       # SAC samples it before learning starts
+        state["action_space_rng"] = np.array(json.dumps(space_rng.bit_generator.state))
+    return state
+
+
+def restore_env_state(model, venv, folder: Path) -> bool:
+    """Put :func:`env_state` of a checkpoint back (just before ``learn``); ``False`` for a
+    checkpoint without it (written before it existed: the env then starts new episodes). A
+    malformed one is a :class:`training.runfolder.RunFolderError`."""
+    import torch
+
+    if not (folder / ENV_STATE).is_file():
+        return False
+    try:
+        with np.load(stored_zip(folder, ENV_STATE, MAX_CHECKPOINT_BYTES), allow_pickle=False) as d:
+            data = {k: d[k] for k in d.files}
+        stats = vecnormalize_state(venv)
+        venv.reset()                          # every wrapper's bookkeeping exists, then is overwritten
+        restore_vecnormalize(venv, stats)
+        monitor, sat = venv.venv, venv.venv.venv
+        sat.set_state({k[len("env."):]: v for k, v in data.items() if k.startswith("env.")})
+        monitor.episode_returns = data["monitor.episode_returns"].copy()
+        monitor.episode_lengths = data["monitor.episode_lengths"].copy()
+        venv.returns = data["normalize.returns"].copy()
+        model._last_obs = data["last_obs"].copy()
+        model._last_episode_starts = data["last_episode_starts"].copy()
+        if "last_original_obs" in data:
+            model._last_original_obs = data["last_original_obs"].copy()
+        if "action_space_rng" in data:
+            model.action_space.np_random.bit_generator.state = json.loads(str(data["action_space_rng"]))
+        np.random.set_state(("MT19937", data["numpy_rng.keys"], int(data["numpy_rng.pos"]),  # noqa: NPY002
+                             int(data["numpy_rng.has_gauss"]), float(data["numpy_rng.cached_gaussian"])))
+        torch.set_rng_state(torch.from_numpy(data["torch_rng"].copy()))
+    except RunFolderError:
+        raise
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, OSError) as err:
+        raise RunFolderError(f"--resume: {folder / ENV_STATE} is malformed ({type(err).__name__}: "
+                             f"{str(err).splitlines()[0][:120] if str(err) else ''})") from None
+    return True
 
 
 def vecnormalize_state(venv) -> dict[str, Any]:
@@ -361,6 +427,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     if remaining > 0:
         callback = make_callback(cfg, out, venv, eval_env, baseline_eval, meta, history,
                                  {"features": features, "action_map": action_map}, total=target)
+        if ckpt:   # last, so that nothing draws from the random states between here and learn
+            restore_env_state(model, venv, ckpt[1])
         model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=not ckpt,
                     tb_log_name="run", log_interval=1)
         if cfg.checkpoint_every:
