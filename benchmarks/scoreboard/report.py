@@ -482,8 +482,12 @@ def _metric_figure(board: Board, metric: str, path: Path, colors: dict[str, Any]
     for k, (scen, rows) in enumerate(panels):
         ax = fig.add_subplot(grid[k // ncols, k % ncols])
         names = [r[0] for r in rows]
-        ax.barh(range(len(rows)), [r[1] for r in rows], xerr=[[r[2] for r in rows], [r[3] for r in rows]],
-                capsize=2, color=[colors[n] for n in names], ecolor="0.3")
+        bars = ax.barh(range(len(rows)), [r[1] for r in rows], xerr=[[r[2] for r in rows], [r[3] for r in rows]],
+                       capsize=2, color=[colors[n] for n in names], ecolor="0.3")
+        ax.bar_label(bars, fmt="%.3g", fontsize=6, padding=3)  # every value readable, zeros too
+        top = max(r[1] + r[3] for r in rows)
+        if min(r[1] - r[2] for r in rows) >= 0:  # a non-negative metric: the axis starts at 0
+            ax.set_xlim(0, 1.18 * top if top > 0 else 1.0)
         ax.set_yticks(range(len(rows)), names, fontsize=7)
         ax.invert_yaxis()
         ax.set_xlabel(_PLOT_LABELS.get(metric, metric), fontsize=8)
