@@ -150,3 +150,25 @@ def test_interventions_are_counted_per_agent_step():
     assert agg["safety_agent_steps"] == n * agg["safety_steps"]
     assert agg["interventions_per_agent_step"] == pytest.approx(agg["safety_interventions"] / (n * agg["safety_steps"]))
     assert 0 < agg["interventions_per_agent_step"] <= 1.0
+
+
+def test_choose_ranks_rounds_safety_first_and_ship_never_overwrites(tmp_path):
+    import json
+
+    from training.safe_imitation import choose, ship
+
+    def val(coll, viol, succ, rate):
+        return {"alone": {"collision_episodes": coll, "violation_episodes": viol, "success_rate": succ},
+                "shield": {"interventions_per_agent_step": rate}}
+
+    hist = [{"round": -1, "val": val(2, 60, 0.98, 0.05)}, {"round": 1, "val": val(0, 3, 1.0, 0.01)},
+            {"round": 2, "val": val(0, 2, 0.97, 0.02)}, {"round": 3, "val": val(0, 2, 0.99, 0.0)},
+            {"round": 4, "val": val(1, 0, 1.0, 0.0)}]
+    (tmp_path / "history.json").write_text(json.dumps(hist))
+    assert choose(tmp_path) == 3
+    with pytest.raises(SatenvError, match="not a round folder"):
+        ship(tmp_path, 3, tmp_path / "out")
+    (tmp_path / "rounds" / "0003").mkdir(parents=True)
+    (tmp_path / "exists").mkdir()
+    with pytest.raises(SatenvError, match="never overwritten"):
+        ship(tmp_path, 3, tmp_path / "exists")

@@ -25,7 +25,8 @@ given again override it). Every round:
 3. **validate** on validation seeds only: the network alone (collision and violation episodes,
    success) and behind the filter (interventions per agent-step); the round is chosen on these.
 
-Rows, labels and history go to ``<run>/labels/round_NNNN.npz``, ``<run>/rounds/NNNN/`` (policy
+``--ship training/policies/<name>`` copies the round :func:`choose` picks on validation (or
+``--ship-round k``) to a new policy folder. Rows, labels and history go to ``<run>/labels/round_NNNN.npz``, ``<run>/rounds/NNNN/`` (policy
 folder format) and ``<run>/history.json``.
 """
 
@@ -331,6 +332,31 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
               f"| collect {collect_s:.0f}s fit {fit_s:.0f}s val {val_s:.0f}s", flush=True)
 
 
+def choose(run_dir: Path) -> int:
+    """The round of a run to ship: the lowest :func:`selection_key` on validation (round -1, the
+    warm start, competes too: a run that never beat it returns -1)."""
+    history = json.loads((run_dir / "history.json").read_text())
+    return min(history, key=lambda h: (*selection_key(h["val"]), -h["round"]))["round"]
+
+
+def ship(run_dir: Path, k: int, dest: Path) -> Path:
+    """Copy round ``k`` of a run to the policy folder ``dest`` (a new folder: an existing one is an
+    error) with the run's history; returns ``dest``."""
+    import shutil
+
+    from training.policy import write_manifest
+
+    src = run_dir / "rounds" / f"{k:04d}"
+    if not src.is_dir():
+        raise SatenvError(f"ship: {src} is not a round folder of the run")
+    if dest.exists():
+        raise SatenvError(f"ship: {dest} exists; a shipped folder is never overwritten")
+    shutil.copytree(src, dest)
+    shutil.copy(run_dir / "history.json", dest / "history.json")
+    write_manifest(dest)
+    return dest
+
+
 def _load_rows(run_dir: Path) -> dict[str, np.ndarray]:
     parts = []
     for f in sorted((run_dir / "labels").glob("round_*.npz")):
@@ -342,14 +368,21 @@ def _load_rows(run_dir: Path) -> dict[str, np.ndarray]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--run-dir", required=True, type=Path)
+    parser.add_argument("--ship", type=Path, default=None,
+                        help="ship the round chosen on validation (or --ship-round) to this new policy folder")
+    parser.add_argument("--ship-round", type=int, default=None)
     for f in SafeDaggerConfig.__dataclass_fields__.values():
         parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None, help="a JSON value")
     ns = parser.parse_args(argv)
+    if ns.ship is not None:
+        k = choose(ns.run_dir) if ns.ship_round is None else ns.ship_round
+        print(f"shipped round {k} to {ship(ns.run_dir, k, ns.ship)}")
+        return
     saved = ns.run_dir / "config.json"
     base = SafeDaggerConfig(**json.loads(saved.read_text())) if saved.is_file() else SafeDaggerConfig()
     over = {}
     for k, v in vars(ns).items():
-        if k == "run_dir" or v is None:
+        if k in ("run_dir", "ship", "ship_round") or v is None:
             continue
         over[k] = v if k in ("system", "warm_start", "label") else json.loads(v)
     run(replace(base, **over), ns.run_dir)
