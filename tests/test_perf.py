@@ -108,7 +108,7 @@ def test_fast_solver_targets_are_flagged_against_issue_17():
 
 
 def test_perf_envs_section_smoke():
-    """Issue 25's comparisons at tiny sizes: each target is the ratio of two figures of the run."""
+    """The envs comparisons at tiny sizes: each target is the ratio of two figures of the run."""
     from benchmarks.perf import envs
 
     out = envs.env_speed(0.002, 0.01, batch=2, swarm_sizes=(4, 8), log=lambda line: None)
@@ -119,10 +119,13 @@ def test_perf_envs_section_smoke():
     assert all(isinstance(t["met"], bool) and t["op"] == ">=" for t in names.values())
     if "skipped" not in out["pettingzoo"]:
         pz = out["pettingzoo"]
-        t = names["(25) cluster_v0 PettingZoo / mpe2 simple_spread, per agent-step"]
+        t = names["(envs) cluster_v0 PettingZoo / mpe2 simple_spread, per agent-step"]
         assert t["value"] == pz["cluster_v0"]["agent_steps_per_s"] / pz["mpe2"]["agent_steps_per_s"]
-        assert t["target"] == 1.0 and names["(25) servicing_v0 PettingZoo / mpe2 simple_spread, per agent-step"][
-            "target"] == 0.5
+        assert t["target"] == 5.0 and names["(envs) servicing_v0 PettingZoo / mpe2 simple_spread, per agent-step"][
+            "target"] == 1.0
+    shares = out["make_vec_profile"]["shares"]
+    assert set(shares) == {"truth kernel", "separations", "graph and observation", "rest"}
+    assert abs(sum(shares.values()) - 1.0) < 1e-9 and min(shares.values()) >= 0
     if "vmas_agent_steps_per_s" in out["make_vec"]:
         assert out["make_vec"]["satenv_agent_steps_per_s"] > 0
     # the report collects a section's own targets

@@ -20,7 +20,7 @@ Agent-steps per second (one agent advanced by one decision step) of
               ``platoon_v0`` PettingZoo step (target < 5 %, plus an A/B of the step with the check
               on and off) and of the ``satenv.make_vec`` step at each batch size.
 
-Seven more sections run only when named in ``--sections`` (they take minutes):
+More sections run only when named in ``--sections`` (they take minutes):
 
 * ``reproductions`` wall times of ``reproduce li2022 --case 1`` (our variant) and
               ``reproduce pereira2022-servicing`` (a subprocess each, plots off), against their
@@ -53,6 +53,10 @@ Seven more sections run only when named in ``--sections`` (they take minutes):
               fast configuration (:data:`benchmarks.perf.learning.FAST_CONFIGS`, about ``16384 x
               --solver-scale`` agent-steps each) and the env / learner (/ expert) shares of the
               wall time, each skipped with a note when its extra is missing.
+* ``experts`` DAgger expert labels per second (:mod:`benchmarks.perf.experts`): each system's
+              expert (NMPC on servicing, re-planning tube-RDMPC on the cluster) through
+              :class:`training.experts.ExpertPool` with one worker and with two, and the targets
+              (>= 100 / >= 50 labels/s on two cores).
 
 The default sections also include
 
@@ -82,7 +86,17 @@ from typing import Any
 
 from benchmarks._env import single_thread_blas
 
-from . import cgmres, envs, learning, policy_threads, reproductions, safety, scaling, training
+from . import (
+    cgmres,
+    envs,
+    experts,
+    learning,
+    policy_threads,
+    reproductions,
+    safety,
+    scaling,
+    training,
+)
 from ._common import AGENTS, PettingZooLoop, _loadavg, _machine, _rate
 from .api import api_loops
 from .batched import batched_core, batched_dynamics
@@ -101,7 +115,7 @@ __all__ = ["AGENTS", "API_VS_MPE2", "CORE_VS_VMAS", "EXTRA_SECTIONS", "FAST_SOLV
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard", "envs")
 """The default sections."""
 EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions", "safety",
-                  "policy_threads")
+                  "policy_threads", "experts")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -151,6 +165,7 @@ REGISTRY: dict[str, Callable[[Options, Log], Any]] = {
     "envs": lambda o, log: envs.env_speed(o.min_time, o.api_time, log=log),
     "reproductions": lambda o, log: reproductions.reproduction_times(log),
     "safety": safety.run,
+    "experts": experts.run,
     "policy_threads": policy_threads.run,
     "cgmres_ipopt": _cgmres,
     "training": _training,

@@ -2,4 +2,5 @@
 
 from benchmarks.perf import main
 
-main()
+if __name__ == "__main__":   # the expert pools spawn workers that import this module again
+    main()
