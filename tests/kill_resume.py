@@ -115,7 +115,7 @@ def sweep(target: str) -> int:
           f"{lost} {'rounds' if target == 'dagger' else 'evaluations'} lost, {duplicated} duplicated; "
           f"{equal} of {len(labels)} resumed runs equal to the uninterrupted one")
     return 0 if (kills == len(labels) and unfinished == lost == duplicated == 0
-                 and (target == "train" or equal == len(labels))) else 1
+                 and equal == len(labels)) else 1
 
 
 def main(argv: list[str] | None = None) -> int:

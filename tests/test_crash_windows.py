@@ -197,6 +197,17 @@ def test_dagger_resume_reads_the_history_not_the_label_files(tmp_path, monkeypat
     (out / "history.json").write_text('[{"round": 0}, {"rou')    # a torn history (not written by us)
     with pytest.raises(runfolder.RunFolderError, match="history.json: not valid JSON"):
         run(cfg, out)
+    (out / "history.json").write_text('[{"round": 1}]')
+    with pytest.raises(runfolder.RunFolderError, match="expected a list of rounds 0, 1"):
+        run(cfg, out)
+    (out / "history.json").write_text('[{"round": 0}]')
+    (out / "labels" / "round_0000.npz").write_bytes(b"PK")
+    with pytest.raises(runfolder.RunFolderError, match="round_0000.npz: the labels of round 0"):
+        run(cfg, out)
+    from training.recipes import dagger
+
+    with pytest.raises(SystemExit, match="cannot resume .*round_0000.npz"):    # the CLI: no traceback
+        dagger.main(["--run-dir", str(out)])
     capsys.readouterr()
 
 

@@ -387,7 +387,13 @@ def main(argv: list[str] | None = None) -> None:
     cfg = replace(base, **_config_fields({**over, "system": system_name(over.get("system", base.system))}))
     if cfg.system not in SYSTEM_DEFAULTS:
         raise SystemExit(f"error: system must be one of {sorted(SYSTEM_DEFAULTS)}, got {cfg.system!r}")
-    run(cfg, ns.run_dir)
+    from training.policy import PolicyLoadError
+    from training.runfolder import RunFolderError
+
+    try:
+        run(cfg, ns.run_dir)
+    except (RunFolderError, PolicyLoadError) as err:      # a malformed run folder: named, no traceback
+        raise SystemExit(f"error: cannot resume {ns.run_dir}: {str(err)[:400]}") from None
 
 
 def _config_fields(d: dict[str, Any]) -> dict[str, Any]:
