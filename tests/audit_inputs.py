@@ -1367,12 +1367,16 @@ def _zip_bomb(path) -> None:
     import io
     import zipfile
 
-    if not _BOMB:
+    if not _BOMB:   # torch.save's layout (version, byteorder records), its data.pkl deflated
         buf = io.BytesIO()
-        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf, \
-                zf.open("archive/data.pkl", "w") as f:
-            for _ in range(BOMB_MB):
-                f.write(bytes(2**20))
+        with zipfile.ZipFile(buf, "w") as zf:
+            zf.writestr("archive/version", "3\n")
+            zf.writestr("archive/byteorder", "little")
+            info = zipfile.ZipInfo("archive/data.pkl")
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with zf.open(info, "w") as f:
+                for _ in range(BOMB_MB):
+                    f.write(bytes(2**20))
         _BOMB.append(buf.getvalue())
     with open(path, "wb") as f:
         f.write(_BOMB[0])
