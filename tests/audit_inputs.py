@@ -1317,7 +1317,7 @@ def audit_gym_make(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
     if rng.random() < 0.6:
         pool = list(RENDER_MODES) + scalar_pool()
         kwargs, field = {"render_mode": pool[int(rng.integers(len(pool)))]}, "render_mode"
-        if kwargs["render_mode"] in ("human", "HUMAN", "human_list"):
+        if isinstance(kwargs["render_mode"], str) and kwargs["render_mode"] in ("human", "HUMAN", "human_list"):
             kwargs["render_mode"] = None        # no window in the audit
     else:
         kwargs, field = {"max_steps": bad_value(rng, 300)}, "max_steps"
