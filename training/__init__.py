@@ -1,8 +1,9 @@
 """Training learned policies for satenv scenarios (stable-baselines3, BenchMARL, Ray RLlib).
 
-* :func:`load` — a trained policy folder -> a policy with the baseline interface
-  (``reset(seed=None)``, ``act(observations) -> actions``); never unpickles
-  (:mod:`training.policy`: what is safe to load).
+* :func:`load` — a trained policy folder (or a run folder: its ``final/``) -> a policy with the
+  baseline interface (``reset(seed=None)``, ``act(observations) -> actions``); never unpickles
+  (:mod:`training.policy`: what is safe to load); a folder shipped behind its safety filter needs
+  ``env=`` (or ``shielded=False`` for the network alone), else :class:`ShippedFilterError`.
 * :class:`training.vec_env.SatVecEnv` — parameter-shared SB3 ``VecEnv`` over ``satenv.make_vec``.
 * ``python -m training.train`` — SB3 PPO/SAC training (:class:`training.config.TrainConfig`).
 * ``python -m training.benchmarl_train`` — BenchMARL (MAPPO, ...) on the native TorchRL env.
@@ -15,12 +16,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from .config import TrainConfig
-from .policy import LearnedPolicy, PolicyLoadError, load
+from .policy import LearnedPolicy, PolicyLoadError, ShippedFilterError, load
 
 POLICIES_DIR = Path(__file__).parent / "policies"
 """Folder of the shipped trained policies (one artefact folder per policy)."""
 
-__all__ = ["LearnedPolicy", "PolicyLoadError", "POLICIES_DIR", "TrainConfig", "load", "SatVecEnv"]
+__all__ = ["LearnedPolicy", "PolicyLoadError", "POLICIES_DIR", "ShippedFilterError", "TrainConfig", "load",
+           "SatVecEnv"]
 
 
 def __getattr__(name: str):
