@@ -9,7 +9,7 @@ policy card and the scoreboard.
 * **Aggregate** (:func:`aggregate`) of a list of records, keys:
 
   ================================  =============================================================
-  ``episodes``                      number of episodes
+  ``episodes``, ``successes``       number of episodes, of successful ones
   ``success_rate``                  share of successful episodes (the scenario's rule, ``metrics.success``)
   ``success_ci95``                  95 % Wilson interval of ``success_rate`` (``None`` on one episode)
   ``collision_episodes``            episodes with at least one collision flag
@@ -109,7 +109,7 @@ def aggregate(episodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
     rate, lo, hi = wilson(wins, len(eps))
     safe = sum(bool(e.get("success")) and not e.get("collisions") and not e.get("violations") for e in eps)
     out: dict[str, Any] = {
-        "episodes": len(eps), "errors": len(eps) - len(ok), "success_rate": rate,
+        "episodes": len(eps), "errors": len(eps) - len(ok), "successes": wins, "success_rate": rate,
         "success_ci95": [lo, hi] if len(eps) > 1 else None,
         "collision_episodes": sum(bool(e.get("collisions")) for e in eps),
         "violation_episodes": sum(bool(e.get("violations")) for e in eps),

@@ -22,6 +22,7 @@ from typing import Any
 
 from benchmarks.scoreboard.specs import NETWORK_SUFFIX, SHIELD_SUFFIX
 from satenv.metrics import matched_ratios
+from satenv.scoring import aggregate
 from satenv.scoring import wilson as _wilson  # the board's success-rate interval
 
 __all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
@@ -39,13 +40,13 @@ def is_learned(policy: str) -> bool:
 
 
 def _policy_stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
-    n = len(recs)
-    wins = sum(bool(r.get("success")) for r in recs)
-    rate, lo, hi = _wilson(wins, n)
-    return {"episodes": n, "successes": wins, "success": rate, "success_ci95": [lo, hi],
-            "collision_episodes": sum(bool(r.get("collisions")) for r in recs),
-            "violation_episodes": sum(bool(r.get("violations")) for r in recs),
-            "errors": sum(r.get("error") is not None for r in recs)}
+    """The headline's numbers of one policy: :func:`satenv.scoring.aggregate` of its records."""
+    agg = aggregate(recs)
+    lo, hi = agg["success_ci95"] or _wilson(agg["successes"], agg["episodes"])[1:]
+    return {"episodes": agg["episodes"], "successes": agg["successes"],
+            "success": agg["success_rate"], "success_ci95": [lo, hi],
+            "collision_episodes": agg["collision_episodes"], "violation_episodes": agg["violation_episodes"],
+            "errors": agg["errors"]}
 
 
 def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> dict[str, Any]:
