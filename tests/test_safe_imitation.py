@@ -114,7 +114,7 @@ def test_config_rejects_bad_values(field, value):
 
 
 def test_a_system_without_expert_needs_self_labels():
-    with pytest.raises(SatenvError, match="label must be 'self'"):
+    with pytest.raises(SatenvError, match="label must be .self. or .teacher."):
         SafeDaggerConfig(system="platoon-pereira2023", label="filtered")
 
 

@@ -11,7 +11,8 @@ given again override it). Every round:
    not end the episode) *behind the safety filter* (:class:`satenv.safety.SafetyFilter`), so the
    labelled states are those the filtered policy reaches; at every agent-step the row stores the
    observation, the system's expert action, the expert action after the filter (the label:
-   ``label="filtered"``), the filter's output for the network's action, whether the filter
+   ``label="filtered"``; ``"teacher"``: the warm-start network's action after the filter, the
+   shipped composite as the expert), the filter's output for the network's action, whether the filter
    intervened, and the filter's constraint rows at that state (:func:`agent_constraints`);
 2. **fit** (warm start, all rows of every round) on
 
@@ -63,6 +64,12 @@ EXPERTS: dict[str, Any] = {"platoon-pereira2022": _joint_platoon, "platoon-perei
 label, ``label="self"``)."""
 
 
+LABELS = ("filtered", "expert", "self", "teacher")
+"""What the network imitates: the system's expert after the filter or as it is, the filter's output
+for the network's own action (self-distillation of the filtered network), or the filter's output
+for the *warm-start* network's action (the shipped composite, network + filter, as a frozen expert)."""
+
+
 @dataclass(frozen=True)
 class SafeDaggerConfig:
     """One run (every field is a ``--flag`` taking a JSON value)."""
@@ -74,7 +81,8 @@ class SafeDaggerConfig:
     train_seed: int = 610_000
     val_seeds: int = 100                 # network alone: validation seeds 700000.. (this many)
     val_shield_seeds: int = 20           # behind the filter (interventions)
-    label: str = "filtered"              # "filtered": F(expert), "expert": raw expert, "self": F(network)
+    label: str = "filtered"              # "filtered": F(expert), "expert": raw expert, "self": F(network),
+    #                                      "teacher": F(warm-start network), the shipped composite as expert
     w_int: float = 1.0
     w_bar: float = 10.0
     bar_margin: float = 0.02
@@ -86,10 +94,11 @@ class SafeDaggerConfig:
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
             raise SatenvError(f"system must be one of {sorted(EXPERTS)}, got {self.system!r}")
-        if self.label not in ("filtered", "expert", "self"):
-            raise SatenvError(f"label must be 'filtered', 'expert' or 'self', got {self.label!r}")
-        if EXPERTS[self.system] is None and self.label != "self":
-            raise SatenvError(f"system {self.system!r} has no expert here: label must be 'self', got {self.label!r}")
+        if self.label not in LABELS:
+            raise SatenvError(f"label must be one of {list(LABELS)}, got {self.label!r}")
+        if EXPERTS[self.system] is None and self.label in ("filtered", "expert"):
+            raise SatenvError(f"system {self.system!r} has no expert here: label must be 'self' or 'teacher', "
+                              f"got {self.label!r}")
         for name in ("w_int", "w_bar", "bar_margin", "learning_rate"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
@@ -196,7 +205,7 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
 
     x = torch.as_tensor(policy.normalizer(policy.features(data["obs"].astype(np.float64))
                                           if policy.features is not None else data["obs"]), dtype=torch.float32)
-    key = {"filtered": "label", "expert": "expert", "self": "filtered"}[cfg.label]
+    key = {"filtered": "label", "expert": "expert", "self": "filtered", "teacher": "label"}[cfg.label]
     y = torch.as_tensor(data[key], dtype=torch.float32).clamp(-1, 1)
     power = float(policy.action_map.power) if policy.action_map is not None else 1.0
     offset, slope = (torch.as_tensor(v, dtype=torch.float32) for v in terminal_affine(policy, data["obs"], y.shape[-1]))
@@ -281,7 +290,12 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
     (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     task = tasks.training_task(cfg.system)
     collect_env = task.make_env(terminate_on_collision=False)
-    expert = EXPERTS[cfg.system](collect_env) if EXPERTS[cfg.system] is not None else None
+    if cfg.label == "teacher":   # the warm-start network; collect_episode filters its action
+        expert = load(Path(cfg.warm_start), shielded=False)
+    elif cfg.label in ("filtered", "expert"):
+        expert = EXPERTS[cfg.system](collect_env)
+    else:
+        expert = None
     norm_mode = safety_model(collect_env).norm_mode if hasattr(collect_env, "core") else False
     history_path = run_dir / "history.json"
     history = json.loads(history_path.read_text()) if history_path.is_file() else []
