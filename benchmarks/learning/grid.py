@@ -21,7 +21,7 @@ from typing import Any
 
 from satenv import tasks
 
-__all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "DAGGER_LABELS", "FILTER_SYSTEMS", "KEY",
+__all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "DAGGER_LABELS", "DEFAULT_SEEDS", "FILTER_SYSTEMS", "KEY",
            "RL_ALGORITHMS", "Run", "TEST_SEEDS_PER_CHECKPOINT", "LearningError", "grid", "test_seeds"]
 
 
@@ -36,6 +36,9 @@ ALGORITHMS = (*RL_ALGORITHMS, "dagger", "controller")
 """Every row of the grid; ``controller`` is the system's controller (no training, the reference)."""
 DEFAULT_ALGORITHMS = ("controller", "ppo", "mappo", "masac", "dagger")
 """The rows run by default (IPPO and ISAC on request: ``--algorithms``)."""
+
+DEFAULT_SEEDS = (0, 1, 2)
+"""Training seeds of every row."""
 
 CHECKPOINTS = 5
 """Evaluations per run, at 1/5, 2/5, ..., 5/5 of the budget (the last one is the test result)."""

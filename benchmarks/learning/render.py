@@ -247,14 +247,24 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
             lines.append(_final_row(_label(algo, filtered), recs, n_test))
         lines.append("")
     lines += _datasets_section(datasets or {})
-    missing = results["incomplete"] + [{**e, "checkpoints_logged": "error"} for e in results["errors"]]
     lines += ["## Not complete yet", ""]
-    if missing:
-        lines += ["Runs with checkpoints still missing (the resume command above completes them):", ""]
-        lines += [f"- {m['system']} / {m['algorithm']}{' + filter' if m['filter'] else ''} / seed {m['seed']}: "
-                  f"checkpoints logged {m['checkpoints_logged']}" for m in missing]
-    else:
+    complete = {(r["system"], r["algorithm"], r["filter"], r["seed"]) for r in results["records"]}
+    errors = [e for e in results["errors"] if (e["system"], e["algorithm"], e["filter"], e["seed"]) not in complete]
+    missing = results["incomplete"] + [{**e, "checkpoints_logged": "none (the run crashed: " + e["error"].split(" (")[0][:80] + ")"}
+                                       for e in errors]
+    if not missing and not results.get("not_run"):
         lines.append("Every run of the grid is complete.")
+    if missing:
+        lines += ["Runs with checkpoints missing (the resume command above completes them):", ""]
+        lines += [f"- {m['system']} / {_label(m['algorithm'], m['filter']) if m['algorithm'] != 'controller' else 'controller'}"
+                  f" / seed {m['seed']}: checkpoints logged {m['checkpoints_logged']}" for m in missing] + [""]
+    if results.get("not_run"):
+        by: dict[str, list[str]] = defaultdict(list)
+        for r in results["not_run"]:
+            name = "controller" if r["algorithm"] == "controller" else _label(r["algorithm"], r["filter"])
+            by[r["system"]].append(f"{name} seed {r['seed']}")
+        lines += [f"Not run yet ({len(results['not_run'])} runs of the grid; the resume command above runs them):", ""]
+        lines += [f"- {s}: {', '.join(v)}" for s, v in by.items()]
     lines.append("")
     return "\n".join(lines)
 

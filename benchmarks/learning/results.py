@@ -14,7 +14,8 @@ A run is complete when every one of its checkpoints is logged; its record has
 * ``command``: the command that reproduces it.
 
 Runs with some checkpoints missing are listed in ``incomplete`` (with what they have), crashed
-runs in ``errors``.
+runs in ``errors``, the runs of the default grid (:data:`~benchmarks.learning.grid.DEFAULT_SEEDS`)
+with nothing logged yet in ``not_run``.
 """
 
 from __future__ import annotations
@@ -104,11 +105,18 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
                     "load_avg_1m": last.get("load_avg_1m"),
                     "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref),
                     "command": command(system, algo, filtered, seed)})
+    seen = {(r["system"], r["algorithm"], r["filter"], r["seed"]) for r in out} | {
+        (r["system"], r["algorithm"], r["filter"], r["seed"]) for r in incomplete} | {
+        (s, "controller", False, 0) for s in controllers} | {
+        (e["system"], e["algorithm"], e["filter"], e["seed"]) for e in errors}
+    not_run = [r.to_json() for r in G.grid(tasks.SYSTEMS, G.DEFAULT_ALGORITHMS, G.DEFAULT_SEEDS)
+               if (r.system, r.algorithm, r.filter, r.seed) not in seen]
     return {"grid": {"checkpoints": G.CHECKPOINTS, "test_seeds_per_checkpoint": G.TEST_SEEDS_PER_CHECKPOINT,
                      "budget_agent_steps": G.BUDGET_AGENT_STEPS, "dagger_labels": G.DAGGER_LABELS,
                      "filter_penalty": G.FILTER_PENALTY,
                      "curve_fields": ["agent_steps", "success_rate", "mean_return", "collision_episodes"]},
-            "controllers": controllers, "records": out, "incomplete": incomplete, "errors": errors}
+            "controllers": controllers, "records": out, "incomplete": incomplete, "errors": errors,
+            "not_run": not_run}
 
 
 def write_results(log: Path, out: Path) -> Path:
