@@ -214,7 +214,7 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "Run, resume (the log is kill-safe; the same command skips what is logged) and render:",
         "",
         "```bash",
-        "benchmarks/learning/run_all.sh          # every command of the grid, cheap systems first",
+        "nohup benchmarks/learning/run_all.sh &  # the whole grid, breadth first; run it again to resume",
         "python -m benchmarks.learning results   # benchmarks/learning/log.jsonl -> results.json",
         "python -m benchmarks.learning render    # results.json -> this page and its figures",
         "```",

@@ -6,7 +6,7 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 RUN="nice -n 10 python -m benchmarks.learning run --workers ${WORKERS:-2}"
 CHEAP=platoon-pereira2023,platoon-pereira2022,formation-kannan2022-position,formation-kannan2022-collision
-for SEEDS in 0 1-2; do
+for SEEDS in 0 0-2; do
   $RUN --systems $CHEAP --algorithms controller,ppo,mappo,masac,dagger --seeds $SEEDS
   $RUN --systems servicing-pereira2022,cluster-li2022 --algorithms ppo,mappo,masac --seeds $SEEDS
   $RUN --systems servicing-pereira2022 --algorithms controller --seeds 0
