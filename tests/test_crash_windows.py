@@ -29,6 +29,11 @@ TIMING_KEYS = ("collect_s", "fit_s", "session_wall_s", "compute_ms_per_agent", "
 """Measured times: the only entries a resumed run may differ in."""
 
 
+def canonical(data) -> str:
+    """``data`` as sorted JSON text: equal data, equal text (NaN included, which ``==`` never equals)."""
+    return json.dumps(data, sort_keys=True)
+
+
 def untimed(data):
     """``data`` (JSON) without its :data:`TIMING_KEYS`, at any depth."""
     if isinstance(data, dict):
@@ -84,14 +89,14 @@ def tiny_dagger(monkeypatch_setattr) -> tuple:
     """A DAgger run of seconds: the platoon (pereira2022) cut to 12 steps and a proportional
     expert (deterministic); returns ``(run, config)``."""
     import satenv
-    from training.recipes import dagger
+    from training import imitate
 
-    def make_envs(system):
+    def make_envs(cfg):
         make = satenv.make
         kw = {"preset": "pereira2022", "max_steps": 12}
-        return (make("platoon_v0", randomize=True, terminate_on_collision=False, **kw),
-                make("platoon_v0", terminate_on_collision=False, **kw),
-                make("platoon_v0", randomize=True, **kw), make("platoon_v0", **kw))
+        return imitate.Envs(make("platoon_v0", randomize=True, terminate_on_collision=False, **kw),
+                            make("platoon_v0", terminate_on_collision=False, **kw),
+                            make("platoon_v0", randomize=True, **kw), make("platoon_v0", **kw))
 
     class Expert:
         def __init__(self, env):
@@ -104,20 +109,21 @@ def tiny_dagger(monkeypatch_setattr) -> tuple:
             return {a: np.clip(-0.05 * np.asarray(o[:3], dtype=np.float64), -1, 1).astype(np.float32)
                     for a, o in obs.items()}
 
-    monkeypatch_setattr(dagger, "make_envs", make_envs)
-    monkeypatch_setattr(dagger, "make_expert", lambda system, env, options: Expert(env))
-    cfg = dagger.DaggerConfig(system="platoon-pereira2022", rounds=2, round0_episodes=2, episodes_per_round=1,
-                              val_seeds=(700_000,), net_arch=(16,), epochs=1, batch_size=64,
-                              paper_start_share=0.3, expert_options={})
-    return dagger.run, cfg
+    monkeypatch_setattr(imitate, "make_envs", make_envs)
+    monkeypatch_setattr(imitate, "make_expert", lambda name, env, options: Expert(env))
+    cfg = imitate.system_config("platoon-pereira2022", rounds=2, round0_episodes=2, episodes_per_round=1,
+                                eval_seeds=(700_000,), net_arch=(16,), epochs=1, batch_size=64,
+                                paper_start_share=0.3, expert_options={}, final_eval=False)
+    return imitate.run, cfg
 
 
-def dagger_result(run_dir: Path) -> tuple[list, dict[str, bytes]]:
+def dagger_result(run_dir: Path) -> tuple[str, dict[str, bytes]]:
     """What a finished run leaves: its history (timings aside) and its files' bytes (the labels'
     arrays, the rounds' weights and normalisation)."""
-    history = untimed(json.loads((run_dir / "history.json").read_text()))
+    rounds = untimed(json.loads((run_dir / "history.json").read_text()))
+    history = canonical(rounds)
     files = {}
-    for k in range(len(history)):
+    for k in range(len(rounds)):
         with np.load(run_dir / "labels" / f"round_{k:04d}.npz") as d:
             files[f"labels {k}"] = b"".join(d[name].tobytes() for name in sorted(d.files))
         for name in ("weights.safetensors", "obs_norm.json"):
@@ -153,7 +159,7 @@ def _dagger_sweep(tmp_path, monkeypatch, last_round_only: bool) -> None:
     labels = boundaries(lambda: run(cfg, ref), tmp_path, monkeypatch)
     reference = dagger_result(ref)
     rounds = cfg.rounds
-    assert [h["round"] for h in reference[0]] == list(range(rounds))
+    assert [h["round"] for h in json.loads(reference[0])] == list(range(rounds))
     per_round = (len(labels) - 2) // rounds                # config.json, then the same writes per round
     assert per_round >= 8 and len(labels) == 2 + rounds * per_round, labels
     first = len(labels) - per_round + 1 if last_round_only else 1
@@ -162,7 +168,7 @@ def _dagger_sweep(tmp_path, monkeypatch, last_round_only: bool) -> None:
         out = tmp_path / f"k{k}"
         kill_and_resume(lambda: run(cfg, out), k, monkeypatch)   # noqa: B023 - called at once
         history, files = dagger_result(out)
-        done = [h["round"] for h in history]
+        done = [h["round"] for h in json.loads(history)]
         lost += len(set(range(rounds)) - set(done))
         duplicated += len(done) - len(set(done))
         differ += (history, files) != reference
@@ -257,7 +263,7 @@ def tiny_train_config(out: Path):
                        eval_baselines=("zero",), out_dir=str(out), progress=False)
 
 
-def train_result(out: Path) -> tuple[list[int], dict, bytes, dict]:
+def train_result(out: Path) -> tuple[list[int], str, bytes, dict]:
     """What a finished training run leaves: its evaluation steps, the final folder's evaluation
     (times aside) and weights, and ``best/``'s step (the folders are loaded: whole and consistent)."""
     import training
@@ -267,6 +273,7 @@ def train_result(out: Path) -> tuple[list[int], dict, bytes, dict]:
     steps = [h["step"] for h in json.loads((out / "eval_history.json").read_text())]
     final = untimed(json.loads((out / "final" / "eval.json").read_text()))
     final.pop("table", None)
+    final = canonical(final)
     best = json.loads((out / "best" / "env.json").read_text())["step"]
     return steps, final, (out / "final" / "weights.safetensors").read_bytes(), {"best_step": best}
 
