@@ -1,5 +1,5 @@
-"""training.experts and training.recipes (issue 27): stateless experts, the resumable DAgger
-driver, the held-out target checks."""
+"""training.experts and training.recipes: stateless experts, the resumable DAgger command, the
+held-out target checks."""
 
 from __future__ import annotations
 
@@ -54,13 +54,10 @@ def test_expert_options_are_checked(env):
 
 
 @pytest.mark.slow  # ~15 s: two expert QP builds, three fits and learning-curve plots
-def test_dagger_run_saves_every_round_and_resumes(tmp_path, monkeypatch):
-    name = "platoon-pereira2022"
-    sysdef = dagger.SYSTEMS[name]
-    short = replace(sysdef, scenario={**sysdef.scenario, "max_steps": 6}, paper={**sysdef.paper, "max_steps": 6})
-    monkeypatch.setitem(dagger.SYSTEMS, name, short)
-    cfg = dagger._config({"system": name, "round0_episodes": 2, "episodes_per_round": 1, "rounds": 2,
-                          "val_seeds": [700_000], "net_arch": [16], "epochs": 1})
+def test_dagger_run_saves_every_round_and_resumes(tmp_path):
+    cfg = dagger.system_config("platoon-pereira2022", env_kwargs={"max_steps": 6}, round0_episodes=2,
+                               episodes_per_round=1, rounds=2, eval_seeds=(700_000,), net_arch=(16,), epochs=1,
+                               final_eval=False)
     dagger.run(cfg, tmp_path)
     hist = json.loads((tmp_path / "history.json").read_text())
     assert [h["round"] for h in hist] == [0, 1] and hist[-1]["labels"] == (2 + 1) * 6 * 2
@@ -69,6 +66,7 @@ def test_dagger_run_saves_every_round_and_resumes(tmp_path, monkeypatch):
     hist = json.loads((tmp_path / "history.json").read_text())
     assert [h["round"] for h in hist] == [0, 1, 2] and hist[-1]["labels"] == 4 * 6 * 2
     assert len(list((tmp_path / "labels").glob("round_*.npz"))) == 3
+    assert all(h["paper"]["episodes"] == 1 for h in hist)     # the system's paper start, evaluated every round
 
 
 def _ep(seed, rmse, dv, *, collided=False, terminated=False):

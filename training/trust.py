@@ -260,6 +260,7 @@ def check_replayed_config(data: Any, *, allow_code_env_id: bool = False, source:
     """
     import satenv
     from baselines.registry import BASELINES
+    from training.experts import EXPERTS
 
     if not isinstance(allow_code_env_id, bool):
         raise UntrustedDataError(f"allow_code_env_id must be a bool, got {allow_code_env_id!r:.40}")
@@ -283,7 +284,8 @@ def check_replayed_config(data: Any, *, allow_code_env_id: bool = False, source:
                                                                     list | tuple) else None
     if names is None:
         raise UntrustedDataError(f"{source}: eval_baselines must be a list of baseline names")
-    if "expert" in data:
+    expert = data.get("expert")
+    if "expert" in data and not (isinstance(expert, str) and expert in EXPERTS):  # DAgger's experts: names too
         names.append(data["expert"])
     for name in names:
         if not isinstance(name, str) or (name not in BASELINES and name != "auto"):

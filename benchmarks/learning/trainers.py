@@ -13,7 +13,7 @@ defaults plus the fast configuration (:data:`benchmarks.perf.learning.FAST_CONFI
 * ``mappo``, ``ippo``, ``masac``, ``isac``: ``training.benchmarl_train.build_experiment`` with a
   BenchMARL callback that exports the actor (``training.benchmarl_train.export_actor``) at each
   checkpoint;
-* ``dagger``: ``training.recipes.dagger.run`` (the project's recipe, the system's expert and
+* ``dagger``: ``training.recipes.dagger.run`` (the project's one DAgger, the system's expert and
   defaults, :data:`~training.recipes.dagger.SYSTEM_DEFAULTS`) one round per checkpoint.
 """
 
@@ -131,10 +131,10 @@ def train_dagger(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     task = run.task
     fast = {k: v for k, v in _fast("dagger").items() if k != "torch_threads"}
     episodes = DAGGER_EPISODES[run.system]
-    cfg = dagger.DaggerConfig(**{**dagger.SYSTEM_DEFAULTS[run.system], **fast, "system": run.system,
-                                 "seed": run.seed, "train_seed": task.seeds("train")[0] + 10_000 * run.seed,
-                                 "round0_episodes": episodes, "episodes_per_round": episodes,
-                                 "val_seeds": task.seeds("validation", 1)})
+    cfg = dagger.system_config(run.system, **{**fast, "seed": run.seed,
+                                              "train_seed": task.seeds("train")[0] + 10_000 * run.seed,
+                                              "round0_episodes": episodes, "episodes_per_round": episodes,
+                                              "eval_seeds": task.seeds("validation", 1), "final_eval": False})
     for k in range(CHECKPOINTS):
         dagger.run(dataclasses.replace(cfg, rounds=k + 1), workdir)
         history = json.loads((workdir / "history.json").read_text())

@@ -4,7 +4,7 @@ end-to-end training throughput of each trainer on each env with its fast configu
 :data:`FAST_CONFIGS` is the documented fast configuration of each trainer (``docs/training.md``,
 "Fast configurations"): the fields of ``training.config.TrainConfig`` (SB3 PPO,
 ``python -m training.train``), ``training.benchmarl_train.BenchMARLConfig`` (BenchMARL MAPPO) and
-``training.imitate.ImitationConfig`` (DAgger) that set the speed. :func:`end_to_end` runs each
+``training.imitate.DaggerConfig`` (DAgger) that set the speed. :func:`end_to_end` runs each
 trainer's own building blocks with it for a few thousand agent-steps (no evaluation, no
 checkpoints) and splits the wall time into
 
@@ -137,37 +137,40 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -
     from training.actor import MLPActor
     from training.envs import make_env
     from training.experts import make as make_expert
-    from training.imitate import ImitationConfig, collect_episode, fit
+    from training.imitate import DaggerConfig, collect_episode, features, fit
     from training.policy import LearnedPolicy, ObsNormalizer
 
     m = len(_agents(env_id))
-    max_steps = max(2, agent_steps // (2 * ImitationConfig(**fast).episodes_per_round * m))
+    max_steps = max(2, agent_steps // (2 * DaggerConfig(**fast).episodes_per_round * m))
     system = tasks.system(DAGGER_TASKS[env_id])
     task = tasks.get(system.training_task)
-    cfg = ImitationConfig(env_id=env_id, env_kwargs={**task.env_kwargs, "max_steps": max_steps}, out_dir=out_dir,
-                          expert=system.expert, **fast)
+    cfg = DaggerConfig(env_id=env_id, env_kwargs={**task.env_kwargs, "max_steps": max_steps}, out_dir=out_dir,
+                       expert=system.expert, **fast)
     torch.set_num_threads(cfg.torch_threads)
     env = make_env(env_id, **cfg.env_kwargs)
     expert = make_expert(cfg.expert, env)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
-    actor = MLPActor(obs_dim, act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
+    feats = features(cfg)
+    actor = MLPActor(feats.out_dim(obs_dim), act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     generator, rng = torch.Generator().manual_seed(cfg.seed), np.random.default_rng(cfg.seed)
     acc = {"env": 0.0, "expert": 0.0, "learner": 0.0}
     xs, ys, normalizer = [], [], None
     with _timed(env, "step", acc, "env"), _timed(expert, "act", acc, "expert"):
         t0 = time.perf_counter()
         for k in range(2):
-            learner = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,))
+            learner = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats)
             for e in range(cfg.episodes_per_round):
-                x, y = collect_episode(env, expert, learner, cfg.train_seed + k * cfg.episodes_per_round + e,
-                                       cfg.beta ** k, rng)
-                xs.append(x)
-                ys.append(y)
+                rows, _ = collect_episode(env, expert, learner, cfg.train_seed + k * cfg.episodes_per_round + e,
+                                          cfg.beta ** k, 0.0, rng)
+                xs.append(rows["obs"])
+                ys.append(np.clip(rows["act"], -1, 1))
             x_all, y_all = np.concatenate(xs), np.concatenate(ys)
-            normalizer = normalizer or ObsNormalizer(x_all.mean(0), x_all.var(0), cfg.clip_obs)
+            if normalizer is None:
+                fx = feats(x_all.astype(np.float64))
+                normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
             t1 = time.perf_counter()
-            fit(actor, normalizer, x_all, y_all, cfg, generator)
+            fit(actor, normalizer, feats, x_all, y_all, cfg, generator, cfg.epochs)
             acc["learner"] += time.perf_counter() - t1
         wall = time.perf_counter() - t0
     return {**_row(sum(len(x) for x in xs), wall, acc, fast), "expert": cfg.expert,

@@ -34,7 +34,8 @@ def select(run_dir: Path, rounds: list[int], seeds: list[int]) -> list[dict[str,
     from satenv.safety import shield
 
     cfg = json.loads((run_dir / "config.json").read_text())
-    env = tasks.training_task(system_name(cfg.get("system", "platoon-pereira2022"))).make_env()
+    env = (tasks.get(cfg["task"]) if cfg.get("task") else   # a run folder of training.imitate, or an earlier one's
+           tasks.training_task(system_name(cfg.get("system", "platoon-pereira2022")))).make_env()
     rows = []
     for k in rounds:
         folder = run_dir / "rounds" / f"{k:04d}"
