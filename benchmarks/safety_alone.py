@@ -10,7 +10,7 @@ training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
   the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
 
 and writes ``<out>/safety_alone.json`` (aggregates, targets, matched ratios, every episode
-record; with ``--perturbation-seeds``, every perturbation of the task too) and
+record; with ``--perturbation-seeds``, the first entry under every perturbation of its task) and
 ``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
 interventions per agent-step). Each entry's episodes are cached in ``<out>/cache/`` so an
 interrupted run resumes where it stopped::
@@ -44,9 +44,11 @@ def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict
     done: dict[int, dict[str, Any]] = {}
     if cache.is_file():
         for line in cache.read_text().splitlines():
-            if line.strip():
+            try:
                 rec = json.loads(line)
-                done[int(rec["seed"])] = rec
+            except json.JSONDecodeError:   # a line cut by an interrupted run: that episode runs again
+                continue
+            done[int(rec["seed"])] = rec
     cache.parent.mkdir(parents=True, exist_ok=True)
     with cache.open("a") as fh:
         for s in seeds:
@@ -159,8 +161,8 @@ def plot(result: dict[str, Any], path: Path) -> None:
     ax[1].set_ylabel("filter interventions [% of agent-steps]")
     ax[1].set_xticks(x, labels, fontsize=7)
     ax[1].legend(fontsize=7)
-    n = entries[0][VARIANTS[0]]["aggregate"]["episodes"] if entries else 0
-    fig.suptitle(f"learned policies alone and behind the filter (test seeds, {n} episodes each)")
+    counts = sorted({e[VARIANTS[0]]["aggregate"]["episodes"] for e in entries})
+    fig.suptitle(f"learned policies alone and behind the filter (test seeds; {'/'.join(map(str, counts))} episodes)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -170,27 +172,29 @@ def main(argv: list[str] | None = None) -> None:
     import torch
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--entry", action="append", required=True, help="system=policy-folder (repeatable)")
+    p.add_argument("--entry", action="append", required=True,
+                   help="system=policy-folder[@episodes] (repeatable; @n: this entry on the first n test seeds)")
     p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
     p.add_argument("--controller-seeds", type=int, default=200, help="the controller on the first n (0: none)")
     p.add_argument("--perturbation-seeds", type=int, default=0,
-                   help="also run every perturbation of the task on the first n test seeds (0: none)")
+                   help="the first entry also under every perturbation of its task, first n test seeds (0: none)")
     p.add_argument("--out", type=Path, required=True)
     ns = p.parse_args(argv)
     torch.set_num_threads(1)
     entries = []
     for spec in ns.entry:
         system, sep, folder = spec.partition("=")
-        if not sep or not folder:
-            raise SystemExit(f"error: --entry must be system=policy-folder, got {spec!r}")
-        entries.append((system, Path(folder)))
+        folder, at, count = folder.partition("@")
+        if not sep or not folder or (at and not count.isdigit()):
+            raise SystemExit(f"error: --entry must be system=policy-folder[@episodes], got {spec!r}")
+        entries.append((system, Path(folder), int(count) if at else ns.seeds))
     ns.out.mkdir(parents=True, exist_ok=True)
     result = {"command": "python -m benchmarks.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
-              "entries": [evaluate_entry(s, f, ns.seeds, ns.controller_seeds, ns.out / "cache") for s, f in entries]}
-    if ns.perturbation_seeds:
-        for block, (s, f) in zip(result["entries"], entries, strict=True):
-            block["perturbations"] = evaluate_perturbed(s, f, ns.perturbation_seeds,
-                                                        min(ns.controller_seeds, ns.perturbation_seeds), ns.out / "cache")
+              "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache") for s, f, n in entries]}
+    if ns.perturbation_seeds:   # the policy under study: the first entry
+        s, f, _ = entries[0]
+        result["entries"][0]["perturbations"] = evaluate_perturbed(
+            s, f, ns.perturbation_seeds, min(ns.controller_seeds, ns.perturbation_seeds), ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     plot(result, ns.out / "safety_alone.png")
 
