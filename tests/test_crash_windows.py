@@ -374,6 +374,36 @@ def test_bad_training_input_is_a_named_value_error(tmp_path, monkeypatch, capsys
     capsys.readouterr()
 
 
+def final_result(run_dir: Path) -> tuple:
+    """A finished run's ``final/``: its ``eval.json`` (timings and the table of them aside) and weights."""
+    ev = untimed(json.loads((run_dir / "final" / "eval.json").read_text()))
+    ev.pop("table")
+    return json.dumps(ev, sort_keys=True), (run_dir / "final" / "weights.safetensors").read_bytes()
+
+
+def test_dagger_killed_while_writing_final_resumes_to_the_same_final(tmp_path, monkeypatch, capsys):
+    """The held-out stage after the last round: a kill at each of its write boundaries, then the same
+    command, leaves the ``final/`` (and ``eval.json``) of an uninterrupted run, and no leftover."""
+    from dataclasses import replace
+
+    run, cfg = tiny_dagger(monkeypatch.setattr)
+    cfg = replace(cfg, final_eval=True, eval_baselines=("zero",), test_seeds=(900_000, 900_001), workers=1,
+                  progress=False)
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path / "cache"))
+    ref = tmp_path / "ref"
+    labels = boundaries(lambda: run(cfg, ref), tmp_path, monkeypatch)
+    last_round = max(i for i, label in enumerate(labels, 1) if "learning_curve" in label)
+    final_stage = range(last_round + 1, len(labels) + 1)
+    assert len(final_stage) >= 2 and all("final" in labels[k - 1] for k in final_stage), labels[last_round:]
+    reference = final_result(ref)
+    for k in final_stage:
+        out = tmp_path / f"k{k}"
+        kill_and_resume(lambda: run(cfg, out), k, monkeypatch)   # noqa: B023 - called at once
+        assert final_result(out) == reference, f"killed at boundary {k} ({labels[k - 1]})"
+        assert sorted(p.name for p in out.iterdir() if p.name.startswith("final")) == ["final"]
+    capsys.readouterr()
+
+
 def test_dagger_starts_for_every_system_name(tmp_path, capsys):
     """``--system platoon-tplf30`` crashed at start-up (an env keyword given twice): every system,
     old names included, builds its envs and experts (a run of 0 rounds)."""
