@@ -57,6 +57,15 @@ def test_a_task_brings_its_system_expert_and_defaults_and_flags_override_them():
     assert (plain.task, plain.obs_drop_dims, plain.obs_symlog_scale) == (None, (), 0.0)
 
 
+def test_a_run_folder_of_the_earlier_imitate_is_not_silently_restarted(tmp_path):
+    from training.imitate import run
+
+    (tmp_path / "eval_history.json").write_text("[]")
+    with pytest.raises(ValueError, match="earlier training.imitate .* --config"):
+        run(DaggerConfig(out_dir=str(tmp_path)))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eval_history.json"]
+
+
 def test_collect_episode_labels_every_visited_state_with_the_expert():
     env = satenv.make("platoon_v0", **SHORT)
     expert = baselines.make("dmpc", env)

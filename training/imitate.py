@@ -64,13 +64,17 @@ _PLATOON = {"round0_episodes": 40, "episodes_per_round": 16, "noise_std": 0.15, 
 SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {
     "platoon-pereira2022": {**_PLATOON, "eval_seeds": tuple(range(700_000, 700_012)),
                             "expert_options": {"coupling": "sequential"}, "obs_drop_dims": (14,)},
+    # the reference controllers of the cluster and servicing (tube-RDMPC, NMPC) take minutes an
+    # episode: final/'s eval.json runs them on the first test seeds only (the network on all)
     "cluster-li2022": {"round0_episodes": 6, "episodes_per_round": 4, "eval_seeds": _VALIDATION3,
-                       "obs_drop_dims": (18,), "obs_symlog_scale": 300.0, "noise_std": 0.1, "epochs": 20},
+                       "obs_drop_dims": (18,), "obs_symlog_scale": 300.0, "noise_std": 0.1, "epochs": 20,
+                       "baseline_seeds": 3},
     # the cooperative NMPC (N = 30) warm-starts and plans against the other spacecraft's previous
     # plan, so its shadow labels are close to, not exactly, what it would do
     # (training/runs/servicing_pereira2022_dagger)
     "servicing-pereira2022": {"round0_episodes": 4, "episodes_per_round": 2, "eval_seeds": _VALIDATION3,
-                              "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05, "epochs": 20},
+                              "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05, "epochs": 20,
+                              "baseline_seeds": 3},
     # C/GMRES continues its previous solution and the pereira2023 DMPC warm-starts, so neither is a
     # stateless expert: these run, but their labels are the shadow plans'
     "formation-kannan2022-collision": {**_PLATOON, "eval_seeds": _VALIDATION3},
@@ -464,6 +468,10 @@ def run(cfg: DaggerConfig, run_dir: str | Path | None = None, *, resume: bool = 
 
     run_dir = Path(cfg.out_dir if run_dir is None else run_dir)
     history = read_history(run_dir)          # resume after the last round it records, never by counting files
+    if (run_dir / "eval_history.json").is_file() and not history:
+        raise ValueError(f"{run_dir} is a run folder of an earlier training.imitate (eval_history.json, data.npz), "
+                         f"which this one cannot continue; replay it in a new folder: --config "
+                         f"{run_dir / 'config.json'} --out-dir NEW_DIR")
     if history and not resume:
         raise ValueError(f"{run_dir} already has {len(history)} rounds; pass --resume to continue or choose "
                          "another --out-dir")
