@@ -111,6 +111,9 @@ def tiny_dagger(monkeypatch_setattr) -> tuple:
 
     monkeypatch_setattr(imitate, "make_envs", make_envs)
     monkeypatch_setattr(imitate, "make_expert", lambda name, env, options: Expert(env))
+    # the learning curve is drawn by matplotlib (seconds per round on a busy machine); its write
+    # boundaries stay, its picture is a stub
+    monkeypatch_setattr(imitate, "plot_curve", lambda history, path: Path(path).write_bytes(b"curve"))
     cfg = imitate.system_config("platoon-pereira2022", rounds=2, round0_episodes=2, episodes_per_round=1,
                                 eval_seeds=(700_000,), net_arch=(16,), epochs=1, batch_size=64,
                                 paper_start_share=0.3, expert_options={}, final_eval=False)
