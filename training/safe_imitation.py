@@ -300,7 +300,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
     history_path = run_dir / "history.json"
     history = json.loads(history_path.read_text()) if history_path.is_file() else []
     done = len(history)
-    start = run_dir / "rounds" / f"{done - 1:04d}" if done else Path(cfg.warm_start)
+    last = history[-1]["round"] if history else -1     # round -1: the warm start's validation only
+    start = run_dir / "rounds" / f"{last:04d}" if last >= 1 else Path(cfg.warm_start)
     policy = load(start, shielded=False)
     warm_meta = json.loads((Path(cfg.warm_start) / "env.json").read_text())
     warm_cfg = json.loads((Path(cfg.warm_start) / "config.json").read_text())
