@@ -62,6 +62,10 @@ def run_one(run: Run) -> dict[str, Any]:
     skip = logged_keys(path) if log is not None else set()
     seeds = test_seeds(run.system)
     records: list[dict[str, Any]] = []
+    if all(run.key(k) in skip for k in range(len(run.checkpoints))):   # done meanwhile (another invocation)
+        if log is not None:
+            log.close()
+        return {"records": records}
     t_start = time.perf_counter()
 
     def checkpoint(k: int, agent_steps: int, wall_s: float, make_policy) -> None:
