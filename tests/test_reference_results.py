@@ -120,3 +120,12 @@ def test_bad_run_fields_are_errors():
         G.Run("platoon-pereira2023", "dqn")
     with pytest.raises(G.LearningError, match="seed"):
         G.Run("platoon-pereira2023", "ppo", seed=-1)
+
+
+def test_interventions_are_per_agent_step():
+    """The filter counts decisions; an intervention is one agent's action (2 agents, 10 decisions,
+    10 corrected actions: half the agent-steps)."""
+    ep = {"seed": 0, "success": False, "collisions": 0, "violations": 0, "terminated": False, "rmse": 1.0,
+          "delta_v": 1.0, "safety_interventions": 10, "safety_infeasible": 0, "safety_steps": 10}
+    block = results._test_block([ep], None, n_agents=2)
+    assert block["interventions_per_agent_step"] == pytest.approx(0.5)

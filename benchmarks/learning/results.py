@@ -49,8 +49,19 @@ def _round(x: Any, nd: int = 4) -> Any:
     return None if x is None else (round(float(x), nd) if isinstance(x, (float, np.floating)) else x)
 
 
-def _test_block(episodes: list[dict[str, Any]], ref: list[dict[str, Any]] | None) -> dict[str, Any]:
-    agg = scoring.aggregate(episodes)
+def _agents(system: str) -> int:
+    return len(tasks.training_task(system).make_env().possible_agents)
+
+
+def _with_agent_steps(episodes: list[dict[str, Any]], n_agents: int) -> list[dict[str, Any]]:
+    """Episodes logged before ``safety_agent_steps`` was kept: the filter's decisions x agents
+    (:func:`satenv.scoring.episode_record`'s rule)."""
+    return [{**e, "safety_agent_steps": e["safety_steps"] * n_agents}
+            if "safety_steps" in e and "safety_agent_steps" not in e else e for e in episodes]
+
+
+def _test_block(episodes: list[dict[str, Any]], ref: list[dict[str, Any]] | None, n_agents: int) -> dict[str, Any]:
+    agg = scoring.aggregate(_with_agent_steps(episodes, n_agents))
     out = {k: _round(agg.get(k)) for k in TEST_FIELDS if k in agg}
     if ref:
         out.update({k: _round(v) for k, v in scoring.matched_ratios(episodes, ref).items()})
@@ -78,7 +89,7 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
         if algo == "controller" and 0 in cps:
             rec = cps[0]
             controllers[system] = {"controller": tasks.system(system).controller, "task": rec["task"],
-                                   "test_seeds": rec["test_seeds"], "test": _test_block(rec["episodes"], None),
+                                   "test_seeds": rec["test_seeds"], "test": _test_block(rec["episodes"], None, _agents(system)),
                                    "mean_return": _point(rec)[2], "eval_s": rec.get("eval_s"),
                                    "command": command(system, "controller", False, 0)}
     out, incomplete = [], []
@@ -103,7 +114,7 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
                     "budget_agent_steps": int(last["budget_agent_steps"]), "agent_steps": int(last["agent_steps"]),
                     "wall_s": _round(last["wall_s"], 1), "test_seeds": last["test_seeds"],
                     "load_avg_1m": last.get("load_avg_1m"),
-                    "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref),
+                    "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref, _agents(system)),
                     "command": command(system, algo, filtered, seed)})
     seen = {(r["system"], r["algorithm"], r["filter"], r["seed"]) for r in out} | {
         (r["system"], r["algorithm"], r["filter"], r["seed"]) for r in incomplete} | {
