@@ -36,7 +36,7 @@ counts ``vague``; a shipped filtered folder loaded without ``env`` as the bare n
 ``nonfinite`` (silently unsafe); a ``--resume`` whose peak memory grows past ``OVER_CAP_MB``
 counts ``over_cap``.
 
-Then two checks of issue 13 beyond bad inputs: **solver faults** (each baseline's solver replaced
+Then two checks beyond bad inputs: **solver faults** (each baseline's solver replaced
 by one that raises, returns a wrong shape, a NaN point or an infeasible point reported as a
 success, as in ``tests/test_baseline_registry.py``; every injected solve counted as ``flagged``
 (a fallback recorded in ``info``, action finite and in bounds), ``crashed`` (an exception escaped
