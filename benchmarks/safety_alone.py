@@ -95,8 +95,10 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
     return out
 
 
-def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path) -> dict[str, Any]:
-    """One entry's block of the JSON (module docstring)."""
+def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path,
+                   n_filter: int | None = None) -> dict[str, Any]:
+    """One entry's block of the JSON (module docstring); the filtered variant on the first
+    ``n_filter`` seeds only when given (a slow system)."""
     import baselines
     import training
     from satenv import tasks
@@ -113,7 +115,8 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
     eps = {}
     for name, pol in ((VARIANTS[0], net), (VARIANTS[1], shield(net, env))):
         t0 = time.perf_counter()
-        eps[name] = _episodes(env, pol, seeds, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
+        ss = seeds if name == VARIANTS[0] or not n_filter else seeds[:n_filter]
+        eps[name] = _episodes(env, pol, ss, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
         block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1)}
         print(system, folder.name, name, json.dumps(block[name]["aggregate"], default=float), flush=True)
     if n_controller:
@@ -176,6 +179,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="system=policy-folder[@episodes] (repeatable; @n: this entry on the first n test seeds)")
     p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
     p.add_argument("--controller-seeds", type=int, default=200, help="the controller on the first n (0: none)")
+    p.add_argument("--filter-seeds", type=int, default=None,
+                   help="the network behind the filter on the first n of each entry's seeds only (default: all)")
     p.add_argument("--perturbation-seeds", type=int, default=0,
                    help="the first entry also under every perturbation of its task, first n test seeds (0: none)")
     p.add_argument("--out", type=Path, required=True)
@@ -190,7 +195,8 @@ def main(argv: list[str] | None = None) -> None:
         entries.append((system, Path(folder), int(count) if at else ns.seeds))
     ns.out.mkdir(parents=True, exist_ok=True)
     result = {"command": "python -m benchmarks.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
-              "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache") for s, f, n in entries]}
+              "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache", ns.filter_seeds)
+                          for s, f, n in entries]}
     if ns.perturbation_seeds:   # the policy under study: the first entry
         s, f, _ = entries[0]
         result["entries"][0]["perturbations"] = evaluate_perturbed(
