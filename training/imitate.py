@@ -464,7 +464,13 @@ def run(cfg: DaggerConfig, run_dir: str | Path | None = None, *, resume: bool = 
     from training import runfolder
     from training.actor import MLPActor
     from training.envs import policy_env_meta
-    from training.policy import LearnedPolicy, ObsNormalizer, load, save_artifacts, terminal_from_config
+    from training.policy import (
+        LearnedPolicy,
+        ObsNormalizer,
+        load,
+        save_artifacts,
+        terminal_from_config,
+    )
 
     run_dir = Path(cfg.out_dir if run_dir is None else run_dir)
     history = read_history(run_dir)          # resume after the last round it records, never by counting files
