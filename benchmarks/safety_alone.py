@@ -38,8 +38,8 @@ VARIANTS = ("network alone", "network + filter")
 def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict[str, Any]]:
     """:func:`satenv.scoring.run_episodes`, resumable: records already in ``cache`` (JSON lines,
     one per seed) are reused, new ones appended as they finish."""
-    from satenv.scoring import episode_record
     from satenv.rollout import rollout
+    from satenv.scoring import episode_record
 
     done: dict[int, dict[str, Any]] = {}
     if cache.is_file():
