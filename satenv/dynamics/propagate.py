@@ -264,8 +264,13 @@ class RelativeModel:
         x_next, chief_next = np.empty_like(xs), np.empty_like(cs)
         path = np.empty((n_steps if positions else 0, n, m, 3))
         if span:
-            cm = (np.zeros((0, n, 3)) if common is None else
-                  np.ascontiguousarray(np.broadcast_to(common, (n_steps, *lead, 3)), dtype=float).reshape(n_steps, n, 3))
+            if common is None:
+                cm = np.zeros((0, n, 3))
+            else:
+                common = np.asarray(common, dtype=float)
+                if common.shape != (n_steps, *lead, 3):
+                    common = np.broadcast_to(common, (n_steps, *lead, 3))
+                cm = np.ascontiguousarray(common).reshape(n_steps, n, 3)
             run(xs, cs, us, cm, n_steps, self.group, self.substeps, self.dt, params, _dop853.A, _dop853.B,
                 _dop853.C, x_next, chief_next, path)
         else:
