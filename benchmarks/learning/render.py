@@ -306,6 +306,9 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
                 ax.legend(fontsize=7)
         for ax in (axes[0], axes[2]):
             ax.set_ylim(-0.05, 1.05)
+        if not any(algo == "dagger" for algo, _ in groups):
+            axes[2].set_xticks([])
+            axes[2].text(0.5, 0.5, "DAgger: not run yet", ha="center", va="center", transform=axes[2].transAxes)
         fig.suptitle(f"{tasks.SYSTEMS[name].label}: IQM over seeds, 95 % bootstrap band")
         fig.tight_layout()
         path = folder / f"{name}.png"
