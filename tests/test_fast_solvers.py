@@ -8,7 +8,7 @@ pereira2022 §5.2 servicing scenario under the NMPC, each solved by the interpre
 within 1e-6 (tube: of the unit-ball-scaled input; NMPC: in N, of inputs up to 3 N). The horizons are
 shortened (N = 3) so the gcc compile stays a few seconds in the default suite;
 ``benchmarks.perf`` times the full horizons against the same reference. Last, the parallel
-expert labeller (``training.experts.ExpertPool``) against labelling in one process.
+expert labeller (``training.labeller.ExpertPool``) against labelling in one process.
 """
 
 import numpy as np
@@ -161,7 +161,7 @@ def test_solver_option_is_validated():
 
 # --------------------------------------------------------------------------- parallel expert labels
 def test_expert_pool_rejects_a_bad_worker_count():
-    from training.experts import ExpertPool
+    from training.labeller import ExpertPool
 
     for bad in (0, -1, 1.5, True):
         with pytest.raises(ValueError, match="workers"):
@@ -172,8 +172,8 @@ def test_expert_pool_rejects_a_bad_worker_count():
 def test_expert_pool_labels_are_those_of_one_process():
     """Two workers label three short platoon episodes (one flown by the expert with action noise):
     the rows and stats of each equal those of ``label_episode`` in this process."""
-    from training import experts
-    from training.experts import ExpertPool, LabelJob
+    from training import labeller
+    from training.labeller import ExpertPool, LabelJob
 
     kw = {"max_steps": 4}
     jobs = [LabelJob("platoon-pereira2022-random", seed=s, noise=n, rng=s, env_kwargs=kw)
@@ -182,14 +182,14 @@ def test_expert_pool_labels_are_those_of_one_process():
         out = pool.label(jobs)
         with pytest.raises(TypeError, match="LabelJob"):
             pool.label([{"task": "x"}])
-    experts._WORKER.clear()
-    experts._WORKER["expert"] = ("joint_platoon_mpc", {})
+    labeller._WORKER.clear()
+    labeller._WORKER["expert"] = ("joint_platoon_mpc", {})
     try:
         for job, (rows, stats) in zip(jobs, out, strict=True):
-            ref_rows, ref_stats = experts.label_episode(job)
+            ref_rows, ref_stats = labeller.label_episode(job)
             assert stats == ref_stats and rows.keys() == ref_rows.keys()
             for key in rows:
                 np.testing.assert_array_equal(rows[key], ref_rows[key], err_msg=key)
-            assert len(rows["act"]) == 4 * len(experts._WORKER[(job.task, '{"max_steps": 4}')][0].possible_agents)
+            assert len(rows["act"]) == 4 * len(labeller._WORKER[(job.task, '{"max_steps": 4}')][0].possible_agents)
     finally:
-        experts._WORKER.clear()
+        labeller._WORKER.clear()

@@ -2,7 +2,7 @@
 
 Each system's expert (:data:`satenv.tasks.SYSTEMS`: the NMPC on servicing, the re-planning
 tube-RDMPC on the cluster) flies round-0 episodes of its training task (the expert's own actions,
-random starts) cut to ``decisions`` steps, through :class:`training.experts.ExpertPool` with one
+random starts) cut to ``decisions`` steps, through :class:`training.labeller.ExpertPool` with one
 worker and with two; a label is one agent's action at one decision. The pools are warmed up first
 (envs, experts and their solvers built in every worker), so the rates are the steady state of a
 run that keeps its pool. Both rates come from the same run; the machine's load at the time is
@@ -35,7 +35,7 @@ def labels_per_second(system: str, episodes: int = 4, decisions: int | None = No
                       workers: tuple[int, ...] = (1, 2)) -> dict[str, Any]:
     """Labels/s of ``system``'s expert over ``episodes`` episodes of ``decisions`` steps, per pool size."""
     from satenv import tasks
-    from training.experts import ExpertPool, LabelJob
+    from training.labeller import ExpertPool, LabelJob
 
     sys_ = tasks.system(system)
     steps = decisions or DECISIONS.get(system, 20)
