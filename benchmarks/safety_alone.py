@@ -176,7 +176,8 @@ def main(argv: list[str] | None = None) -> None:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--entry", action="append", required=True,
-                   help="system=policy-folder[@episodes] (repeatable; @n: this entry on the first n test seeds)")
+                   help="system=policy-folder[@episodes[:filtered]] (repeatable; @n: this entry on the first n "
+                        "test seeds; :f: behind the filter on the first f of them)")
     p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
     p.add_argument("--controller-seeds", type=int, default=200, help="the controller on the first n (0: none)")
     p.add_argument("--filter-seeds", type=int, default=None,
@@ -190,15 +191,16 @@ def main(argv: list[str] | None = None) -> None:
     for spec in ns.entry:
         system, sep, folder = spec.partition("=")
         folder, at, count = folder.partition("@")
-        if not sep or not folder or (at and not count.isdigit()):
-            raise SystemExit(f"error: --entry must be system=policy-folder[@episodes], got {spec!r}")
-        entries.append((system, Path(folder), int(count) if at else ns.seeds))
+        count, colon, nf = count.partition(":")
+        if not sep or not folder or (at and not count.isdigit()) or (colon and not nf.isdigit()):
+            raise SystemExit(f"error: --entry must be system=policy-folder[@episodes[:filtered]], got {spec!r}")
+        entries.append((system, Path(folder), int(count) if at else ns.seeds, int(nf) if colon else ns.filter_seeds))
     ns.out.mkdir(parents=True, exist_ok=True)
     result = {"command": "python -m benchmarks.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
-              "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache", ns.filter_seeds)
-                          for s, f, n in entries]}
+              "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache", nf)
+                          for s, f, n, nf in entries]}
     if ns.perturbation_seeds:   # the policy under study: the first entry
-        s, f, _ = entries[0]
+        s, f, _, _ = entries[0]
         result["entries"][0]["perturbations"] = evaluate_perturbed(
             s, f, ns.perturbation_seeds, min(ns.controller_seeds, ns.perturbation_seeds), ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")

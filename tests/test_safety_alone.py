@@ -39,3 +39,5 @@ def test_a_bad_entry_is_an_error(tmp_path):
         safety_alone.main(["--entry", "platoon-pereira2023", "--out", str(tmp_path)])
     with pytest.raises(SystemExit, match="system=policy-folder"):
         safety_alone.main(["--entry", "platoon-pereira2023=x@many", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="system=policy-folder"):
+        safety_alone.main(["--entry", "platoon-pereira2023=x@10:some", "--out", str(tmp_path)])
