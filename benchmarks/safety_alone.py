@@ -184,6 +184,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="the network behind the filter on the first n of each entry's seeds only (default: all)")
     p.add_argument("--perturbation-seeds", type=int, default=0,
                    help="the first entry also under every perturbation of its task, first n test seeds (0: none)")
+    p.add_argument("--perturbation-controller-seeds", type=int, default=None,
+                   help="the controller under each perturbation on the first n (default: min of the two counts above)")
     p.add_argument("--out", type=Path, required=True)
     ns = p.parse_args(argv)
     torch.set_num_threads(1)
@@ -202,7 +204,9 @@ def main(argv: list[str] | None = None) -> None:
     if ns.perturbation_seeds:   # the policy under study: the first entry
         s, f, _, _ = entries[0]
         result["entries"][0]["perturbations"] = evaluate_perturbed(
-            s, f, ns.perturbation_seeds, min(ns.controller_seeds, ns.perturbation_seeds), ns.out / "cache")
+            s, f, ns.perturbation_seeds,
+            min(ns.controller_seeds, ns.perturbation_seeds) if ns.perturbation_controller_seeds is None
+            else ns.perturbation_controller_seeds, ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     plot(result, ns.out / "safety_alone.png")
 
