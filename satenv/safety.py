@@ -606,10 +606,11 @@ def _solve_rows(m: SafetyModel, rows: np.ndarray, lo: np.ndarray, a: np.ndarray,
                 kinds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Filter ``n`` agents' proposals ``a (n, d)`` against their rows ``rows u >= lo``
     ``(n, K, d)``, ``(n, K)``: ``(out, safe, infeasible, active)``; a safe proposal is returned
-    as it is, an unsafe one is replaced by the QP's point or the backup action."""
+    as it is (clipped to the action box, as the env would: a filtered action never leaves it), an
+    unsafe one is replaced by the QP's point or the backup action."""
     ref = _effective(m, a)
     safe = (np.einsum("nkj,nj->nk", rows, ref) - lo).min(axis=-1, initial=np.inf) >= -_ROW_TOL
-    out = a.copy()
+    out = np.clip(a, -1.0, 1.0)
     infeasible = np.zeros(len(a), dtype=bool)
     active = np.full(len(a), -1, dtype=np.int64)
     reach = -m.u_box * math.sqrt(m.action_dim) - 1e-9      # (normalised) rows below this never bind
