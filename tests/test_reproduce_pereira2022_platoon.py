@@ -24,7 +24,7 @@ def test_short_run_schema_and_claims(tmp_path):
         assert d["steps"] == 15 and d["min_keepout_margin_m"] > 0 and d["min_los_margin_m"] > 0
     assert len(result["figures"]) == 2
     json.dumps(result)
-    assert "claims of our run met" in repro.format_table(result)
+    assert "claims of our run:" in repro.format_table(result)
 
 
 def test_constraint_margins_sign():
