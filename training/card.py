@@ -31,19 +31,9 @@ __all__ = ["card", "targets", "shipped_table", "folder_table", "readme"]
 def card(folder: Path) -> dict[str, Any]:
     """The headline numbers of one policy folder (from ``eval.json``, ``env.json``, ``scoreboard.json``)."""
     ev = json.loads((folder / "eval.json").read_text())
-    ref_key = next(k for k in ev if k.startswith("vs_"))
-    ratios = ev[ref_key]
-    reference = ratios.get("reference", ref_key[3:].lower())
-    agg = ev["aggregate"]
-    base = next((v for k, v in agg.items() if k.lower() == reference.lower()), None)
+    read = _safety_alone_fields if "network alone" in ev else _recipe_fields
+    own, ratios, alone, reference, base, matched, shipped = read(folder, ev)
     scen = folder / "scoreboard.json"
-    # what training.load(folder, env=env) returns: the network, or (a folder that ships behind the
-    # safety filter) "learned+shield"; the network alone is then reported beside it
-    shipped = ratios.get("shipped", "learned")
-    own = agg[shipped]
-    matched = "matched" in ratios
-    shipped_ratios = (ratios.get("matched", ratios.get("all_seeds", {})) if shipped == "learned"
-                      else ratios.get(shipped, {}))
     return {
         "name": folder.name,
         "scenarios": json.loads(scen.read_text())["scenarios"] if scen.is_file() else [],
@@ -54,15 +44,41 @@ def card(folder: Path) -> dict[str, Any]:
         "collision_episodes": own["collision_episodes"],
         "violations": own["violations"],
         "violation_episodes": own.get("violation_episodes", int(bool(own["violations"]))),
-        "rmse_ratio": shipped_ratios.get("rmse_ratio"),
-        "delta_v_ratio": shipped_ratios.get("delta_v_ratio"),
-        "network_alone": None if shipped == "learned" else {
-            k: agg["learned"][k] for k in ("success_rate", "collision_episodes", "violations")},
+        "rmse_ratio": ratios.get("rmse_ratio"),
+        "delta_v_ratio": ratios.get("delta_v_ratio"),
+        "network_alone": None if alone is None else {
+            k: alone[k] for k in ("success_rate", "collision_episodes", "violations")},
         "baseline": reference,
         "baseline_success": None if base is None else base["success_rate"],
         "baseline_episodes": None if base is None else base["episodes"],
         "ratios_on": "matched" if matched else "all seeds",
     }
+
+
+def _recipe_fields(folder: Path, ev: dict[str, Any]) -> tuple:
+    """An evaluation of ``training.evaluate`` / the held-out recipe: ``aggregate`` and ``vs_<REF>``;
+    a folder shipped behind the filter has ``learned+shield`` beside the network alone."""
+    ref_key = next(k for k in ev if k.startswith("vs_"))
+    ratios = ev[ref_key]
+    reference = ratios.get("reference", ref_key[3:].lower())
+    agg = ev["aggregate"]
+    base = next((v for k, v in agg.items() if k.lower() == reference.lower()), None)
+    shipped = ratios.get("shipped", "learned")
+    own_ratios = (ratios.get("matched", ratios.get("all_seeds", {})) if shipped == "learned"
+                  else ratios.get(shipped, {}))
+    alone = None if shipped == "learned" else agg["learned"]
+    return agg[shipped], own_ratios, alone, reference, base, "matched" in ratios or shipped != "learned", shipped
+
+
+def _safety_alone_fields(folder: Path, ev: dict[str, Any]) -> tuple:
+    """An evaluation of ``benchmarks.safety_alone``: the network alone and behind the filter on the
+    same test seeds, ratios to the controller on matched episodes."""
+    filtered = json.loads((folder / "env.json").read_text()).get("safety_filter") is not None
+    shipped = "network + filter" if filtered else "network alone"
+    block = ev[shipped]
+    return (block["aggregate"], block.get("ratios_vs_controller", {}),
+            ev["network alone"]["aggregate"] if filtered else None, ev["controller"],
+            ev.get("controller_aggregate"), True, shipped)
 
 
 def targets(c: dict[str, Any]) -> dict[str, bool]:
