@@ -254,8 +254,9 @@ def _cell(stat: dict[str, Any], metric: str) -> str:
     mean, (lo, hi) = stat["mean"], stat["ci95"]
     if mean is None:
         return "–"
-    if metric == "success":
-        return f"{100 * mean:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]" if lo is not None else f"{100 * mean:.0f} %"
+    if metric == "success":   # no interval on one episode (a deterministic task runs one seed)
+        one = stat.get("n", 2) < 2
+        return f"{100 * mean:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]" if lo is not None and not one else f"{100 * mean:.0f} %"
     if lo is None or hi is None or hi - lo <= 1e-9 * max(1.0, abs(mean)):  # one seed, or the same value on all
         return _fmt(mean)
     return f"{_fmt(mean)} [{_fmt(lo)}, {_fmt(hi)}]"
