@@ -4,8 +4,10 @@ For each entry ``system=folder`` (a policy folder under ``training/policies``), 
 training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
 
 * ``network alone`` — ``training.load(folder, env=env, shielded=False)``;
-* ``network + filter`` — the same network behind ``satenv.safety.shield`` (what every folder that
-  ships with the filter loads as): interventions and infeasible steps per agent-step;
+* ``network + filter`` — the same network behind ``satenv.safety.shield`` with the options of the
+  folder's ``env.json`` ``"safety_filter"`` (what a folder that ships with the filter loads as,
+  :func:`as_shipped`; the filter's defaults for a folder shipped without it): interventions and
+  infeasible steps per agent-step;
 * the system's controller (``satenv.tasks.CONTROLLERS``) on the first ``--controller-seeds`` of
   the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
 
@@ -29,10 +31,22 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["VARIANTS", "evaluate_entry", "evaluate_perturbed", "plot", "main"]
+__all__ = ["VARIANTS", "as_shipped", "evaluate_entry", "evaluate_perturbed", "plot", "main"]
 
 VARIANTS = ("network alone", "network + filter")
 """The two ways every policy is reported."""
+
+
+def as_shipped(folder: Path, network: Any, env: Any) -> Any:
+    """``network`` behind the safety filter as ``folder`` ships it: with the options of its
+    ``env.json`` ``"safety_filter"`` (:func:`training.policy.shipped_filter`), the filter's
+    defaults when the folder ships without it."""
+    from satenv.safety import shield
+    from training.policy import policy_folder, shipped_filter
+
+    root = policy_folder(folder)
+    config = shipped_filter(root, json.loads((root / "env.json").read_text()))
+    return shield(network, env, config)
 
 
 def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict[str, Any]]:
@@ -68,7 +82,6 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
     import baselines
     import training
     from satenv import perturbations, tasks
-    from satenv.safety import shield
     from satenv.scoring import aggregate
 
     task = tasks.training_task(system)
@@ -78,7 +91,7 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
         env = perturbations.make_env(task, name)
         net = training.load(folder, env=env, shielded=False)
         row: dict[str, Any] = {}
-        for variant, pol in ((VARIANTS[0], net), (VARIANTS[1], shield(net, env))):
+        for variant, pol in ((VARIANTS[0], net), (VARIANTS[1], as_shipped(folder, net, env))):
             cache = cache_dir / f"{system}__{folder.name}__{name}__{variant.replace(' ', '_').replace('+', 'plus')}.jsonl"
             row[variant] = aggregate(_episodes(env, pol, seeds, cache))
         if n_controller:
@@ -102,7 +115,6 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
     import baselines
     import training
     from satenv import tasks
-    from satenv.safety import shield
     from satenv.scoring import aggregate, matched_ratios, targets
 
     task = tasks.training_task(system)
@@ -113,7 +125,7 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
     block: dict[str, Any] = {"system": system, "task": task.name, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
                              "controller": task.controller}
     eps = {}
-    for name, pol in ((VARIANTS[0], net), (VARIANTS[1], shield(net, env))):
+    for name, pol in ((VARIANTS[0], net), (VARIANTS[1], as_shipped(folder, net, env))):
         t0 = time.perf_counter()
         ss = seeds if name == VARIANTS[0] or not n_filter else seeds[:n_filter]
         eps[name] = _episodes(env, pol, ss, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
