@@ -36,7 +36,7 @@ import numba
 import numpy as np
 
 from ._dop853 import STAGES
-from ._truth_kernel import _accel, _axes, _new_chief, _to_eci, _to_lvlh
+from ._truth_kernel import _accel, _axes, _chief_record, _new_chief, _to_eci, _to_lvlh
 
 __all__ = ["propagate"]
 
@@ -80,15 +80,7 @@ def _chief_step(c0, H, p, a_tab, b_tab, c_tab, rec, ecoef):
                 for j in range(STAGES):
                     acc += b_tab[j] * k[j, c]
             y[c, 0] = c0[c] + H * acc
-        a0, a1, a2 = _accel(y[0, 0], y[1, 0], y[2, 0], y[3, 0], y[4, 0], y[5, 0], p, p[7])
-        _axes(y, e)
-        r = rec[i]
-        for c in range(6):
-            r[c] = y[c, 0]
-        r[6], r[7], r[8] = a0, a1, a2
-        for row in range(3):
-            for c in range(3):
-                r[9 + 3 * row + c] = e[row, c]
+        a0, a1, a2 = _chief_record(y, e, p, rec[i])
         if i < STAGES:
             k[i, 0], k[i, 1], k[i, 2] = y[3, 0], y[4, 0], y[5, 0]
             k[i, 3], k[i, 4], k[i, 5] = a0, a1, a2

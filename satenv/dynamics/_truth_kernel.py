@@ -142,6 +142,21 @@ LVLH axes ex, ey, ez (9)."""
 
 
 @_jit
+def _chief_record(src, e, p, rec):
+    """The chief's state ``src`` (6, 1), its acceleration and its LVLH axes (into ``e``) as one
+    record row ``rec`` (18,): state, acceleration, axes row by row. Returns the acceleration."""
+    a0, a1, a2 = _accel(src[0, 0], src[1, 0], src[2, 0], src[3, 0], src[4, 0], src[5, 0], p, p[7])
+    _axes(src, e)
+    for c in range(6):
+        rec[c] = src[c, 0]
+    rec[6], rec[7], rec[8] = a0, a1, a2
+    for r in range(3):
+        for c in range(3):
+            rec[9 + 3 * r + c] = e[r, c]
+    return a0, a1, a2
+
+
+@_jit
 def _chief_track(c0, n, h, p, track, ends):
     """The chief's ``n`` RK4 sub-steps from ``c0`` (6,) (:func:`satenv.dynamics.integrators.rk4_step`
     on the chief's row of the packed state): every stage's state, acceleration and axes into
@@ -155,15 +170,7 @@ def _chief_track(c0, n, h, p, track, ends):
     for i in range(n):
         for stage in range(4):
             src = y if stage == 0 else tmp
-            a0, a1, a2 = _accel(src[0, 0], src[1, 0], src[2, 0], src[3, 0], src[4, 0], src[5, 0], p, p[7])
-            _axes(src, e)
-            rec = track[4 * i + stage]
-            for c in range(6):
-                rec[c] = src[c, 0]
-            rec[6], rec[7], rec[8] = a0, a1, a2
-            for r in range(3):
-                for c in range(3):
-                    rec[9 + 3 * r + c] = e[r, c]
+            a0, a1, a2 = _chief_record(src, e, p, track[4 * i + stage])
             k[stage, 0], k[stage, 1], k[stage, 2] = src[3, 0], src[4, 0], src[5, 0]
             k[stage, 3], k[stage, 4], k[stage, 5] = a0, a1, a2
             if stage < 3:
