@@ -172,3 +172,73 @@ def test_choose_ranks_rounds_safety_first_and_ship_never_overwrites(tmp_path):
     (tmp_path / "exists").mkdir()
     with pytest.raises(SatenvError, match="never overwritten"):
         ship(tmp_path, 3, tmp_path / "exists")
+
+
+class _FixedThrust:
+    """A 'network' that always proposes full thrust, in opposite directions for neighbouring agents
+    (closing on each other: often unsafe)."""
+
+    def __init__(self, n: int, d: int):
+        self.a = np.where(np.arange(n)[:, None] % 2 == 1, 1.0, -1.0) * np.ones((n, d))
+
+    def reset(self, seed=None):
+        pass
+
+    def predict(self, obs):
+        return self.a[: len(obs)].copy()
+
+
+@pytest.mark.parametrize("fly", ["filtered", "alone"])
+def test_collection_applies_the_flown_or_the_filtered_action(fly):
+    """fly="alone" steps the network's own action (the filter's output only recorded): the
+    recorded observations are those of an env stepped with that action; "filtered" steps the
+    filter's output."""
+    from training.safe_imitation import collect_episode
+
+    kw = {"terminate_on_collision": False, "max_steps": 30}
+    env = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    n = len(env.possible_agents)
+    net = _FixedThrust(n, env.action_space(env.possible_agents[0]).shape[0])
+    rows, stats = collect_episode(env, None, net, 700_123, fly)
+    assert stats["agent_steps"] == len(rows["obs"]) > n
+    assert rows["intervened"].any()                    # the filter disagreed somewhere
+    ref = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    obs, _ = ref.reset(seed=700_123)
+    agents = list(ref.possible_agents)
+    for k in range(len(rows["obs"]) // n):
+        assert np.allclose(np.stack([obs[a] for a in agents]), rows["obs"][k * n:(k + 1) * n], atol=1e-5)
+        applied = rows["flown" if fly == "alone" else "filtered"][k * n:(k + 1) * n]
+        obs, *_ = ref.step({a: np.clip(applied[i], -1, 1) for i, a in enumerate(agents)})
+
+
+def test_prior_rows_are_imitated_beside_the_runs_own():
+    """Rows of an earlier DAgger run (``prior``) pull the actor to their labels where the run has none."""
+    from training.actor import MLPActor
+    from training.policy import LearnedPolicy, ObsNormalizer
+
+    rng = np.random.default_rng(2)
+    n = 256
+    obs = rng.normal(loc=-2.0, size=(n, 4)).astype(np.float32)
+    prior_obs = rng.normal(loc=+2.0, size=(n, 4)).astype(np.float32)
+    zeros = np.zeros((n, 3), np.float32)
+    data = {"obs": obs, "label": zeros, "expert": zeros, "filtered": zeros, "intervened": np.zeros(n, bool),
+            "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+    prior = {"obs": prior_obs, "act": np.full((n, 3), 0.5, np.float32)}
+    cfg = SafeDaggerConfig(w_bar=0.0, w_int=0.0, epochs=60, batch_size=64, learning_rate=3e-3)
+    errs = {}
+    for weight in (0.0, 1.0):
+        torch.manual_seed(0)
+        pol = LearnedPolicy(MLPActor(4, 3, [32], "tanh", True), ObsNormalizer(), obs_shape=(4,))
+        terms = fit(pol, data, SafeDaggerConfig(**{**cfg.to_json(), "prior_weight": weight}), False,
+                    torch.Generator().manual_seed(0), prior)
+        errs[weight] = float(np.abs(pol.predict(prior_obs) - 0.5).mean())
+        assert np.abs(pol.predict(obs)).mean() < 0.1          # the run's own rows still fitted
+    assert terms["prior"] < 0.01
+    assert errs[1.0] < 0.05 < errs[0.0]
+
+
+@pytest.mark.parametrize("field,value", [("fly", "nope"), ("prior_labels", "/nonexistent/labels"),
+                                         ("prior_weight", -1.0)])
+def test_config_rejects_bad_flight_and_prior(field, value):
+    with pytest.raises(SatenvError, match=field):
+        SafeDaggerConfig(**{field: value})

@@ -13,7 +13,9 @@ given again override it). Every round:
    observation, the system's expert action, the expert action after the filter (the label:
    ``label="filtered"``; ``"teacher"``: the warm-start network's action after the filter, the
    shipped composite as the expert), the filter's output for the network's action, whether the filter
-   intervened, and the filter's constraint rows at that state (:func:`agent_constraints`);
+   intervened, and the filter's constraint rows at that state (:func:`agent_constraints`).
+   ``fly="alone"``: the network flies without the filter (its own action applied, the filter's
+   output and rows still recorded), so the expert labels the states where the network alone goes;
 2. **fit** (warm start, all rows of every round) on
 
    ``L = |pi(o) - y|^2 + w_int * |pi(o) - F(pi_flown(o))|^2 [intervened rows] + w_bar * sum_k relu(l_k + m - r_k . pi(o))^2``
@@ -22,7 +24,10 @@ given again override it). Every round:
    for the flown action, where it intervened) and the **barrier term**: the filter's rows are the
    discrete barrier condition on the next state (``h(x+) >= (1 - gamma) h(x)``, linear in the
    action), so the hinge is zero exactly when the filter would leave the action alone (with the
-   margin ``m`` inside), and differentiable in the network's output;
+   margin ``m`` inside), and differentiable in the network's output. ``prior_labels``: the labels
+   folder of an earlier DAgger run (``obs``, ``act``), a batch of it imitated beside every batch
+   with weight ``prior_weight`` (``+ w_prior |pi(o_p) - y_p|^2``), a task term that the other
+   terms cannot trade away on the states the expert already labelled;
 3. **validate** on validation seeds only: the network alone (collision and violation episodes,
    success) and behind the filter (interventions per agent-step); the round is chosen on these.
 
@@ -57,14 +62,24 @@ def _joint_platoon(env: Any) -> Any:
     return JointPlatoonMPC(env, coupling="sequential")
 
 
+def _replanning_tube(env: Any) -> Any:
+    from training.experts import ReplanningTubeRDMPC
+
+    return ReplanningTubeRDMPC(env)
+
+
 EXPERTS: dict[str, Any] = {"platoon-pereira2022": _joint_platoon, "platoon-pereira2023": None,
-                           "cluster-li2022": None, "servicing-pereira2022": None}
+                           "cluster-li2022": _replanning_tube, "servicing-pereira2022": None}
 """The expert that labels each system's states (a stateless re-planner where there is one;
 ``None``: the system has none better than the filtered network, whose own filtered action is the
 label, ``label="self"``)."""
 
 
 LABELS = ("filtered", "expert", "self", "teacher")
+FLIGHTS = ("filtered", "alone")
+"""Who flies the collection episodes: the network behind the filter (the labelled states are those
+the shipped composite reaches) or the network alone (the states where it needs the filter; the
+filter's output and rows are still recorded, the network's own action is applied)."""
 """What the network imitates: the system's expert after the filter or as it is, the filter's output
 for the network's own action (self-distillation of the filtered network), or the filter's output
 for the *warm-start* network's action (the shipped composite, network + filter, as a frozen expert)."""
@@ -90,16 +105,24 @@ class SafeDaggerConfig:
     batch_size: int = 512
     learning_rate: float = 1e-4
     seed: int = 0
+    fly: str = "filtered"                # FLIGHTS
+    prior_labels: str = ""               # a DAgger run's labels folder (round_*.npz with obs, act): rows
+    #                                      imitated in every batch beside the run's own (anchors the task)
+    prior_weight: float = 1.0
 
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
             raise SatenvError(f"system must be one of {sorted(EXPERTS)}, got {self.system!r}")
         if self.label not in LABELS:
             raise SatenvError(f"label must be one of {list(LABELS)}, got {self.label!r}")
+        if self.fly not in FLIGHTS:
+            raise SatenvError(f"fly must be one of {list(FLIGHTS)}, got {self.fly!r}")
+        if self.prior_labels and not Path(self.prior_labels).is_dir():
+            raise SatenvError(f"prior_labels must be a folder of round_*.npz label files, got {self.prior_labels!r}")
         if EXPERTS[self.system] is None and self.label in ("filtered", "expert"):
             raise SatenvError(f"system {self.system!r} has no expert here: label must be 'self' or 'teacher', "
                               f"got {self.label!r}")
-        for name in ("w_int", "w_bar", "bar_margin", "learning_rate"):
+        for name in ("w_int", "w_bar", "bar_margin", "learning_rate", "prior_weight"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise SatenvError(f"{name} must be a finite number >= 0, got {v!r}")
@@ -154,9 +177,11 @@ def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm
 
 
 # --------------------------------------------------------------------------- collection
-def collect_episode(env: Any, expert: Any, net: Any, seed: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """The network flies ``env`` behind the filter; every agent-step labelled (module docstring).
-    Without an expert (``None``) the expert columns hold the network's own action."""
+def collect_episode(env: Any, expert: Any, net: Any, seed: int,
+                    fly: str = "filtered") -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The network flies ``env`` behind the filter (``fly="alone"``: without it, the filter's output
+    only recorded); every agent-step labelled (module docstring). Without an expert (``None``) the
+    expert columns hold the network's own action."""
     from satenv.safety import SafetyFilter
 
     obs, _ = env.reset(seed=seed)
@@ -180,7 +205,8 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int) -> tuple[dict[st
             lab = expert.act(obs)
             e = np.stack([np.asarray(lab[a], dtype=float) for a in agents])
             e_f, _ = filt.filter(np.clip(e, -1, 1))
-        r, lo = agent_constraints(filt, n_f)
+        applied = n_f if fly == "filtered" else _box(n)
+        r, lo = agent_constraints(filt, applied)
         rows["obs"].append(o)
         rows["expert"].append(e)
         rows["label"].append(e_f)
@@ -191,20 +217,33 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int) -> tuple[dict[st
         rows["lower"].append(lo)
         interventions += int(rec.intervened.sum())
         steps += len(agents)
-        obs, _, _, _, infos = env.step({a: n_f[i].astype(np.float32) for i, a in enumerate(agents)})
+        obs, _, _, _, infos = env.step({a: applied[i].astype(np.float32) for i, a in enumerate(agents)})
         collided |= any(bool(i.get("collision")) for i in infos.values())
     out = {k: np.concatenate(v).astype(np.float32 if k != "intervened" else bool) for k, v in rows.items()}
     return out, {"seed": seed, "agent_steps": steps, "interventions": interventions, "collision": collided}
 
 
+def _box(a: np.ndarray) -> np.ndarray:
+    return np.clip(np.nan_to_num(np.asarray(a, dtype=float)), -1.0, 1.0)
+
+
 # --------------------------------------------------------------------------- fit
-def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mode: bool,
-        generator: Any) -> dict[str, float]:
-    """Adam on the loss of the module docstring (``policy.actor`` in place); the epoch-mean terms."""
+def _inputs(policy: Any, obs: np.ndarray) -> Any:
+    """The actor's input for raw observations (the policy's features, then its normaliser)."""
     import torch
 
-    x = torch.as_tensor(policy.normalizer(policy.features(data["obs"].astype(np.float64))
-                                          if policy.features is not None else data["obs"]), dtype=torch.float32)
+    return torch.as_tensor(policy.normalizer(policy.features(obs.astype(np.float64))
+                                             if policy.features is not None else obs), dtype=torch.float32)
+
+
+def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mode: bool,
+        generator: Any, prior: dict[str, np.ndarray] | None = None) -> dict[str, float]:
+    """Adam on the loss of the module docstring (``policy.actor`` in place); the epoch-mean terms.
+    ``prior`` (``obs``, ``act``): rows of an earlier DAgger run, a batch of the same size drawn from
+    them at every step and imitated with weight ``cfg.prior_weight`` (the ``prior`` term)."""
+    import torch
+
+    x = _inputs(policy, data["obs"])
     key = {"filtered": "label", "expert": "expert", "self": "filtered", "teacher": "label"}[cfg.label]
     y = torch.as_tensor(data[key], dtype=torch.float32).clamp(-1, 1)
     power = float(policy.action_map.power) if policy.action_map is not None else 1.0
@@ -212,23 +251,34 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
     f = torch.as_tensor(data["filtered"], dtype=torch.float32)
     mask = torch.as_tensor(data["intervened"], dtype=torch.float32)
     rows, lower = torch.as_tensor(data["rows"]), torch.as_tensor(data["lower"])
+    if prior is not None:
+        px = _inputs(policy, prior["obs"])
+        py = torch.as_tensor(prior["act"], dtype=torch.float32).clamp(-1, 1)
+        p_off, p_slope = (torch.as_tensor(v, dtype=torch.float32)
+                          for v in terminal_affine(policy, prior["obs"], py.shape[-1]))
     actor = policy.actor
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
     actor.train()
     terms = {}
     for _ in range(cfg.epochs):
-        sums = np.zeros(3)
+        sums = np.zeros(4)
         for idx in torch.randperm(len(x), generator=generator).split(cfg.batch_size):
             a = offset[idx] + slope[idx] * _env_action(actor(x[idx]), power)
             imit = ((a - y[idx]) ** 2).sum(-1).mean()
             inter = (mask[idx] * ((a - f[idx]) ** 2).sum(-1)).mean()
             bar = barrier_hinge(a, rows[idx], lower[idx], cfg.bar_margin, norm_mode).mean()
             loss = imit + cfg.w_int * inter + cfg.w_bar * bar
+            pri = torch.zeros(())
+            if prior is not None:
+                j = torch.randint(len(px), (len(idx),), generator=generator)
+                pa = p_off[j] + p_slope[j] * _env_action(actor(px[j]), power)
+                pri = ((pa - py[j]) ** 2).sum(-1).mean()
+                loss = loss + cfg.prior_weight * pri
             opt.zero_grad()
             loss.backward()
             opt.step()
-            sums += np.array([imit.item(), inter.item(), bar.item()]) * len(idx)
-        terms = dict(zip(("imitation", "intervention", "barrier"), (sums / len(x)).tolist(), strict=True))
+            sums += np.array([imit.item(), inter.item(), bar.item(), pri.item()]) * len(idx)
+        terms = dict(zip(("imitation", "intervention", "barrier", "prior"), (sums / len(x)).tolist(), strict=True))
     actor.eval()
     return terms
 
@@ -310,12 +360,14 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         history_path.write_text(json.dumps(history, indent=1) + "\n")
         done = 1
     generator = torch.Generator().manual_seed(cfg.seed + done)
+    prior = _load_prior(Path(cfg.prior_labels)) if cfg.prior_labels else None
     t_start = time.perf_counter()
     for k in range(done, cfg.rounds + 1):
         t0 = time.perf_counter()
         parts, flown = [], []
         for j in range(cfg.episodes_per_round):
-            part, stats = collect_episode(collect_env, expert, policy, cfg.train_seed + (k - 1) * cfg.episodes_per_round + j)
+            part, stats = collect_episode(collect_env, expert, policy,
+                                          cfg.train_seed + (k - 1) * cfg.episodes_per_round + j, cfg.fly)
             parts.append(part)
             flown.append(stats)
         batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
@@ -323,7 +375,7 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         collect_s = time.perf_counter() - t0
         data = _load_rows(run_dir)
         t1 = time.perf_counter()
-        terms = fit(policy, data, cfg, norm_mode, generator)
+        terms = fit(policy, data, cfg, norm_mode, generator, prior)
         fit_s = time.perf_counter() - t1
         t2 = time.perf_counter()
         val = validate(task, policy, cfg)
@@ -333,8 +385,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
                        source="training.safe_imitation round checkpoint")
         steps = sum(s["agent_steps"] for s in flown)
         history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
-                        "weights": {f: getattr(cfg, f) for f in ("label", "w_int", "w_bar", "bar_margin",
-                                                                 "learning_rate", "epochs")}, "collect_s": round(collect_s, 1),
+                        "weights": {f: getattr(cfg, f) for f in ("label", "fly", "w_int", "w_bar", "bar_margin",
+                                                                 "prior_weight", "learning_rate", "epochs")}, "collect_s": round(collect_s, 1),
                         "fit_s": round(fit_s, 1), "val_s": round(val_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1),
                         "flown_interventions_per_agent_step": sum(s["interventions"] for s in flown) / max(1, steps),
@@ -343,8 +395,14 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         a, s = val["alone"], val["shield"]
         print(f"round {k}: rows {len(data['obs'])} loss {json.dumps({t: round(v, 5) for t, v in terms.items()})} "
               f"alone: success {a['success_rate']:.2f} coll {a['collision_episodes']} viol {a['violation_episodes']} "
-              f"| shield: interv/step {s.get('interventions_per_agent_step', 0):.4f} "
+              f"final err {_final_error(a)} | shield: success {s['success_rate']:.2f} final err {_final_error(s)} "
+              f"interv/step {s.get('interventions_per_agent_step', 0):.4f} "
               f"| collect {collect_s:.0f}s fit {fit_s:.0f}s val {val_s:.0f}s", flush=True)
+
+
+def _final_error(agg: dict[str, Any]) -> str:
+    f = agg.get("final_error_m")
+    return f"{f:.1f} m" if isinstance(f, (int, float)) else "n/a"
 
 
 def choose(run_dir: Path) -> int:
@@ -370,6 +428,19 @@ def ship(run_dir: Path, k: int, dest: Path) -> Path:
     shutil.copy(run_dir / "history.json", dest / "history.json")
     write_manifest(dest)
     return dest
+
+
+def _load_prior(folder: Path) -> dict[str, np.ndarray]:
+    """``obs`` and ``act`` of every ``round_*.npz`` of a DAgger run's labels folder."""
+    parts = []
+    for f in sorted(folder.glob("round_*.npz")):
+        with np.load(f, allow_pickle=False) as d:
+            if "obs" not in d.files or "act" not in d.files:
+                raise SatenvError(f"prior_labels: {f} has no 'obs' and 'act' arrays (has {d.files})")
+            parts.append({"obs": d["obs"].astype(np.float32), "act": d["act"].astype(np.float32)})
+    if not parts:
+        raise SatenvError(f"prior_labels: no round_*.npz in {folder}")
+    return {k: np.concatenate([p[k] for p in parts]) for k in ("obs", "act")}
 
 
 def _load_rows(run_dir: Path) -> dict[str, np.ndarray]:
@@ -399,7 +470,7 @@ def main(argv: list[str] | None = None) -> None:
     for k, v in vars(ns).items():
         if k in ("run_dir", "ship", "ship_round") or v is None:
             continue
-        over[k] = v if k in ("system", "warm_start", "label") else json.loads(v)
+        over[k] = v if SafeDaggerConfig.__dataclass_fields__[k].type in (str, "str") else json.loads(v)
     run(replace(base, **over), ns.run_dir)
 
 
