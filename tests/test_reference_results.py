@@ -104,6 +104,22 @@ def test_results_from_the_log(tmp_path, zero_trainer):
     assert "platoon, pereira2023" in page and "No success on any seed at the budget: PPO (SB3)" in page
 
 
+def test_a_longer_budget_is_its_own_run_and_row(tmp_path, zero_trainer):
+    log = tmp_path / "log.jsonl"
+    short, longer = (G.Run("platoon-pereira2023", "ppo", False, 0, str(log), budget_override=b) for b in (5000, 10000))
+    runner.run_one(short)
+    assert runner.done_runs([short, longer], log) == {short}
+    runner.run_one(longer)
+    assert runner.done_runs([short, longer], log) == {short, longer}
+    data = results.build_results(runner.read_log(log))
+    assert sorted(r["budget_agent_steps"] for r in data["records"]) == [5000, 10000]
+    assert {r["command"].split("--budget ")[-1] for r in data["records"]} == {"5000", "10000"}
+    page = render.render_page(data)
+    assert "PPO (SB3), 5,000 agent-steps" in page and "PPO (SB3), 10,000 agent-steps" in page
+    # the grid's own budget needs no --budget
+    assert "--budget" not in results.command("platoon-pereira2023", "ppo", False, 0, G.BUDGET_AGENT_STEPS["platoon-pereira2023"])
+
+
 def test_grid_covers_the_targets():
     runs = G.grid(list(G.BUDGET_AGENT_STEPS), G.DEFAULT_ALGORITHMS, [0, 1, 2])
     systems = {r.system for r in runs}

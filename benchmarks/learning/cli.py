@@ -37,7 +37,7 @@ def _names(text: str, allowed, what: str) -> list[str]:
 
 
 def cmd_run(ns: argparse.Namespace) -> int:
-    from benchmarks.learning.grid import ALGORITHMS
+    from benchmarks.learning.grid import ALGORITHMS, KEY
     from benchmarks.learning.runner import done_runs, logged_keys, lost_record, read_log, run_one
     from benchmarks.scoreboard.backends import stream
     from benchmarks.scoreboard.runner import EpisodeLog
@@ -60,7 +60,7 @@ def cmd_run(ns: argparse.Namespace) -> int:
         log = EpisodeLog(log_path)
         try:   # what the worker could not write itself (a Ray worker elsewhere, a dead worker)
             for rec in result["records"]:
-                key = (rec["system"], rec["algorithm"], rec["filter"], rec["seed"], rec["checkpoint"])
+                key = tuple(rec[k] for k in KEY)
                 if rec.get("lost") or (rec.get("error") is None and key not in keys):
                     log.append(rec)
         finally:

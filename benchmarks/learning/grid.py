@@ -73,8 +73,9 @@ FILTER_PENALTY = 0.1
 """Reward penalty per unit of filter correction ``|du|`` in the filtered training env
 (``satenv.safety.SafetyConfig.penalty``)."""
 
-KEY = ("system", "algorithm", "filter", "seed", "checkpoint")
-"""The key of a log record: one evaluation of one run."""
+KEY = ("system", "algorithm", "filter", "seed", "budget_agent_steps", "checkpoint")
+"""The key of a log record: one evaluation of one run (a run at another budget, ``--budget``, is
+another run)."""
 
 
 @dataclass(frozen=True)
@@ -119,10 +120,16 @@ class Run:
         return [round(self.budget * (k + 1) / CHECKPOINTS) for k in range(CHECKPOINTS)]
 
     def key(self, checkpoint: int) -> tuple[Any, ...]:
-        return (self.system, self.algorithm, self.filter, self.seed, checkpoint)
+        return (self.system, self.algorithm, self.filter, self.seed, self.budget, checkpoint)
+
+    @property
+    def longer(self) -> bool:
+        """An RL run at a budget other than the grid's (``--budget``): its own row on the page."""
+        return self.algorithm in RL_ALGORITHMS and self.budget != BUDGET_AGENT_STEPS[self.system]
 
     def label(self) -> str:
-        return f"{self.system}/{self.algorithm}{'+filter' if self.filter else ''}/seed{self.seed}"
+        budget = f"@{self.budget}" if self.longer else ""
+        return f"{self.system}/{self.algorithm}{'+filter' if self.filter else ''}{budget}/seed{self.seed}"
 
     def to_json(self) -> dict[str, Any]:
         return {k: v for k, v in asdict(self).items() if k not in ("log_path", "budget_override")}

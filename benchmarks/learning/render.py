@@ -49,15 +49,30 @@ def iqm_band(scores: np.ndarray, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> t
     return iqm(scores), np.percentile(boot, 2.5, axis=0), np.percentile(boot, 97.5, axis=0)
 
 
-def _groups(results: dict[str, Any]) -> dict[str, dict[tuple[str, bool], list[dict[str, Any]]]]:
-    out: dict[str, dict[tuple[str, bool], list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
+Group = tuple[str, bool, int]
+"""A row of the page: algorithm, filter in training, and the budget when it is not the grid's (else 0)."""
+
+
+def _longer(rec: dict[str, Any]) -> int:
+    run = G.Run(rec["system"], rec["algorithm"], rec["filter"], rec["seed"],
+                budget_override=int(rec.get("budget_agent_steps") or 0))
+    return run.budget if run.longer else 0
+
+
+def _groups(results: dict[str, Any]) -> dict[str, dict[Group, list[dict[str, Any]]]]:
+    out: dict[str, dict[Group, list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
     for rec in results["records"]:
-        out[rec["system"]][(rec["algorithm"], rec["filter"])].append(rec)
+        out[rec["system"]][(rec["algorithm"], rec["filter"], _longer(rec))].append(rec)
     return out
 
 
-def _label(algo: str, filtered: bool) -> str:
-    return LABELS[algo] + (" + filter in training" if filtered else "")
+def _order(group: Group) -> tuple[int, bool, int]:
+    return G.ALGORITHMS.index(group[0]), group[1], group[2]
+
+
+def _label(algo: str, filtered: bool, budget: int = 0) -> str:
+    return (LABELS[algo] + (" + filter in training" if filtered else "")
+            + (f", {budget:,} agent-steps" if budget else ""))
 
 
 def _fmt(x: Any, nd: int = 2) -> str:
@@ -95,12 +110,12 @@ def _load_note(results: dict[str, Any]) -> str:
             "at the checkpoints)")
 
 
-def _says(system: str, groups: dict[tuple[str, bool], list[dict[str, Any]]], ctrl: dict[str, Any] | None) -> str:
+def _says(system: str, groups: dict[Group, list[dict[str, Any]]], ctrl: dict[str, Any] | None) -> str:
     """What the curves say, from the numbers (the rule is written on the page)."""
     learned, partial, none = [], [], []
-    for (algo, filtered), recs in groups.items():
+    for group, recs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
         finals = np.array([r["test"]["success_rate"] for r in recs])
-        label = _label(algo, filtered)
+        label = _label(*group)
         if iqm(finals) >= scoring.SUCCESS_MIN:
             learned.append(label)
         elif finals.max() > 0:
@@ -121,12 +136,11 @@ def _says(system: str, groups: dict[tuple[str, bool], list[dict[str, Any]]], ctr
 
 def _summary(results: dict[str, Any], groups: dict[str, Any]) -> list[str]:
     """Final success per system and row: IQM over seeds (number of seeds)."""
-    cols = [(a, f) for a in G.ALGORITHMS if a != "controller" for f in (False, True)
-            if any((a, f) in groups.get(s, {}) for s in tasks.SYSTEMS)]
+    cols = sorted({g for s in tasks.SYSTEMS for g in groups.get(s, {})}, key=_order)
     lines = ["## Summary", "",
              "Final test success rate per system (IQM over seeds, number of seeds in brackets; `–`: not run "
              "yet). The sections below have the curves, every test metric and the commands.", "",
-             "| system | controller | " + " | ".join(_label(a, f) for a, f in cols) + " |",
+             "| system | controller | " + " | ".join(_label(*g) for g in cols) + " |",
              "|---" * (len(cols) + 2) + "|"]
     for name, sysdef in tasks.SYSTEMS.items():
         ctrl = results["controllers"].get(name)
@@ -187,7 +201,8 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         f"({', '.join(f'{s}: {b:,}' for s, b in g['budget_agent_steps'].items())}); DAgger gets expert "
         f"labels instead ({', '.join(f'{s}: {b:,}' for s, b in g['dagger_labels'].items())}). The "
         "budgets were sized for two shared CPU cores, not for convergence: a row that does not learn "
-        "here may learn with more.",
+        "here may learn with more. A row labelled with a number of agent-steps ran at that longer budget "
+        "(`--budget`), on the systems and algorithms where it was run, with everything else the same.",
         f"- **Checkpoints**: {g['checkpoints']} evaluations per run, evenly spaced over the budget "
         "(RL budgets are rounded up to whole collection rounds; the agent-steps actually run are in the "
         "table). Each evaluation flies the deterministic policy on the task's **first "
@@ -242,21 +257,21 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
             lines.append(f"| controller `{ctrl['controller']}` | – | {t['success_rate']:.2f} | "
                          f"{t['collision_episodes']}/{t['episodes']} | {t['violation_episodes']}/{t['episodes']} | "
                          f"1 | 1 | – | – | – | `{ctrl['command']}` |")
-        for (algo, filtered), recs in sorted(groups.get(name, {}).items(),
-                                             key=lambda kv: (G.ALGORITHMS.index(kv[0][0]), kv[0][1])):
-            lines.append(_final_row(_label(algo, filtered), recs, n_test))
+        for group, recs in sorted(groups.get(name, {}).items(), key=lambda kv: _order(kv[0])):
+            lines.append(_final_row(_label(*group), recs, n_test))
         lines.append("")
     lines += _datasets_section(datasets or {})
     lines += ["## Not complete yet", ""]
-    complete = {(r["system"], r["algorithm"], r["filter"], r["seed"]) for r in results["records"]}
-    errors = [e for e in results["errors"] if (e["system"], e["algorithm"], e["filter"], e["seed"]) not in complete]
+    complete = {(r["system"], r["algorithm"], r["filter"], r["seed"], r["budget_agent_steps"]) for r in results["records"]}
+    errors = [e for e in results["errors"] if (e["system"], e["algorithm"], e["filter"], e["seed"],
+                                               e.get("budget_agent_steps")) not in complete]
     missing = results["incomplete"] + [{**e, "checkpoints_logged": "none (the run crashed: " + e["error"].split(" (")[0][:80] + ")"}
                                        for e in errors]
     if not missing and not results.get("not_run"):
         lines.append("Every run of the grid is complete.")
     if missing:
         lines += ["Runs with checkpoints missing (the resume command above completes them):", ""]
-        lines += [f"- {m['system']} / {_label(m['algorithm'], m['filter']) if m['algorithm'] != 'controller' else 'controller'}"
+        lines += [f"- {m['system']} / {_label(m['algorithm'], m['filter'], _longer(m)) if m['algorithm'] != 'controller' else 'controller'}"
                   f" / seed {m['seed']}: checkpoints logged {m['checkpoints_logged']}" for m in missing] + [""]
     if results.get("not_run"):
         by: dict[str, list[str]] = defaultdict(list)
@@ -283,13 +298,13 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
         ctrl = results["controllers"].get(name)
         fig = new_figure(figsize=(14, 3.8), dpi=80)
         axes = fig.subplots(1, 3)
-        for (algo, filtered), recs in sorted(groups.items(), key=lambda kv: (G.ALGORITHMS.index(kv[0][0]), kv[0][1])):
+        for (algo, filtered, budget), recs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
             curves = np.array([r["curve"] for r in recs], dtype=float)    # seeds x checkpoints x 4
             x = np.median(curves[:, :, 0], axis=0)
             panels = [(axes[2], 1)] if algo == "dagger" else [(axes[0], 1), (axes[1], 2)]
             for ax, col in panels:
                 mid, lo, hi = iqm_band(curves[:, :, col])
-                line, = ax.plot(x, mid, "o-", ms=3, label=_label(algo, filtered))
+                line, = ax.plot(x, mid, "o-", ms=3, label=_label(algo, filtered, budget))
                 ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
         if ctrl:
             for ax, value in ((axes[0], ctrl["test"]["success_rate"]), (axes[1], ctrl["mean_return"]),
@@ -306,7 +321,7 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
                 ax.legend(fontsize=7)
         for ax in (axes[0], axes[2]):
             ax.set_ylim(-0.05, 1.05)
-        if not any(algo == "dagger" for algo, _ in groups):
+        if not any(group[0] == "dagger" for group in groups):
             axes[2].set_xticks([])
             axes[2].text(0.5, 0.5, "DAgger: not run yet", ha="center", va="center", transform=axes[2].transAxes)
         fig.suptitle(f"{tasks.SYSTEMS[name].label}: IQM over seeds, 95 % bootstrap band")

@@ -36,11 +36,14 @@ TEST_FIELDS = ("episodes", "success_rate", "collision_episodes", "violation_epis
                "rmse", "delta_v", "final_error_m", "compute_ms_per_agent", "interventions_per_agent_step")
 
 
-def command(system: str, algorithm: str, filtered: bool, seed: int) -> str:
-    """The command that reproduces one row (a filtered row runs with its unfiltered twin)."""
+def command(system: str, algorithm: str, filtered: bool, seed: int, budget: int = 0) -> str:
+    """The command that reproduces one row (a filtered row runs with its unfiltered twin; an RL row
+    at another budget than the grid's says ``--budget``)."""
     filt = f" --filter-systems {system}" if filtered else " --filter-systems ''"
     if algorithm == "controller":
         filt = ""
+    if budget and G.Run(system, algorithm, filtered, seed, budget_override=budget).longer:
+        filt += f" --budget {budget}"
     return (f"python -m benchmarks.learning run --systems {system} --algorithms {algorithm} --seeds {seed}"
             f"{filt}")
 
@@ -75,17 +78,23 @@ def _point(rec: dict[str, Any]) -> list[Any]:
             int(sum(bool(e["collisions"]) for e in eps))]
 
 
+def _run_key(rec: dict[str, Any]) -> tuple[Any, ...]:
+    return (rec["system"], rec["algorithm"], rec["filter"], rec["seed"], rec.get("budget_agent_steps"))
+
+
 def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
     """The ``results.json`` data of the log ``records``."""
     runs: dict[tuple, dict[int, dict[str, Any]]] = defaultdict(dict)
     errors = []
     for rec in records:
         if rec.get("error") is not None:
-            errors.append({k: rec.get(k) for k in ("system", "algorithm", "filter", "seed", "error")})
+            errors.append({k: rec.get(k) for k in ("system", "algorithm", "filter", "seed", "budget_agent_steps",
+                                                   "error")})
             continue
-        runs[(rec["system"], rec["algorithm"], rec["filter"], rec["seed"])][rec["checkpoint"]] = rec
+        runs[(rec["system"], rec["algorithm"], rec["filter"], rec["seed"], int(rec["budget_agent_steps"]))][
+            rec["checkpoint"]] = rec
     controllers = {}
-    for (system, algo, _, _), cps in runs.items():
+    for (system, algo, _, _, _), cps in runs.items():
         if algo == "controller" and 0 in cps:
             rec = cps[0]
             controllers[system] = {"controller": tasks.system(system).controller, "task": rec["task"],
@@ -94,15 +103,15 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
                                    "command": command(system, "controller", False, 0)}
     out, incomplete = [], []
     order = {s: i for i, s in enumerate(tasks.SYSTEMS)}
-    for key in sorted(runs, key=lambda k: (order[k[0]], G.ALGORITHMS.index(k[1]), k[2], k[3])):
-        system, algo, filtered, seed = key
+    for key in sorted(runs, key=lambda k: (order[k[0]], G.ALGORITHMS.index(k[1]), k[2], k[4], k[3])):
+        system, algo, filtered, seed, budget = key
         if algo == "controller":
             continue
         cps = runs[key]
-        n = len(G.Run(system, algo, filtered, seed).checkpoints)
+        n = len(G.Run(system, algo, filtered, seed, budget_override=budget).checkpoints)
         if any(k not in cps for k in range(n)):
             incomplete.append({"system": system, "algorithm": algo, "filter": filtered, "seed": seed,
-                               "checkpoints_logged": sorted(cps)})
+                               "budget_agent_steps": budget, "checkpoints_logged": sorted(cps)})
             continue
         last = cps[n - 1]
         ref = None
@@ -115,13 +124,10 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
                     "wall_s": _round(last["wall_s"], 1), "test_seeds": last["test_seeds"],
                     "load_avg_1m": last.get("load_avg_1m"),
                     "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref, _agents(system)),
-                    "command": command(system, algo, filtered, seed)})
-    seen = {(r["system"], r["algorithm"], r["filter"], r["seed"]) for r in out} | {
-        (r["system"], r["algorithm"], r["filter"], r["seed"]) for r in incomplete} | {
-        (s, "controller", False, 0) for s in controllers} | {
-        (e["system"], e["algorithm"], e["filter"], e["seed"]) for e in errors}
+                    "command": command(system, algo, filtered, seed, budget)})
+    seen = {_run_key(r) for r in (*out, *incomplete, *errors)} | {(s, "controller", False, 0, 0) for s in controllers}
     not_run = [r.to_json() for r in G.grid(tasks.SYSTEMS, G.DEFAULT_ALGORITHMS, G.DEFAULT_SEEDS)
-               if (r.system, r.algorithm, r.filter, r.seed) not in seen]
+               if (r.system, r.algorithm, r.filter, r.seed, r.budget) not in seen]
     return {"grid": {"checkpoints": G.CHECKPOINTS, "test_seeds_per_checkpoint": G.TEST_SEEDS_PER_CHECKPOINT,
                      "budget_agent_steps": G.BUDGET_AGENT_STEPS, "dagger_labels": G.DAGGER_LABELS,
                      "filter_penalty": G.FILTER_PENALTY,
