@@ -15,7 +15,7 @@ SYSTEM = "platoon-pereira2023"   # the DMPC flies it in a fraction of a second p
 @pytest.fixture
 def tiny(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
-    datasets.write(SYSTEM, 2, progress=False)
+    datasets.write(SYSTEM, 2, progress=False, cache=tmp_path / "cache")
     return datasets.read(SYSTEM)
 
 
@@ -48,4 +48,21 @@ def test_replay_detects_other_actions(tiny):
 def test_bad_episode_count_is_an_error(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
     with pytest.raises(datasets.DatasetError, match="episodes"):
-        datasets.write(SYSTEM, 0)
+        datasets.write(SYSTEM, 0, cache=tmp_path / "cache")
+    with pytest.raises(datasets.DatasetError, match="workers"):
+        datasets.write(SYSTEM, 1, workers=0, cache=tmp_path / "cache")
+
+
+def test_an_interrupted_write_records_only_what_it_has_not_got(tmp_path, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    cache = tmp_path / "cache"
+    datasets._record_one((SYSTEM, 0, str(cache)))     # seed 0 recorded before the interruption
+    recorded = []
+    real = datasets._record_one
+    monkeypatch.setattr(datasets, "_record_one", lambda job: recorded.append(job[1]) or real(job))
+    ds = datasets.write(SYSTEM, 2, progress=False, cache=cache)
+    assert recorded == [1]
+    assert [datasets.episode_seed(ds, i) for i in range(2)] == [0, 1]
+    for ep in ds.iterate_episodes():   # the cached episode is the same data: it replays exactly
+        assert datasets.replay(SYSTEM, ep, datasets.episode_seed(ds, ep.id)) == {"observation": 0.0, "state": 0.0}
+    assert not list(cache.rglob("*.npz"))   # the cache is emptied once the dataset is written

@@ -3,6 +3,7 @@
     python -m benchmarks.learning.datasets write --systems platoon-pereira2023 --episodes 50
     python -m benchmarks.learning.datasets read  --systems platoon-pereira2023
     python -m benchmarks.learning.datasets write --systems all --root /data/minari   # every system
+    python -m benchmarks.learning.datasets write --systems cluster-li2022 --workers 2  # episodes in parallel
 
 Each dataset (id ``satenv/<system>/<controller>-v0``, e.g. ``satenv/platoon-pereira2023/dmpc-v0``)
 holds the system controller's episodes (:data:`satenv.tasks.CONTROLLERS`) on the first
@@ -24,6 +25,11 @@ default ``~/.minari/datasets``; ``--root`` sets it), never in git: this command 
 
 The episode's seed is Minari's episode ``seed``: ``env.reset(seed=seed)`` and the recorded actions
 reproduce the recorded observations and states (``tests/test_datasets.py``).
+
+Writing is resumable: each recorded episode is kept as plain arrays (``.npz``, loaded without
+pickle) in ``--cache`` (default ``~/.cache/satenv/episodes``) until the dataset is written, so an
+interrupted ``write`` records only the episodes it has not got; ``--workers`` records episodes in
+parallel (the scoreboard's backends).
 """
 
 from __future__ import annotations
@@ -42,7 +48,8 @@ import numpy as np
 
 from satenv import tasks
 
-__all__ = ["INFO_FIELDS", "SafetyInfos", "dataset_id", "episode_seed", "make_env", "read", "record_episode", "replay", "write"]
+__all__ = ["CACHE", "INFO_FIELDS", "SafetyInfos", "dataset_id", "episode_seed", "load_episode", "make_env", "read",
+           "record_episode", "replay", "save_episode", "write"]
 
 INFO_FIELDS = {"collision": bool, "violations": np.int64, "cost": np.float64, "min_separation": np.float64,
                "delta_v": np.float64}
@@ -50,6 +57,9 @@ INFO_FIELDS = {"collision": bool, "violations": np.int64, "cost": np.float64, "m
 MANIFEST = Path(__file__).resolve().parent / "datasets.json"
 """What was generated (id, task, seeds, size, wall time; committed, the datasets are not): the docs
 page's dataset table."""
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "satenv" / "episodes"
+"""Where recorded episodes wait until their dataset is written (one ``.npz`` per seed)."""
+BUFFER_FIELDS = ("observations", "actions", "rewards", "terminations", "truncations")
 GYM_ID = {"platoon_v0": "satenv/Platoon-v0", "cluster_v0": "satenv/Cluster-v0",
           "servicing_v0": "satenv/Servicing-v0", "formation_v0": "satenv/Formation-v0"}
 
@@ -133,30 +143,81 @@ def record_episode(env: gym.Env, controller: Any, seed: int) -> Any:
     return EpisodeBuffer(seed=int(seed), infos=infos, **data)
 
 
-def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, manifest: Path | None = None) -> Any:
+def save_episode(buffer: Any, path: Path) -> Path:
+    """An ``EpisodeBuffer`` as plain arrays in ``path`` (``.npz``; written whole, then renamed)."""
+    arrays = {k: np.asarray(getattr(buffer, k)) for k in BUFFER_FIELDS}
+    arrays.update({f"info.{k}": np.asarray(v) for k, v in buffer.infos.items()})
+    arrays["seed"] = np.asarray(buffer.seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    os.replace(tmp, path)
+    return path
+
+
+def load_episode(path: Path) -> Any:
+    """The ``EpisodeBuffer`` :func:`save_episode` wrote (no pickle)."""
+    from minari.data_collector.episode_buffer import EpisodeBuffer
+
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: list(z[k]) for k in BUFFER_FIELDS}
+        infos = {k[5:]: list(z[k]) for k in z.files if k.startswith("info.")}
+        return EpisodeBuffer(seed=int(z["seed"]), infos=infos, **data)
+
+
+def _episode_path(cache: Path, system: str, seed: int) -> Path:
+    return cache / dataset_id(system).replace("/", "__") / f"seed-{int(seed)}.npz"
+
+
+def _record_one(job: tuple[str, int, str]) -> dict[str, Any]:
+    """Record one seed's episode into the cache (a worker's task)."""
+    import baselines
+
+    system, seed, cache = job
+    env = make_env(system)
+    try:
+        controller = baselines.make(tasks.system(system).controller, env.unwrapped.env)
+        save_episode(record_episode(env, controller, seed), _episode_path(Path(cache), system, seed))
+    finally:
+        env.close()
+    return {"seed": seed}
+
+
+def _lost(job: tuple[str, int, str], error: str) -> dict[str, Any]:
+    return {"seed": job[1], "error": error}
+
+
+def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, manifest: Path | None = None,
+          workers: int = 1, cache: Path = CACHE) -> Any:
     """Record ``episodes`` controller episodes (train seeds ``seed0 ...``) as the system's dataset
     (replacing an existing one) with Minari's writer (``minari.create_dataset_from_buffers``: the
     storage ``DataCollector`` writes, without its ``jax`` dependency) and return the ``MinariDataset``;
-    its entry goes to ``manifest`` when given."""
+    its entry goes to ``manifest`` when given. Episodes already in ``cache`` are not recorded again;
+    ``workers`` > 1 records the others in parallel."""
     import minari
 
-    import baselines
+    from benchmarks.scoreboard.backends import stream
 
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise DatasetError(f"episodes must be a positive int, got {episodes!r}")
+    for name, value in (("episodes", episodes), ("workers", workers)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise DatasetError(f"{name} must be a positive int, got {value!r}")
     task = tasks.training_task(system)
     seeds = list(task.seeds("train"))[seed0:seed0 + episodes]
-    env = make_env(system)
-    controller = baselines.make(tasks.system(system).controller, env.unwrapped.env)
-    buffers, t0 = [], time.perf_counter()
-    for k, seed in enumerate(seeds):
-        buffers.append(record_episode(env, controller, seed))
+    todo = [(system, int(s), str(cache)) for s in seeds if not _episode_path(cache, system, s).is_file()]
+    t0 = time.perf_counter()
+    for k, result in enumerate(stream(todo, "local", workers, None, run=_record_one, lost=_lost)):
+        if result.get("error"):
+            raise RuntimeError(f"{system}: the episode of seed {result['seed']} failed: {result['error']}")
         if progress:
-            print(f"{system}: episode {k + 1}/{len(seeds)} (seed {seed}) at {time.perf_counter() - t0:.0f}s", flush=True)
+            print(f"{system}: episode {len(seeds) - len(todo) + k + 1}/{len(seeds)} (seed {result['seed']}) at "
+                  f"{time.perf_counter() - t0:.0f}s", flush=True)
+    buffers = [load_episode(_episode_path(cache, system, s)) for s in seeds]
     did = dataset_id(system)
     if did in minari.list_local_datasets():
         minari.delete_dataset(did)
     steps = sum(len(b.actions) for b in buffers)
+    env = make_env(system)
     ds = minari.create_dataset_from_buffers(
         did, buffers, env=env.unwrapped.spec, eval_env=env.unwrapped.spec, algorithm_name=f"scripted controller {tasks.system(system).controller}",
         author="satenv", code_permalink="benchmarks/learning/datasets.py", description=_card(system, seeds, steps),
@@ -164,6 +225,8 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
     env.close()
     if manifest is not None:
         _record(manifest, system, seeds, buffers, time.perf_counter() - t0)
+    for s in seeds:
+        _episode_path(cache, system, s).unlink(missing_ok=True)
     return ds
 
 
@@ -225,11 +288,14 @@ def main(argv: Iterable[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--root", default=None, help="Minari's dataset folder (MINARI_DATASETS_PATH)")
     p.add_argument("--manifest", default=str(MANIFEST), help="JSON file of what was written ('' for none)")
+    p.add_argument("--workers", type=int, default=1, help="episodes recorded in parallel")
+    p.add_argument("--cache", default=str(CACHE), help="recorded episodes kept until the dataset is written")
     ns = p.parse_args(None if argv is None else list(argv))
     if ns.root:
         os.environ["MINARI_DATASETS_PATH"] = ns.root
     for system in _systems(ns.systems):
-        ds = (write(system, ns.episodes, manifest=Path(ns.manifest) if ns.manifest else None)
+        ds = (write(system, ns.episodes, manifest=Path(ns.manifest) if ns.manifest else None, workers=ns.workers,
+                    cache=Path(ns.cache))
               if ns.command == "write" else read(system))
         ep = next(ds.iterate_episodes())
         print(f"{dataset_id(system)}: {ds.total_episodes} episodes, {ds.total_steps} steps; episode 0: "
