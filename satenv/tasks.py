@@ -287,6 +287,10 @@ def _tasks() -> list[Task]:
              "cluster-li2022", "training",
              "li2022 case 1 with randomised starts (±50 m) and target slots (on the 300 m sphere)",
              (*_TRANSLATION, "disturbance-x2", "model-cw")),
+        *[Task(f"cluster-swarm{n}", "cluster_v0", _cluster.swarm(n), None, "extra",
+               f"li2022 case-1 physics (J2 + drag, disturbance, moving obstacle) with {n} satellites and "
+               f"{n} slots, random each reset (satenv.scenarios.cluster.swarm): a team-size ladder for "
+               "policies trained at one size") for n in (10, 20, 40)],
         Task("cluster-swarm64-cw", "cluster_v0", _cluster.swarm(64, dynamics="cw"), None, "extra",
              "li2022 case-1 physics with 64 satellites and 64 slots (random each reset, Hungarian "
              "allocation), cw truth (satenv.scenarios.cluster.swarm)"),

@@ -78,10 +78,15 @@ class MLPActor(nn.Module):
         return self
 
 
-def actor_from_spec(spec: dict[str, Any]) -> MLPActor:
-    """Build the (untrained) actor a ``policy.json`` ``actor`` entry describes."""
+def actor_from_spec(spec: dict[str, Any]) -> nn.Module:
+    """Build the (untrained) actor a ``policy.json`` ``actor`` entry describes: an
+    :class:`MLPActor` (``"type": "mlp"``) or a ``training.set_policy.SetActor`` (``"set"``)."""
+    if isinstance(spec, dict) and spec.get("type") == "set":
+        from training.set_policy import set_actor_from_spec
+
+        return set_actor_from_spec(spec)
     if not isinstance(spec, dict) or spec.get("type") != "mlp":
-        raise ValueError(f"actor spec must be a JSON object with type 'mlp', got {spec!r}")
+        raise ValueError(f"actor spec must be a JSON object with type 'mlp' or 'set', got {spec!r}")
     unknown = set(spec) - {"type", "obs_dim", "act_dim", "hidden", "activation", "squash"}
     if unknown:
         raise ValueError(f"unknown actor spec field(s) {sorted(unknown)}")

@@ -47,6 +47,7 @@ from training.config import (
     Flag,
     Ints,
     JsonDict,
+    Names,
     RunConfig,
     check_int,
     check_number,
@@ -94,7 +95,16 @@ class DaggerConfig(RunConfig):
     """One DAgger run (``python -m training.imitate``, ``python -m training.recipes.dagger``)."""
 
     net_arch: Ints = (512, 512, 512)
-    """Hidden layer sizes of the MLP."""
+    """Hidden layer sizes of the MLP (with ``architecture="set"``: of the head after the pooling)."""
+    architecture: Literal["mlp", "set"] = "mlp"
+    """The network: ``"mlp"`` (every input to one MLP) or ``"set"`` (``training.set_policy.SetActor``:
+    a shared encoder of the neighbour slots, masked mean and max pooling, then the head; the env needs
+    the fixed layout, ``env_kwargs`` ``obs_neighbours``), so one network flies any team size."""
+    set_encoder: Ints = (64, 64)
+    """Hidden sizes of the set actor's per-slot encoder (its last is the pooled code's width)."""
+    prior_labels: Names = ()
+    """Label files (``labels/round_NNNN.npz`` of another run, ``obs`` and ``act`` of this env's
+    observation layout) added to every fit: the expert's labels of an earlier run reused."""
     lr: float = 5e-4
     """Learning rate of the regression (Adam)."""
     out_dir: str = "runs/dagger"
@@ -396,6 +406,27 @@ def load_labels(run: Path, rounds: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(xs), np.clip(np.concatenate(ys), -1, 1)
 
 
+def with_prior_labels(cfg: DaggerConfig, obs_dim: int, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``cfg.prior_labels`` (read with ``allow_pickle=False``) before the run's own labels ``x, y``."""
+    xs, ys = [], []
+    for name in cfg.prior_labels:
+        try:
+            with np.load(name, allow_pickle=False) as d:
+                xs.append(d["obs"])
+                ys.append(np.clip(d["act"], -1, 1))
+        except (OSError, KeyError, ValueError) as err:
+            raise ValueError(f"prior_labels {name!r}: cannot be read ({type(err).__name__}: {str(err)[:80]})") from None
+        if xs[-1].ndim != 2 or xs[-1].shape[1] != obs_dim or len(ys[-1]) != len(xs[-1]):
+            raise ValueError(f"prior_labels {name!r}: observations {xs[-1].shape} do not fit this env's {obs_dim} "
+                             f"entries (or the actions do not match them)")
+    if not xs:
+        return x, y
+    if len(x):
+        xs.append(x)
+        ys.append(y)
+    return np.concatenate(xs), np.concatenate(ys)
+
+
 def read_history(run: Path) -> list[dict[str, Any]]:
     """The complete rounds of a run (``history.json``, written last in each round: the run's record
     of progress); ``[]`` for a new run. A malformed file is a :class:`training.runfolder.RunFolderError`."""
@@ -494,9 +525,19 @@ def run(cfg: DaggerConfig, run_dir: str | Path | None = None, *, resume: bool = 
     meta = policy_env_meta(cfg.env_id, envs.collect, collect_kwargs(cfg, cfg.env_kwargs), cfg.resolved_eval_env_kwargs)
     policy_cfg = {**cfg.to_json(), "out_dir": str(run_dir), "recipe": "training.imitate"}
     done = len(history)
-    x, y = load_labels(run_dir, done)
+    x, y = with_prior_labels(cfg, obs_dim, *load_labels(run_dir, done))
     torch.manual_seed(cfg.seed)              # the initial weights: the same in every session
-    actor = MLPActor(feats.out_dim(obs_dim), act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
+    if cfg.architecture == "set":
+        from training.set_policy import SetActor, slot_layout
+
+        own, slot, k = slot_layout(envs.collect)
+        if feats.drop_dims and feats.drop_dims[-1] >= own:
+            raise ValueError(f"obs_drop_dims {list(feats.drop_dims)} must be own entries (< {own}) with "
+                             "architecture='set' (a dropped slot entry would break the permutation invariance)")
+        actor = SetActor(feats.out_dim(obs_dim), act_dim, own, slot, k, list(cfg.set_encoder),
+                         list(cfg.net_arch), cfg.activation, cfg.squash)
+    else:
+        actor = MLPActor(feats.out_dim(obs_dim), act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     normalizer = None
     if history:
         runfolder.recover_folder(round_folder(run_dir, done - 1))   # a swap a kill interrupted
@@ -538,7 +579,12 @@ def run(cfg: DaggerConfig, run_dir: str | Path | None = None, *, resume: bool = 
         y = np.clip(batch["act"], -1, 1) if len(y) == 0 else np.concatenate([y, np.clip(batch["act"], -1, 1)])
         if normalizer is None:
             fx = feats(x.astype(np.float64))
-            normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
+            if cfg.architecture == "set":
+                from training.set_policy import set_normalizer
+
+                normalizer = set_normalizer(actor.spec, fx, cfg.clip_obs)
+            else:
+                normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
         t1 = time.perf_counter()
         loss = fit(actor, normalizer, feats, x, y, cfg, generator,
                    cfg.epochs * (cfg.round0_epoch_factor if k == 0 else 1))

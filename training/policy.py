@@ -471,7 +471,7 @@ def shipped_filter(root: Path, meta: dict[str, Any]) -> Any:
 _QUOTED = re.compile(r"'[^'\n]*'|\"[^\"\n]*\"")
 _VOCABULARY = frozenset({"mlp", "identity", "mean", "var", "clip_obs", "epsilon", "inf", "type", "obs_dim",
                          "act_dim", "hidden", "activation", "squash", "format", "actor", "tanh", "relu",
-                         "elu", "silu"})
+                         "elu", "silu", "set", "own_dim", "slot_dim", "n_slots", "encoder"})
 """Words a load error may quote; any other quoted text in it came from the file and is hidden."""
 
 

@@ -22,7 +22,8 @@ any field of :class:`~satenv.scenarios.cluster.ClusterScenario` overrides the pr
 ``dt``, ``physics_dt``, ``max_steps``, ``u_max`` [m/s^2, bound on the norm], ``allocation="fixed"``,
 ``reallocate_every``, ``terminate_on_collision``, ``randomize=True`` (random initial positions
 and target slots from the seed; ``random_position_spread``, ``random_target_radius``),
-``initial_positions`` (any M), ``success_tol`` (1 m), ``collision_voids_success``.
+``initial_positions`` (any M), ``success_tol`` (1 m), ``collision_voids_success``,
+``obs_neighbours`` (``None`` or ``K`` in ``[1, 64]``: the fixed observation layout below).
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
 ``reset(seed=..., options={"initial_state": array (M, 6)})`` starts from a given state.
 
@@ -58,6 +59,13 @@ entries    meaning
 19 …       K slots of 7, the graph neighbours nearest first:
            ``[1, (q_j - q_i) / L, (p_j - p_i) / V]``; unused slots are zeros
 =========  =======================================================================
+
+With ``obs_neighbours = K`` (an int, default ``None``) the layout is fixed whatever ``M``:
+``19 + 7 K`` entries, the same 19 first, then always ``K`` slots of the ``K`` nearest other
+satellites within ``comm_range`` (whatever ``n_neighbours``), nearest first, each
+``[1, (q_j - q_i) / L, (p_j - p_i) / V]`` or zeros (flag 0) when fewer are in range. A policy on
+it flies any team size; a set encoder (``training.set_policy``) reads the slots as an unordered
+set. With ``K = n_neighbours <= M - 1`` it equals the default layout entry for entry.
 
 ``state()`` returns the global state ``(6 M + 6,)``: the satellites' states, then the obstacle's
 position and velocity.
@@ -185,7 +193,9 @@ class ClusterCore(BatchedCore):
             raise ValueError(f"method must be 'auto', 'dense' or 'sparse', got {method!r}")
         self.dense = method == "dense" or (method == "auto" and m <= DENSE_MAX)
         self.n_slots = min(sc.n_neighbours, m - 1)
-        self.obs_dim = N_FIXED_OBS + 7 * self.n_slots
+        # the observation's neighbour slots: the graph's, or obs_neighbours of them whatever M is
+        self.obs_slots = self.n_slots if sc.obs_neighbours is None else sc.obs_neighbours
+        self.obs_dim = N_FIXED_OBS + 7 * self.obs_slots
         self.orbit = sc.orbit
         self.model = RelativeModel(sc.dynamics, self.orbit, sc.physics_dt)
         # the fused step's: one DOP853 step over a decision's physics steps (their inputs exactly;
@@ -453,16 +463,26 @@ class ClusterCore(BatchedCore):
         self._graph_cache = (pos.copy(), order, degree)
         return order, degree
 
+    def _fixed_slots(self, q: np.ndarray) -> np.ndarray:
+        """The fixed layout's slots (``obs_neighbours = K``): the ``K`` nearest other satellites
+        within ``comm_range``, nearest first, ``-1`` for an empty slot ``(B, M, K)``."""
+        order = np.full(q.shape[:2] + (self.obs_slots,), -1, np.int64)
+        found = in_range_nearest(q, self.obs_slots, self.scenario.comm_range)[1]
+        order[..., :found.shape[-1]] = found
+        return order
+
     def _observe(self, sel) -> np.ndarray:
         """Observations of the copies ``sel`` (a slice or indices)."""
         sc = self.scenario
         x, t = self.x[sel], self.t[sel]
         b, m = x.shape[0], self.n_agents
-        if self.dense and self._kernel is not None:
+        fixed = sc.obs_neighbours is not None
+        if (self.dense or fixed) and self._kernel is not None:
             obs = np.empty((b, m, self.obs_dim), np.float32)
+            order = self._fixed_slots(x[..., :3]) if fixed else self._neighbours(x[..., :3])[0]
             self._kernel.observe(np.ascontiguousarray(x), np.ascontiguousarray(self.targets()[sel]),
                                  sc.obstacle_at(t * sc.dt), self.p_obs, self.q_r, 1.0 - t / sc.max_steps,
-                                 self._neighbours(x[..., :3])[0], POS_SCALE, VEL_SCALE, obs)
+                                 order, POS_SCALE, VEL_SCALE, obs)
             return obs
         q, p = x[..., :3], x[..., 3:]
         obs = np.zeros((b, m, self.obs_dim))
@@ -473,9 +493,9 @@ class ClusterCore(BatchedCore):
         obs[..., 12:15] = (self.p_obs - p) / VEL_SCALE
         obs[..., 15:18] = (self.q_r - q) / POS_SCALE
         obs[..., 18] = 1.0 - t[:, None] / sc.max_steps
-        k = self.n_slots
-        if k > 0 and not self.dense:  # the graph's nearest neighbours are the in-range k-nearest
-            order = in_range_nearest(q, sc.n_neighbours, sc.comm_range)[1]
+        k = self.obs_slots
+        if k > 0 and (fixed or not self.dense):  # the graph's nearest neighbours are the in-range k-nearest
+            order = self._fixed_slots(q) if fixed else in_range_nearest(q, sc.n_neighbours, sc.comm_range)[1]
             valid = order >= 0
             nb = np.take_along_axis(x[:, None, :, :], np.maximum(order, 0)[..., None], axis=2)
             rel = (nb - x[:, :, None, :]) / np.array([POS_SCALE] * 3 + [VEL_SCALE] * 3)

@@ -29,7 +29,8 @@ any field of :class:`satenv.scenarios.formation.FormationScenario` overrides the
 ``dynamics="cw" | "nonlinear" | "j2" | "j2_drag"``, ``connection_range``, ``max_steps``, ``dt``,
 ``u_max`` [m/s^2, per axis], ``terminate_on_disconnect=True``, ``collision_distance``,
 ``terminate_on_collision``, ``randomize=True``, ``goals``, ``success_tol`` (1 m),
-``collision_voids_success``.
+``collision_voids_success``, ``obs_neighbours`` (``None`` or ``K`` in ``[1, 64]``: the fixed
+observation layout below).
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
 ``reset(seed=..., options={"initial_state": array (M, 6)})`` starts from a given state.
 
@@ -50,6 +51,11 @@ entries    meaning
 6 …        per other agent j (ascending index, self skipped): ``(x_j - x_i)`` / (L, V)
 last       1 if the proximity graph is connected, else 0
 =========  ==========================================================================
+
+With ``obs_neighbours = K`` (an int, default ``None``) the layout is fixed whatever ``M``:
+``7 + 7 K`` entries, ``e_i / L``, ``v_i / V``, the connectivity flag, then ``K`` slots of the
+nearest other spacecraft, nearest first, each ``[1, (x_j - x_i) / (L, V)]`` or zeros (flag 0)
+beyond ``M - 1`` (for a set encoder, ``training.set_policy``).
 
 ``state()`` returns the global state: the M LVLH states flattened ``(6 M,)`` float64.
 
@@ -137,7 +143,7 @@ class FormationCore(BatchedCore):
         if method not in ("auto", "dense", "sparse"):
             raise ValueError(f"method must be 'auto', 'dense' or 'sparse', got {method!r}")
         self.dense = method == "dense" or (method == "auto" and m <= DENSE_MAX)
-        self.obs_dim = 6 * m + 1
+        self.obs_dim = 6 * m + 1 if scenario.obs_neighbours is None else 7 + 7 * scenario.obs_neighbours
         self.model = RelativeModel(scenario.dynamics, reference_orbit(scenario), scenario.dt)
         self.targets = scenario.target_positions()
         self.weights = scenario.error_weights()
@@ -237,6 +243,8 @@ class FormationCore(BatchedCore):
     def observe(self) -> np.ndarray:
         sc = self.scenario
         b, m = self.batch, self.n_agents
+        if sc.obs_neighbours is not None:
+            return self._observe_fixed()
         scale = np.array([sc.length_scale] * 3 + [sc.velocity_scale] * 3)
         obs = np.empty((b, m, self.obs_dim))
         obs[..., 0:3] = sc.formation_error(self.x) / sc.length_scale
@@ -245,6 +253,24 @@ class FormationCore(BatchedCore):
             rel = (self.x[:, self.others] - self.x[:, :, None]) / scale      # (B, M, M-1, 6)
             obs[..., 6:-1] = rel.reshape(b, m, -1)
         obs[..., -1] = self._connected[:, None]
+        return obs.astype(np.float32)
+
+    def _observe_fixed(self) -> np.ndarray:
+        """The fixed layout (``obs_neighbours = K``, module docstring): own error and velocity,
+        the connectivity flag, then ``K`` slots of the nearest others (zeros beyond ``M - 1``)."""
+        sc = self.scenario
+        b, m, k = self.batch, self.n_agents, sc.obs_neighbours
+        scale = np.array([sc.length_scale] * 3 + [sc.velocity_scale] * 3)
+        obs = np.zeros((b, m, self.obs_dim))
+        obs[..., 0:3] = sc.formation_error(self.x) / sc.length_scale
+        obs[..., 3:6] = self.x[..., 3:] / sc.velocity_scale
+        obs[..., 6] = self._connected[:, None]
+        order = nearest(self.x[..., :3], k)[1]                                   # (B, M, K), -1 empty
+        valid = order >= 0
+        nb = np.take_along_axis(self.x[:, None, :, :], np.maximum(order, 0)[..., None], axis=2)
+        rel = (nb - self.x[:, :, None, :]) / scale
+        slots = np.concatenate([np.ones(valid.shape + (1,)), rel], axis=-1) * valid[..., None]
+        obs[..., 7:] = slots.reshape(b, m, 7 * k)
         return obs.astype(np.float32)
 
     def global_state(self) -> np.ndarray:

@@ -27,7 +27,7 @@ from satenv.errors import SatenvError, SatenvTypeError
 
 __all__ = ["MAX_AGENTS", "MAX_INT", "MAX_MAGNITUDE", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "SatenvError", "array",
            "at_most", "derived", "flag", "from_preset", "integer", "nested", "number", "real",
-           "orbit_step", "spreads_in_region", "states_in_region", "steps", "vector"]
+           "obs_neighbours", "orbit_step", "spreads_in_region", "states_in_region", "steps", "vector"]
 
 MAX_AGENTS: int = 1024
 """Cap on the number of agents of a scenario: the swarm sizes the envs are built and measured for
@@ -61,6 +61,18 @@ def integer(value: Any, name: str, *, minimum: int = 1, maximum: int | None = No
     if maximum is None:
         maximum, why = MAX_INT, why or "the cap on scenario integers, satenv.scenarios._fields.MAX_INT"
     return _integer(value, name, minimum=minimum, maximum=maximum, why=why, allow_float=allow_float)
+
+
+MAX_OBS_NEIGHBOURS: int = 64
+"""Cap on the neighbour slots of a fixed observation layout (``obs_neighbours``)."""
+
+
+def obs_neighbours(value: Any, name: str = "obs_neighbours") -> int | None:
+    """``None`` (the env's own observation layout) or the number of neighbour slots ``K`` of the
+    fixed, team-size-independent layout, an int in ``[1, MAX_OBS_NEIGHBOURS]``."""
+    if value is None:
+        return None
+    return integer(value, name, minimum=1, maximum=MAX_OBS_NEIGHBOURS, why="MAX_OBS_NEIGHBOURS")
 
 
 def real(value: Any, name: str, expected: str = "a finite real number") -> float:

@@ -132,6 +132,10 @@ class ClusterScenario:
         obstacle_radius: r_o [m]; satellites must stay r_s + r_o from the obstacle (eq. 31).
         target_radius: r_t [m]; satellites must stay r_s + r_t from the target spacecraft.
         comm_range: r_c [m]; n_neighbours: N_a (see :mod:`satenv.cluster_graph`).
+        obs_neighbours: ``None`` (default): the observation's neighbour slots are the graph's
+            (``min(n_neighbours, M - 1)``); an int ``K``: always ``K`` slots, the ``K`` nearest
+            other satellites within ``comm_range``, zero-padded (a layout independent of ``M``;
+            ``satenv.envs.cluster_v0``).
         mass: satellite mass [kg].
         u_max: acceleration authority [m/s^2], a bound on the norm of the commanded acceleration
             (li2022: T_max / m = 1 N / 50 kg = 0.02 m/s^2; :attr:`thrust_max` is ``u_max mass``).
@@ -167,6 +171,7 @@ class ClusterScenario:
     target_radius: float = 0.0
     comm_range: float = 1000.0
     n_neighbours: int = 4
+    obs_neighbours: int | None = None
     mass: float = 50.0
     u_max: float = 0.02
     disturbance: str = "sinusoid"
@@ -218,6 +223,7 @@ class ClusterScenario:
                              "(use math.radians for degrees)")
         s(self, "altitude", _number(self.altitude, "altitude (m above R_EARTH)"))
         s(self, "n_neighbours", _integer(self.n_neighbours, "n_neighbours", 0))
+        s(self, "obs_neighbours", _fields.obs_neighbours(self.obs_neighbours))
         s(self, "max_steps", _fields.steps(self.max_steps, "max_steps"))
         s(self, "reallocate_every", _integer(self.reallocate_every, "reallocate_every", 0))
         ratio = _fields.derived(lambda: self.dt / self.physics_dt, "the physics steps per decision "

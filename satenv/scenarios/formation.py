@@ -63,6 +63,7 @@ from satenv.scenarios._fields import (
     flag,
     from_preset,
     number,
+    obs_neighbours,
     orbit_step,
     spreads_in_region,
     states_in_region,
@@ -107,6 +108,9 @@ class FormationScenario:
         success_tol: an episode succeeds when every spacecraft ends within this distance of its
             final position [m] (:func:`satenv.metrics.success`).
         collision_voids_success: a collision flag makes the episode a failure.
+        obs_neighbours: ``None`` (default): the observation lists every other spacecraft; an int
+            ``K``: ``K`` slots of the nearest others, zero-padded (a layout independent of ``M``;
+            ``satenv.envs.formation_v0``).
     """
 
     name: str
@@ -136,6 +140,7 @@ class FormationScenario:
     random_min_gap: float = 1.0
     success_tol: float = 1.0
     collision_voids_success: bool = True
+    obs_neighbours: int | None = None
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -182,6 +187,7 @@ class FormationScenario:
         for name in ("terminate_on_collision", "terminate_on_disconnect", "randomize",
                      "collision_voids_success"):
             s(self, name, flag(getattr(self, name), name))
+        s(self, "obs_neighbours", obs_neighbours(self.obs_neighbours))
         spreads_in_region(self.random_position_spread, self.random_velocity_spread, self.max_distance)
         inputs = f"mean_motion = {self.mean_motion!r}"
         radius = derived(lambda: (MU_EARTH / self.mean_motion**2) ** (1.0 / 3.0),
