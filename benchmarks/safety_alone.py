@@ -14,8 +14,10 @@ training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
 and writes ``<out>/safety_alone.json`` (aggregates, targets, matched ratios, every episode
 record; with ``--perturbation-seeds``, the first entry under every perturbation of its task) and
 ``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
-interventions per agent-step). Each entry's episodes are cached in ``<out>/cache/`` so an
-interrupted run resumes where it stopped::
+interventions per agent-step); with ``--write-folders``, each entry's block without its episode
+records into its policy folder (:func:`folder_evaluation`: what ``training.card`` reports both ways
+from). Each entry's episodes are cached in ``<out>/cache/`` so an interrupted run resumes where it
+stopped::
 
     nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m benchmarks.safety_alone \\
         --entry platoon-pereira2022=training/policies/platoon_pereira2022_safe_dagger \\
@@ -31,9 +33,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["VARIANTS", "as_shipped", "evaluate_entry", "evaluate_perturbed", "plot", "main"]
+from training.card import (
+    AS_SHIPPED,
+    BOTH_WAYS_FILE,
+    INTERVENTIONS_LIMIT,
+    NETWORK_ALONE,
+    both_ways_file,
+)
 
-VARIANTS = ("network alone", "network + filter")
+__all__ = ["VARIANTS", "as_shipped", "evaluate_entry", "evaluate_perturbed", "folder_evaluation", "plot", "main"]
+
+VARIANTS = (NETWORK_ALONE, AS_SHIPPED)
 """The two ways every policy is reported."""
 
 
@@ -68,11 +78,21 @@ def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict
         for s in seeds:
             if s in done:
                 continue
+            t0 = time.perf_counter()
             rec = episode_record(rollout(env, policy, seed=int(s)), int(s), len(env.possible_agents))
+            rec["wall_s"] = round(time.perf_counter() - t0, 3)
             done[s] = rec
             fh.write(json.dumps(rec, default=float) + "\n")
             fh.flush()
     return [done[s] for s in seeds]
+
+
+def _wall_s(records: list[dict[str, Any]], elapsed: float) -> float:
+    """A variant's wall time [s]: the sum of its episodes' own times when every record has one (so
+    a resumed run counts the episodes an earlier run made), else ``elapsed``, this run's."""
+    if records and all("wall_s" in r for r in records):
+        return round(sum(r["wall_s"] for r in records), 1)
+    return round(elapsed, 1)
 
 
 def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path) -> dict[str, Any]:
@@ -129,7 +149,7 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
         t0 = time.perf_counter()
         ss = seeds if name == VARIANTS[0] or not n_filter else seeds[:n_filter]
         eps[name] = _episodes(env, pol, ss, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
-        block[name] = {"aggregate": aggregate(eps[name]), "wall_s": round(time.perf_counter() - t0, 1)}
+        block[name] = {"aggregate": aggregate(eps[name]), "wall_s": _wall_s(eps[name], time.perf_counter() - t0)}
         print(system, folder.name, name, json.dumps(block[name]["aggregate"], default=float), flush=True)
     if n_controller:
         cseeds = seeds[:n_controller]
@@ -146,6 +166,37 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
     for name in VARIANTS:
         block[name]["episodes"] = eps[name]
     return block
+
+
+def folder_evaluation(block: dict[str, Any], source: str, command: str) -> dict[str, Any]:
+    """An entry's block as its policy folder keeps it (``training.card.BOTH_WAYS_FILE``): the
+    test seeds of the network alone first, where it came from, then the block with each variant's
+    seeds in place of its episode records."""
+    out: dict[str, Any] = {"test_seeds": [e["seed"] for e in block[NETWORK_ALONE]["episodes"]],
+                           "source": source, "command": command}
+    for key, value in block.items():
+        if key in VARIANTS:
+            value = {**{k: v for k, v in value.items() if k != "episodes"},
+                     "test_seeds": [e["seed"] for e in value["episodes"]]}
+        out[key] = value
+    return out
+
+
+def write_folders(result: dict[str, Any], source: Path) -> list[Path]:
+    """Each entry's :func:`folder_evaluation` into its policy folder: the folder's both-ways
+    evaluation file when it has one (``training.card.both_ways_file``), else
+    ``training.card.BOTH_WAYS_FILE``; the paths written (a file that already holds the same
+    evaluation is left as it is)."""
+    written = []
+    for block in result["entries"]:
+        folder = Path(block["policy"])
+        path = both_ways_file(folder) or folder / BOTH_WAYS_FILE
+        text = json.dumps(folder_evaluation(block, str(source), result["command"]), indent=1, default=float) + "\n"
+        if path.is_file() and json.loads(path.read_text()) == json.loads(text):
+            continue
+        path.write_text(text)
+        written.append(path)
+    return written
 
 
 def plot(result: dict[str, Any], path: Path) -> None:
@@ -172,7 +223,7 @@ def plot(result: dict[str, Any], path: Path) -> None:
     ax[0].legend(fontsize=7, loc="lower left")
     rate = [e[VARIANTS[1]]["aggregate"].get("interventions_per_agent_step") or 0.0 for e in entries]
     ax[1].bar(x, [100 * r for r in rate], 0.5)
-    ax[1].axhline(1, color="k", ls="--", lw=0.8, label="target 1 %")
+    ax[1].axhline(100 * INTERVENTIONS_LIMIT, color="k", ls="--", lw=0.8, label=f"target {100 * INTERVENTIONS_LIMIT:g} %")
     ax[1].set_ylabel("filter interventions [% of agent-steps]")
     ax[1].set_xticks(x, labels, fontsize=7)
     ax[1].legend(fontsize=7)
@@ -187,7 +238,7 @@ def main(argv: list[str] | None = None) -> None:
     import torch
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--entry", action="append", required=True,
+    p.add_argument("--entry", action="append", default=[],
                    help="system=policy-folder[@episodes[:filtered]] (repeatable; @n: this entry on the first n "
                         "test seeds; :f: behind the filter on the first f of them)")
     p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
@@ -198,8 +249,20 @@ def main(argv: list[str] | None = None) -> None:
                    help="the first entry also under every perturbation of its task, first n test seeds (0: none)")
     p.add_argument("--perturbation-controller-seeds", type=int, default=None,
                    help="the controller under each perturbation on the first n (default: min of the two counts above)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--write-folders", action="store_true",
+                   help="also write each entry's evaluation (no episode records) into its policy folder")
+    p.add_argument("--folders-from", type=Path, default=None, metavar="SAFETY_ALONE_JSON",
+                   help="only write the policy folders' evaluations from this earlier run's JSON (runs nothing)")
     ns = p.parse_args(argv)
+    if ns.folders_from is not None:
+        if not ns.folders_from.is_file():
+            raise SystemExit(f"error: --folders-from must be a safety_alone.json, got {str(ns.folders_from)!r}")
+        for path in write_folders(json.loads(ns.folders_from.read_text()), ns.folders_from):
+            print("wrote", path)
+        return
+    if not ns.entry or ns.out is None:
+        raise SystemExit("error: --entry system=policy-folder[@episodes[:filtered]] (one or more) and --out are required")
     torch.set_num_threads(1)
     entries = []
     for spec in ns.entry:
@@ -221,6 +284,9 @@ def main(argv: list[str] | None = None) -> None:
             else ns.perturbation_controller_seeds, ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     plot(result, ns.out / "safety_alone.png")
+    if ns.write_folders:
+        for path in write_folders(result, ns.out / "safety_alone.json"):
+            print("wrote", path)
 
 
 if __name__ == "__main__":

@@ -30,6 +30,34 @@ def test_two_episodes_write_json_png_and_resume_from_the_cache(tmp_path):
     safety_alone.main(args)                          # reuses the cached episodes, skips the cut line
     assert json.loads((tmp_path / "safety_alone.json").read_text())["entries"][0]["network alone"]["episodes"] == \
         block["network alone"]["episodes"]
+    assert all(e["wall_s"] > 0 for e in alone["episodes"]) and alone["wall_s"] > 0   # times survive a resume
+
+
+def test_a_run_is_written_into_a_policy_folder_that_the_card_reads(tmp_path):
+    """--folders-from: each entry (no episode records) into its folder; the card reads it both ways."""
+    import shutil
+
+    import training
+    from benchmarks import safety_alone
+    from training.card import BOTH_WAYS_FILE, card
+
+    folder = tmp_path / "policy"
+    shutil.copytree(training.POLICIES_DIR / "platoon_tplf_ppo_shield", folder)
+    (folder / BOTH_WAYS_FILE).unlink(missing_ok=True)
+    out = tmp_path / "run"
+    safety_alone.main(["--entry", f"platoon-pereira2023={folder}", "--seeds", "2", "--controller-seeds", "1",
+                       "--out", str(out)])
+    assert not (folder / BOTH_WAYS_FILE).exists()             # only when asked
+    safety_alone.main(["--folders-from", str(out / "safety_alone.json")])
+    saved = json.loads((folder / BOTH_WAYS_FILE).read_text())
+    assert saved["test_seeds"] == [900_000, 900_001] and saved["source"] == str(out / "safety_alone.json")
+    assert "episodes" not in saved["network + filter"] and saved["network + filter"]["test_seeds"] == [900_000, 900_001]
+    c = card(folder)
+    assert c["evaluation"] == BOTH_WAYS_FILE and c["episodes"] == c["network_alone"]["episodes"] == 2
+    assert c["interventions_per_agent_step"] is not None and c["baseline_episodes"] == 1
+    stamp = (folder / BOTH_WAYS_FILE).stat().st_mtime_ns
+    assert safety_alone.write_folders(json.loads((out / "safety_alone.json").read_text()), out / "safety_alone.json") == []
+    assert (folder / BOTH_WAYS_FILE).stat().st_mtime_ns == stamp   # the same evaluation: left as it is
 
 
 def test_a_bad_entry_is_an_error(tmp_path):
@@ -41,3 +69,7 @@ def test_a_bad_entry_is_an_error(tmp_path):
         safety_alone.main(["--entry", "platoon-pereira2023=x@many", "--out", str(tmp_path)])
     with pytest.raises(SystemExit, match="system=policy-folder"):
         safety_alone.main(["--entry", "platoon-pereira2023=x@10:some", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="--entry"):
+        safety_alone.main(["--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="folders-from"):
+        safety_alone.main(["--folders-from", str(tmp_path / "missing.json")])
