@@ -199,3 +199,16 @@ def test_dagger_trains_a_set_actor(tmp_path):
            "--progress", "false", "--workers", "1"]
     with pytest.raises(SystemExit, match="obs_neighbours"):
         main(bad)
+
+
+def test_team_sizes_reports_each_task_both_ways(tmp_path):
+    from training.team_sizes import evaluate, table
+
+    folder = _folder(tmp_path, _cluster(10))
+    out = tmp_path / "sizes.json"
+    result = evaluate(folder, ("cluster-swarm10", "cluster-swarm20"), (900000,), {"obs_neighbours": K, "max_steps": 3},
+                      out)
+    assert json.loads(out.read_text())["tasks"]["cluster-swarm20"]["agents"] == 20
+    for entry in result["tasks"].values():
+        assert entry["network alone"]["aggregate"]["episodes"] == 1 and "as shipped" in entry
+    assert table(result).count("| cluster-swarm") == 4
