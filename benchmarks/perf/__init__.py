@@ -44,9 +44,11 @@ More sections run only when named in ``--sections`` (they take minutes):
 * ``safety``  the safety filter (:mod:`benchmarks.perf.safety`): its ms per agent decision
               beside the env step on the same states (cluster_v0 N = 10 at 1 and 64 copies, targets
               0.1 / 0.02 ms; pereira2022 platoon and servicing).
-* ``policy_threads`` a loaded policy's decision time with every core busy: torch's default
-              threads, one thread (the peer) and ``training.load``'s one-thread guard
-              (:mod:`benchmarks.perf.policy_threads`, target guard <= 2x one thread).
+* ``policy_threads`` every shipped network's decision per agent (the filter excluded) beside
+              its env's step (target <= 0.2 ms per agent), then a loaded policy's decision time
+              with every core busy: torch's default threads, one thread (the peer) and
+              ``training.load``'s one-thread guard (:mod:`benchmarks.perf.policy_threads`, target
+              guard <= 2x one thread).
 * ``learning`` the native TorchRL env (``satenv.torchrl.make_env``, 256 copies) against TorchRL's
               generic ``PettingZooWrapper`` over the same ``platoon_v0`` (env only), and end-to-end
               training agent-steps/s of SB3 PPO, BenchMARL MAPPO and DAgger on each env with its
