@@ -48,20 +48,17 @@ def episode(policy: Any, env_kwargs: dict[str, Any], filtered: bool, seed: int) 
 
 
 def plot(out: str | Path, name: str = POLICY, seed: int = SEED) -> dict[str, Any]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     import training
     from benchmarks.scoreboard.registry import SHIPPED_POLICY_DIR
+    from satenv.render import new_figure
     from training.trust import read_json
 
     folder = SHIPPED_POLICY_DIR / name
     kwargs = dict(read_json(folder, "env.json")["eval_env_kwargs"])
     policy = training.load(folder, shielded=False)
     raw, safe = episode(policy, kwargs, False, seed), episode(policy, kwargs, True, seed)
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8.0, 6.4), sharex=True, constrained_layout=True)
+    fig = new_figure(figsize=(8.0, 6.4), layout="constrained")
+    (ax1, ax2) = fig.subplots(2, 1, sharex=True)
     colors = {"pair": "tab:blue", "obstacle": "tab:red"}
     for key, limit in zip(("pair", "obstacle"), safe["limits"][:2], strict=True):
         for run, style, label in ((raw, ":", "unfiltered"), (safe, "-", "filtered")):
@@ -84,7 +81,6 @@ def plot(out: str | Path, name: str = POLICY, seed: int = SEED) -> dict[str, Any
     ax2.legend(fontsize=8, title="binding constraint", title_fontsize=8, loc="upper right")
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return {"steps": [len(raw["pair"]), len(safe["pair"])],
             "collision_unfiltered": bool((raw["pair"] < raw["limits"][0]).any() | (raw["obstacle"] < raw["limits"][1]).any()
                                          | (raw["target"] < raw["limits"][2]).any()),

@@ -221,10 +221,11 @@ def _per_agent_us(row: dict, key: str) -> float | None:
 
 def plot(result: dict, path: str) -> None:
     """Per-agent cost against N (log-log), one panel per family."""
-    import matplotlib.pyplot as plt
+    from satenv.render import new_figure
 
     keys = [k for k in FAMILIES if k in result]
-    fig, axes = plt.subplots(1, len(keys), figsize=(6 * len(keys), 4), squeeze=False)
+    fig = new_figure(figsize=(6 * len(keys), 4))
+    axes = fig.subplots(1, len(keys), squeeze=False)
     for ax, key in zip(axes[0], keys, strict=True):
         part = result[key]
         for curve, style, label in _CURVES:
@@ -241,4 +242,3 @@ def plot(result: dict, path: str) -> None:
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)

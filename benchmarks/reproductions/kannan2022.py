@@ -291,17 +291,15 @@ def _range_effect(rows: list[dict[str, Any]] | None) -> str:
 
 def plot_scenario(traj, preset: str, plots: Path) -> list[str]:
     """Fig. 2-7 analogues: per spacecraft, position / velocity / input versus time."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from satenv.render import new_figure
 
     plots.mkdir(parents=True, exist_ok=True)
     files = []
     t = traj.t
     accel = traj.info["accel"]
     for i, (agent, fig_no) in enumerate(zip(traj.agents, SCENARIOS[preset]["figures"], strict=True)):
-        fig, axes = plt.subplots(3, 1, figsize=(6.4, 7.2), sharex=True)
+        fig = new_figure(figsize=(6.4, 7.2))
+        axes = fig.subplots(3, 1, sharex=True)
         for j, lab in enumerate("xyz"):
             style = "--" if lab == "x" else "-"  # x and z nearly coincide in both scenarios
             axes[0].plot(t, traj.states[:, i, j], style, label=lab)
@@ -319,7 +317,6 @@ def plot_scenario(traj, preset: str, plots: Path) -> list[str]:
         fig.tight_layout()
         path = plots / f"kannan2022_fig{fig_no}_{preset.split('-')[1]}_{agent}.png"
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         files.append(str(path))
     return files
 

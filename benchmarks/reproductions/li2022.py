@@ -801,12 +801,7 @@ def format_table(result: dict[str, Any]) -> str:
 # ----------------------------------------------------------------------------------------------
 def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]:
     """Analogues of li2022 Fig. 5, 13-24 (PNG)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    from satenv.render import draw_scene
+    from satenv.render import draw_scene, new_figure
 
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
@@ -814,7 +809,6 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
     def save(fig, name):
         p = out / name
         fig.savefig(p, bbox_inches="tight", dpi=100)
-        plt.close(fig)
         paths.append(p)
 
     cases = sorted({c for c, _ in episodes})
@@ -823,7 +817,7 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
         for ctrl in labels:
             traj, env, pol = episodes[(c, ctrl)]
             sc = env.scenario
-            fig = plt.figure(figsize=(7, 6))
+            fig = new_figure(figsize=(7, 6))
             ax = fig.add_subplot(projection="3d")
             pos = traj.states[..., :3]
             tmin = int(np.argmin(traj.info["obstacle_distance"].min(axis=1)))
@@ -847,8 +841,8 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
                   ("fig19_20", "pair_distance", "distance to nearest satellite [m]", False),
                   ("fig21_22", "target_distance", "distance to target spacecraft [m]", False)]
         for name, key, label, is_err in panels:
-            fig, axes = plt.subplots(1, len(labels), figsize=(6 * len(labels), 4), sharey=True,
-                                     squeeze=False)
+            fig = new_figure(figsize=(6 * len(labels), 4))
+            axes = fig.subplots(1, len(labels), sharey=True, squeeze=False)
             axes = axes[0]
             for ax, ctrl in zip(axes, labels, strict=True):
                 traj, env, _ = episodes[(c, ctrl)]
@@ -871,7 +865,8 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
             save(fig, f"{name}_{key}_case{c}.png")
 
         # Fig. 23/24: thrust of Sat 1
-        fig, axes = plt.subplots(1, len(labels), figsize=(6 * len(labels), 4), sharey=True, squeeze=False)
+        fig = new_figure(figsize=(6 * len(labels), 4))
+        axes = fig.subplots(1, len(labels), sharey=True, squeeze=False)
         axes = axes[0]
         for ax, ctrl in zip(axes, labels, strict=True):
             traj, env, pol = episodes[(c, ctrl)]
@@ -896,7 +891,8 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
         # Fig. 13 along the runs: ||q - q~|| of every satellite per RDMPC variant
         rd = [lab for lab in labels if lab.startswith("tube_rdmpc")]
         if rd:
-            fig, axes = plt.subplots(1, len(rd), figsize=(6 * len(rd), 4), sharey=True, squeeze=False)
+            fig = new_figure(figsize=(6 * len(rd), 4))
+            axes = fig.subplots(1, len(rd), sharey=True, squeeze=False)
             for ax, ctrl in zip(axes[0], rd, strict=True):
                 _, env, pol = episodes[(c, ctrl)]
                 eps = pol.tube_errors()
@@ -915,7 +911,8 @@ def save_figures(episodes: dict, tube_res: dict | None, out: Path) -> list[Path]
             save(fig, f"fig13_run_tube_error_case{c}.png")
 
     if tube_res is not None:
-        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4))
+        fig = new_figure(figsize=(12, 4))
+        (ax1, ax2) = fig.subplots(1, 2)
         for r in tube_res["runs"]:
             e = np.array(r["sat1_error_m"])
             t = np.arange(len(e)) * r["dt"]

@@ -198,11 +198,7 @@ def save_figures(runs: dict, out: Path) -> list[Path]:
     """Fig. 3 analogue, one PNG per spacecraft: its pair position (relative to its target) in the
     x-y and z-y planes with the LOS cone and the keep-out sphere, the pair position and the input
     over time; both variants overlaid."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    from satenv.render import new_figure
     from satenv.scenarios.platoon import pair_states
 
     out.mkdir(parents=True, exist_ok=True)
@@ -211,7 +207,8 @@ def save_figures(runs: dict, out: Path) -> list[Path]:
     xr, yr, zr = sc.port
     paths = []
     for f in range(sc.n_followers):
-        fig, axs = plt.subplots(2, 2, figsize=(11, 8))
+        fig = new_figure(figsize=(11, 8))
+        axs = fig.subplots(2, 2)
         for (a, b, slope, half, plane) in ((0, 1, cx, xr, "x"), (2, 1, cz, zr, "z")):
             ax = axs[0, 0 if a == 0 else 1]
             lat = np.linspace(-60, 60, 241)
@@ -245,6 +242,5 @@ def save_figures(runs: dict, out: Path) -> list[Path]:
         fig.tight_layout()
         path = out / f"pereira2022_platoon_spacecraft{f + 1}.png"
         fig.savefig(path, dpi=90)
-        plt.close(fig)
         paths.append(path)
     return paths

@@ -222,13 +222,8 @@ def attitude_step_response(horizons=(30, 100), seconds: float = 25.0) -> dict[st
 
 def plot_figures(traj, env, plots: Path) -> list[str]:
     """Fig. 4 analogue per spacecraft (velocities, Euler XYZ, angular velocity, inputs) and Fig. 5."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from satenv.dynamics.attitude import quat_to_euler_xyz
-    from satenv.render import _draw_sphere
+    from satenv.render import _draw_sphere, new_figure
 
     plots.mkdir(parents=True, exist_ok=True)
     sc = env.scenario
@@ -236,7 +231,8 @@ def plot_figures(traj, env, plots: Path) -> list[str]:
     files = []
     for i, agent in enumerate(traj.agents):
         x = traj.states[:, i]
-        fig, axes = plt.subplots(4, 1, figsize=(8, 10), sharex=True)
+        fig = new_figure(figsize=(8, 10))
+        axes = fig.subplots(4, 1, sharex=True)
         for j, lab in enumerate("xyz"):
             axes[0].plot(t, x[:, 3 + j], label=f"v_{lab}")
         axes[0].axhline(sc.v_max, ls=":", c="k")
@@ -266,9 +262,8 @@ def plot_figures(traj, env, plots: Path) -> list[str]:
         fig.tight_layout()
         path = plots / f"servicing_fig4_{agent}.png"
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         files.append(str(path))
-    fig = plt.figure(figsize=(7, 6))
+    fig = new_figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
     _draw_sphere(ax, np.zeros(3), sc.object_radius, color="grey", alpha=0.3)
     _draw_sphere(ax, np.zeros(3), sc.keepout_radius, color="red", alpha=0.1)
@@ -290,9 +285,9 @@ def plot_figures(traj, env, plots: Path) -> list[str]:
     ax.set_title("pereira2022 Fig. 5 analogue: positions (o start, x waypoints)")
     path = plots / "servicing_fig5_positions.png"
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     files.append(str(path))
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig = new_figure(figsize=(8, 6))
+    axes = fig.subplots(2, 1, sharex=True)
     for i, agent in enumerate(traj.agents):
         axes[0].plot(t, traj.info["dist_object"][:, i], label=f"{agent}: |p|")
         axes[1].plot(t, np.degrees(traj.info["pointing_error"][:, i]), label=agent)
@@ -309,7 +304,6 @@ def plot_figures(traj, env, plots: Path) -> list[str]:
     fig.tight_layout()
     path = plots / "servicing_distances_pointing.png"
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     files.append(str(path))
     return files
 

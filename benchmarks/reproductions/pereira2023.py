@@ -486,19 +486,15 @@ def add_arguments(parser) -> None:
 def save_figures(runs: dict, out: Path) -> list[Path]:
     """Analogues of pereira2023 Fig. 4-7 (one PNG per follower: position error, velocity error
     and input per axis, the three topologies overlaid) and a 3-D trajectory plot per topology."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    from satenv.render import plot_trajectory
+    from satenv.render import new_figure, plot_trajectory
 
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
     n = next(iter(runs.values()))[1].scenario.n_followers
     axes_names = ("x", "y", "z")
     for f in range(n):
-        fig, axs = plt.subplots(3, 3, figsize=(11, 8), sharex=True)
+        fig = new_figure(figsize=(11, 8))
+        axs = fig.subplots(3, 3, sharex=True)
         for topo, (traj, _env) in runs.items():
             e = traj.info["tracking_error"][:, f]
             u = traj.info["accel"][1:, f]
@@ -520,7 +516,6 @@ def save_figures(runs: dict, out: Path) -> list[Path]:
         fig.tight_layout()
         path = out / f"pereira2023_follower{f + 1}.png"
         fig.savefig(path, dpi=90)
-        plt.close(fig)
         paths.append(path)
     for topo, (traj, _env) in runs.items():
         paths.append(plot_trajectory(traj, out / f"pereira2023_{topo}_trajectory.png",
