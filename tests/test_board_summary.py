@@ -170,3 +170,49 @@ def test_shield_twins_skip_a_policy_shipped_with_its_filter():
     notes = []
     sel = select(["trained:platoon_pereira2022_dagger_shield+shield"], registry, "policy", notes, strict=True)
     assert not sel.names and "ships behind the safety filter already" in notes[0]
+
+
+def test_a_filtered_policy_shows_its_interventions_per_agent_step_old_records_included(tmp_path):
+    """Behind the filter: the share of agent-steps it changed, in the scenario table and the
+    summary; an older record (interventions only) gets it from its steps and the env's agents."""
+    records = [_ep("tube_rdmpc", s) for s in range(2)]
+    records += [_ep("trained:s", s) | {"steps": 400.0, "interventions": k, "mean_du": 0.1, "infeasible_steps": 0}
+                for s, k in ((0, 400), (1, 1200))]                   # no rate: written before it existed
+    records += [_ep("trained:s:network", s, success=False, collisions=1) for s in range(2)]
+    (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    header = _header([SCEN], ["tube_rdmpc", "trained:s", "trained:s:network"])
+    header["scenarios"][SCEN]["kwargs"] = {"preset": "li2022-case1", "randomize": True}
+    (tmp_path / "scoreboard.json").write_text(json.dumps({"header": header}))
+    board = reaggregate(tmp_path, plots=False)
+    rates = [r.get("interventions_per_agent_step") for r in board.records if r["policy"] == "trained:s"]
+    assert rates == [pytest.approx(400 / 4000), pytest.approx(1200 / 4000)]          # 10 satellites
+    assert board.aggregates[SCEN]["trained:s"]["interventions_per_agent_step"]["mean"] == pytest.approx(0.2)
+    (row,) = board.headline
+    assert row["learned"]["interventions_per_agent_step"] == pytest.approx(0.2)
+    assert row["learned"]["unfiltered"]["interventions_per_agent_step"] is None
+    md = (tmp_path / "scoreboard.md").read_text()
+    assert "| interventions / agent-step |" in md and "| 20 % |" in md
+
+
+def test_an_episode_behind_the_filter_records_its_share_of_agent_steps():
+    import numpy as np
+
+    import satenv
+    from benchmarks.scoreboard.specs import episode_metrics
+    from satenv.rollout import rollout
+    from satenv.safety import shield
+
+    class FullThrust:
+        def reset(self, seed=None):
+            pass
+
+        def act(self, obs):
+            return {a: np.ones(3, dtype=np.float32) for a in obs}
+
+    env = satenv.platoon_v0(preset="pereira2022", randomize=True, max_steps=6)
+    traj = rollout(env, shield(FullThrust(), env), seed=0)
+    rec = episode_metrics(traj, SCENARIOS["platoon-pereira2022-random"])
+    assert rec["interventions_per_agent_step"] == pytest.approx(
+        rec["interventions"] / (traj.steps * len(env.possible_agents)))
+    plain = episode_metrics(rollout(env, FullThrust(), seed=0), SCENARIOS["platoon-pereira2022-random"])
+    assert plain["interventions"] is None and plain["interventions_per_agent_step"] is None

@@ -201,6 +201,24 @@ def _finish(out: Path, header: dict[str, Any], records: list[Record], notes: lis
     return board
 
 
+def _with_intervention_rates(records: list[Record], scenarios: Mapping[str, Any]) -> list[Record]:
+    """``records`` with ``interventions_per_agent_step`` where an older record has the filter's
+    ``interventions`` but not their share: ``interventions / (steps x agents)`` (the filter decides
+    once per step for every agent), the agents counted on the scenario's env (header kwargs)."""
+    import satenv
+
+    agents: dict[str, int] = {}
+    out = []
+    for rec in records:
+        if rec.get("interventions") is not None and "interventions_per_agent_step" not in rec and rec.get("steps"):
+            scen = scenarios[rec["scenario"]]
+            if rec["scenario"] not in agents:
+                agents[rec["scenario"]] = len(satenv.make(scen["env"], **scen["kwargs"]).possible_agents)
+            rec = {**rec, "interventions_per_agent_step": rec["interventions"] / (rec["steps"] * agents[rec["scenario"]])}
+        out.append(rec)
+    return out
+
+
 def reaggregate(out: str | Path, plots: bool = True) -> Board:
     """Re-write a finished board's outputs in ``out`` from its ``episodes.jsonl`` and the header of
     its ``scoreboard.json`` (running no episode, checking no fingerprint): e.g. after the report
@@ -219,6 +237,7 @@ def reaggregate(out: str | Path, plots: bool = True) -> Board:
             r["policy"], r["seed"]
 
     records = sorted((r for r in read_episodes(out / EPISODES_FILE) if r["scenario"] in scen), key=order)
+    records = _with_intervention_rates(records, header["scenarios"])
     header["ranking"] = RANKING       # re-ranked by the current rule
     return _finish(out, header, records, list(header.get("notes", [])), plots)
 

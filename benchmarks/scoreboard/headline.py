@@ -43,10 +43,14 @@ def _policy_stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
     """The headline's numbers of one policy: :func:`satenv.scoring.aggregate` of its records."""
     agg = aggregate(recs)
     lo, hi = agg["success_ci95"] or _wilson(agg["successes"], agg["episodes"])[1:]
+    filtered = [r for r in recs if r.get("interventions_per_agent_step") is not None and r.get("steps")]
     return {"episodes": agg["episodes"], "successes": agg["successes"],
             "success": agg["success_rate"], "success_ci95": [lo, hi],
             "collision_episodes": agg["collision_episodes"], "violation_episodes": agg["violation_episodes"],
-            "errors": agg["errors"]}
+            "errors": agg["errors"],
+            # behind the filter: its interventions over every agent-step of the episodes (the same agents in each)
+            "interventions_per_agent_step": (sum(r["interventions_per_agent_step"] * r["steps"] for r in filtered)
+                                             / sum(r["steps"] for r in filtered)) if filtered else None}
 
 
 def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> dict[str, Any]:
@@ -107,6 +111,12 @@ def _who(e: dict[str, Any] | None) -> list[str]:
     return cells
 
 
+def _interventions(e: dict[str, Any] | None) -> str:
+    """A learned policy's interventions per agent-step behind the filter (``—`` without it)."""
+    rate = None if e is None else e.get("interventions_per_agent_step")
+    return "—" if rate is None else f"{100 * rate:.3g} %"
+
+
 def _ratio(x: float | None) -> str:
     return "–" if x is None else f"{x:.2f}"
 
@@ -123,14 +133,18 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
              "one hard-constraint violation counted by the env. RMSE and Δv ratios: "
              "learned / scripted, ratio of the means over the *matched, completed* episodes (seeds "
              "where both episodes ran to the end without a collision), so an episode that ends "
-             "early cannot improve a ratio; `matched`: how many seeds; – when none.", "",
+             "early cannot improve a ratio; `matched`: how many seeds; – when none. A learned policy "
+             "behind the safety filter has its network alone beside it and the share of its agent-steps "
+             "the filter changed (interventions / agent-step; — without the filter).", "",
              "| system | scenario | best scripted | success | collision episodes | violation episodes | best learned | "
-             "success | collision episodes | violation episodes | RMSE ratio | Δv ratio | matched |",
-             "|---|---|---|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|"]
+             "success | collision episodes | violation episodes | interventions / agent-step | RMSE ratio | Δv ratio "
+             "| matched |",
+             "|---|---|---|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|"]
     for row in rows:
         r = row["ratios"]
         cells = [row["system"], f"`{row['scenario']}`", *_who(row["scripted"]), *_who(row["learned"]),
-                 _ratio(r["rmse_ratio"]), _ratio(r["delta_v_ratio"]), str(r["matched_seeds"])]
+                 _interventions(row["learned"]), _ratio(r["rmse_ratio"]), _ratio(r["delta_v_ratio"]),
+                 str(r["matched_seeds"])]
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
     if figure:

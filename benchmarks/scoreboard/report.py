@@ -39,11 +39,12 @@ KEY = ("scenario", "policy", "seed")
 METRICS: tuple[str, ...] = (
     "success", "rmse", "rmsee", "foe", "final_error_m", "delta_v", "time_to_converge_s",
     "min_separation_m", "collisions", "violations", "safety_cost", "fallbacks",
-    "compute_ms_per_decision", "episode_return", "steps", "interventions", "mean_du", "infeasible_steps",
+    "compute_ms_per_decision", "episode_return", "steps", "interventions", "interventions_per_agent_step",
+    "mean_du", "infeasible_steps",
 )
 """Aggregated per (scenario, policy): ``satenv.metrics.summary`` plus ``episode_return``, and for
-a shielded policy the safety filter's ``interventions``, ``mean_du``, ``infeasible_steps``
-(:func:`benchmarks.scoreboard.specs.episode_metrics`)."""
+a shielded policy the safety filter's ``interventions``, ``interventions_per_agent_step``,
+``mean_du``, ``infeasible_steps`` (:func:`benchmarks.scoreboard.specs.episode_metrics`)."""
 TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "wall_s")
 """Measured wall times: the only record fields that differ between two runs of the same key."""
 
@@ -53,9 +54,10 @@ _TABLE = [  # (metric, column header) of the markdown table
     ("min_separation_m", "min sep [m]"), ("collisions", "collision flags"), ("violations", "violations"),
     ("safety_cost", "cost"), ("fallbacks", "fallbacks"), ("compute_ms_per_decision", "ms/decision"),
 ]
-_SHIELD_TABLE = [("interventions", "interventions"), ("mean_du", "mean ‖Δu‖"),
-                 ("infeasible_steps", "infeasible")]
-"""Columns of a scenario with a shielded policy (``+shield``): per episode, agent-steps."""
+_SHIELD_TABLE = [("interventions", "interventions"), ("interventions_per_agent_step", "interventions / agent-step"),
+                 ("mean_du", "mean ‖Δu‖"), ("infeasible_steps", "infeasible")]
+"""Columns of a scenario with a shielded policy (``+shield``): per episode, agent-steps (and
+their share of the episode's agent-steps)."""
 PAPER_CONTROLLER = CONTROLLERS
 """The controller each env's paper proposes (:data:`satenv.tasks.CONTROLLERS`): the reference
 (score 1) of the normalised score."""
@@ -288,7 +290,9 @@ def _preamble(h: dict[str, Any]) -> list[str]:
         "constraint violations counted by the env (speed, keep-out, line of sight, ... as the "
         "scenario defines them); **cost** the env's safety cost summed over the episode; "
         "**fallbacks** solver failures replaced by a safe action; **ms/decision** wall time of one "
-        "act() call.", ""]
+        "act() call; behind the safety filter, **interventions** agent-steps it changed per episode, "
+        "**interventions / agent-step** their share of the episode's agent-steps, **infeasible** "
+        "agent-steps it applied its backup action.", ""]
 
 
 def _scenario_section(board: Board, scen: str) -> list[str]:

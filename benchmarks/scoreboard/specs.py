@@ -248,14 +248,17 @@ def episode_metrics(traj, scenario: ScenarioSpec) -> dict[str, Any]:
     """The metrics of one episode: ``satenv.metrics.summary``, whose success is the env
     scenario's own rule (the same answer as ``metrics.summary`` and the training evaluation),
     and for a shielded policy the filter's: ``interventions`` (agent-steps it changed),
-    ``mean_du`` (mean ``|du|`` of those changes; ``None`` without any) and ``infeasible_steps``
-    (agent-steps it applied the backup); ``None`` for a policy without the filter."""
+    ``interventions_per_agent_step`` (the same over the agent-steps it decided), ``mean_du`` (mean
+    ``|du|`` of those changes; ``None`` without any) and ``infeasible_steps`` (agent-steps it
+    applied the backup); ``None`` for a policy without the filter."""
     from satenv import metrics
 
     out = metrics.summary(traj)
     info = traj.policy_info
     n = int(info["safety_interventions"]) if "safety_steps" in info else None
-    out.update(interventions=n, mean_du=float(info["safety_delta"]) / n if n else None,
+    agent_steps = int(info["safety_steps"]) * len(traj.agents) if n is not None else 0
+    out.update(interventions=n, interventions_per_agent_step=n / agent_steps if agent_steps else None,
+               mean_du=float(info["safety_delta"]) / n if n else None,
                infeasible_steps=int(info["safety_infeasible"]) if n is not None else None)
     return out
 
