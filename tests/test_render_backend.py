@@ -1,7 +1,7 @@
 """Rendering and the scoreboard's plots leave the user's matplotlib backend and pyplot alone.
 
 Each check runs in a fresh interpreter whose backend the "user" chose (``svg``): env frames,
-``plot_trajectory``, the scoreboard's plots; ``render_mode="human"`` without an interactive
+``plot_trajectory``, the scoreboard's plots, a reproduction's figures; ``render_mode="human"`` without an interactive
 backend warns instead of silently showing nothing.
 """
 
@@ -36,6 +36,10 @@ scoreboard(["--scenarios", "platoon-PLF-cw", "--policies", "zero", "--seeds", "0
             "--out", {out!r} + "/board"])
 import pathlib
 assert list(pathlib.Path({out!r}, "board", "plots").glob("*.png")), "no plots written"
+from benchmarks.reproductions.kannan2022 import plot_scenario
+fenv = satenv.make("formation_v0", preset="kannan2022-position", max_steps=5)
+assert plot_scenario(rollout(fenv, baselines.make("zero", fenv), seed=0), "kannan2022-position",
+                     pathlib.Path({out!r}, "repro"))
 print(matplotlib.get_backend(), plt.get_fignums())
 """
 
