@@ -87,12 +87,12 @@ def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict
     return [done[s] for s in seeds]
 
 
-def _wall_s(records: list[dict[str, Any]], elapsed: float) -> float:
-    """A variant's wall time [s]: the sum of its episodes' own times when every record has one (so
-    a resumed run counts the episodes an earlier run made), else ``elapsed``, this run's."""
+def _wall_s(records: list[dict[str, Any]]) -> float | None:
+    """A variant's wall time [s]: the sum of its episodes' own times (an interrupted, resumed run
+    counts each episode once); ``None`` when a record has no time (a cache of an earlier version)."""
     if records and all("wall_s" in r for r in records):
         return round(sum(r["wall_s"] for r in records), 1)
-    return round(elapsed, 1)
+    return None
 
 
 def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: int, cache_dir: Path) -> dict[str, Any]:
@@ -146,10 +146,9 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
                              "controller": task.controller}
     eps = {}
     for name, pol in ((VARIANTS[0], net), (VARIANTS[1], as_shipped(folder, net, env))):
-        t0 = time.perf_counter()
         ss = seeds if name == VARIANTS[0] or not n_filter else seeds[:n_filter]
         eps[name] = _episodes(env, pol, ss, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
-        block[name] = {"aggregate": aggregate(eps[name]), "wall_s": _wall_s(eps[name], time.perf_counter() - t0)}
+        block[name] = {"aggregate": aggregate(eps[name]), "wall_s": _wall_s(eps[name])}
         print(system, folder.name, name, json.dumps(block[name]["aggregate"], default=float), flush=True)
     if n_controller:
         cseeds = seeds[:n_controller]
