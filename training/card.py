@@ -1,4 +1,4 @@
-"""Policy cards: the shipped policies' numbers, read from their ``eval.json`` (one source).
+"""Policy cards: the shipped policies' numbers, both ways, read from each folder's own files.
 
     python -m training.card            # the shipped-policies table of docs/training.md
     python -m training.card NAME       # one folder's evaluation table and its targets
@@ -47,6 +47,7 @@ BOTH_WAYS_FILE = "safety_alone.json"
 
 INTERVENTIONS_LIMIT = 0.01
 """A policy shipped behind the filter: at most this fraction of its agent-steps changed by it."""
+
 
 def both_ways_file(folder: Path) -> Path | None:
     """The folder's both-ways evaluation (module docstring): :data:`BOTH_WAYS_FILE`, else
