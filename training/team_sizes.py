@@ -5,8 +5,9 @@ team of any size without retraining; this evaluates it on a ladder of tasks (by 
 swarms of 10, 20 and 40 satellites, ``satenv.tasks`` ``cluster-swarm*``) both ways:
 
 * ``network alone`` — ``training.load(folder, env=env, shielded=False)``;
-* ``as shipped`` — ``training.load(folder, env=env)`` (behind ``satenv.safety.shield`` when the
-  folder ships with it): interventions and infeasible filter steps per agent-step,
+* ``network + filter`` — behind ``satenv.safety.shield`` with the options of the folder's
+  ``env.json`` ``"safety_filter"`` (its defaults for a folder shipped without one, e.g. a DAgger
+  round's checkpoint): interventions and infeasible filter steps per agent-step,
 
 and writes a JSON of the aggregates (:func:`satenv.scoring.aggregate`) and every episode record,
 rewritten after every (task, variant) so an interrupted run keeps what it finished::
@@ -30,15 +31,22 @@ __all__ = ["DEFAULT_TASKS", "evaluate", "main", "table"]
 DEFAULT_TASKS = ("cluster-swarm10", "cluster-swarm20", "cluster-swarm40")
 """The team-size ladder evaluated by default."""
 
-VARIANTS = ("network alone", "as shipped")
+VARIANTS = ("network alone", "network + filter")
+"""The two ways every policy is reported (the names of ``training.card``)."""
 
 
 def _policy(folder: Path, env: Any, variant: str) -> Any:
     import training
+    from satenv.safety import shield
+    from training.policy import policy_folder, shipped_filter
 
     with warnings.catch_warnings():   # another team size than trained on is the point here
         warnings.filterwarnings("ignore", message="env scenario differs")
-        return training.load(folder, env=env, shielded=variant == "as shipped")
+        network = training.load(folder, env=env, shielded=False)
+    if variant == VARIANTS[0]:
+        return network
+    root = policy_folder(folder)
+    return shield(network, env, shipped_filter(root, json.loads((root / "env.json").read_text())))
 
 
 def evaluate(folder: str | Path, tasks: tuple[str, ...], seeds: tuple[int, ...], env_kwargs: dict[str, Any],
