@@ -66,6 +66,7 @@ FULL: dict[str, Any] = {
     # takes ~0.5 s per decision of the whole swarm
     "scenario_seeds": {name: list(tasks.get(name).seeds("test", n)) for name, n in (
         ("platoon-swarm256-ring-cw", 3), ("cluster-swarm64-cw", 3), ("cluster-case1-random", 5),
+        ("cluster-swarm10", 3), ("cluster-swarm20", 3), ("cluster-swarm40", 3),
         ("servicing-pereira2022-random", 3))},
 }
 """The full (published) board: every scenario x fitting policy x these test seeds (a deterministic
