@@ -242,3 +242,18 @@ def test_prior_rows_are_imitated_beside_the_runs_own():
 def test_config_rejects_bad_flight_and_prior(field, value):
     with pytest.raises(SatenvError, match=field):
         SafeDaggerConfig(**{field: value})
+
+
+@pytest.mark.parametrize("norm_mode", [True, False])
+def test_hinge_of_an_unreachable_bound_asks_for_the_best_along_the_row(norm_mode):
+    """A row whose bound no action reaches: the hinge is zero at the action that goes furthest
+    along it and grows as (attainable - r.a)^2 elsewhere, not as (bound - r.a)^2."""
+    r = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    rows = torch.as_tensor(r[None, None, :])
+    lower = torch.tensor([[5.0]], dtype=torch.float64)
+    best = r if norm_mode else np.array([1.0, 1.0, 0.0])
+    top = 1.0 if norm_mode else np.sqrt(2.0)
+    assert barrier_hinge(torch.as_tensor(best[None]), rows, lower, norm_mode=norm_mode).item() == pytest.approx(0.0, abs=1e-12)
+    zero = torch.zeros((1, 3), dtype=torch.float64)
+    assert barrier_hinge(zero, rows, lower, norm_mode=norm_mode).item() == pytest.approx(top ** 2)
+    assert barrier_hinge(zero, rows, lower, margin=0.5, norm_mode=norm_mode).item() == pytest.approx(top ** 2)

@@ -166,13 +166,18 @@ def agent_constraints(filt: Any, applied: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm_mode: bool = False) -> Any:
     """``sum_k relu(lower_k + margin - rows_k . eff(a))^2`` per row of a torch batch: zero where the
-    filter (tightened by ``margin``) would pass the action, growing with the distance outside."""
+    filter (tightened by ``margin``) would pass the action, growing with the distance outside.
+    A bound no action can reach (an infeasible row, common where the network alone has flown too
+    close) is lowered to the row's attainable maximum (``1`` on the unit ball, ``|rows_k|_1`` on
+    the box): the hinge then asks for the best the action can do along the row, no more, and the
+    term stays of the order of the others."""
     import torch
 
     eff = torch.clamp(actions, -1.0, 1.0)
     if norm_mode:
         eff = eff / torch.clamp(torch.linalg.norm(eff, dim=-1, keepdim=True), min=1.0)
-    slack = torch.einsum("nkd,nd->nk", rows, eff) - lower - margin
+    attainable = torch.ones_like(lower) if norm_mode else rows.abs().sum(-1)
+    slack = torch.einsum("nkd,nd->nk", rows, eff) - torch.minimum(lower + margin, attainable)
     return (torch.relu(-slack) ** 2).sum(-1)
 
 
@@ -364,14 +369,19 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
     t_start = time.perf_counter()
     for k in range(done, cfg.rounds + 1):
         t0 = time.perf_counter()
-        parts, flown = [], []
-        for j in range(cfg.episodes_per_round):
-            part, stats = collect_episode(collect_env, expert, policy,
-                                          cfg.train_seed + (k - 1) * cfg.episodes_per_round + j, cfg.fly)
-            parts.append(part)
-            flown.append(stats)
-        batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-        np.savez_compressed(run_dir / "labels" / f"round_{k:04d}.npz", **batch)
+        labels, stats_path = run_dir / "labels" / f"round_{k:04d}.npz", run_dir / "labels" / f"round_{k:04d}.json"
+        if labels.is_file() and stats_path.is_file():     # collected before a stop: the rows are kept
+            flown = json.loads(stats_path.read_text())
+        else:
+            parts, flown = [], []
+            for j in range(cfg.episodes_per_round):
+                part, stats = collect_episode(collect_env, expert, policy,
+                                              cfg.train_seed + (k - 1) * cfg.episodes_per_round + j, cfg.fly)
+                parts.append(part)
+                flown.append(stats)
+            batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+            np.savez_compressed(labels, **batch)
+            stats_path.write_text(json.dumps(flown, default=_json_scalar) + "\n")
         collect_s = time.perf_counter() - t0
         data = _load_rows(run_dir)
         t1 = time.perf_counter()
@@ -428,6 +438,11 @@ def ship(run_dir: Path, k: int, dest: Path) -> Path:
     shutil.copy(run_dir / "history.json", dest / "history.json")
     write_manifest(dest)
     return dest
+
+
+def _json_scalar(v: Any) -> Any:
+    """numpy scalars in the flown-episode stats as JSON values."""
+    return v.item() if isinstance(v, np.generic) else str(v)
 
 
 def _load_prior(folder: Path) -> dict[str, np.ndarray]:
