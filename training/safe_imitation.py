@@ -27,7 +27,9 @@ given again override it). Every round:
    margin ``m`` inside), and differentiable in the network's output. ``prior_labels``: the labels
    folder of an earlier DAgger run (``obs``, ``act``), a batch of it imitated beside every batch
    with weight ``prior_weight`` (``+ w_prior |pi(o_p) - y_p|^2``), a task term that the other
-   terms cannot trade away on the states the expert already labelled;
+   terms cannot trade away on the states the expert already labelled. ``imitation_space="network"``:
+   the imitation terms compare the network's own output with the label (as the DAgger engine
+   trained a warm start whose terminal feedback blends in near the target), not the flown action;
 3. **validate** on validation seeds only: the network alone (collision and violation episodes,
    success) and behind the filter (interventions per agent-step); the round is chosen on these.
 
@@ -76,6 +78,12 @@ label, ``label="self"``)."""
 
 
 LABELS = ("filtered", "expert", "self", "teacher")
+IMITATION_SPACES = ("flown", "network")
+"""Where the imitation terms compare with the label: the flown action (the policy's terminal
+feedback blended in, as the filter sees it) or the network's own output (as the DAgger engine,
+:func:`training.imitate.regress`, trained a warm start with terminal feedback). The barrier and
+intervention terms are always on the flown action."""
+
 FLIGHTS = ("filtered", "alone")
 """Who flies the collection episodes: the network behind the filter (the labelled states are those
 the shipped composite reaches) or the network alone (the states where it needs the filter; the
@@ -109,12 +117,15 @@ class SafeDaggerConfig:
     prior_labels: str = ""               # a DAgger run's labels folder (round_*.npz with obs, act): rows
     #                                      imitated in every batch beside the run's own (anchors the task)
     prior_weight: float = 1.0
+    imitation_space: str = "flown"       # IMITATION_SPACES
 
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
             raise SatenvError(f"system must be one of {sorted(EXPERTS)}, got {self.system!r}")
         if self.label not in LABELS:
             raise SatenvError(f"label must be one of {list(LABELS)}, got {self.label!r}")
+        if self.imitation_space not in IMITATION_SPACES:
+            raise SatenvError(f"imitation_space must be one of {list(IMITATION_SPACES)}, got {self.imitation_space!r}")
         if self.fly not in FLIGHTS:
             raise SatenvError(f"fly must be one of {list(FLIGHTS)}, got {self.fly!r}")
         if self.prior_labels and not Path(self.prior_labels).is_dir():
@@ -261,6 +272,7 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
         py = torch.as_tensor(prior["act"], dtype=torch.float32).clamp(-1, 1)
         p_off, p_slope = (torch.as_tensor(v, dtype=torch.float32)
                           for v in terminal_affine(policy, prior["obs"], py.shape[-1]))
+    on_flown = cfg.imitation_space == "flown"
     actor = policy.actor
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
     actor.train()
@@ -268,15 +280,17 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
     for _ in range(cfg.epochs):
         sums = np.zeros(4)
         for idx in torch.randperm(len(x), generator=generator).split(cfg.batch_size):
-            a = offset[idx] + slope[idx] * _env_action(actor(x[idx]), power)
-            imit = ((a - y[idx]) ** 2).sum(-1).mean()
+            out = _env_action(actor(x[idx]), power)
+            a = offset[idx] + slope[idx] * out
+            imit = (((a if on_flown else out) - y[idx]) ** 2).sum(-1).mean()
             inter = (mask[idx] * ((a - f[idx]) ** 2).sum(-1)).mean()
             bar = barrier_hinge(a, rows[idx], lower[idx], cfg.bar_margin, norm_mode).mean()
             loss = imit + cfg.w_int * inter + cfg.w_bar * bar
             pri = torch.zeros(())
             if prior is not None:
                 j = torch.randint(len(px), (len(idx),), generator=generator)
-                pa = p_off[j] + p_slope[j] * _env_action(actor(px[j]), power)
+                pout = _env_action(actor(px[j]), power)
+                pa = p_off[j] + p_slope[j] * pout if on_flown else pout
                 pri = ((pa - py[j]) ** 2).sum(-1).mean()
                 loss = loss + cfg.prior_weight * pri
             opt.zero_grad()
@@ -396,7 +410,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         steps = sum(s["agent_steps"] for s in flown)
         history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
                         "weights": {f: getattr(cfg, f) for f in ("label", "fly", "w_int", "w_bar", "bar_margin",
-                                                                 "prior_weight", "learning_rate", "epochs")}, "collect_s": round(collect_s, 1),
+                                                                 "prior_weight", "imitation_space", "learning_rate",
+                                                                 "epochs")}, "collect_s": round(collect_s, 1),
                         "fit_s": round(fit_s, 1), "val_s": round(val_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1),
                         "flown_interventions_per_agent_step": sum(s["interventions"] for s in flown) / max(1, steps),
