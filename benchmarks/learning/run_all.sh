@@ -13,3 +13,5 @@ for SEEDS in 0 0-2; do
 done
 $RUN --systems cluster-li2022 --algorithms controller --seeds 0
 $RUN --systems servicing-pereira2022,cluster-li2022 --algorithms dagger --seeds 0-2
+# PPO once more at ten times the budget on the TPLF platoon: does it learn with more?
+$RUN --systems platoon-pereira2023 --algorithms ppo --seeds 0-2 --budget 2000000
