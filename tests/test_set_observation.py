@@ -14,8 +14,8 @@ import training
 from satenv.envs.cluster_v0 import N_FIXED_OBS, POS_SCALE, ClusterCore
 from satenv.errors import SatenvError, SatenvTypeError
 from satenv.scenarios.cluster import resolve_scenario, swarm
-from training.policy import LearnedPolicy, PolicyLoadError, save_artifacts
-from training.set_policy import SetActor, set_normalizer, slot_layout
+from training.policy import LearnedPolicy, ObsNormalizer, PolicyLoadError, save_artifacts
+from training.set_policy import SetActor, set_statistics, slot_layout
 from training.shaping import ObsFeatures
 
 K = 4
@@ -120,10 +120,10 @@ def test_permuting_the_slots_leaves_the_action_exactly_unchanged():
         assert not np.array_equal(actor(torch.as_tensor(xs)).numpy(), y)
 
 
-def test_set_normalizer_shares_the_slot_statistics_and_keeps_the_flag():
+def test_set_statistics_share_the_slot_statistics_and_keeps_the_flag():
     rng = np.random.default_rng(1)
     fx = _slot_obs(500, rng).astype(np.float64)
-    norm = set_normalizer(_actor(fx.shape[1]).spec, fx, 10.0)
+    norm = ObsNormalizer(*set_statistics(_actor(fx.shape[1]).spec, fx), 10.0)
     m, v = norm.mean[N_FIXED_OBS:].reshape(K, 7), norm.var[N_FIXED_OBS:].reshape(K, 7)
     assert np.all(m == m[0]) and np.all(v == v[0]) and m[0, 0] == 0 and v[0, 0] == 1
     out = norm(fx)[:, N_FIXED_OBS:].reshape(-1, K, 7)
@@ -137,7 +137,8 @@ def _folder(tmp_path, env):
     torch.manual_seed(0)
     actor = SetActor(feats.out_dim(obs_dim), 3, own, slot, k, [16], [32], "relu", True)
     fx = feats(_slot_obs(200, np.random.default_rng(2)).astype(np.float64))
-    policy = LearnedPolicy(actor, set_normalizer(actor.spec, fx, 10.0), obs_shape=(obs_dim,), features=feats)
+    norm = ObsNormalizer(*set_statistics(actor.spec, fx), 10.0)
+    policy = LearnedPolicy(actor, norm, obs_shape=(obs_dim,), features=feats)
     meta = {"env_id": "cluster_v0", "env_name": "cluster_v0", "observation_shape": [obs_dim], "action_shape": [3],
             "env_kwargs": {"obs_neighbours": K}}
     config = {"obs_symlog_scale": 300.0, "obs_symlog_dims": 6, "obs_drop_dims": [18], "architecture": "set"}

@@ -79,12 +79,8 @@ class MLPActor(nn.Module):
 
 
 def actor_from_spec(spec: dict[str, Any]) -> nn.Module:
-    """Build the (untrained) actor a ``policy.json`` ``actor`` entry describes: an
-    :class:`MLPActor` (``"type": "mlp"``) or a ``training.set_policy.SetActor`` (``"set"``)."""
-    if isinstance(spec, dict) and spec.get("type") == "set":
-        from training.set_policy import set_actor_from_spec
-
-        return set_actor_from_spec(spec)
+    """Build the (untrained) :class:`MLPActor` a ``policy.json`` ``actor`` entry of ``"type": "mlp"``
+    describes (``training.policy`` reads the other type, ``"set"``, with ``training.set_policy``)."""
     if not isinstance(spec, dict) or spec.get("type") != "mlp":
         raise ValueError(f"actor spec must be a JSON object with type 'mlp' or 'set', got {spec!r}")
     unknown = set(spec) - {"type", "obs_dim", "act_dim", "hidden", "activation", "squash"}

@@ -580,9 +580,9 @@ def run(cfg: DaggerConfig, run_dir: str | Path | None = None, *, resume: bool = 
         if normalizer is None:
             fx = feats(x.astype(np.float64))
             if cfg.architecture == "set":
-                from training.set_policy import set_normalizer
+                from training.set_policy import set_statistics
 
-                normalizer = set_normalizer(actor.spec, fx, cfg.clip_obs)
+                normalizer = ObsNormalizer(*set_statistics(actor.spec, fx), cfg.clip_obs)
             else:
                 normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
         t1 = time.perf_counter()

@@ -488,10 +488,19 @@ def _parsed(root: Path, name: str, fn: Any, *args: Any) -> Any:
         raise PolicyLoadError(f"{root / name}: {type(err).__name__}: {msg[:200]}") from None
 
 
+def _actor_from_spec(spec: Any) -> Any:
+    """The actor of a ``policy.json`` ``actor`` entry: ``"set"`` (:mod:`training.set_policy`) or an MLP."""
+    if isinstance(spec, dict) and spec.get("type") == "set":
+        from training.set_policy import set_actor_from_spec
+
+        return set_actor_from_spec(spec)
+    from training.actor import actor_from_spec
+
+    return actor_from_spec(spec)
+
+
 def _load_safe(root: Path, trusted: bool) -> LearnedPolicy:
     import torch
-
-    from training.actor import actor_from_spec
 
     legacy = not os.path.lexists(root / WEIGHTS) and os.path.lexists(root / LEGACY_WEIGHTS)
     missing = [f for f in POLICY_FILES if not os.path.lexists(root / f) and not (legacy and f == WEIGHTS)]
@@ -527,7 +536,7 @@ def _load_safe(root: Path, trusted: bool) -> LearnedPolicy:
     normalizer = _parsed(root, "obs_norm.json", lambda b: ObsNormalizer.from_json(
         parse_json(b, root / "obs_norm.json")), blobs["obs_norm.json"])
     with torch.device("meta"):  # validated and sized without allocating
-        actor = _parsed(root, "policy.json", actor_from_spec, spec.get("actor"))
+        actor = _parsed(root, "policy.json", _actor_from_spec, spec.get("actor"))
     shapes = {k: tuple(v.shape) for k, v in actor.state_dict().items()}
     if legacy:
         data = read_member(root, LEGACY_WEIGHTS, max_weights_bytes() + 2**24)

@@ -14,7 +14,7 @@ Before encoding, the slots are put in one canonical order (a lexicographic sort 
 entries), so a permutation of the slots gives the bit-identical action, not only the same one up
 to rounding. The network is described by ``policy.json`` (``"type": "set"``, read by
 :func:`set_actor_from_spec` through ``training.actor.actor_from_spec``) and its weights by
-``weights.safetensors`` like the MLP's; :func:`set_normalizer` keeps the slot statistics shared
+``weights.safetensors`` like the MLP's; :func:`set_statistics` keeps the slot statistics shared
 by every slot (and the presence flag unscaled), so the normalisation is permutation-invariant too.
 """
 
@@ -28,11 +28,11 @@ from torch import nn
 
 from training.actor import ACTIVATIONS, MAX_LAYERS, MAX_PARAMETERS
 
-__all__ = ["PRESENT_ABOVE", "SetActor", "set_actor_from_spec", "set_normalizer", "slot_layout"]
+__all__ = ["PRESENT_ABOVE", "SetActor", "set_actor_from_spec", "set_statistics", "slot_layout"]
 
 PRESENT_ABOVE = 0.5
 """A slot is present when its (normalised) flag entry exceeds this (the env writes 1 or 0 and
-:func:`set_normalizer` leaves the flag unscaled)."""
+:func:`set_statistics` leaves the flag unscaled)."""
 
 SPEC_FIELDS = ("type", "obs_dim", "act_dim", "own_dim", "slot_dim", "n_slots", "encoder", "hidden",
                "activation", "squash")
@@ -160,13 +160,12 @@ def slot_layout(env: Any) -> tuple[int, int, int]:
     return int(core.obs_dim) - slot_dim * k, slot_dim, int(k)
 
 
-def set_normalizer(spec: dict[str, Any], features: np.ndarray, clip_obs: float) -> Any:
-    """The :class:`training.policy.ObsNormalizer` of a set actor from network inputs ``features``
-    ``(n, obs_dim)``: own entries by their own mean and variance; every slot entry by the mean and
-    variance of that entry over all present slots (one statistic shared by every slot, so the
-    normalisation commutes with permuting them); the presence flag unscaled (mean 0, variance 1)."""
-    from training.policy import ObsNormalizer
-
+def set_statistics(spec: dict[str, Any], features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mean and variance of a set actor's :class:`training.policy.ObsNormalizer` from network
+    inputs ``features`` ``(n, obs_dim)``: own entries by their own mean and variance; every slot
+    entry by the mean and variance of that entry over all present slots (one statistic shared by
+    every slot, so the normalisation commutes with permuting them); the presence flag unscaled
+    (mean 0, variance 1)."""
     fx = np.asarray(features, dtype=np.float64)
     mean, var = fx.mean(0), fx.var(0)
     o, d, k = spec["own_dim"], spec["slot_dim"], spec["n_slots"]
@@ -176,4 +175,4 @@ def set_normalizer(spec: dict[str, Any], features: np.ndarray, clip_obs: float) 
     slot_var = slots.var(0) if len(slots) else np.ones(d)
     slot_mean[0], slot_var[0] = 0.0, 1.0
     mean[o:o + k * d], var[o:o + k * d] = np.tile(slot_mean, k), np.tile(slot_var, k)
-    return ObsNormalizer(mean, var, clip_obs)
+    return mean, var
