@@ -262,9 +262,10 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         lines.append("")
     lines += _datasets_section(datasets or {})
     lines += ["## Not complete yet", ""]
-    complete = {(r["system"], r["algorithm"], r["filter"], r["seed"], r["budget_agent_steps"]) for r in results["records"]}
-    errors = [e for e in results["errors"] if (e["system"], e["algorithm"], e["filter"], e["seed"],
-                                               e.get("budget_agent_steps")) not in complete]
+    from benchmarks.learning.results import run_key
+
+    complete = {run_key(r) for r in results["records"]}
+    errors = [e for e in results["errors"] if run_key(e) not in complete]
     missing = results["incomplete"] + [{**e, "checkpoints_logged": "none (the run crashed: " + e["error"].split(" (")[0][:80] + ")"}
                                        for e in errors]
     if not missing and not results.get("not_run"):

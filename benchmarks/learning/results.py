@@ -30,7 +30,7 @@ import numpy as np
 from benchmarks.learning import grid as G
 from satenv import scoring, tasks
 
-__all__ = ["build_results", "command", "write_results"]
+__all__ = ["build_results", "command", "run_key", "write_results"]
 
 TEST_FIELDS = ("episodes", "success_rate", "collision_episodes", "violation_episodes", "safe_success_rate",
                "rmse", "delta_v", "final_error_m", "compute_ms_per_agent", "interventions_per_agent_step")
@@ -78,7 +78,8 @@ def _point(rec: dict[str, Any]) -> list[Any]:
             int(sum(bool(e["collisions"]) for e in eps))]
 
 
-def _run_key(rec: dict[str, Any]) -> tuple[Any, ...]:
+def run_key(rec: dict[str, Any]) -> tuple[Any, ...]:
+    """One run of a results or error record: system, algorithm, filter, seed and budget."""
     return (rec["system"], rec["algorithm"], rec["filter"], rec["seed"], rec.get("budget_agent_steps"))
 
 
@@ -125,7 +126,7 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
                     "load_avg_1m": last.get("load_avg_1m"),
                     "curve": [_point(cps[k]) for k in range(n)], "test": _test_block(last["episodes"], ref, _agents(system)),
                     "command": command(system, algo, filtered, seed, budget)})
-    seen = {_run_key(r) for r in (*out, *incomplete, *errors)} | {(s, "controller", False, 0, 0) for s in controllers}
+    seen = {run_key(r) for r in (*out, *incomplete, *errors)} | {(s, "controller", False, 0, 0) for s in controllers}
     not_run = [r.to_json() for r in G.grid(tasks.SYSTEMS, G.DEFAULT_ALGORITHMS, G.DEFAULT_SEEDS)
                if (r.system, r.algorithm, r.filter, r.seed, r.budget) not in seen]
     return {"grid": {"checkpoints": G.CHECKPOINTS, "test_seeds_per_checkpoint": G.TEST_SEEDS_PER_CHECKPOINT,
