@@ -136,6 +136,9 @@ def test_bad_run_fields_are_errors():
         G.Run("platoon-pereira2023", "dqn")
     with pytest.raises(G.LearningError, match="seed"):
         G.Run("platoon-pereira2023", "ppo", seed=-1)
+    for bad in (-5, 2.5, True):
+        with pytest.raises(G.LearningError, match="budget"):
+            G.Run("platoon-pereira2023", "ppo", budget_override=bad)
 
 
 def test_interventions_are_per_agent_step():

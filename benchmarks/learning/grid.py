@@ -98,6 +98,9 @@ class Run:
             raise LearningError(f"filter must be a bool, got {self.filter!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise LearningError(f"seed must be an int >= 0, got {self.seed!r}")
+        if isinstance(self.budget_override, bool) or not isinstance(self.budget_override, int) \
+                or self.budget_override < 0:
+            raise LearningError(f"budget must be an int >= 0 agent-steps (0: the grid's), got {self.budget_override!r}")
 
     @property
     def task(self) -> tasks.Task:
