@@ -55,6 +55,8 @@ def test_a_task_brings_its_system_expert_and_defaults_and_flags_override_them():
     assert same == cfg.replace(out_dir="x")
     plain, _ = parse(["--env-id", "formation_v0", "--expert", "cgmres"])   # no task: no system defaults
     assert (plain.task, plain.obs_drop_dims, plain.obs_symlog_scale) == (None, (), 0.0)
+    named, _ = parse(["--task", "platoon-TPLF-cw", "--expert", "dmpc"])   # a task of no system: name the expert
+    assert (named.task, named.expert, named.env_id) == ("platoon-TPLF-cw", "dmpc", "platoon_v0")
 
 
 def test_a_run_folder_of_the_earlier_imitate_is_not_silently_restarted(tmp_path):

@@ -745,14 +745,17 @@ def parse(argv: list[str] | None = None, *, prog: str = "python -m training.imit
 
 def _fresh_base(flags: dict[str, str]) -> DaggerConfig | None:
     """The base of a new run: the task's system defaults (the default task without ``--task`` and
-    ``--env-id``); ``None`` (the field defaults) for an env id without a task."""
+    ``--env-id``); ``None`` (the field defaults, the flags then name the expert) for an env id
+    without a task and for a task of no system."""
     from training.config import DEFAULT_TASK
 
     task = flags.get("--task")
     if task is None and "--env-id" in flags:
         return None
     name = tasks.get(task or DEFAULT_TASK).name
-    return DaggerConfig(**{"task": name, **SYSTEM_DEFAULTS.get(tasks.get(name).system, {})})
+    if not tasks.get(name).system:
+        return None
+    return DaggerConfig(**{"task": name, **SYSTEM_DEFAULTS[tasks.get(name).system]})
 
 
 def _flag_values(args: list[str]) -> dict[str, str]:
