@@ -24,18 +24,32 @@ default ``~/.minari/datasets``; ``--root`` sets it), never in git: this command 
   (:func:`replay`).
 
 The episode's seed is Minari's episode ``seed``: ``env.reset(seed=seed)`` and the recorded actions
-reproduce the recorded observations and states (``tests/test_datasets.py``).
+reproduce the recorded observations and states (:func:`replay`, ``tests/test_datasets.py``).
+
+**A controller that also acts inside the env.** The cluster's tube-RDMPC registers its tube
+controller κ (li2022 eq. 13) with ``env.set_inner_loop``: the env applies ``u~ + κ(x)`` at every
+physics step (0.25 s), κ computed from the true state. The recorded action is the controller's
+decision-rate command ``u~`` (what the env's ``step`` takes); κ is not in it, and the bare env flies
+the recorded actions to other states (cluster episode 0: 0.024 apart in the state after the first
+step, and the env ends before the actions do). :func:`replay` therefore builds the controller and
+resets it after the env, as :func:`record_episode` does, so whatever it installs in the env is there
+again (its ``act`` is never called: the actions are the recorded ones); the card says when a
+controller has an inner loop. ``infos["state"]`` is the flown trajectory.
 
 Writing is resumable: each recorded episode is kept as plain arrays (``.npz``, loaded without
 pickle) in ``--cache`` (default ``~/.cache/satenv/episodes``) until the dataset is written, so an
 interrupted ``write`` records only the episodes it has not got; ``--workers`` records episodes in
-parallel (the scoreboard's backends).
+parallel (the scoreboard's backends). An episode taken from the cache is replayed first (cheap next
+to recording) and recorded again when it does not replay exactly: the env may have changed since it
+was recorded. (A change of the controller alone, with the env unchanged, is not detected: its
+actions still replay.)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -48,8 +62,9 @@ import numpy as np
 
 from satenv import tasks
 
-__all__ = ["CACHE", "INFO_FIELDS", "SafetyInfos", "dataset_id", "episode_seed", "load_episode", "make_env", "read",
-           "record_episode", "replay", "save_episode", "write"]
+__all__ = ["CACHE", "INFO_FIELDS", "SafetyInfos", "dataset_id", "drop_stale", "episode_seed", "inner_loop_name",
+           "load_episode", "make_controller", "make_env", "read", "record_episode", "replay", "replays_exactly",
+           "save_episode", "write"]
 
 INFO_FIELDS = {"collision": bool, "violations": np.int64, "cost": np.float64, "min_separation": np.float64,
                "delta_v": np.float64}
@@ -93,19 +108,38 @@ def dataset_id(system: str) -> str:
     return f"satenv/{system}/{tasks.system(system).controller.replace('_', '-')}-v0"
 
 
-def make_env(system: str) -> gym.Env:
-    """The training task of ``system`` as its centralised Gymnasium view with :class:`SafetyInfos`."""
+def make_env(system: str, **overrides: Any) -> gym.Env:
+    """The training task of ``system`` as its centralised Gymnasium view with :class:`SafetyInfos`
+    (``overrides`` replace env keywords of the task, e.g. ``max_steps`` for a short episode)."""
     import satenv  # noqa: F401  (registers the gymnasium ids)
 
     task = tasks.training_task(system)
-    return SafetyInfos(gym.make(GYM_ID[task.env_id], **dict(task.env_kwargs)))
+    return SafetyInfos(gym.make(GYM_ID[task.env_id], **{**dict(task.env_kwargs), **overrides}))
 
 
-def _card(system: str, seeds: list[int], steps: int) -> str:
+def make_controller(system: str, env: gym.Env) -> Any:
+    """The system's controller (:data:`satenv.tasks.CONTROLLERS`) on ``env`` (:func:`make_env`)."""
+    import baselines
+
+    return baselines.make(tasks.system(system).controller, env.unwrapped.env)
+
+
+def _inner_loop(env: gym.Env) -> Any:
+    """The physics-rate hook a controller installed in ``env`` (``None`` for none or an env without hooks)."""
+    return getattr(env.unwrapped.env, "inner_loop", None)
+
+
+def _card(system: str, seeds: list[int], steps: int, inner_loop: str | None = None) -> str:
     sysdef, task = tasks.system(system), tasks.training_task(system)
     env = task.make_env()
     m = len(env.possible_agents)
     o, a = env.observation_space(env.possible_agents[0]).shape[0], env.action_space(env.possible_agents[0]).shape[0]
+    hook = ("" if inner_loop is None else
+            f"The controller also acts inside the env: it registers {inner_loop} with env.set_inner_loop, "
+            f"which adds its correction to the action at every physics step from the true state; the "
+            f"recorded actions are the controller's decision-rate commands without it, so a replay needs the "
+            f"controller's inner loop attached (benchmarks.learning.datasets.replay does), and infos state is "
+            f"the flown trajectory. ")
     return (f"satenv {sysdef.label}: the controller {sysdef.controller!r} (baselines.make) flying the training "
             f"task {task.name!r} ({task.description}) on train seeds {tasks.show_seeds(seeds)} "
             f"({len(seeds)} episodes, {steps} steps, {steps * m} agent-steps). Env: {GYM_ID[task.env_id]} with "
@@ -113,7 +147,7 @@ def _card(system: str, seeds: list[int], steps: int) -> str:
             f"possible_agents order {list(env.possible_agents)}; observation = the {m} agents' observations "
             f"concatenated ({m} x {o}); action = their normalised actions concatenated ({m} x {a}, in [-1, 1]); "
             f"reward = team sum; infos: per agent {sorted(INFO_FIELDS)} (length {m}), tracking_error ({m}, d), "
-            f"state = env.state() (replay: reset(seed=episode seed) then the actions). "
+            f"state = env.state() (replay: reset(seed=episode seed) then the actions). {hook}"
             f"Written by python -m benchmarks.learning.datasets.")
 
 
@@ -172,12 +206,10 @@ def _episode_path(cache: Path, system: str, seed: int) -> Path:
 
 def _record_one(job: tuple[str, int, str]) -> dict[str, Any]:
     """Record one seed's episode into the cache (a worker's task)."""
-    import baselines
-
     system, seed, cache = job
     env = make_env(system)
     try:
-        controller = baselines.make(tasks.system(system).controller, env.unwrapped.env)
+        controller = make_controller(system, env)
         save_episode(record_episode(env, controller, seed), _episode_path(Path(cache), system, seed))
     finally:
         env.close()
@@ -204,8 +236,12 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
             raise DatasetError(f"{name} must be a positive int, got {value!r}")
     task = tasks.training_task(system)
     seeds = list(task.seeds("train"))[seed0:seed0 + episodes]
-    todo = [(system, int(s), str(cache)) for s in seeds if not _episode_path(cache, system, s).is_file()]
     t0 = time.perf_counter()
+    for s in drop_stale(system, seeds, cache):
+        if progress:
+            print(f"{system}: the cached episode of seed {s} does not replay with this code: recording it again",
+                  flush=True)
+    todo = [(system, int(s), str(cache)) for s in seeds if not _episode_path(cache, system, s).is_file()]
     for k, result in enumerate(stream(todo, "local", workers, None, run=_record_one, lost=_lost)):
         if result.get("error"):
             raise RuntimeError(f"{system}: the episode of seed {result['seed']} failed: {result['error']}")
@@ -220,7 +256,8 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
     env = make_env(system)
     ds = minari.create_dataset_from_buffers(
         did, buffers, env=env.unwrapped.spec, eval_env=env.unwrapped.spec, algorithm_name=f"scripted controller {tasks.system(system).controller}",
-        author="satenv", code_permalink="benchmarks/learning/datasets.py", description=_card(system, seeds, steps),
+        author="satenv", code_permalink="benchmarks/learning/datasets.py",
+        description=_card(system, seeds, steps, inner_loop_name(system)),
         data_format="arrow", observation_space=env.observation_space, action_space=env.action_space)
     env.close()
     if manifest is not None:
@@ -228,6 +265,38 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
     for s in seeds:
         _episode_path(cache, system, s).unlink(missing_ok=True)
     return ds
+
+
+def drop_stale(system: str, seeds: Iterable[int], cache: Path = CACHE) -> list[int]:
+    """Replay every cached episode of ``seeds`` and delete those that do not replay exactly (recorded
+    by an env that has changed since, or unreadable); the seeds deleted."""
+    stale = []
+    for s in seeds:
+        path = _episode_path(cache, system, s)
+        if not path.is_file():
+            continue
+        try:
+            exact = replays_exactly(replay(system, load_episode(path), s))
+        except (ValueError, TypeError, KeyError):   # another layout: other shapes, fields or spaces
+            exact = False
+        if not exact:
+            path.unlink()
+            stale.append(int(s))
+    return stale
+
+
+def inner_loop_name(system: str) -> str | None:
+    """The class of the physics-rate hook the system's controller installs in its env
+    (``env.set_inner_loop``; tube-RDMPC: ``TubeController``), ``None`` when it installs none."""
+    env = make_env(system)
+    try:
+        controller = make_controller(system, env)
+        env.reset(seed=0)
+        controller.reset(seed=0)
+        hook = _inner_loop(env)
+    finally:
+        env.close()
+    return None if hook is None else type(hook).__name__
 
 
 def _record(manifest: Path, system: str, seeds: list[int], buffers: list[Any], wall_s: float) -> None:
@@ -257,19 +326,38 @@ def episode_seed(dataset: Any, episode_id: int) -> int:
     return int(next(iter(dataset.storage.get_episode_metadata([int(episode_id)])))["seed"])
 
 
-def replay(system: str, episode: Any, seed: int) -> dict[str, float]:
-    """Fly a recorded episode's actions from ``seed`` (:func:`episode_seed`); the largest
-    differences to the recorded observations and states (0 when it replays exactly)."""
-    env = make_env(system)
-    obs, info = env.reset(seed=int(seed))
-    obs_err = float(np.max(np.abs(obs - episode.observations[0])))
-    state_err = float(np.max(np.abs(info["state"] - episode.infos["state"][0])))
-    for t, action in enumerate(episode.actions):
-        obs, _, _, _, info = env.step(action)
-        obs_err = max(obs_err, float(np.max(np.abs(obs - episode.observations[t + 1]))))
-        state_err = max(state_err, float(np.max(np.abs(info["state"] - episode.infos["state"][t + 1]))))
-    env.close()
-    return {"observation": obs_err, "state": state_err}
+def replay(system: str, episode: Any, seed: int, **env_overrides: Any) -> dict[str, float]:
+    """Fly a recorded episode's actions from ``seed`` (:func:`episode_seed`) with the controller
+    reset after the env as in :func:`record_episode` (what it installs in the env, e.g. the
+    tube-RDMPC's inner loop, is there again; it never acts); ``env_overrides`` as given to the
+    recording's :func:`make_env`. Returns the largest differences to the recorded observations and
+    states and ``flags``, the number of steps whose termination/truncation differ from the recorded
+    ones (a step the env could not take because it had ended counts, and its differences are
+    ``inf``). An exact replay is ``{"observation": 0.0, "state": 0.0, "flags": 0}``."""
+    env = make_env(system, **env_overrides)
+    try:
+        controller = make_controller(system, env)
+        obs, info = env.reset(seed=int(seed))
+        controller.reset(seed=int(seed))
+        obs_err = float(np.max(np.abs(obs - episode.observations[0])))
+        state_err = float(np.max(np.abs(info["state"] - episode.infos["state"][0])))
+        flags, done = 0, False
+        for t, action in enumerate(episode.actions):
+            if done:
+                return {"observation": math.inf, "state": math.inf, "flags": flags + len(episode.actions) - t}
+            obs, _, term, trunc, info = env.step(action)
+            obs_err = max(obs_err, float(np.max(np.abs(obs - episode.observations[t + 1]))))
+            state_err = max(state_err, float(np.max(np.abs(info["state"] - episode.infos["state"][t + 1]))))
+            flags += (bool(term), bool(trunc)) != (bool(episode.terminations[t]), bool(episode.truncations[t]))
+            done = bool(term or trunc)
+    finally:
+        env.close()
+    return {"observation": obs_err, "state": state_err, "flags": flags}
+
+
+def replays_exactly(error: dict[str, float]) -> bool:
+    """Whether a :func:`replay` result is an exact replay."""
+    return error == {"observation": 0.0, "state": 0.0, "flags": 0}
 
 
 def _systems(text: str) -> list[str]:
@@ -298,8 +386,10 @@ def main(argv: Iterable[str] | None = None) -> int:
                     cache=Path(ns.cache))
               if ns.command == "write" else read(system))
         ep = next(ds.iterate_episodes())
+        err = replay(system, ep, episode_seed(ds, ep.id))
         print(f"{dataset_id(system)}: {ds.total_episodes} episodes, {ds.total_steps} steps; episode 0: "
-              f"{len(ep.actions)} steps, replay max |obs diff| {replay(system, ep, episode_seed(ds, ep.id))['observation']:.3g}", flush=True)
+              f"{len(ep.actions)} steps, replay max |obs diff| {err['observation']:.3g}, max |state diff| "
+              f"{err['state']:.3g}, steps ending otherwise {err['flags']}", flush=True)
     return 0
 
 
