@@ -148,3 +148,16 @@ def test_interventions_are_per_agent_step():
           "delta_v": 1.0, "safety_interventions": 10, "safety_infeasible": 0, "safety_steps": 10}
     block = results._test_block([ep], None, n_agents=2)
     assert block["interventions_per_agent_step"] == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("args, field", [(["--budget", "-5"], "budget"), (["--seeds", "x"], "--seeds"),
+                                         (["--workers", "0"], "--workers"), (["--systems", "nope"], "--systems")])
+def test_bad_run_arguments_are_a_one_line_error(tmp_path, capsys, args, field):
+    from benchmarks.learning.cli import main
+
+    log = tmp_path / "log.jsonl"
+    assert main(["run", "--log", str(log), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and field in err and "Traceback" not in err
+    assert err.count("\n") == 1
+    assert not log.exists()   # nothing ran, nothing was written

@@ -14,8 +14,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from benchmarks.learning.grid import DEFAULT_ALGORITHMS, FILTER_SYSTEMS, grid
+from benchmarks.learning.grid import DEFAULT_ALGORITHMS, FILTER_SYSTEMS, LearningError, grid
 from satenv import tasks
+from satenv.errors import SatenvError
 
 __all__ = ["LOG", "RESULTS", "main"]
 
@@ -32,22 +33,40 @@ def _names(text: str, allowed, what: str) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip()]
     bad = [n for n in names if n not in allowed]
     if bad or not names:
-        raise SystemExit(f"error: --{what} must name some of {list(allowed)}, got {text!r}")
+        raise LearningError(f"--{what} must name some of {list(allowed)}, got {text!r}")
     return names
 
 
+def _runs(ns: argparse.Namespace, log_path: Path) -> list:
+    """The runs ``run`` asks for (every argument checked: a :class:`LearningError` or a
+    :class:`~satenv.errors.SatenvError` naming the bad one)."""
+    from benchmarks.learning.grid import ALGORITHMS
+
+    if ns.workers < 1:
+        raise LearningError(f"--workers must be an int >= 1, got {ns.workers}")
+    try:
+        seeds = tasks.parse_seeds(ns.seeds)
+    except SatenvError as exc:
+        raise LearningError(f"--seeds: {exc}") from exc
+    return grid(_names(ns.systems, tasks.SYSTEMS, "systems"), _names(ns.algorithms, ALGORITHMS, "algorithms"),
+                seeds, _names(ns.filter_systems, tasks.SYSTEMS, "filter-systems") if ns.filter_systems else (),
+                log_path=str(log_path.resolve()), budget=ns.budget)
+
+
 def cmd_run(ns: argparse.Namespace) -> int:
-    from benchmarks.learning.grid import ALGORITHMS, KEY
+    from benchmarks.learning.grid import KEY
     from benchmarks.learning.runner import done_runs, logged_keys, lost_record, read_log, run_one
     from benchmarks.scoreboard.backends import stream
     from benchmarks.scoreboard.runner import EpisodeLog
 
     log_path = Path(ns.log)
+    try:
+        runs = _runs(ns, log_path)
+    except LearningError as exc:   # bad input: one line, no traceback (the scoreboard's convention)
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     log_path.parent.mkdir(parents=True, exist_ok=True)
     read_log(log_path, repair=True)
-    runs = grid(_names(ns.systems, tasks.SYSTEMS, "systems"), _names(ns.algorithms, ALGORITHMS, "algorithms"),
-                tasks.parse_seeds(ns.seeds), _names(ns.filter_systems, tasks.SYSTEMS, "filter-systems")
-                if ns.filter_systems else (), log_path=str(log_path.resolve()), budget=ns.budget)
     done = done_runs(runs, log_path)
     todo = [r for r in runs if r not in done]
     print(f"{len(runs)} runs, {len(done)} already in {log_path}, {len(todo)} to run", flush=True)
