@@ -259,10 +259,19 @@ class TrainConfig(RunConfig):
     model by (success rate, -RMSE) is kept in ``best/``."""
     checkpoint_every: int = 100_000
     """Save model + normalisation every this many agent-steps (0: never)."""
+    init_actor: str = ""
+    """PPO: start the actor and the observation normaliser from this policy folder (e.g. a DAgger
+    network of ``training.imitate`` / ``training.recipes.dagger``: its hidden sizes, activation and
+    ``tanh`` output; ``--net-arch`` and the observation features must match it; no terminal
+    feedback) instead of at random (``training.train.seed_actor``)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_run_fields(self, ("reward_shaping",))
+        if not isinstance(self.init_actor, str):
+            raise ValueError(f"init_actor must be a policy folder path or '', got {self.init_actor!r}")
+        if self.init_actor and self.algo != "ppo":
+            raise ValueError(f"init_actor seeds a PPO actor; algo is {self.algo!r}")
         if self.lr_schedule not in ("constant", "linear"):
             raise ValueError(f"lr_schedule must be 'constant' or 'linear', got {self.lr_schedule!r}")
         if self.algo not in ALGOS:

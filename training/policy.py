@@ -309,8 +309,12 @@ def _sb3_actor(model: Any):
     from training.actor import MLPActor
 
     policy = model.policy
-    if hasattr(policy, "action_net"):  # PPO / A2C: mlp_extractor.policy_net -> action_net
+    if hasattr(policy, "action_net"):  # PPO / A2C: mlp_extractor.policy_net -> action_net [-> tanh]
         body, head, squash = policy.mlp_extractor.policy_net, policy.action_net, False
+        if isinstance(head, nn.Sequential):   # training.train.build_model of a squashed seed
+            if len(head) != 2 or not isinstance(head[0], nn.Linear) or not isinstance(head[1], nn.Tanh):
+                raise PolicyLoadError(f"cannot export a PPO action head {head}: expected Linear or Linear -> Tanh")
+            head, squash = head[0], True
     elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):  # SAC: latent_pi -> mu -> tanh
         body, head, squash = policy.actor.latent_pi, policy.actor.mu, True
     else:

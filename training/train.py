@@ -51,7 +51,7 @@ from training.runfolder import RunFolderError
 from training.shaping import RewardShaping
 from training.trust import MAX_CHECKPOINT_BYTES, npz_headers, read_json, stored_zip
 
-__all__ = ["main", "train", "latest_checkpoint"]
+__all__ = ["main", "train", "latest_checkpoint", "init_policy", "seed_actor"]
 
 
 # --------------------------------------------------------------------------- helpers
@@ -81,21 +81,104 @@ def learning_rate(cfg: TrainConfig):
 
 
 def build_model(cfg: TrainConfig, venv):
+    """The SB3 model of ``cfg``; with ``init_actor``, a PPO policy of the seed's shape (its
+    activation for actor and critic, a ``tanh`` after the action head when the seed squashes:
+    the Gaussian's mean is then the seed's action), weights still random (:func:`seed_actor`)."""
     from stable_baselines3 import PPO, SAC
 
     common = {"seed": cfg.seed, "device": "cpu", "verbose": 0, "learning_rate": learning_rate(cfg),
               "gamma": cfg.gamma, "tensorboard_log": None}
     if cfg.algo == "ppo":
         arch = list(cfg.net_arch)
-        return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-                   gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef,
-                   vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
-                   policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "log_std_init": cfg.log_std_init},
-                   **common)
+        policy_kwargs: dict[str, Any] = {"net_arch": {"pi": arch, "vf": arch}, "log_std_init": cfg.log_std_init}
+        spec = init_policy(cfg).actor.spec if cfg.init_actor else None
+        if spec is not None:
+            from training.actor import ACTIVATIONS
+
+            policy_kwargs["activation_fn"] = ACTIVATIONS[spec["activation"]]
+        model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+                    gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef,
+                    vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm, policy_kwargs=policy_kwargs, **common)
+        if spec is not None and spec["squash"]:   # same parameters: the optimiser already holds them
+            from torch import nn
+
+            model.policy.action_net = nn.Sequential(model.policy.action_net, nn.Tanh())
+        return model
     return SAC("MlpPolicy", venv, buffer_size=cfg.buffer_size, learning_starts=cfg.learning_starts,
                batch_size=cfg.sac_batch_size, train_freq=cfg.train_freq, gradient_steps=cfg.gradient_steps,
                tau=cfg.tau, policy_kwargs={"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init},
                **common)
+
+
+SEEDED_OBS_COUNT = 1e9
+"""How many observations the seed's normaliser statistics count as in ``VecNormalize``'s running
+update: the seeded actor keeps seeing its inputs scaled as in its own training (a batch of a
+million observations moves the mean by at most 0.1 % of their difference)."""
+
+
+def init_policy(cfg: TrainConfig):
+    """The network of ``cfg.init_actor`` (alone, never its filter), checked against ``cfg``: an
+    MLP of hidden sizes ``net_arch``, the same observation features, action map and clip, no
+    terminal feedback (SB3 has none). A mismatch is a ``ValueError`` naming the field."""
+    from training.policy import load
+
+    seed = load(cfg.init_actor, shielded=False)
+    spec, norm = seed.actor.spec, seed.normalizer
+    where = f"init_actor {cfg.init_actor!r}"
+    if spec.get("type") != "mlp":
+        raise ValueError(f"{where}: needs an MLP actor, got type {spec.get('type')!r}")
+    if tuple(spec["hidden"]) != tuple(cfg.net_arch):
+        raise ValueError(f"{where}: hidden layers {spec['hidden']}; give --net-arch {','.join(map(str, spec['hidden']))}"
+                         f" (got {','.join(map(str, cfg.net_arch))})")
+    if seed.terminal is not None:
+        raise ValueError(f"{where}: has terminal feedback ({seed.terminal}); SB3 PPO trains the network alone")
+    features = features_from_config(cfg.to_json())
+    if seed.features != features:
+        raise ValueError(f"{where}: observation features {seed.features}; the run's are {features} "
+                         "(--obs-symlog-scale, --obs-symlog-dims, --obs-drop-dims)")
+    if seed.action_map != action_map_from_config(cfg.to_json()):
+        raise ValueError(f"{where}: action map {seed.action_map}; give the same --action-power")
+    if (norm.mean is not None) != cfg.norm_obs or (norm.mean is not None and norm.clip_obs != cfg.clip_obs):
+        raise ValueError(f"{where}: observation normaliser {'clip ' + str(norm.clip_obs) if norm.mean is not None else 'none'}"
+                         f"; the run has --norm-obs {cfg.norm_obs} --clip-obs {cfg.clip_obs}")
+    return seed
+
+
+def seed_actor(model, venv, seed, observations: np.ndarray, maps: dict[str, Any]) -> float:
+    """Copy the network ``seed`` (:func:`init_policy`) into the PPO actor of :func:`build_model`
+    and its normaliser statistics into ``venv`` (counted as :data:`SEEDED_OBS_COUNT`), then check
+    that the exported policy's actions on the raw per-agent ``observations`` ``(n, obs_dim)`` are
+    the seed's; returns the largest difference (``ValueError`` above ``1e-5``). The critic and
+    the action standard deviation (``log_std_init``) stay as built."""
+    from torch import nn
+
+    policy = model.policy
+    head = policy.action_net[0] if isinstance(policy.action_net, nn.Sequential) else policy.action_net
+    body = [m for m in policy.mlp_extractor.policy_net if isinstance(m, nn.Linear)]
+    layers = seed.actor.linear_layers()
+    if len(layers) != len(body) + 1:
+        raise ValueError(f"init_actor: {len(layers)} layers, the PPO actor has {len(body) + 1}")
+    import torch
+
+    with torch.no_grad():
+        for dst, src in zip([*body, head], layers, strict=True):
+            if dst.weight.shape != src.weight.shape:
+                raise ValueError(f"init_actor: layer {tuple(src.weight.shape)} does not fit {tuple(dst.weight.shape)}")
+            dst.weight.copy_(src.weight)
+            dst.bias.copy_(src.bias)
+    norm = seed.normalizer
+    if norm.mean is not None:
+        if norm.mean.shape != venv.obs_rms.mean.shape or norm.epsilon != venv.epsilon:
+            raise ValueError(f"init_actor: normaliser of shape {norm.mean.shape} (epsilon {norm.epsilon}); the "
+                             f"run's is {venv.obs_rms.mean.shape} (epsilon {venv.epsilon})")
+        venv.obs_rms.mean, venv.obs_rms.var = norm.mean.copy(), norm.var.copy()
+        venv.obs_rms.count = SEEDED_OBS_COUNT
+    got = export_policy(model, venv, {"observation_shape": list(seed.obs_shape)}, maps).predict(observations)
+    diff = float(np.abs(got - seed.predict(observations)).max())
+    if not diff <= 1e-5:
+        raise ValueError(f"init_actor: the seeded PPO actor does not reproduce the seed's actions "
+                         f"(max difference {diff:.3g})")
+    return diff
 
 
 def _score(agg: dict[str, Any]) -> tuple[float, float]:
@@ -411,6 +494,11 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     model = build_model(cfg, venv)
     if ckpt:
         load_checkpoint(model, ckpt[1])
+    elif cfg.init_actor:
+        probe = make_env(cfg.env_id, **cfg.env_kwargs)   # start observations to check the seeding on
+        starts = np.concatenate([np.stack(list(probe.reset(seed=cfg.seed + k)[0].values())) for k in range(4)])
+        diff = seed_actor(model, venv, init_policy(cfg), starts, {"features": features, "action_map": action_map})
+        print(f"actor seeded from {cfg.init_actor} (its actions reproduced to {diff:.1e})", file=sys.stderr)
     model.tensorboard_log = str(out / "tb")
     history_path = out / "eval_history.json"
     history = _read_history(history_path, start_steps) if (resume and history_path.is_file()) else []
