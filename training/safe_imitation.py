@@ -15,7 +15,10 @@ given again override it). Every round:
    shipped composite as the expert), the filter's output for the network's action, whether the filter
    intervened, and the filter's constraint rows at that state (:func:`agent_constraints`).
    ``fly="alone"``: the network flies without the filter (its own action applied, the filter's
-   output and rows still recorded), so the expert labels the states where the network alone goes;
+   output and rows still recorded), so the expert labels the states where the network alone goes
+   (``"mixed"``: alone and behind the filter in alternate episodes). The expert (or teacher) acts
+   at the state the flown network reached and is filtered there; the filter everywhere (labels,
+   rows, flights, validation) is the warm start's shipped one (:func:`warm_start_filter`);
 2. **fit** (warm start, all rows of every round) on
 
    ``L = |pi(o) - y|^2 + w_int * |pi(o) - F(pi_flown(o))|^2 [intervened rows] + w_bar * sum_k relu(l_k + m - r_k . pi(o))^2``
@@ -29,7 +32,9 @@ given again override it). Every round:
    with weight ``prior_weight`` (``+ w_prior |pi(o_p) - y_p|^2``), a task term that the other
    terms cannot trade away on the states the expert already labelled. ``imitation_space="network"``:
    the imitation terms compare the network's own output with the label (as the DAgger engine
-   trained a warm start whose terminal feedback blends in near the target), not the flown action;
+   trained a warm start whose terminal feedback blends in near the target), not the flown action
+   (for the expert's labels; the teacher's label is a flown action, compared in ``"flown"`` space:
+   :func:`check_label_space`);
 3. **validate** on validation seeds only: the network alone (collision and violation episodes,
    success) and behind the filter (interventions per agent-step); the round is chosen on these.
 
@@ -84,10 +89,11 @@ feedback blended in, as the filter sees it) or the network's own output (as the 
 :func:`training.imitate.regress`, trained a warm start with terminal feedback). The barrier and
 intervention terms are always on the flown action."""
 
-FLIGHTS = ("filtered", "alone")
+FLIGHTS = ("filtered", "alone", "mixed")
 """Who flies the collection episodes: the network behind the filter (the labelled states are those
-the shipped composite reaches) or the network alone (the states where it needs the filter; the
-filter's output and rows are still recorded, the network's own action is applied)."""
+the shipped composite reaches), the network alone (the states where it needs the filter; the
+filter's output and rows are still recorded, the network's own action is applied), or both
+(``"mixed"``: a round's even-numbered episodes alone, the odd ones behind the filter)."""
 """What the network imitates: the system's expert after the filter or as it is, the filter's output
 for the network's own action (self-distillation of the filtered network), or the filter's output
 for the *warm-start* network's action (the shipped composite, network + filter, as a frozen expert)."""
@@ -193,18 +199,23 @@ def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm
 
 
 # --------------------------------------------------------------------------- collection
-def collect_episode(env: Any, expert: Any, net: Any, seed: int,
-                    fly: str = "filtered") -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filtered",
+                    filter_config: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """The network flies ``env`` behind the filter (``fly="alone"``: without it, the filter's output
     only recorded); every agent-step labelled (module docstring). Without an expert (``None``) the
-    expert columns hold the network's own action."""
+    expert columns hold the network's own action. The expert (a re-planner, or the frozen teacher
+    network) acts on the observation of the state the flown network reached, and its action is
+    filtered at that state. ``filter_config``: the :class:`satenv.safety.SafetyConfig` of the filter
+    (the warm start's shipped one, :func:`warm_start_filter`; ``None``: the default)."""
     from satenv.safety import SafetyFilter
 
+    if fly not in ("filtered", "alone"):
+        raise SatenvError(f"collect_episode: fly must be 'filtered' or 'alone', got {fly!r}")
     obs, _ = env.reset(seed=seed)
     if expert is not None:
         expert.reset(seed=seed)
     net.reset(seed=seed)
-    filt = SafetyFilter(env)
+    filt = SafetyFilter(env, filter_config)
     agents = list(env.possible_agents)
     rows: dict[str, list] = {k: [] for k in ("obs", "expert", "label", "filtered", "flown", "intervened",
                                              "rows", "lower")}
@@ -325,15 +336,17 @@ def _env_action(out: Any, power: float) -> Any:
 
 
 # --------------------------------------------------------------------------- validation
-def validate(task: Any, policy: Any, cfg: SafeDaggerConfig) -> dict[str, Any]:
-    """The network alone on ``cfg.val_seeds`` validation seeds and behind the filter on the first
-    ``cfg.val_shield_seeds`` (:func:`satenv.scoring.aggregate` of each)."""
+def validate(task: Any, policy: Any, cfg: SafeDaggerConfig, filter_config: Any = None) -> dict[str, Any]:
+    """The network alone on ``cfg.val_seeds`` validation seeds and behind the filter (its
+    ``filter_config``, the warm start's shipped one) on the first ``cfg.val_shield_seeds``
+    (:func:`satenv.scoring.aggregate` of each)."""
     from satenv.safety import shield
     from satenv.scoring import aggregate, run_episodes
 
     env = task.make_env()
     alone = aggregate(run_episodes(env, policy, task.seeds("validation", cfg.val_seeds)))
-    shipped = aggregate(run_episodes(env, shield(policy, env), task.seeds("validation", cfg.val_shield_seeds)))
+    shipped = aggregate(run_episodes(env, shield(policy, env, filter_config),
+                                     task.seeds("validation", cfg.val_shield_seeds)))
     return {"alone": alone, "shield": shipped}
 
 
@@ -346,6 +359,39 @@ def selection_key(v: dict[str, Any]) -> tuple[float, ...]:
 
 
 # --------------------------------------------------------------------------- run
+def warm_start_filter(folder: Path) -> Any:
+    """The :class:`satenv.safety.SafetyConfig` the warm start ships with (``env.json``
+    ``"safety_filter"``; the default filter when it ships none): the labels, the rows, the flights
+    behind the filter and the validation use the filter of the shipped composite (servicing ships
+    with a 0.005 margin, against the default 0.02 that would hold its servicers off their final
+    waypoints)."""
+    from satenv.safety import SafetyConfig
+    from training.policy import shipped_filter
+
+    meta = json.loads((Path(folder) / "env.json").read_text())
+    return shipped_filter(Path(folder), meta) or SafetyConfig()
+
+
+def check_label_space(cfg: SafeDaggerConfig, policy: Any) -> None:
+    """Refuse teacher labels compared with the network's own output when the warm start blends in
+    terminal feedback: the teacher's label is a *flown* action (its feedback blended in, then
+    filtered), so ``imitation_space="network"`` would pull the network's raw output towards the
+    flown action, away from the warm start even where the filter passes it; ``"flown"`` has the
+    warm start as its minimiser wherever the filter leaves the teacher's action alone."""
+    term = getattr(policy, "terminal", None)
+    if cfg.label == "teacher" and cfg.imitation_space == "network" and term is not None \
+            and getattr(term, "active", True):
+        raise SatenvError("imitation_space must be 'flown' with label 'teacher' when the warm start has terminal "
+                          "feedback (the teacher's label is a flown action), got 'network'")
+
+
+def episode_flight(cfg: SafeDaggerConfig, j: int) -> str:
+    """Who flies episode ``j`` of a round (:data:`FLIGHTS`; ``"mixed"``: even ``j`` alone, odd behind the filter)."""
+    if cfg.fly != "mixed":
+        return cfg.fly
+    return "alone" if j % 2 == 0 else "filtered"
+
+
 def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
     import torch
 
@@ -366,16 +412,18 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
     else:
         expert = None
     norm_mode = safety_model(collect_env).norm_mode if hasattr(collect_env, "core") else False
+    filter_config = warm_start_filter(Path(cfg.warm_start))
     history_path = run_dir / "history.json"
     history = json.loads(history_path.read_text()) if history_path.is_file() else []
     done = len(history)
     last = history[-1]["round"] if history else -1     # round -1: the warm start's validation only
     start = run_dir / "rounds" / f"{last:04d}" if last >= 1 else Path(cfg.warm_start)
     policy = load(start, shielded=False)
+    check_label_space(cfg, policy)
     warm_meta = json.loads((Path(cfg.warm_start) / "env.json").read_text())
     warm_cfg = json.loads((Path(cfg.warm_start) / "config.json").read_text())
     if not history:   # round -1: the warm start itself on the same validation seeds
-        history.append({"round": -1, "source": str(cfg.warm_start), "val": validate(task, policy, cfg)})
+        history.append({"round": -1, "source": str(cfg.warm_start), "val": validate(task, policy, cfg, filter_config)})
         history_path.write_text(json.dumps(history, indent=1) + "\n")
         done = 1
     generator = torch.Generator().manual_seed(cfg.seed + done)
@@ -390,7 +438,9 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
             parts, flown = [], []
             for j in range(cfg.episodes_per_round):
                 part, stats = collect_episode(collect_env, expert, policy,
-                                              cfg.train_seed + (k - 1) * cfg.episodes_per_round + j, cfg.fly)
+                                              cfg.train_seed + (k - 1) * cfg.episodes_per_round + j,
+                                              episode_flight(cfg, j), filter_config)
+                stats["fly"] = episode_flight(cfg, j)
                 parts.append(part)
                 flown.append(stats)
             batch = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
@@ -402,7 +452,7 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         terms = fit(policy, data, cfg, norm_mode, generator, prior)
         fit_s = time.perf_counter() - t1
         t2 = time.perf_counter()
-        val = validate(task, policy, cfg)
+        val = validate(task, policy, cfg, filter_config)
         val_s = time.perf_counter() - t2
         config = {**warm_cfg, "recipe": "training.safe_imitation", "safe_dagger": cfg.to_json(), "round": k}
         save_artifacts(run_dir / "rounds" / f"{k:04d}", policy, env_meta=warm_meta, config=config,

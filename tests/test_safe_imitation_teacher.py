@@ -1,0 +1,142 @@
+"""training.safe_imitation with the frozen composite (warm-start network + its shipped filter) as
+the expert, flown by the network alone: the label, the filter it uses and the objective."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from satenv import tasks  # noqa: E402
+from satenv.errors import SatenvError  # noqa: E402
+from satenv.safety import SafetyConfig, SafetyFilter  # noqa: E402
+from training.safe_imitation import (  # noqa: E402
+    SafeDaggerConfig,
+    check_label_space,
+    collect_episode,
+    episode_flight,
+    fit,
+    warm_start_filter,
+)
+
+
+class _Fixed:
+    """A 'network' proposing a fixed action per agent (``act`` too, as a teacher policy)."""
+
+    def __init__(self, a: np.ndarray):
+        self.a = np.asarray(a, dtype=float)
+
+    def reset(self, seed=None):
+        pass
+
+    def predict(self, obs):
+        return self.a[: len(obs)].copy()
+
+    def act(self, obs):
+        return {k: self.a[i].astype(np.float32) for i, k in enumerate(obs)}
+
+
+@pytest.mark.parametrize("fly", ["alone", "filtered"])
+def test_teacher_label_is_the_teachers_action_filtered_at_the_students_state(fly):
+    """The label of every agent-step is the teacher's action at the state the *student* reached
+    (the env stepped with the student's flown or filtered action), filtered at that state with
+    the given filter config; teacher and student differ, so a label from the teacher's own
+    trajectory would not match, and the filter changes the teacher's action somewhere (so an
+    unfiltered label would not match either)."""
+    kw = {"terminate_on_collision": False, "max_steps": 25}
+    env = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    agents = list(env.possible_agents)
+    n, d = len(agents), env.action_space(agents[0]).shape[0]
+    student = _Fixed(np.where(np.arange(n)[:, None] % 2 == 1, 1.0, -1.0) * np.ones((n, d)))
+    teacher = _Fixed(-student.a if fly == "alone" else np.roll(student.a, 1, axis=1))
+    config = SafetyConfig(margin=0.05)
+    rows, _ = collect_episode(env, teacher, student, 700_321, fly, config)
+    ref = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    obs, _ = ref.reset(seed=700_321)
+    filt = SafetyFilter(ref, config)
+    changed = 0
+    for k in range(len(rows["obs"]) // n):
+        sl = slice(k * n, (k + 1) * n)
+        expected, rec = filt.filter(teacher.a)
+        changed += int(rec.intervened.sum())
+        assert np.allclose(rows["label"][sl], expected, atol=1e-5)
+        assert np.allclose(rows["expert"][sl], teacher.a)
+        applied = rows["flown" if fly == "alone" else "filtered"][sl]
+        obs, *_ = ref.step({a: np.clip(applied[i], -1, 1).astype(np.float32) for i, a in enumerate(agents)})
+    assert changed > 0                                   # the filter did change the teacher somewhere
+
+
+def test_the_filter_is_the_warm_starts_shipped_one(tmp_path):
+    """Servicing ships with a 0.005 margin: labels, rows and validation use it; a folder that ships
+    no filter gets the default."""
+    cfg = warm_start_filter(tasks_root() / "training/policies/servicing_pereira2022_dagger_shield")
+    assert cfg.margin == pytest.approx(0.005)
+    (tmp_path / "env.json").write_text(json.dumps({"env_id": "servicing_v0"}))
+    assert warm_start_filter(tmp_path) == SafetyConfig()
+
+
+def tasks_root():
+    from pathlib import Path
+
+    return Path(__file__).resolve().parents[1]
+
+
+def test_teacher_labels_with_terminal_feedback_must_be_compared_flown():
+    from training.actor import MLPActor
+    from training.policy import LearnedPolicy, ObsNormalizer
+    from training.shaping import TerminalFeedback
+
+    with_fb = LearnedPolicy(MLPActor(9, 3, [8], "tanh", True), ObsNormalizer(), obs_shape=(9,),
+                            terminal=TerminalFeedback(radius=2.0))
+    without = LearnedPolicy(MLPActor(9, 3, [8], "tanh", True), ObsNormalizer(), obs_shape=(9,))
+    with pytest.raises(SatenvError, match="imitation_space"):
+        check_label_space(SafeDaggerConfig(label="teacher", imitation_space="network",
+                                           system="servicing-pereira2022"), with_fb)
+    check_label_space(SafeDaggerConfig(label="teacher", imitation_space="flown", system="servicing-pereira2022"), with_fb)
+    check_label_space(SafeDaggerConfig(label="teacher", imitation_space="network", system="servicing-pereira2022"),
+                      without)
+    check_label_space(SafeDaggerConfig(label="expert", imitation_space="network"), with_fb)
+
+
+def test_the_warm_start_is_a_fixed_point_of_its_own_flown_teacher_labels():
+    """With terminal feedback, the teacher's unfiltered flown action as the label: the flown
+    objective is zero at the warm start (the fit does not move it), the network-space one is not."""
+    from training.actor import MLPActor
+    from training.policy import LearnedPolicy, ObsNormalizer
+    from training.shaping import TerminalFeedback
+
+    rng = np.random.default_rng(4)
+    n = 256
+    obs = rng.normal(scale=0.05, size=(n, 9))
+    e = rng.normal(size=(n, 3))
+    obs[:, :3] = 2.0 * e / np.linalg.norm(e, axis=1, keepdims=True)      # w = exp(-1) = 0.37
+    obs = obs.astype(np.float32)
+    torch.manual_seed(0)
+    moved = {}
+    for space in ("flown", "network"):
+        pol = LearnedPolicy(MLPActor(9, 3, [32], "tanh", True), ObsNormalizer(), obs_shape=(9,),
+                            terminal=TerminalFeedback(radius=2.0))
+        torch.manual_seed(0)
+        pol.actor.load_state_dict(MLPActor(9, 3, [32], "tanh", True).state_dict())
+        label = pol.predict(obs)                          # the teacher's flown action, unfiltered
+        before = pol.predict(obs)
+        data = {"obs": obs, "label": label, "expert": label, "filtered": label, "intervened": np.zeros(n, bool),
+                "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+        cfg = SafeDaggerConfig(label="teacher", system="servicing-pereira2022", w_bar=0.0, w_int=0.0, epochs=20,
+                               batch_size=64, learning_rate=3e-3, imitation_space=space)
+        terms = fit(pol, data, cfg, False, torch.Generator().manual_seed(0))
+        moved[space] = float(np.abs(pol.predict(obs) - before).mean())
+        if space == "flown":
+            assert terms["imitation"] < 1e-6
+    assert moved["flown"] < 1e-3 < moved["network"]
+
+
+def test_mixed_flights_alternate_alone_and_filtered():
+    cfg = SafeDaggerConfig(fly="mixed")
+    assert [episode_flight(cfg, j) for j in range(4)] == ["alone", "filtered", "alone", "filtered"]
+    assert episode_flight(SafeDaggerConfig(fly="alone"), 1) == "alone"
+    with pytest.raises(SatenvError, match="fly"):
+        collect_episode(None, None, None, 0, "mixed")
