@@ -167,7 +167,11 @@ def _datasets_section(manifest: dict[str, Any]) -> list[str]:
              "Layout: observation = every agent's observation concatenated in `possible_agents` order, action = "
              "their normalised actions concatenated, reward = team sum; infos per agent: `collision`, "
              "`violations`, `cost`, `min_separation`, `delta_v`, `tracking_error`, and `state` (the env's full "
-             "state; `reset(seed=episode seed)` and the recorded actions replay it exactly).", "",
+             "state; `reset(seed=episode seed)` and the recorded actions replay it exactly, with the controller "
+             "reset after the env as in the recording: the cluster's tube-RDMPC also acts inside the env, its "
+             "tube controller correcting the action at every physics step (`env.set_inner_loop`), and the "
+             "recorded actions are its decision-rate commands without that correction; "
+             "`benchmarks.learning.datasets.replay` attaches it).", "",
              "| system | dataset id | train seeds | episodes | steps (agent-steps) | collision / violation episodes | "
              "written in [s] |", "|---|---|---|---|---|---|---|"]
     for name in tasks.SYSTEMS:
