@@ -140,3 +140,28 @@ def test_mixed_flights_alternate_alone_and_filtered():
     assert episode_flight(SafeDaggerConfig(fly="alone"), 1) == "alone"
     with pytest.raises(SatenvError, match="fly"):
         collect_episode(None, None, None, 0, "mixed")
+
+
+def test_handover_flies_alone_until_the_first_failure_then_behind_the_filter():
+    """fly="handover": the env is stepped with the network's own action up to the first step whose
+    infos report a collision or a hard-bound violation, with the filter's output after it."""
+    kw = {"terminate_on_collision": False, "max_steps": 60}
+    env = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    agents = list(env.possible_agents)
+    n, d = len(agents), env.action_space(agents[0]).shape[0]
+    student = _Fixed(np.where(np.arange(n)[:, None] % 2 == 1, 1.0, -1.0) * np.ones((n, d)))
+    rows, stats = collect_episode(env, None, student, 700_321, "handover")
+    ref = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    obs, _ = ref.reset(seed=700_321)
+    alone, alone_rows, after = True, 0, 0
+    for k in range(len(rows["obs"]) // n):
+        sl = slice(k * n, (k + 1) * n)
+        assert np.allclose(np.stack([obs[a] for a in agents]), rows["obs"][sl], atol=1e-5)
+        applied = rows["flown" if alone else "filtered"][sl]
+        alone_rows += n if alone else 0
+        after += 0 if alone else int(not np.allclose(rows["flown"][sl], rows["filtered"][sl]))
+        obs, _, _, _, infos = ref.step({a: np.clip(applied[i], -1, 1).astype(np.float32) for i, a in enumerate(agents)})
+        if any(bool(i.get("collision")) or bool(i.get("violations")) for i in infos.values()):
+            alone = False
+    assert not alone and after > 0          # the handover happened, and the filter then changed actions
+    assert stats["alone_agent_steps"] == alone_rows < stats["agent_steps"]

@@ -16,7 +16,8 @@ given again override it). Every round:
    intervened, and the filter's constraint rows at that state (:func:`agent_constraints`).
    ``fly="alone"``: the network flies without the filter (its own action applied, the filter's
    output and rows still recorded), so the expert labels the states where the network alone goes
-   (``"mixed"``: alone and behind the filter in alternate episodes). The expert (or teacher) acts
+   (``"mixed"``: alone and behind the filter in alternate episodes; ``"handover"``: alone until the
+   first collision or hard-bound violation, then behind the filter). The expert (or teacher) acts
    at the state the flown network reached and is filtered there; the filter everywhere (labels,
    rows, flights, validation) is the warm start's shipped one (:func:`warm_start_filter`);
 2. **fit** (warm start, all rows of every round) on
@@ -89,11 +90,16 @@ feedback blended in, as the filter sees it) or the network's own output (as the 
 :func:`training.imitate.regress`, trained a warm start with terminal feedback). The barrier and
 intervention terms are always on the flown action."""
 
-FLIGHTS = ("filtered", "alone", "mixed")
+FLIGHTS = ("filtered", "alone", "mixed", "handover")
 """Who flies the collection episodes: the network behind the filter (the labelled states are those
 the shipped composite reaches), the network alone (the states where it needs the filter; the
 filter's output and rows are still recorded, the network's own action is applied), or both
-(``"mixed"``: a round's even-numbered episodes alone, the odd ones behind the filter)."""
+(``"mixed"``: a round's even-numbered episodes alone, the odd ones behind the filter;
+``"handover"``: each episode alone until its first collision or hard-bound violation, then behind
+the filter, so the labelled states are the network's own up to its failure and the composite's
+recovery from it, not the network's flight on after a collision)."""
+EPISODE_FLIGHTS = ("filtered", "alone", "handover")
+"""How one collection episode is flown (``"mixed"`` chooses between the first two per episode)."""
 """What the network imitates: the system's expert after the filter or as it is, the filter's output
 for the network's own action (self-distillation of the filtered network), or the filter's output
 for the *warm-start* network's action (the shipped composite, network + filter, as a frozen expert)."""
@@ -202,15 +208,16 @@ def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm
 def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filtered",
                     filter_config: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """The network flies ``env`` behind the filter (``fly="alone"``: without it, the filter's output
-    only recorded); every agent-step labelled (module docstring). Without an expert (``None``) the
+    only recorded; ``"handover"``: alone until the first collision or hard-bound violation, then
+    behind the filter); every agent-step labelled (module docstring). Without an expert (``None``) the
     expert columns hold the network's own action. The expert (a re-planner, or the frozen teacher
     network) acts on the observation of the state the flown network reached, and its action is
     filtered at that state. ``filter_config``: the :class:`satenv.safety.SafetyConfig` of the filter
     (the warm start's shipped one, :func:`warm_start_filter`; ``None``: the default)."""
     from satenv.safety import SafetyFilter
 
-    if fly not in ("filtered", "alone"):
-        raise SatenvError(f"collect_episode: fly must be 'filtered' or 'alone', got {fly!r}")
+    if fly not in EPISODE_FLIGHTS:
+        raise SatenvError(f"collect_episode: fly must be one of {list(EPISODE_FLIGHTS)}, got {fly!r}")
     obs, _ = env.reset(seed=seed)
     if expert is not None:
         expert.reset(seed=seed)
@@ -220,6 +227,7 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
     rows: dict[str, list] = {k: [] for k in ("obs", "expert", "label", "filtered", "flown", "intervened",
                                              "rows", "lower")}
     collided, interventions, steps, infos = False, 0, 0, {}
+    alone, alone_steps = fly != "filtered", 0
     while env.agents:
         if len(env.agents) != len(agents):
             break
@@ -232,7 +240,8 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
             lab = expert.act(obs)
             e = np.stack([np.asarray(lab[a], dtype=float) for a in agents])
             e_f, _ = filt.filter(np.clip(e, -1, 1))
-        applied = n_f if fly == "filtered" else _box(n)
+        applied = _box(n) if alone else n_f
+        alone_steps += len(agents) if alone else 0
         r, lo = agent_constraints(filt, applied)
         rows["obs"].append(o)
         rows["expert"].append(e)
@@ -246,8 +255,11 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
         steps += len(agents)
         obs, _, _, _, infos = env.step({a: applied[i].astype(np.float32) for i, a in enumerate(agents)})
         collided |= any(bool(i.get("collision")) for i in infos.values())
+        if fly == "handover" and any(bool(i.get("collision")) or bool(i.get("violations")) for i in infos.values()):
+            alone = False
     out = {k: np.concatenate(v).astype(np.float32 if k != "intervened" else bool) for k, v in rows.items()}
-    return out, {"seed": seed, "agent_steps": steps, "interventions": interventions, "collision": collided}
+    return out, {"seed": seed, "agent_steps": steps, "interventions": interventions, "collision": collided,
+                 "alone_agent_steps": alone_steps}
 
 
 def _box(a: np.ndarray) -> np.ndarray:
