@@ -165,3 +165,39 @@ def test_handover_flies_alone_until_the_first_failure_then_behind_the_filter():
             alone = False
     assert not alone and after > 0          # the handover happened, and the filter then changed actions
     assert stats["alone_agent_steps"] == alone_rows < stats["agent_steps"]
+
+
+@pytest.mark.parametrize("prior_space", ["network", "flown"])
+def test_prior_term_compares_in_its_own_space(prior_space):
+    """Teacher rows in flown space beside a DAgger run's expert labels: ``prior_space="network"``
+    fits the network's own output to the prior labels, ``"flown"`` what is flown."""
+    from training.actor import MLPActor
+    from training.policy import LearnedPolicy, ObsNormalizer
+    from training.shaping import TerminalFeedback
+
+    rng = np.random.default_rng(5)
+    n = 256
+
+    def near(loc):
+        o = rng.normal(loc=loc, scale=0.05, size=(n, 9))
+        e = rng.normal(size=(n, 3))
+        o[:, :3] = 3.5 * e / np.linalg.norm(e, axis=1, keepdims=True)    # w = exp(-3.5 / 2) = 0.17
+        return o.astype(np.float32)
+
+    obs, prior_obs = near(-1.0), near(+1.0)
+    zeros = np.zeros((n, 3), np.float32)
+    data = {"obs": obs, "label": zeros, "expert": zeros, "filtered": zeros, "intervened": np.zeros(n, bool),
+            "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+    prior = {"obs": prior_obs, "act": np.full((n, 3), 0.3, np.float32)}
+    torch.manual_seed(0)
+    pol = LearnedPolicy(MLPActor(9, 3, [32], "tanh", True), ObsNormalizer(), obs_shape=(9,),
+                        terminal=TerminalFeedback(radius=2.0))
+    cfg = SafeDaggerConfig(label="teacher", system="servicing-pereira2022", w_bar=0.0, w_int=0.0, epochs=80,
+                           batch_size=64, learning_rate=3e-3, imitation_space="flown", prior_space=prior_space)
+    fit(pol, data, cfg, False, torch.Generator().manual_seed(0), prior)
+    with torch.no_grad():
+        raw = pol.actor(torch.as_tensor(prior_obs)).numpy()
+    flown = pol.predict(prior_obs)
+    fitted, other = (raw, flown) if prior_space == "network" else (flown, raw)
+    assert np.abs(fitted - 0.3).mean() < 0.03
+    assert np.abs(other - 0.3).mean() > 0.05

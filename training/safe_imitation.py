@@ -31,7 +31,8 @@ given again override it). Every round:
    margin ``m`` inside), and differentiable in the network's output. ``prior_labels``: the labels
    folder of an earlier DAgger run (``obs``, ``act``), a batch of it imitated beside every batch
    with weight ``prior_weight`` (``+ w_prior |pi(o_p) - y_p|^2``), a task term that the other
-   terms cannot trade away on the states the expert already labelled. ``imitation_space="network"``:
+   terms cannot trade away on the states the expert already labelled (compared in ``prior_space``,
+   by default the imitation terms' space). ``imitation_space="network"``:
    the imitation terms compare the network's own output with the label (as the DAgger engine
    trained a warm start whose terminal feedback blends in near the target), not the flown action
    (for the expert's labels; the teacher's label is a flown action, compared in ``"flown"`` space:
@@ -130,6 +131,8 @@ class SafeDaggerConfig:
     #                                      imitated in every batch beside the run's own (anchors the task)
     prior_weight: float = 1.0
     imitation_space: str = "flown"       # IMITATION_SPACES
+    prior_space: str = ""                # IMITATION_SPACES for the prior term ("": imitation_space); a DAgger
+    #                                      run's labels are the expert's action, "network" with terminal feedback
 
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
@@ -138,6 +141,8 @@ class SafeDaggerConfig:
             raise SatenvError(f"label must be one of {list(LABELS)}, got {self.label!r}")
         if self.imitation_space not in IMITATION_SPACES:
             raise SatenvError(f"imitation_space must be one of {list(IMITATION_SPACES)}, got {self.imitation_space!r}")
+        if self.prior_space not in ("", *IMITATION_SPACES):
+            raise SatenvError(f"prior_space must be '' or one of {list(IMITATION_SPACES)}, got {self.prior_space!r}")
         if self.fly not in FLIGHTS:
             raise SatenvError(f"fly must be one of {list(FLIGHTS)}, got {self.fly!r}")
         if self.prior_labels and not Path(self.prior_labels).is_dir():
@@ -296,6 +301,7 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
         p_off, p_slope = (torch.as_tensor(v, dtype=torch.float32)
                           for v in terminal_affine(policy, prior["obs"], py.shape[-1]))
     on_flown = cfg.imitation_space == "flown"
+    prior_on_flown = (cfg.prior_space or cfg.imitation_space) == "flown"
     actor = policy.actor
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
     actor.train()
@@ -313,7 +319,7 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
             if prior is not None:
                 j = torch.randint(len(px), (len(idx),), generator=generator)
                 pout = _env_action(actor(px[j]), power)
-                pa = p_off[j] + p_slope[j] * pout if on_flown else pout
+                pa = p_off[j] + p_slope[j] * pout if prior_on_flown else pout
                 pri = ((pa - py[j]) ** 2).sum(-1).mean()
                 loss = loss + cfg.prior_weight * pri
             opt.zero_grad()
@@ -472,7 +478,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         steps = sum(s["agent_steps"] for s in flown)
         history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
                         "weights": {f: getattr(cfg, f) for f in ("label", "fly", "w_int", "w_bar", "bar_margin",
-                                                                 "prior_weight", "imitation_space", "learning_rate",
+                                                                 "prior_weight", "imitation_space", "prior_space",
+                                                                 "learning_rate",
                                                                  "epochs")}, "collect_s": round(collect_s, 1),
                         "fit_s": round(fit_s, 1), "val_s": round(val_s, 1),
                         "session_wall_s": round(time.perf_counter() - t_start, 1),
