@@ -86,3 +86,14 @@ def test_a_seed_that_does_not_fit_the_run_is_a_value_error_naming_the_field(tmp_
         _cfg(tmp_path, init_actor=folder, algo="sac")
     with pytest.raises(ValueError, match="init_actor must be a policy folder"):
         _cfg(tmp_path, init_actor=3)
+
+
+def test_the_filtered_training_env_takes_the_filter_options_a_folder_ships_with():
+    from benchmarks.learning.trainers import filtered_task_env
+    from satenv.safety import SafetyError
+
+    env = filtered_task_env("servicing-pereira2022-random", penalty=1.0, safety={"margin": 0.005})
+    assert (env.safety.config.margin, env.safety.config.penalty) == (0.005, 1.0)
+    assert filtered_task_env("servicing-pereira2022-random").safety.config.margin == 0.02   # the default
+    with pytest.raises(SafetyError, match="unknown option.*'margn'"):
+        filtered_task_env("servicing-pereira2022-random", safety={"margn": 0.005})

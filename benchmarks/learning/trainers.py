@@ -40,13 +40,17 @@ the expert labels): one round per checkpoint, so the labels are ``CHECKPOINTS x 
 episode steps`` (:data:`benchmarks.learning.grid.DAGGER_LABELS`)."""
 
 
-def filtered_task_env(task: str, penalty: float = FILTER_PENALTY, **overrides: Any) -> Any:
+def filtered_task_env(task: str, penalty: float = FILTER_PENALTY, safety: dict[str, Any] | None = None,
+                      **overrides: Any) -> Any:
     """The training task's env with the safety filter inside its ``step`` and the intervention
-    penalty on (an env id ``benchmarks.learning.trainers:filtered_task_env`` for ``training.train``)."""
+    penalty on (an env id ``benchmarks.learning.trainers:filtered_task_env`` for ``training.train``);
+    ``safety``: the filter's other options (``satenv.safety.SafetyConfig`` fields, e.g. the margin a
+    policy folder ships with, ``{"margin": 0.005}``)."""
     from satenv import tasks
     from satenv.safety import SafetyConfig
 
-    return tasks.get(task).make_env(safety_filter=SafetyConfig(penalty=penalty), **overrides)
+    config = SafetyConfig.from_options(SafetyConfig(penalty=penalty), **(safety or {}))
+    return tasks.get(task).make_env(safety_filter=config, **overrides)
 
 
 def _fast(trainer: str) -> dict[str, Any]:
