@@ -106,8 +106,11 @@ def _load_note(results: dict[str, Any]) -> str:
     loads = [r["load_avg_1m"] for r in results["records"] if r.get("load_avg_1m") is not None]
     if not loads:
         return "on two CPU cores shared with other jobs"
+    spread = max((max(w) / min(w) for rows in _groups(results).values() for recs in rows.values()
+                  if len(w := [r["wall_s"] for r in recs if r.get("wall_s")]) > 1), default=1.0)
     return (f"on two CPU cores shared with other jobs (1-minute load average {min(loads):.0f}-{max(loads):.0f} "
-            "at the checkpoints)")
+            f"at the checkpoints); the seeds of one row differ by up to {spread:.0f}x with the load and the run's "
+            "share of the CPU, so compare algorithms by their budgets, not by this column")
 
 
 def _says(system: str, groups: dict[Group, list[dict[str, Any]]], ctrl: dict[str, Any] | None) -> str:
