@@ -35,3 +35,31 @@ def docs_site(tmp_path_factory):
     out = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(site)],
                          cwd=root, capture_output=True, text=True, env=env, timeout=600)
     return site, out
+
+
+@pytest.fixture
+def feedback_policy():
+    """A factory of small learned policies for 9-entry observations and 3-axis actions:
+    ``feedback_policy(hidden=32, terminal=True)``, a tanh MLP with terminal feedback of radius 2
+    (its blend weight is ``exp(-|obs[:3]| / 2)``) unless ``terminal`` is false."""
+    def make(hidden: int = 32, terminal: bool = True):
+        from training.actor import MLPActor
+        from training.policy import LearnedPolicy, ObsNormalizer
+        from training.shaping import TerminalFeedback
+
+        return LearnedPolicy(MLPActor(9, 3, [hidden], "tanh", True), ObsNormalizer(), obs_shape=(9,),
+                             terminal=TerminalFeedback(radius=2.0) if terminal else None)
+    return make
+
+
+@pytest.fixture
+def unconstrained_rows():
+    """A factory of ``training.safe_imitation`` fit data whose every label is ``label`` and whose
+    one filter row per agent-step can never bind: ``unconstrained_rows(obs, label)``."""
+    def make(obs, label):
+        import numpy as np
+
+        n = len(obs)
+        return {"obs": obs, "label": label, "expert": label, "filtered": label, "intervened": np.zeros(n, bool),
+                "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+    return make

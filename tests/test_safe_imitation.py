@@ -260,13 +260,9 @@ def test_hinge_of_an_unreachable_bound_asks_for_the_best_along_the_row(norm_mode
 
 
 @pytest.mark.parametrize("space", ["flown", "network"])
-def test_imitation_space_fits_the_flown_action_or_the_networks_output(space):
+def test_imitation_space_fits_the_flown_action_or_the_networks_output(space, feedback_policy, unconstrained_rows):
     """With terminal feedback blended in, "flown" fits what is flown to the label and "network"
     the network's own output (the DAgger engine's objective)."""
-    from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer
-    from training.shaping import TerminalFeedback
-
     rng = np.random.default_rng(3)
     n = 256
     obs = rng.normal(scale=0.05, size=(n, 9))
@@ -274,11 +270,9 @@ def test_imitation_space_fits_the_flown_action_or_the_networks_output(space):
     obs[:, :3] = 3.5 * e / np.linalg.norm(e, axis=1, keepdims=True)   # w = exp(-3.5 / 2) = 0.17: label reachable
     obs = obs.astype(np.float32)
     label = np.full((n, 3), 0.3, np.float32)
-    data = {"obs": obs, "label": label, "expert": label, "filtered": label, "intervened": np.zeros(n, bool),
-            "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+    data = unconstrained_rows(obs, label)
     torch.manual_seed(0)
-    pol = LearnedPolicy(MLPActor(9, 3, [32], "tanh", True), ObsNormalizer(), obs_shape=(9,),
-                        terminal=TerminalFeedback(radius=2.0))
+    pol = feedback_policy()
     cfg = SafeDaggerConfig(label="expert", w_bar=0.0, w_int=0.0, epochs=80, batch_size=64, learning_rate=3e-3,
                            imitation_space=space)
     fit(pol, data, cfg, False, torch.Generator().manual_seed(0))

@@ -84,14 +84,8 @@ def tasks_root():
     return Path(__file__).resolve().parents[1]
 
 
-def test_teacher_labels_with_terminal_feedback_must_be_compared_flown():
-    from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer
-    from training.shaping import TerminalFeedback
-
-    with_fb = LearnedPolicy(MLPActor(9, 3, [8], "tanh", True), ObsNormalizer(), obs_shape=(9,),
-                            terminal=TerminalFeedback(radius=2.0))
-    without = LearnedPolicy(MLPActor(9, 3, [8], "tanh", True), ObsNormalizer(), obs_shape=(9,))
+def test_teacher_labels_with_terminal_feedback_must_be_compared_flown(feedback_policy):
+    with_fb, without = feedback_policy(hidden=8), feedback_policy(hidden=8, terminal=False)
     with pytest.raises(SatenvError, match="imitation_space"):
         check_label_space(SafeDaggerConfig(label="teacher", imitation_space="network",
                                            system="servicing-pereira2022"), with_fb)
@@ -101,12 +95,10 @@ def test_teacher_labels_with_terminal_feedback_must_be_compared_flown():
     check_label_space(SafeDaggerConfig(label="expert", imitation_space="network"), with_fb)
 
 
-def test_the_warm_start_is_a_fixed_point_of_its_own_flown_teacher_labels():
+def test_the_warm_start_is_a_fixed_point_of_its_own_flown_teacher_labels(feedback_policy, unconstrained_rows):
     """With terminal feedback, the teacher's unfiltered flown action as the label: the flown
     objective is zero at the warm start (the fit does not move it), the network-space one is not."""
     from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer
-    from training.shaping import TerminalFeedback
 
     rng = np.random.default_rng(4)
     n = 256
@@ -117,14 +109,12 @@ def test_the_warm_start_is_a_fixed_point_of_its_own_flown_teacher_labels():
     torch.manual_seed(0)
     moved = {}
     for space in ("flown", "network"):
-        pol = LearnedPolicy(MLPActor(9, 3, [32], "tanh", True), ObsNormalizer(), obs_shape=(9,),
-                            terminal=TerminalFeedback(radius=2.0))
+        pol = feedback_policy()
         torch.manual_seed(0)
         pol.actor.load_state_dict(MLPActor(9, 3, [32], "tanh", True).state_dict())
         label = pol.predict(obs)                          # the teacher's flown action, unfiltered
         before = pol.predict(obs)
-        data = {"obs": obs, "label": label, "expert": label, "filtered": label, "intervened": np.zeros(n, bool),
-                "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+        data = unconstrained_rows(obs, label)
         cfg = SafeDaggerConfig(label="teacher", system="servicing-pereira2022", w_bar=0.0, w_int=0.0, epochs=20,
                                batch_size=64, learning_rate=3e-3, imitation_space=space)
         terms = fit(pol, data, cfg, False, torch.Generator().manual_seed(0))
@@ -168,13 +158,9 @@ def test_handover_flies_alone_until_the_first_failure_then_behind_the_filter():
 
 
 @pytest.mark.parametrize("prior_space", ["network", "flown"])
-def test_prior_term_compares_in_its_own_space(prior_space):
+def test_prior_term_compares_in_its_own_space(prior_space, feedback_policy, unconstrained_rows):
     """Teacher rows in flown space beside a DAgger run's expert labels: ``prior_space="network"``
     fits the network's own output to the prior labels, ``"flown"`` what is flown."""
-    from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer
-    from training.shaping import TerminalFeedback
-
     rng = np.random.default_rng(5)
     n = 256
 
@@ -185,13 +171,10 @@ def test_prior_term_compares_in_its_own_space(prior_space):
         return o.astype(np.float32)
 
     obs, prior_obs = near(-1.0), near(+1.0)
-    zeros = np.zeros((n, 3), np.float32)
-    data = {"obs": obs, "label": zeros, "expert": zeros, "filtered": zeros, "intervened": np.zeros(n, bool),
-            "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
+    data = unconstrained_rows(obs, np.zeros((n, 3), np.float32))
     prior = {"obs": prior_obs, "act": np.full((n, 3), 0.3, np.float32)}
     torch.manual_seed(0)
-    pol = LearnedPolicy(MLPActor(9, 3, [32], "tanh", True), ObsNormalizer(), obs_shape=(9,),
-                        terminal=TerminalFeedback(radius=2.0))
+    pol = feedback_policy()
     cfg = SafeDaggerConfig(label="teacher", system="servicing-pereira2022", w_bar=0.0, w_int=0.0, epochs=80,
                            batch_size=64, learning_rate=3e-3, imitation_space="flown", prior_space=prior_space)
     fit(pol, data, cfg, False, torch.Generator().manual_seed(0), prior)
