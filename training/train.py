@@ -80,10 +80,11 @@ def learning_rate(cfg: TrainConfig):
     return cfg.lr
 
 
-def build_model(cfg: TrainConfig, venv):
+def build_model(cfg: TrainConfig, venv, seed=None):
     """The SB3 model of ``cfg``; with ``init_actor``, a PPO policy of the seed's shape (its
     activation for actor and critic, a ``tanh`` after the action head when the seed squashes:
-    the Gaussian's mean is then the seed's action), weights still random (:func:`seed_actor`)."""
+    the Gaussian's mean is then the seed's action), weights still random (:func:`seed_actor`).
+    ``seed``: the seed network when the caller has loaded it (:func:`init_policy`), else loaded here."""
     from stable_baselines3 import PPO, SAC
 
     common = {"seed": cfg.seed, "device": "cpu", "verbose": 0, "learning_rate": learning_rate(cfg),
@@ -91,7 +92,9 @@ def build_model(cfg: TrainConfig, venv):
     if cfg.algo == "ppo":
         arch = list(cfg.net_arch)
         policy_kwargs: dict[str, Any] = {"net_arch": {"pi": arch, "vf": arch}, "log_std_init": cfg.log_std_init}
-        spec = init_policy(cfg).actor.spec if cfg.init_actor else None
+        if seed is None and cfg.init_actor:
+            seed = init_policy(cfg)
+        spec = seed.actor.spec if seed is not None else None
         if spec is not None:
             from training.actor import ACTIVATIONS
 
@@ -491,13 +494,14 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     baseline_eval = _cached_baselines(out / "baselines_eval.json", eval_env, cfg, cfg.eval_seeds) if periodic else {}
 
     # 5. model
-    model = build_model(cfg, venv)
+    seed = init_policy(cfg) if cfg.init_actor else None
+    model = build_model(cfg, venv, seed)
     if ckpt:
         load_checkpoint(model, ckpt[1])
-    elif cfg.init_actor:
+    elif seed is not None:
         probe = make_env(cfg.env_id, **cfg.env_kwargs)   # start observations to check the seeding on
         starts = np.concatenate([np.stack(list(probe.reset(seed=cfg.seed + k)[0].values())) for k in range(4)])
-        diff = seed_actor(model, venv, init_policy(cfg), starts, {"features": features, "action_map": action_map})
+        diff = seed_actor(model, venv, seed, starts, {"features": features, "action_map": action_map})
         print(f"actor seeded from {cfg.init_actor} (its actions reproduced to {diff:.1e})", file=sys.stderr)
     model.tensorboard_log = str(out / "tb")
     history_path = out / "eval_history.json"
