@@ -17,8 +17,10 @@ from training.safe_imitation import (  # noqa: E402
     SafeDaggerConfig,
     check_label_space,
     collect_episode,
+    agent_constraints,
     episode_flight,
     fit,
+    label_filter_config,
     warm_start_filter,
 )
 
@@ -67,6 +69,45 @@ def test_teacher_label_is_the_teachers_action_filtered_at_the_students_state(fly
         applied = rows["flown" if fly == "alone" else "filtered"][sl]
         obs, *_ = ref.step({a: np.clip(applied[i], -1, 1).astype(np.float32) for i, a in enumerate(agents)})
     assert changed > 0                                   # the filter did change the teacher somewhere
+
+
+def test_a_label_filter_tightens_the_labels_and_rows_not_the_flight():
+    """With a tighter label filter the label is the teacher's action through *that* filter and the
+    barrier rows are its rows, while the flown action and the intervention record stay the shipped
+    filter's; the two filters disagree somewhere (else the test could not tell them apart)."""
+    kw = {"terminate_on_collision": False, "max_steps": 25}
+    env = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    agents = list(env.possible_agents)
+    n, d = len(agents), env.action_space(agents[0]).shape[0]
+    student = _Fixed(np.where(np.arange(n)[:, None] % 2 == 1, 1.0, -1.0) * np.ones((n, d)))
+    teacher = _Fixed(np.roll(student.a, 1, axis=1))
+    shipped = SafetyConfig(margin=0.05)
+    tight = label_filter_config(SafeDaggerConfig(label_filter={"margin": 3.0, "velocity_margin": 0.9, "gamma": 0.1}),
+                                shipped)
+    assert (tight.margin, tight.velocity_margin, tight.gamma, tight.los_margin) == (3.0, 0.9, 0.1, shipped.los_margin)
+    rows, _ = collect_episode(env, teacher, student, 700_321, "filtered", shipped, tight)
+    ref = tasks.training_task("platoon-pereira2022").make_env(**kw)
+    ref.reset(seed=700_321)
+    f_ship, f_tight = SafetyFilter(ref, shipped), SafetyFilter(ref, tight)
+    differ = 0
+    for k in range(len(rows["obs"]) // n):
+        sl = slice(k * n, (k + 1) * n)
+        label, _ = f_tight.filter(teacher.a)
+        flown, _ = f_ship.filter(student.a)
+        differ += int(not np.allclose(label, f_ship.filter(teacher.a)[0], atol=1e-5))
+        assert np.allclose(rows["label"][sl], label, atol=1e-5)
+        assert np.allclose(rows["filtered"][sl], flown, atol=1e-5)
+        r, lo = agent_constraints(f_tight, flown)
+        assert np.allclose(rows["rows"][sl], r, atol=1e-5) and np.allclose(rows["lower"][sl], lo, atol=1e-5)
+        ref.step({a: np.clip(flown[i], -1, 1).astype(np.float32) for i, a in enumerate(agents)})
+    assert differ > 0
+
+
+@pytest.mark.parametrize("bad", [{"bogus": 1.0}, {"velocity_margin": 2.0}, ["margin", 0.1]])
+def test_a_bad_label_filter_is_refused_naming_it(bad):
+    with pytest.raises(ValueError, match="label_filter|bogus|velocity_margin"):
+        SafeDaggerConfig(label_filter=bad)
+    assert label_filter_config(SafeDaggerConfig(), SafetyConfig(margin=0.05)) is None
 
 
 def test_the_filter_is_the_warm_starts_shipped_one(tmp_path):

@@ -19,7 +19,10 @@ given again override it). Every round:
    (``"mixed"``: alone and behind the filter in alternate episodes; ``"handover"``: alone until the
    first collision or hard-bound violation, then behind the filter). The expert (or teacher) acts
    at the state the flown network reached and is filtered there; the filter everywhere (labels,
-   rows, flights, validation) is the warm start's shipped one (:func:`warm_start_filter`);
+   rows, flights, validation) is the warm start's shipped one (:func:`warm_start_filter`), except
+   that ``label_filter`` (options of :class:`satenv.safety.SafetyConfig`) tightens the filter of the
+   labels and the barrier rows only (:func:`label_filter_config`): the network then copies an
+   expert held inside a smaller set, a slack for its imitation error against the shipped bounds;
 2. **fit** (warm start, all rows of every round) on
 
    ``L = |pi(o) - y|^2 + w_int * |pi(o) - F(pi_flown(o))|^2 [intervened rows] + w_bar * sum_k relu(l_k + m - r_k . pi(o))^2``
@@ -51,7 +54,7 @@ import argparse
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -133,6 +136,8 @@ class SafeDaggerConfig:
     imitation_space: str = "flown"       # IMITATION_SPACES
     prior_space: str = ""                # IMITATION_SPACES for the prior term ("": imitation_space); a DAgger
     #                                      run's labels are the expert's action, "network" with terminal feedback
+    label_filter: dict = field(default_factory=dict)   # SafetyConfig options over the shipped filter, for the
+    #                                      labels and barrier rows only ({}: the shipped filter)
 
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
@@ -145,6 +150,11 @@ class SafeDaggerConfig:
             raise SatenvError(f"prior_space must be '' or one of {list(IMITATION_SPACES)}, got {self.prior_space!r}")
         if self.fly not in FLIGHTS:
             raise SatenvError(f"fly must be one of {list(FLIGHTS)}, got {self.fly!r}")
+        if not isinstance(self.label_filter, dict):
+            raise SatenvError(f"label_filter must be a dict of SafetyConfig options, got {self.label_filter!r:.60}")
+        if self.label_filter:
+            from satenv.safety import SafetyConfig
+            SafetyConfig.from_options(**self.label_filter)     # unknown or out-of-range options raise here
         if self.prior_labels and not Path(self.prior_labels).is_dir():
             raise SatenvError(f"prior_labels must be a folder of round_*.npz label files, got {self.prior_labels!r}")
         if EXPERTS[self.system] is None and self.label in ("filtered", "expert"):
@@ -211,14 +221,16 @@ def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm
 
 # --------------------------------------------------------------------------- collection
 def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filtered",
-                    filter_config: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+                    filter_config: Any = None,
+                    label_config: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """The network flies ``env`` behind the filter (``fly="alone"``: without it, the filter's output
     only recorded; ``"handover"``: alone until the first collision or hard-bound violation, then
     behind the filter); every agent-step labelled (module docstring). Without an expert (``None``) the
     expert columns hold the network's own action. The expert (a re-planner, or the frozen teacher
     network) acts on the observation of the state the flown network reached, and its action is
     filtered at that state. ``filter_config``: the :class:`satenv.safety.SafetyConfig` of the filter
-    (the warm start's shipped one, :func:`warm_start_filter`; ``None``: the default)."""
+    (the warm start's shipped one, :func:`warm_start_filter`; ``None``: the default); ``label_config``
+    the filter of the labels and the barrier rows (``None``: ``filter_config``)."""
     from satenv.safety import SafetyFilter
 
     if fly not in EPISODE_FLIGHTS:
@@ -228,6 +240,7 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
         expert.reset(seed=seed)
     net.reset(seed=seed)
     filt = SafetyFilter(env, filter_config)
+    lfilt = filt if label_config is None else SafetyFilter(env, label_config)
     agents = list(env.possible_agents)
     rows: dict[str, list] = {k: [] for k in ("obs", "expert", "label", "filtered", "flown", "intervened",
                                              "rows", "lower")}
@@ -240,14 +253,14 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
         n = net.predict(o).astype(float)
         n_f, rec = filt.filter(n)
         if expert is None:
-            e, e_f = n, n_f
+            e, e_f = n, (n_f if lfilt is filt else lfilt.filter(n)[0])
         else:
             lab = expert.act(obs)
             e = np.stack([np.asarray(lab[a], dtype=float) for a in agents])
-            e_f, _ = filt.filter(np.clip(e, -1, 1))
+            e_f, _ = lfilt.filter(np.clip(e, -1, 1))
         applied = _box(n) if alone else n_f
         alone_steps += len(agents) if alone else 0
-        r, lo = agent_constraints(filt, applied)
+        r, lo = agent_constraints(lfilt, applied)
         rows["obs"].append(o)
         rows["expert"].append(e)
         rows["label"].append(e_f)
@@ -390,6 +403,14 @@ def warm_start_filter(folder: Path) -> Any:
     return shipped_filter(Path(folder), meta) or SafetyConfig()
 
 
+def label_filter_config(cfg: SafeDaggerConfig, shipped: Any) -> Any:
+    """The filter of the labels and the barrier rows: the ``shipped`` one with ``cfg.label_filter``'s
+    options replaced (``None`` when there are none: the shipped filter itself)."""
+    from satenv.safety import SafetyConfig
+
+    return SafetyConfig.from_options(shipped, **cfg.label_filter) if cfg.label_filter else None
+
+
 def check_label_space(cfg: SafeDaggerConfig, policy: Any) -> None:
     """Refuse teacher labels compared with the network's own output when the warm start blends in
     terminal feedback: the teacher's label is a *flown* action (its feedback blended in, then
@@ -431,6 +452,7 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
         expert = None
     norm_mode = safety_model(collect_env).norm_mode if hasattr(collect_env, "core") else False
     filter_config = warm_start_filter(Path(cfg.warm_start))
+    label_config = label_filter_config(cfg, filter_config)
     history_path = run_dir / "history.json"
     history = json.loads(history_path.read_text()) if history_path.is_file() else []
     done = len(history)
@@ -457,7 +479,7 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
             for j in range(cfg.episodes_per_round):
                 part, stats = collect_episode(collect_env, expert, policy,
                                               cfg.train_seed + (k - 1) * cfg.episodes_per_round + j,
-                                              episode_flight(cfg, j), filter_config)
+                                              episode_flight(cfg, j), filter_config, label_config)
                 stats["fly"] = episode_flight(cfg, j)
                 parts.append(part)
                 flown.append(stats)
@@ -477,7 +499,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
                        source="training.safe_imitation round checkpoint")
         steps = sum(s["agent_steps"] for s in flown)
         history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
-                        "weights": {f: getattr(cfg, f) for f in ("label", "fly", "w_int", "w_bar", "bar_margin",
+                        "weights": {f: getattr(cfg, f) for f in ("label", "label_filter", "fly", "w_int", "w_bar",
+                                                                 "bar_margin",
                                                                  "prior_weight", "imitation_space", "prior_space",
                                                                  "learning_rate",
                                                                  "epochs")}, "collect_s": round(collect_s, 1),
