@@ -225,3 +225,18 @@ def test_prior_term_compares_in_its_own_space(prior_space, feedback_policy, unco
     fitted, other = (raw, flown) if prior_space == "network" else (flown, raw)
     assert np.abs(fitted - 0.3).mean() < 0.03
     assert np.abs(other - 0.3).mean() > 0.05
+
+
+def test_validate_round_writes_the_validation_of_a_round(tmp_path):
+    """``--validate-round -1`` validates the warm start on the given seed counts into the run's
+    ``validation/`` folder; a round the run does not have is refused, naming it."""
+    from training.safe_imitation import main
+
+    warm = str(tasks_root() / "training/policies/platoon_pereira2022_dagger_shield")
+    argv = ["--run-dir", str(tmp_path), "--system", "platoon-pereira2022", "--warm-start", warm,
+            "--val-seeds", "1", "--val-shield-seeds", "1"]
+    main([*argv, "--validate-round", "-1"])
+    out = json.loads((tmp_path / "validation" / "round_-001_1_1.json").read_text())
+    assert out["round"] == -1 and out["val"]["alone"]["episodes"] == 1 and out["val"]["shield"]["episodes"] == 1
+    with pytest.raises(SatenvError, match="round 3"):
+        main([*argv, "--validate-round", "3"])

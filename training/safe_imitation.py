@@ -44,7 +44,8 @@ given again override it). Every round:
    success) and behind the filter (interventions per agent-step); the round is chosen on these.
 
 ``--ship training/policies/<name>`` copies the round :func:`choose` picks on validation (or
-``--ship-round k``) to a new policy folder. Rows, labels and history go to ``<run>/labels/round_NNNN.npz``, ``<run>/rounds/NNNN/`` (policy
+``--ship-round k``) to a new policy folder; ``--validate-round k`` validates round ``k`` (``-1``: the warm
+start) on ``--val-seeds`` / ``--val-shield-seeds`` seeds into ``<run>/validation/``. Rows, labels and history go to ``<run>/labels/round_NNNN.npz``, ``<run>/rounds/NNNN/`` (policy
 folder format) and ``<run>/history.json``.
 """
 
@@ -547,6 +548,24 @@ def ship(run_dir: Path, k: int, dest: Path) -> Path:
     return dest
 
 
+def validate_round(cfg: SafeDaggerConfig, run_dir: Path, k: int) -> Path:
+    """Round ``k`` of a run (``-1``: the warm start) on ``cfg.val_seeds`` / ``cfg.val_shield_seeds``
+    validation seeds (:func:`validate`, the warm start's shipped filter), written to
+    ``<run>/validation/round_NNNN_<alone>_<filtered>.json``; returns that path."""
+    from satenv import tasks
+    from training.policy import load
+
+    folder = Path(cfg.warm_start) if k == -1 else run_dir / "rounds" / f"{k:04d}"
+    if not folder.is_dir():
+        raise SatenvError(f"validate_round: round {k} has no folder {folder}")
+    val = validate(tasks.training_task(cfg.system), load(folder, shielded=False), cfg,
+                   warm_start_filter(Path(cfg.warm_start)))
+    out = run_dir / "validation" / f"round_{k:04d}_{cfg.val_seeds}_{cfg.val_shield_seeds}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"round": k, "source": str(folder), "val": val}, indent=1, default=float) + "\n")
+    return out
+
+
 def _json_scalar(v: Any) -> Any:
     """numpy scalars in the flown-episode stats as JSON values."""
     return v.item() if isinstance(v, np.generic) else str(v)
@@ -579,6 +598,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ship", type=Path, default=None,
                         help="ship the round chosen on validation (or --ship-round) to this new policy folder")
     parser.add_argument("--ship-round", type=int, default=None)
+    parser.add_argument("--validate-round", type=int, default=None,
+                        help="only validate this round (-1: the warm start) on --val-seeds / --val-shield-seeds")
     for f in SafeDaggerConfig.__dataclass_fields__.values():
         parser.add_argument("--" + f.name.replace("_", "-"), type=str, default=None, help="a JSON value")
     ns = parser.parse_args(argv)
@@ -590,9 +611,15 @@ def main(argv: list[str] | None = None) -> None:
     base = SafeDaggerConfig(**json.loads(saved.read_text())) if saved.is_file() else SafeDaggerConfig()
     over = {}
     for k, v in vars(ns).items():
-        if k in ("run_dir", "ship", "ship_round") or v is None:
+        if k in ("run_dir", "ship", "ship_round", "validate_round") or v is None:
             continue
         over[k] = v if SafeDaggerConfig.__dataclass_fields__[k].type in (str, "str") else json.loads(v)
+    if ns.validate_round is not None:
+        path = validate_round(replace(base, **over), ns.run_dir, ns.validate_round)
+        val = json.loads(path.read_text())["val"]
+        print(f"wrote {path}: " + json.dumps({w: {m: val[w].get(m) for m in ("success_rate", "collision_episodes",
+              "violation_episodes", "interventions_per_agent_step")} for w in val}))
+        return
     run(replace(base, **over), ns.run_dir)
 
 
