@@ -240,3 +240,16 @@ def test_validate_round_writes_the_validation_of_a_round(tmp_path):
     assert out["round"] == -1 and out["val"]["alone"]["episodes"] == 1 and out["val"]["shield"]["episodes"] == 1
     with pytest.raises(SatenvError, match="round 3"):
         main([*argv, "--validate-round", "3"])
+
+
+def test_collect_decisions_cuts_a_collection_episode():
+    """``max_decisions`` stops the flight after that many decisions (every agent labelled each);
+    a negative or non-integer count is refused."""
+    env = tasks.training_task("platoon-pereira2022").make_env(terminate_on_collision=False, max_steps=25)
+    n, d = len(env.possible_agents), env.action_space(env.possible_agents[0]).shape[0]
+    student = _Fixed(np.zeros((n, d)))
+    rows, stats = collect_episode(env, None, student, 700_321, "alone", None, None, 7)
+    assert len(rows["obs"]) == 7 * n and stats["agent_steps"] == 7 * n
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError, match="collect_decisions"):
+            SafeDaggerConfig(collect_decisions=bad)

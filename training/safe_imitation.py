@@ -139,6 +139,7 @@ class SafeDaggerConfig:
     #                                      run's labels are the expert's action, "network" with terminal feedback
     label_filter: dict = field(default_factory=dict)   # SafetyConfig options over the shipped filter, for the
     #                                      labels and barrier rows only ({}: the shipped filter)
+    collect_decisions: int = 0           # a collection episode stops after this many decisions (0: at its end)
 
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
@@ -161,6 +162,9 @@ class SafeDaggerConfig:
         if EXPERTS[self.system] is None and self.label in ("filtered", "expert"):
             raise SatenvError(f"system {self.system!r} has no expert here: label must be 'self' or 'teacher', "
                               f"got {self.label!r}")
+        if isinstance(self.collect_decisions, bool) or not isinstance(self.collect_decisions, int) \
+                or self.collect_decisions < 0:
+            raise SatenvError(f"collect_decisions must be an int >= 0 (0: whole episodes), got {self.collect_decisions!r}")
         for name in ("w_int", "w_bar", "bar_margin", "learning_rate", "prior_weight"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
@@ -222,8 +226,8 @@ def barrier_hinge(actions: Any, rows: Any, lower: Any, margin: float = 0.0, norm
 
 # --------------------------------------------------------------------------- collection
 def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filtered",
-                    filter_config: Any = None,
-                    label_config: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+                    filter_config: Any = None, label_config: Any = None,
+                    max_decisions: int = 0) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """The network flies ``env`` behind the filter (``fly="alone"``: without it, the filter's output
     only recorded; ``"handover"``: alone until the first collision or hard-bound violation, then
     behind the filter); every agent-step labelled (module docstring). Without an expert (``None``) the
@@ -231,7 +235,8 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
     network) acts on the observation of the state the flown network reached, and its action is
     filtered at that state. ``filter_config``: the :class:`satenv.safety.SafetyConfig` of the filter
     (the warm start's shipped one, :func:`warm_start_filter`; ``None``: the default); ``label_config``
-    the filter of the labels and the barrier rows (``None``: ``filter_config``)."""
+    the filter of the labels and the barrier rows (``None``: ``filter_config``); ``max_decisions`` > 0
+    stops the episode after that many decisions (the early states of many starts)."""
     from satenv.safety import SafetyFilter
 
     if fly not in EPISODE_FLIGHTS:
@@ -248,7 +253,7 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
     collided, interventions, steps, infos = False, 0, 0, {}
     alone, alone_steps = fly != "filtered", 0
     while env.agents:
-        if len(env.agents) != len(agents):
+        if len(env.agents) != len(agents) or (max_decisions and steps >= max_decisions * len(agents)):
             break
         o = np.stack([obs[a] for a in agents])
         n = net.predict(o).astype(float)
@@ -480,7 +485,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
             for j in range(cfg.episodes_per_round):
                 part, stats = collect_episode(collect_env, expert, policy,
                                               cfg.train_seed + (k - 1) * cfg.episodes_per_round + j,
-                                              episode_flight(cfg, j), filter_config, label_config)
+                                              episode_flight(cfg, j), filter_config, label_config,
+                                              cfg.collect_decisions)
                 stats["fly"] = episode_flight(cfg, j)
                 parts.append(part)
                 flown.append(stats)
@@ -500,7 +506,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
                        source="training.safe_imitation round checkpoint")
         steps = sum(s["agent_steps"] for s in flown)
         history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
-                        "weights": {f: getattr(cfg, f) for f in ("label", "label_filter", "fly", "w_int", "w_bar",
+                        "weights": {f: getattr(cfg, f) for f in ("label", "label_filter", "collect_decisions", "fly",
+                                                                 "w_int", "w_bar",
                                                                  "bar_margin",
                                                                  "prior_weight", "imitation_space", "prior_space",
                                                                  "learning_rate",
