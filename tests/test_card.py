@@ -121,3 +121,25 @@ def test_update_readme_inserts_the_section_once_then_replaces_it(filtered_folder
 def test_the_command_line_refuses_an_unknown_folder():
     with pytest.raises(SystemExit, match="shipped policy"):
         cardmod.main(["no_such_policy"])
+
+
+def test_the_perturbations_are_a_table_of_each_variant_beside_the_controller():
+    """A both-ways file with a ``perturbations`` block gets one row per perturbation and variant
+    (the controller's on its own, shorter seed count); without the block, no table."""
+    ev = {"perturbations": {"seeds": [900_000, 900_009],
+                            "nav-1m": {NETWORK_ALONE: _agg(10, 0, 10, 10, delta_v=36.0),
+                                       AS_SHIPPED: _agg(10, 1, 0, 0, delta_v=260.0,
+                                                        interventions_per_agent_step=0.394),
+                                       "controller": _agg(3, 1, 2, 2, delta_v=85.0)},
+                            "thrust-80": {NETWORK_ALONE: _agg(10, 10, 0, 0, delta_v=1.0),
+                                          AS_SHIPPED: _agg(10, 10, 0, 0, delta_v=1.0),
+                                          "controller": {"error": "BaselineError: refuses the wrapped env"}}}}
+    lines = cardmod.perturbation_table(ev, "tube_rdmpc")
+    rows = [line for line in lines if line.startswith("| nav-1m") or line.startswith("| thrust-80")]
+    assert rows == ["| nav-1m | network alone | 10 | 0.00 | 10/10 | 10/10 | 36.0 | – |",
+                    "| nav-1m | as shipped | 10 | 0.10 | 0/10 | 0/10 | 260.0 | 39.4 % |",
+                    "| nav-1m | controller | 3 | 0.33 | 2/3 | 2/3 | 85.0 | – |",
+                    "| thrust-80 | network alone | 10 | 1.00 | 0/10 | 0/10 | 1.0 | – |",
+                    "| thrust-80 | as shipped | 10 | 1.00 | 0/10 | 0/10 | 1.0 | – |"]
+    assert "900000-900009" in lines[1] and "`tube_rdmpc`" in lines[1]
+    assert cardmod.perturbation_table({}, "dmpc") == []

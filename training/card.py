@@ -275,7 +275,37 @@ def both_ways(folder: Path) -> str:
         "Ratios: this variant / the controller, means over the matched episodes (seeds where both ran to "
         "the end without a collision)" + ("" if c["ratios_on"] == "matched" else
                                         f"; {ALL_SEEDS_MARK} over every seed (an older evaluation)") + ".",
+        *perturbation_table(ev, c["baseline"]),
         BOTH_WAYS_END])
+
+
+PERTURBATION_VARIANTS = ((NETWORK_ALONE, "network alone"), (AS_SHIPPED, "as shipped"), ("controller", "controller"))
+"""The variants of a both-ways evaluation's ``perturbations`` block, and their labels."""
+
+
+def perturbation_table(ev: dict[str, Any], controller: str) -> list[str]:
+    """The both-ways evaluation's ``perturbations`` (``benchmarks.safety_alone --perturbation-seeds``:
+    every perturbation of the task, each variant on the same first test seeds) as Markdown lines;
+    none when it has no such block."""
+    pert = ev.get("perturbations")
+    if not pert:
+        return []
+    lines = [f"**Under the task's perturbations** (`satenv.perturbations`; a navigation error is read by the "
+             f"filter too; test seeds {_seed_span(pert['seeds'])}, the controller `{controller}` on the first "
+             "n of them):", "",
+             "| perturbation | variant | episodes | success | collision ep. | violation ep. | Δv [m/s] "
+             "| interventions / agent-step |", "|---|---|--:|--:|--:|--:|--:|--:|"]
+    for name, row in pert.items():
+        if name == "seeds":
+            continue
+        for key, label in PERTURBATION_VARIANTS:
+            a = row.get(key)
+            if not a or "episodes" not in a:
+                continue
+            lines.append(f"| {name} | {label} | {a['episodes']} | {_f(a['success_rate'])} "
+                         f"| {_eps(a, 'collision_episodes')} | {_eps(a, 'violation_episodes')} "
+                         f"| {_f(a.get('delta_v'), '.1f')} | {_pct(a.get('interventions_per_agent_step'))} |")
+    return ["", *lines]
 
 
 def update_readme(folder: Path) -> bool:
