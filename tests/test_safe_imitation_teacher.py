@@ -196,6 +196,7 @@ def test_handover_flies_alone_until_the_first_failure_then_behind_the_filter():
             alone = False
     assert not alone and after > 0          # the handover happened, and the filter then changed actions
     assert stats["alone_agent_steps"] == alone_rows < stats["agent_steps"]
+    assert rows["alone"].sum() == alone_rows and rows["alone"][:alone_rows].all()   # the rows say who flew
 
 
 @pytest.mark.parametrize("prior_space", ["network", "flown"])
@@ -253,3 +254,25 @@ def test_collect_decisions_cuts_a_collection_episode():
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match="collect_decisions"):
             SafeDaggerConfig(collect_decisions=bad)
+
+
+def test_alone_weight_pulls_the_fit_towards_the_rows_flown_alone(feedback_policy, unconstrained_rows):
+    """The same observations labelled +0.5 where flown alone and -0.5 where flown behind the filter:
+    with equal weights the fit lands between them, with ``alone_weight`` 9 at their weighted mean
+    (+0.4), so the alone rows' label wins."""
+    obs = np.random.default_rng(5).normal(scale=0.05, size=(64, 9)).astype(np.float32)
+    obs = np.concatenate([obs, obs])
+    label = np.concatenate([np.full((64, 3), 0.5), np.full((64, 3), -0.5)]).astype(np.float32)
+    data = {**unconstrained_rows(obs, label), "alone": np.r_[np.ones(64, bool), np.zeros(64, bool)]}
+    means = {}
+    for weight in (1.0, 9.0):
+        pol = feedback_policy(terminal=False)
+        cfg = SafeDaggerConfig(label="teacher", system="servicing-pereira2022", w_bar=0.0, w_int=0.0, epochs=150,
+                               batch_size=128, learning_rate=1e-2, alone_weight=weight)
+        fit(pol, data, cfg, False, torch.Generator().manual_seed(0))
+        means[weight] = float(pol.predict(obs[:64]).mean())
+    assert abs(means[1.0]) < 0.05 and abs(means[9.0] - 0.4) < 0.05
+    data.pop("alone")                                 # rows of a label file without the flag: weight 1
+    fit(feedback_policy(terminal=False), data, SafeDaggerConfig(label="teacher", system="servicing-pereira2022",
+                                                                alone_weight=9.0, epochs=1), False,
+        torch.Generator().manual_seed(0))

@@ -27,6 +27,7 @@ given again override it). Every round:
 
    ``L = |pi(o) - y|^2 + w_int * |pi(o) - F(pi_flown(o))|^2 [intervened rows] + w_bar * sum_k relu(l_k + m - r_k . pi(o))^2``
 
+   (the imitation and barrier terms of a row flown by the network alone weighted ``alone_weight``)
    — imitation of the (filtered) expert, the **intervention term** (distance to the filter's output
    for the flown action, where it intervened) and the **barrier term**: the filter's rows are the
    discrete barrier condition on the next state (``h(x+) >= (1 - gamma) h(x)``, linear in the
@@ -140,6 +141,8 @@ class SafeDaggerConfig:
     label_filter: dict = field(default_factory=dict)   # SafetyConfig options over the shipped filter, for the
     #                                      labels and barrier rows only ({}: the shipped filter)
     collect_decisions: int = 0           # a collection episode stops after this many decisions (0: at its end)
+    alone_weight: float = 1.0            # weight of the rows flown by the network alone in the imitation and
+    #                                      barrier terms (rows of label files without the flag count as 1)
 
     def __post_init__(self) -> None:
         if self.system not in EXPERTS:
@@ -165,7 +168,7 @@ class SafeDaggerConfig:
         if isinstance(self.collect_decisions, bool) or not isinstance(self.collect_decisions, int) \
                 or self.collect_decisions < 0:
             raise SatenvError(f"collect_decisions must be an int >= 0 (0: whole episodes), got {self.collect_decisions!r}")
-        for name in ("w_int", "w_bar", "bar_margin", "learning_rate", "prior_weight"):
+        for name in ("w_int", "w_bar", "bar_margin", "learning_rate", "prior_weight", "alone_weight"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise SatenvError(f"{name} must be a finite number >= 0, got {v!r}")
@@ -249,7 +252,7 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
     lfilt = filt if label_config is None else SafetyFilter(env, label_config)
     agents = list(env.possible_agents)
     rows: dict[str, list] = {k: [] for k in ("obs", "expert", "label", "filtered", "flown", "intervened",
-                                             "rows", "lower")}
+                                             "rows", "lower", "alone")}
     collided, interventions, steps, infos = False, 0, 0, {}
     alone, alone_steps = fly != "filtered", 0
     while env.agents:
@@ -275,13 +278,14 @@ def collect_episode(env: Any, expert: Any, net: Any, seed: int, fly: str = "filt
         rows["intervened"].append(rec.intervened[0])
         rows["rows"].append(r)
         rows["lower"].append(lo)
+        rows["alone"].append(np.full(len(agents), alone))
         interventions += int(rec.intervened.sum())
         steps += len(agents)
         obs, _, _, _, infos = env.step({a: applied[i].astype(np.float32) for i, a in enumerate(agents)})
         collided |= any(bool(i.get("collision")) for i in infos.values())
         if fly == "handover" and any(bool(i.get("collision")) or bool(i.get("violations")) for i in infos.values()):
             alone = False
-    out = {k: np.concatenate(v).astype(np.float32 if k != "intervened" else bool) for k, v in rows.items()}
+    out = {k: np.concatenate(v).astype(bool if k in ("intervened", "alone") else np.float32) for k, v in rows.items()}
     return out, {"seed": seed, "agent_steps": steps, "interventions": interventions, "collision": collided,
                  "alone_agent_steps": alone_steps}
 
@@ -314,6 +318,8 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
     f = torch.as_tensor(data["filtered"], dtype=torch.float32)
     mask = torch.as_tensor(data["intervened"], dtype=torch.float32)
     rows, lower = torch.as_tensor(data["rows"]), torch.as_tensor(data["lower"])
+    alone = data.get("alone", np.zeros(len(data["obs"]), dtype=bool))
+    w = 1.0 + (cfg.alone_weight - 1.0) * torch.as_tensor(alone, dtype=torch.float32)   # per-row weight
     if prior is not None:
         px = _inputs(policy, prior["obs"])
         py = torch.as_tensor(prior["act"], dtype=torch.float32).clamp(-1, 1)
@@ -330,9 +336,9 @@ def fit(policy: Any, data: dict[str, np.ndarray], cfg: SafeDaggerConfig, norm_mo
         for idx in torch.randperm(len(x), generator=generator).split(cfg.batch_size):
             out = _env_action(actor(x[idx]), power)
             a = offset[idx] + slope[idx] * out
-            imit = (((a if on_flown else out) - y[idx]) ** 2).sum(-1).mean()
+            imit = (w[idx] * (((a if on_flown else out) - y[idx]) ** 2).sum(-1)).mean()
             inter = (mask[idx] * ((a - f[idx]) ** 2).sum(-1)).mean()
-            bar = barrier_hinge(a, rows[idx], lower[idx], cfg.bar_margin, norm_mode).mean()
+            bar = (w[idx] * barrier_hinge(a, rows[idx], lower[idx], cfg.bar_margin, norm_mode)).mean()
             loss = imit + cfg.w_int * inter + cfg.w_bar * bar
             pri = torch.zeros(())
             if prior is not None:
@@ -506,7 +512,8 @@ def run(cfg: SafeDaggerConfig, run_dir: Path) -> None:
                        source="training.safe_imitation round checkpoint")
         steps = sum(s["agent_steps"] for s in flown)
         history.append({"round": k, "rows": int(len(data["obs"])), "loss": terms,
-                        "weights": {f: getattr(cfg, f) for f in ("label", "label_filter", "collect_decisions", "fly",
+                        "weights": {f: getattr(cfg, f) for f in ("label", "label_filter", "collect_decisions",
+                                                                 "alone_weight", "fly",
                                                                  "w_int", "w_bar",
                                                                  "bar_margin",
                                                                  "prior_weight", "imitation_space", "prior_space",
@@ -592,10 +599,14 @@ def _load_prior(folder: Path) -> dict[str, np.ndarray]:
 
 
 def _load_rows(run_dir: Path) -> dict[str, np.ndarray]:
+    """Every round's rows of a run; a label file written before the ``alone`` flag counts its rows
+    as flown behind the filter."""
     parts = []
     for f in sorted((run_dir / "labels").glob("round_*.npz")):
         with np.load(f, allow_pickle=False) as d:
-            parts.append({k: d[k] for k in d.files})
+            part = {k: d[k] for k in d.files}
+        part.setdefault("alone", np.zeros(len(part["obs"]), dtype=bool))
+        parts.append(part)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
