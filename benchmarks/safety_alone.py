@@ -12,7 +12,8 @@ training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
   the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
 
 and writes ``<out>/safety_alone.json`` (aggregates, targets, matched ratios, every episode
-record; with ``--perturbation-seeds``, the first entry under every perturbation of its task) and
+record; with ``--perturbation-seeds``, the first entry (``--perturbation-entries``: the first n) under every
+perturbation of its task) and
 ``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
 interventions per agent-step); with ``--write-folders``, each entry's block without its episode
 records into its policy folder (:func:`folder_evaluation`: what ``training.card`` reports both ways
@@ -91,7 +92,7 @@ def _wall_s(records: list[dict[str, Any]]) -> float | None:
     """A variant's wall time [s]: the sum of its episodes' own times (an interrupted, resumed run
     counts each episode once); ``None`` when a record has no time (a cache of an earlier version)."""
     if records and all("wall_s" in r for r in records):
-        return round(sum(r["wall_s"] for r in records), 1)
+        return round(sum(r["wall_s"] for r in records), 3)
     return None
 
 
@@ -246,6 +247,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="the network behind the filter on the first n of each entry's seeds only (default: all)")
     p.add_argument("--perturbation-seeds", type=int, default=0,
                    help="the first entry also under every perturbation of its task, first n test seeds (0: none)")
+    p.add_argument("--perturbation-entries", type=int, default=1,
+                   help="with --perturbation-seeds: the first n entries under the perturbations (default: the first)")
     p.add_argument("--perturbation-controller-seeds", type=int, default=None,
                    help="the controller under each perturbation on the first n (default: min of the two counts above)")
     p.add_argument("--out", type=Path, default=None)
@@ -262,6 +265,8 @@ def main(argv: list[str] | None = None) -> None:
         return
     if not ns.entry or ns.out is None:
         raise SystemExit("error: --entry system=policy-folder[@episodes[:filtered]] (one or more) and --out are required")
+    if ns.perturbation_entries < 1:
+        raise SystemExit(f"error: --perturbation-entries must be at least 1, got {ns.perturbation_entries}")
     torch.set_num_threads(1)
     entries = []
     for spec in ns.entry:
@@ -275,12 +280,11 @@ def main(argv: list[str] | None = None) -> None:
     result = {"command": "python -m benchmarks.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
               "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache", nf)
                           for s, f, n, nf in entries]}
-    if ns.perturbation_seeds:   # the policy under study: the first entry
-        s, f, _, _ = entries[0]
-        result["entries"][0]["perturbations"] = evaluate_perturbed(
-            s, f, ns.perturbation_seeds,
-            min(ns.controller_seeds, ns.perturbation_seeds) if ns.perturbation_controller_seeds is None
-            else ns.perturbation_controller_seeds, ns.out / "cache")
+    if ns.perturbation_seeds:   # the policies under study: the first entries
+        n_controller = (min(ns.controller_seeds, ns.perturbation_seeds) if ns.perturbation_controller_seeds is None
+                        else ns.perturbation_controller_seeds)
+        for (s, f, _, _), block in zip(entries[:ns.perturbation_entries], result["entries"]):
+            block["perturbations"] = evaluate_perturbed(s, f, ns.perturbation_seeds, n_controller, ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     plot(result, ns.out / "safety_alone.png")
     if ns.write_folders:

@@ -73,3 +73,21 @@ def test_a_bad_entry_is_an_error(tmp_path):
         safety_alone.main(["--out", str(tmp_path)])
     with pytest.raises(SystemExit, match="folders-from"):
         safety_alone.main(["--folders-from", str(tmp_path / "missing.json")])
+
+
+def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(tmp_path):
+    from benchmarks import safety_alone
+    from satenv import tasks
+
+    folder = "training/policies/platoon_tplf_safe_distill"
+    base = ["--seeds", "1", "--controller-seeds", "0", "--perturbation-seeds", "1", "--out", str(tmp_path)]
+    entries = ["--entry", f"platoon-pereira2023={folder}", "--entry", f"platoon-pereira2023={folder}@1:0"]
+    safety_alone.main(entries + base + ["--perturbation-entries", "2"])
+    first, second = json.loads((tmp_path / "safety_alone.json").read_text())["entries"]
+    names = set(tasks.get(first["task"]).perturbations)
+    assert set(first["perturbations"]) - {"seeds"} == set(second["perturbations"]) - {"seeds"} == names
+    safety_alone.main(entries + base)                       # the default: the first entry only
+    first, second = json.loads((tmp_path / "safety_alone.json").read_text())["entries"]
+    assert set(first["perturbations"]) - {"seeds"} == names and "perturbations" not in second
+    with pytest.raises(SystemExit, match="perturbation-entries"):
+        safety_alone.main(entries + base + ["--perturbation-entries", "0"])
