@@ -12,8 +12,8 @@ training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
   the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
 
 and writes ``<out>/safety_alone.json`` (aggregates, targets, matched ratios, every episode
-record; with ``--perturbation-seeds``, the first entry (``--perturbation-entries``: the first n) under every
-perturbation of its task) and
+record; with ``--perturbation-seeds``, the first entry (``--perturbation-entries``: the first n)
+under every perturbation of its task) and
 ``<out>/safety_alone.png`` (collision-free and violation-free episodes of each variant,
 interventions per agent-step); with ``--write-folders``, each entry's block without its episode
 records into its policy folder (:func:`folder_evaluation`: what ``training.card`` reports both ways
@@ -246,7 +246,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--filter-seeds", type=int, default=None,
                    help="the network behind the filter on the first n of each entry's seeds only (default: all)")
     p.add_argument("--perturbation-seeds", type=int, default=0,
-                   help="the first entry also under every perturbation of its task, first n test seeds (0: none)")
+                   help="the first entry (more: --perturbation-entries) also under every perturbation of "
+                        "its task, on the first n test seeds (0: none)")
     p.add_argument("--perturbation-entries", type=int, default=1,
                    help="with --perturbation-seeds: the first n entries under the perturbations (default: the first)")
     p.add_argument("--perturbation-controller-seeds", type=int, default=None,
@@ -265,8 +266,9 @@ def main(argv: list[str] | None = None) -> None:
         return
     if not ns.entry or ns.out is None:
         raise SystemExit("error: --entry system=policy-folder[@episodes[:filtered]] (one or more) and --out are required")
-    if ns.perturbation_entries < 1:
-        raise SystemExit(f"error: --perturbation-entries must be at least 1, got {ns.perturbation_entries}")
+    if not 1 <= ns.perturbation_entries <= len(ns.entry):
+        raise SystemExit(f"error: --perturbation-entries must be between 1 and the {len(ns.entry)} --entry "
+                         f"given, got {ns.perturbation_entries}")
     torch.set_num_threads(1)
     entries = []
     for spec in ns.entry:
@@ -283,7 +285,8 @@ def main(argv: list[str] | None = None) -> None:
     if ns.perturbation_seeds:   # the policies under study: the first entries
         n_controller = (min(ns.controller_seeds, ns.perturbation_seeds) if ns.perturbation_controller_seeds is None
                         else ns.perturbation_controller_seeds)
-        for (s, f, _, _), block in zip(entries[:ns.perturbation_entries], result["entries"]):
+        k = ns.perturbation_entries
+        for (s, f, _, _), block in zip(entries[:k], result["entries"][:k], strict=True):
             block["perturbations"] = evaluate_perturbed(s, f, ns.perturbation_seeds, n_controller, ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     plot(result, ns.out / "safety_alone.png")

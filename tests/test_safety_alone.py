@@ -91,3 +91,5 @@ def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(
     assert set(first["perturbations"]) - {"seeds"} == names and "perturbations" not in second
     with pytest.raises(SystemExit, match="perturbation-entries"):
         safety_alone.main(entries + base + ["--perturbation-entries", "0"])
+    with pytest.raises(SystemExit, match="perturbation-entries"):
+        safety_alone.main(entries + base + ["--perturbation-entries", "3"])
