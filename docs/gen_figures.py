@@ -35,9 +35,8 @@ EPISODES: dict[str, dict] = {
 
 def env_figure(env_id: str, spec: dict, out_dir: Path) -> dict:
     """Run one seed-0 episode of ``env_id`` under its baseline; save the PNG; return the caption."""
-    import baselines
     import satenv
-    from satenv import metrics
+    from satenv import baselines, metrics
     from satenv.render import plot_trajectory
     from satenv.rollout import rollout
 
@@ -51,7 +50,7 @@ def env_figure(env_id: str, spec: dict, out_dir: Path) -> dict:
                             title=f"{env_id} ({env.scenario.name}) under {spec['baseline']}")
     kwargs = ", ".join(f"{k}={v!r}" for k, v in spec["env_kwargs"].items())
     caption = (f"`satenv.make({env_id!r}{', ' + kwargs if kwargs else ''})` under "
-               f"`baselines.make({spec['baseline']!r}, env)`, seed 0: {len(traj.t) - 1} steps "
+               f"`satenv.baselines.make({spec['baseline']!r}, env)`, seed 0: {len(traj.t) - 1} steps "
                f"({traj.t[-1]:.4g} s); success {s['success']}, final error "
                f"{s['final_error_m']:.3g} m, Δv {s['delta_v']:.4g} m/s, collision flags "
                f"{s['collisions']}. Dots: final positions, lines: trails, in the LVLH frame (star: origin).")

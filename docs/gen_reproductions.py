@@ -2,7 +2,7 @@
 
 Usage:  python docs/gen_reproductions.py [--slow] [--only pereira2023,kannan2022] [--render-only]
 
-For each paper, runs ``python -m benchmarks.reproduce <paper> --out <paper>.json --plots <paper>/``,
+For each paper, runs ``python -m satenv.bench.reproduce <paper> --out <paper>.json --plots <paper>/``,
 keeps the printed table as ``<paper>.txt`` and renders the JSON into ``<paper>.md`` (:func:`render`:
 the departures table, the claims with the paper's sentence, value, rule and our measurement, the
 as-published / ablation / analysis tables). The reproduction pages include these files at build
@@ -30,7 +30,7 @@ ROOT = DOCS.parent
 OUT = DOCS / "assets" / "reproductions"
 
 sys.path.insert(0, str(ROOT))
-from benchmarks.claims import count, markdown_claims, markdown_departures  # noqa: E402
+from satenv.bench.claims import count, markdown_claims, markdown_departures  # noqa: E402
 
 PAPERS: dict[str, bool] = {
     "pereira2023": False,
@@ -39,14 +39,14 @@ PAPERS: dict[str, bool] = {
     "pereira2022-servicing": True,
     "li2022": True,
 }
-"""Paper name (as ``benchmarks.reproduce`` knows it) -> slow (minutes rather than seconds)."""
+"""Paper name (as ``satenv.bench.reproduce`` knows it) -> slow (minutes rather than seconds)."""
 
 
 def reproduce(paper: str) -> int:
     """Run one reproduction into ``OUT``; returns its exit status (0: every claim met)."""
     plots = OUT / paper
     shutil.rmtree(plots, ignore_errors=True)
-    cmd = [sys.executable, "-m", "benchmarks.reproduce", paper,
+    cmd = [sys.executable, "-m", "satenv.bench.reproduce", paper,
            "--out", str(OUT / f"{paper}.json"), "--plots", str(plots)]
     start = time.perf_counter()
     out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)

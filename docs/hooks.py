@@ -11,7 +11,7 @@ host), each alone on a line:
     status, the rendered ``assets/reproductions/<paper>.md`` (departures, claims with the paper's
     sentence, as-published and analysis tables), the command's printed table and every figure of
     ``assets/reproductions/<paper>`` (all written by ``docs/gen_reproductions.py``);
-``<!-- include: benchmarks/published/scoreboard.md -->``, ``<!-- include: README.md#quick-start -->``
+``<!-- include: studies/published/scoreboard.md -->``, ``<!-- include: README.md#quick-start -->``
     a repository file's Markdown (path from the repository root), or the section under one
     heading (its slug), headings shifted one level down; its relative links to ``docs/`` pages
     are re-pointed, other relative links become plain paths;
@@ -37,7 +37,7 @@ from mkdocs.structure.files import File
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
-MOUNTS = {"scoreboard/plots": ROOT / "benchmarks" / "published" / "plots"}
+MOUNTS = {"scoreboard/plots": ROOT / "studies" / "published" / "plots"}
 """Site folder -> repository folder served there."""
 
 _MARKER = re.compile(r"^<!-- (docstring|env-figure|reproduction|include|gallery|tasks): (\S+) -->$", re.M)
@@ -173,7 +173,7 @@ def claims_table(claims: Any) -> str:
 def reproduction(paper: str, page_src: str) -> str:
     base = DOCS / "assets" / "reproductions"
     json_path = base / f"{paper}.json"
-    command = f"python -m benchmarks.reproduce {paper} --out {paper}.json --plots figs/"
+    command = f"python -m satenv.bench.reproduce {paper} --out {paper}.json --plots figs/"
     if not json_path.exists():
         return (f"!!! note \"Not generated yet\"\n    `{json_path.relative_to(ROOT)}` is not in this "
                 f"checkout: run `python docs/gen_reproductions.py --only {paper}` (or `{command}`).")

@@ -130,3 +130,16 @@ _register_gymnasium()
 
 __all__ = ["ENV_IDS", "EnvModule", "GYM_IDS", "GYM_MAX_EPISODE_STEPS", "__version__", "cluster_v0", "formation_v0", "make", "make_vec",
            "platoon_v0", "servicing_v0"]
+
+_SUBMODULES = frozenset({"allocation", "dynamics", "envs", "errors", "metrics", "perturbations", "rollout", "safety",
+                         "scenarios", "scoring", "tasks", "vector", "baselines", "training", "bench"})
+"""Submodules reachable as attributes after a bare ``import satenv`` (``satenv.tasks.names()``);
+each is imported on first use, so ``import satenv`` stays light."""
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        import importlib
+
+        return importlib.import_module(f"satenv.{name}")
+    raise AttributeError(f"module 'satenv' has no attribute {name!r}")

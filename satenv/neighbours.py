@@ -25,7 +25,7 @@ __all__ = ["DENSE_MAX", "METHODS", "nearest", "norm3", "pairs_within"]
 
 DENSE_MAX: int = 24
 """Largest number of bodies per copy for which ``method="auto"`` uses the dense kernel (measured
-crossover on one core: the tree wins from about 32 bodies; ``benchmarks.perf --sections scaling``)."""
+crossover on one core: the tree wins from about 32 bodies; ``satenv.bench.perf --sections scaling``)."""
 
 METHODS = ("auto", "dense", "tree")
 

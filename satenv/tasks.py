@@ -22,8 +22,8 @@ seed, usable by RL: every start outside the keep-out zones) and a **paper task**
 deterministic, reproducing the paper). The other tasks (``role="extra"``) are variants the
 scoreboard also runs (other topologies, J2 truth, swarms).
 
-The registry imports no baseline: controllers and experts are names that ``baselines.make`` and
-``training.experts.make`` resolve.
+The registry imports no baseline: controllers and experts are names that ``satenv.baselines.make`` and
+``satenv.baselines.experts.make`` resolve.
 """
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ task on that env, the reference of the board's normalised score."""
 
 @dataclass(frozen=True)
 class System:
-    """A paper system: its label, its expert for imitation (a ``training.experts`` registry name)
+    """A paper system: its label, its expert for imitation (a ``satenv.baselines.experts`` registry name)
     and its training and paper tasks; its controller is its env's (:data:`CONTROLLERS`)."""
 
     name: str
@@ -197,7 +197,7 @@ class Task:
 
     @property
     def expert(self) -> str | None:
-        """The system's expert for imitation (a ``training.experts`` registry name)."""
+        """The system's expert for imitation (a ``satenv.baselines.experts`` registry name)."""
         return SYSTEMS[self.system].expert if self.system else None
 
     def seeds(self, split: str, n: int | None = None) -> tuple[int, ...]:

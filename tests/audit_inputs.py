@@ -5,17 +5,17 @@
 Entry points: the four env constructors (random fields of random kinds and magnitudes), ``reset``
 (seeds and ``initial_state`` options) and ``step`` (actions) of each env, ``Orbit``,
 ``simulate``, ``satenv.make_vec`` (``num_envs``, seeds) and its ``step`` (actions of random
-shapes, dtypes and values), ``baselines.make`` (every baseline, random options, on envs it does
-and does not support and on non-envs; an accepted one acts once) and ``training.load`` (a good
+shapes, dtypes and values), ``satenv.baselines.make`` (every baseline, random options, on envs it does
+and does not support and on non-envs; an accepted one acts once) and ``satenv.training.load`` (a good
 policy folder with random corruptions: random bytes, random JSON, truncation, deleted files,
 edited fields, bad tensors, with and without a re-hashed manifest); and the newest parts: the
 filtered envs (``satenv.make(env_id, safety_filter=True)`` and a filtered ``make_vec`` stepped
 with actions far outside the box -- 1e300, the most negative float -- and bad actions), the
 safety API (``SafetyConfig.from_options``, ``SafetyFilter`` on non-envs and ``filter`` with
 actions of other shapes, dtypes and values, ``shield`` with non-policies), every NLP/QP
-baseline deciding after its env's true state went non-finite, ``training.load`` of unusable
+baseline deciding after its env's true state went non-finite, ``satenv.training.load`` of unusable
 paths and of a folder shipped behind its filter without ``env``, ``gymnasium.make`` with bad
-``render_mode``/``max_steps``, and ``--resume`` (``training.train.load_checkpoint``) of corrupted
+``render_mode``/``max_steps``, and ``--resume`` (``satenv.training.train.load_checkpoint``) of corrupted
 checkpoints (zip bombs, oversized or torn files). With the default ``--n 600`` that is 40 entry
 points, 24,000 cases. Each call runs under a SIGALRM timeout and is counted as one of:
 
@@ -334,8 +334,7 @@ NON_ENVS = (None, "platoon_v0", object(), 3, {"name": "platoon_v0"}, np.zeros(3)
 
 
 def audit_baseline(envs: dict, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    import baselines
-
+    from satenv import baselines
     name = str(rng.choice(sorted(baselines.BASELINES)))
     cls = baselines.get(name)
     cfg = getattr(baselines, cls.__name__ + "Config", None)
@@ -366,17 +365,16 @@ def audit_baseline(envs: dict, rng: np.random.Generator, timeout: float) -> tupl
     return ("accepted" if ok else "nonfinite"), field
 
 
-# ------------------------------------------------------------------------------- training.load
+# ------------------------------------------------------------------------------- satenv.training.load
 def audit_load(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    """``training.load`` of a good folder with 1-2 random corruptions (random bytes or JSON,
+    """``satenv.training.load`` of a good folder with 1-2 random corruptions (random bytes or JSON,
     truncation, deleted files, edited fields, bad tensors, huge safetensors headers, links to a
     file outside, FIFOs, directories, 8 GB sparse files), re-hashed into the manifest half the
     time; also counts files opened outside the folder, memory growth past ``OVER_CAP_MB`` and
     the outside file's content echoed in an error."""
     from pathlib import Path
 
-    import training
-
+    from satenv import training
     with tempfile.TemporaryDirectory(dir=tmp) as folder:
         root = good_policy_folder(Path(folder) / "p")
         names = []
@@ -445,8 +443,8 @@ def good_policy_folder(root):
     """A small valid policy folder (identity-free normaliser) written by ``save_artifacts``."""
     import torch
 
-    from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
+    from satenv.training.actor import MLPActor
+    from satenv.training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
 
     torch.manual_seed(0)
     actor = MLPActor(6, 3, [8], "tanh", False)
@@ -635,7 +633,7 @@ def _fault_cases():
     from test_baseline_registry import _bad_point, _FakeNLP
 
     def dmpc(pol, kind, hits):
-        from baselines.dmpc import QPSolver
+        from satenv.baselines.dmpc import QPSolver
         real = QPSolver.solve_raw
 
         def faulty(self):
@@ -665,7 +663,7 @@ def _fault_cases():
         return lambda: pol.__dict__.pop("_law", None)
 
     def cgmres(pol, kind, hits):
-        import baselines.cgmres as mod
+        import satenv.baselines.cgmres as mod
         real = mod.gmres
 
         def faulty(matvec, b, x0, kmax):
@@ -723,15 +721,14 @@ class _Stalled:
 
 def _failures(info: dict) -> int:
     """Solver failures recorded in a policy's ``info`` (each one a fallback or, before a retry,
-    ``solver_failures``; see ``baselines.base.guarded_solve``)."""
+    ``solver_failures``; see ``satenv.baselines.base.guarded_solve``)."""
     return max(info.get("fallbacks", 0), info.get("solver_failures", 0))
 
 
 def audit_solver_faults(steps: int = 3) -> dict:
     """Inject every fault kind into every baseline's solver for ``steps`` decisions; count each
     injected solve as flagged / crashed / unflagged."""
-    import baselines
-
+    from satenv import baselines
     out = {}
     for name, env_id, env_kwargs, options, install in _fault_cases():
         row = Counter()
@@ -778,8 +775,8 @@ def audit_crafted_policy() -> dict:
     import zipfile
     from pathlib import Path
 
-    import training
-    from training.policy import write_manifest
+    from satenv import training
+    from satenv.training.policy import write_manifest
 
     class Boom:
         def __reduce__(self):
@@ -835,11 +832,11 @@ def _evil_module(tmp: str) -> str:
 
 
 class _Reached(Exception):
-    """Raised by the stand-in for ``training.train.train``: the config was accepted."""
+    """Raised by the stand-in for ``satenv.training.train.train``: the config was accepted."""
 
 
 def audit_config(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    """``python -m training.train --config FILE`` (its ``main``, training replaced by a stub)
+    """``python -m satenv.training.train --config FILE`` (its ``main``, training replaced by a stub)
     with a shipped config whose env id, baselines or other fields are replaced by random,
     unregistered or code-naming values (``subprocess:run`` with a shell command that would
     create a marker, a module whose import would); ``--allow-code-env-id`` a tenth of the time.
@@ -848,12 +845,12 @@ def audit_config(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[st
     import io
     from pathlib import Path
 
-    import baselines
-    import training.train as tt
+    import satenv.training.train as tt
+    from satenv import baselines
 
     marker = _evil_module(tmp)
     shell_marker = os.path.join(tmp, "SHELL_RAN")
-    base = json.loads((Path(__file__).parents[1] / "training/policies/platoon_tplf_ppo/config.json").read_text())
+    base = json.loads((Path(__file__).parents[1] / "satenv/training/policies/platoon_tplf_ppo/config.json").read_text())
     cfg = dict(base, out_dir=os.path.join(tmp, "run"))
     ids = [*satenv.ENV_IDS, "subprocess:run", "os:system", "builtins:exec", f"{EVIL_MODULE}:make", "x:y",
            "platoon_v1", "", "PLATOON_V0", 3, None, ["platoon_v0"], {"a": 1}, "satenv:make", "../../etc:passwd"]
@@ -927,8 +924,7 @@ def audit_metrics(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
     (arrays emptied, truncated, reshaped, NaN/inf/huge entries, other dtypes; bad ``dt``, ``t``,
     ``success_tol``, ``collision_voids_success``, ``agents``, ``compute_time``, fallbacks);
     ``nonfinite`` counts a NaN/inf result other than the documented not-converged ``nan``."""
-    import baselines
-    from satenv import metrics
+    from satenv import baselines, metrics
     from satenv.rollout import rollout
 
     if not _TRAJ:
@@ -1008,8 +1004,8 @@ NONNEGATIVE_METRICS = frozenset({"delta_v_total", "delta_v", "min_separation", "
 
 # ------------------------------------------------------------------------------- ids, indices, device, CLIs
 def audit_make_id(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    """``satenv.make`` / ``satenv.make_vec`` / ``training.envs.make_env`` with a bad env id."""
-    from training.envs import make_env
+    """``satenv.make`` / ``satenv.make_vec`` / ``satenv.training.envs.make_env`` with a bad env id."""
+    from satenv.training.envs import make_env
 
     pool = [["platoon_v0"], None, 3, {"a": 1}, b"platoon_v0", "platoon_v9", "", "PLATOON_V0", "platoon_v0 ",
             ("platoon_v0",), 1.5, "satenv.envs.platoon_v0", "subprocess:run", np.str_("cluster_v0"), object()]
@@ -1065,8 +1061,8 @@ def audit_device(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
 
 
 def audit_cli_paths(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    """``python -m benchmarks.scoreboard --out PATH`` with PATH a file, a path through a file or
-    an existing file's name; ``python -m benchmarks.reproduce PAPER`` with path-like or unknown
+    """``python -m satenv.bench.scoreboard --out PATH`` with PATH a file, a path through a file or
+    an existing file's name; ``python -m satenv.bench.reproduce PAPER`` with path-like or unknown
     papers. Either must end in the CLI's own error (a non-zero exit with a message), never a
     traceback, and must leave the file untouched."""
     import io
@@ -1075,16 +1071,16 @@ def audit_cli_paths(tmp: str, rng: np.random.Generator, timeout: float) -> tuple
     with open(target, "w") as f:
         f.write("root:x:0:0\n")
     if rng.random() < 0.5:
-        from benchmarks.scoreboard.cli import main as board
+        from satenv.bench.scoreboard.cli import main as board
 
         out = [target, os.path.join(target, "sub"), target + os.sep][int(rng.integers(3))]
         argv, field = ["--out", out, "--quick", "--no-progress", "--no-plots"], "--out"
         call = board
     else:
-        from benchmarks.reproduce import main as repro
+        from satenv.bench.reproduce import main as repro
 
         paper = ["../../etc/passwd", "/etc/passwd", "pereira2023/../x", "", "os", "li2022 ", "subprocess",
-                 "benchmarks.claims", "PEREIRA2023"][int(rng.integers(9))]
+                 "satenv.bench.claims", "PEREIRA2023"][int(rng.integers(9))]
         argv, field, call = [paper, "--out", target], "paper", repro
     err = io.StringIO()
     try:
@@ -1172,7 +1168,7 @@ def audit_safety_api(envs: dict, rng: np.random.Generator, timeout: float) -> tu
     on non-envs, ``SafetyFilter(env).filter(actions)`` with actions of other shapes (a batch of 2
     for one env, missing agents), dtypes and values, and ``shield(policy, env, ...)`` with
     non-policies; a filtered action must be finite and inside the box."""
-    import baselines
+    from satenv import baselines
     from satenv.safety import SafetyConfig, SafetyFilter, shield
 
     env = envs[str(rng.choice(ENVS))]
@@ -1234,8 +1230,7 @@ def audit_corrupted_state(rng: np.random.Generator, timeout: float) -> tuple[str
     """A scripted baseline deciding after its env's true state went non-finite (NaN/inf at random
     entries of random agents, as an integration blow-up leaves it): the action must be finite, in
     the box, and flagged (``info["fallbacks"]`` > 0) -- never a NaN thrust."""
-    import baselines
-
+    from satenv import baselines
     name, env_id = CORRUPTED_BASELINES[int(rng.integers(len(CORRUPTED_BASELINES)))]
     if name not in _CORRUPT:
         env = satenv.make(env_id)
@@ -1264,11 +1259,10 @@ def audit_corrupted_state(rng: np.random.Generator, timeout: float) -> tuple[str
 
 # ------------------------------------------------------------------------------- load paths, gymnasium ids, --resume
 def audit_load_paths(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    """``training.load`` of unusable paths (names too long, NUL bytes, missing, a file, a run
+    """``satenv.training.load`` of unusable paths (names too long, NUL bytes, missing, a file, a run
     folder without ``final/``), of a shipped filtered folder without ``env`` (must raise, never
     the bare network), and with bad ``env``/``shielded``/``trusted`` arguments."""
-    import training
-
+    from satenv import training
     shipped = sorted(p for p in training.POLICIES_DIR.iterdir() if (p / "manifest.json").is_file())
     filtered = [p for p in shipped if "safety_filter" in (p / "env.json").read_text()]
     kind = int(rng.integers(8))
@@ -1341,10 +1335,10 @@ def _resume_model(tmp: str):
     if not _RESUME:
         from stable_baselines3.common.vec_env import VecNormalize
 
-        from training.config import TrainConfig
-        from training.envs import make_env
-        from training.train import build_model, save_checkpoint
-        from training.vec_env import SatVecEnv
+        from satenv.training.config import TrainConfig
+        from satenv.training.envs import make_env
+        from satenv.training.train import build_model, save_checkpoint
+        from satenv.training.vec_env import SatVecEnv
 
         for algo in ("ppo", "sac"):
             cfg = TrainConfig(env_id="platoon_v0", num_envs=2, net_arch=(16, 16), algo=algo, buffer_size=64,
@@ -1383,7 +1377,7 @@ def _zip_bomb(path) -> None:
 
 
 def audit_resume(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[str, str]:
-    """``training.train.load_checkpoint`` (what ``--resume`` runs) of a checkpoint with one
+    """``satenv.training.train.load_checkpoint`` (what ``--resume`` runs) of a checkpoint with one
     corruption: ``sb3_state.pt`` a zip bomb (:data:`BOMB_MB` inflated), a stored zip beyond the model's
     size, truncated, random bytes, not a zip, other tensors; ``replay_buffer.npz`` a zip bomb or
     arrays of other shapes. Must end in a clear error within the caps (``over_cap`` otherwise)."""
@@ -1391,7 +1385,7 @@ def audit_resume(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[st
 
     import torch
 
-    from training.train import CHECKPOINT_STATE, load_checkpoint
+    from satenv.training.train import CHECKPOINT_STATE, load_checkpoint
 
     algo = "sac" if rng.random() < 0.3 else "ppo"
     model, folder, good = _resume_model(tmp)[algo]
@@ -1437,7 +1431,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=600, help="inputs per entry point")
     ap.add_argument("--n-slow", type=int, default=None, help="inputs for the slow entry points "
-                    "(baselines.make, the CLIs, the TorchRL device; default: --n)")
+                    "(satenv.baselines.make, the CLIs, the TorchRL device; default: --n)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--timeout", type=float, default=5.0, help="seconds per call before it counts as a hang")
     ap.add_argument("--out", default=None, help="write the counts (and examples) as JSON")
@@ -1450,8 +1444,8 @@ def main(argv: list[str] | None = None) -> dict:
     import torch  # noqa: F401  (heavy imports first: an alarm inside an import would leave it half done)
     import torch._dynamo  # noqa: F401  (imported lazily by the first optimiser torch builds)
 
-    import training.policy  # noqa: F401
-    import training.train  # noqa: F401
+    import satenv.training.policy  # noqa: F401
+    import satenv.training.train  # noqa: F401
     rng = np.random.default_rng(args.seed)
     counts: dict[str, Counter] = {}
     examples: dict[str, dict[str, list[str]]] = {}
@@ -1464,9 +1458,9 @@ def main(argv: list[str] | None = None) -> dict:
                 ("make_vec()", lambda r: audit_make_vec(r, args.timeout))]
     vecs = {e: satenv.make_vec(e, 2, seed=0) for e in ENVS}
     entries += [(f"{e} vec.step", lambda r, e=e: audit_vec_step(vecs[e], r, args.timeout)) for e in ENVS]
-    entries += [("baselines.make", lambda r: audit_baseline(envs, r, args.timeout))]
+    entries += [("satenv.baselines.make", lambda r: audit_baseline(envs, r, args.timeout))]
     tmp = tempfile.mkdtemp(prefix="audit_load_")
-    entries += [("training.load", lambda r: audit_load(tmp, r, args.timeout)),
+    entries += [("satenv.training.load", lambda r: audit_load(tmp, r, args.timeout)),
                 ("train --config", lambda r: audit_config(tmp, r, args.timeout)),
                 ("satenv.metrics", lambda r: audit_metrics(r, args.timeout)),
                 ("env ids", lambda r: audit_make_id(r, args.timeout))]
@@ -1483,10 +1477,10 @@ def main(argv: list[str] | None = None) -> dict:
     entries += [("filtered vec.step", lambda r: audit_filtered_vec(fvecs, r, args.timeout)),
                 ("safety API", lambda r: audit_safety_api(envs, r, args.timeout)),
                 ("baselines, bad state", lambda r: audit_corrupted_state(r, args.timeout)),
-                ("training.load paths", lambda r: audit_load_paths(tmp, r, args.timeout)),
+                ("satenv.training.load paths", lambda r: audit_load_paths(tmp, r, args.timeout)),
                 ("gymnasium.make", lambda r: audit_gym_make(r, args.timeout)),
                 ("train --resume", lambda r: audit_resume(tmp, r, args.timeout))]
-    slow = ("baselines.make", "torchrl device", "CLI paths")
+    slow = ("satenv.baselines.make", "torchrl device", "CLI paths")
     t0 = time.time()
     entries = [(n, f) for n, f in entries if not only or any(w in n for w in only)]
     for name, fn in entries:

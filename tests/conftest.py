@@ -43,9 +43,9 @@ def feedback_policy():
     ``feedback_policy(hidden=32, terminal=True)``, a tanh MLP with terminal feedback of radius 2
     (its blend weight is ``exp(-|obs[:3]| / 2)``) unless ``terminal`` is false."""
     def make(hidden: int = 32, terminal: bool = True):
-        from training.actor import MLPActor
-        from training.policy import LearnedPolicy, ObsNormalizer
-        from training.shaping import TerminalFeedback
+        from satenv.training.actor import MLPActor
+        from satenv.training.policy import LearnedPolicy, ObsNormalizer
+        from satenv.training.shaping import TerminalFeedback
 
         return LearnedPolicy(MLPActor(9, 3, [hidden], "tanh", True), ObsNormalizer(), obs_shape=(9,),
                              terminal=TerminalFeedback(radius=2.0) if terminal else None)
@@ -54,7 +54,7 @@ def feedback_policy():
 
 @pytest.fixture
 def unconstrained_rows():
-    """A factory of ``training.safe_imitation`` fit data whose every label is ``label`` and whose
+    """A factory of ``satenv.training.safe_imitation`` fit data whose every label is ``label`` and whose
     one filter row per agent-step can never bind: ``unconstrained_rows(obs, label)``."""
     def make(obs, label):
         import numpy as np

@@ -6,7 +6,7 @@
 
 ``--target dagger`` / ``--target train`` run the tiny DAgger / PPO runs of
 ``tests/test_crash_windows.py`` in fresh interpreters: once uninterrupted (counting its write
-boundaries, :mod:`training.runfolder`), then, for every boundary ``k``, one run ended there by
+boundaries, :mod:`satenv.training.runfolder`), then, for every boundary ``k``, one run ended there by
 ``os._exit`` (``SATENV_CRASH_AT_WRITE=k``: the disk as a ``kill -9`` leaves it) and one resume to
 the end; it prints the runs that could not finish, the rounds / evaluations lost or duplicated and
 how many resumed runs equal the uninterrupted one (timings aside).
@@ -67,7 +67,7 @@ import sys
 sys.path.insert(0, {tests!r})
 from pathlib import Path
 from test_crash_windows import tiny_train_config
-from training.train import latest_checkpoint, train
+from satenv.training.train import latest_checkpoint, train
 out = Path({out!r})
 train(tiny_train_config(out), resume=latest_checkpoint(out) is not None)
 """,
@@ -78,7 +78,7 @@ def sweep(target: str) -> int:
     """Kill ``target`` at every write boundary in a subprocess, resume, compare (module docstring)."""
     from test_crash_windows import dagger_result, train_result
 
-    from training import runfolder
+    from satenv.training import runfolder
 
     tmp = Path(tempfile.mkdtemp(prefix=f"kill_{target}_"))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS.parent), str(TESTS)]),
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         return sweep(args.target)
     from test_scoreboard import _board, _strip
 
-    from benchmarks.scoreboard import EPISODES_FILE, read_episodes
+    from satenv.bench.scoreboard import EPISODES_FILE, read_episodes
 
     rng = np.random.default_rng(args.seed)
     tmp = Path(tempfile.mkdtemp(prefix="kill_resume_"))

@@ -1,14 +1,14 @@
-"""baselines.APF: saturation, repulsion geometry, collision-free short runs on both presets."""
+"""satenv.baselines.APF: saturation, repulsion geometry, collision-free short runs on both presets."""
 
 import numpy as np
 import pytest
 
-from baselines.apf import APF
 from satenv import metrics
+from satenv.baselines.apf import APF
 from satenv.envs.cluster_v0 import parallel_env
 from satenv.rollout import rollout
 
-SHORT_STEPS = 60   # 300 s of the li2022 scenarios (the full run is in benchmarks/reproductions/li2022.py)
+SHORT_STEPS = 60   # 300 s of the li2022 scenarios (the full run is in satenv/bench/reproductions/li2022.py)
 
 
 def test_accelerations_are_saturated_and_point_at_the_target():

@@ -1,14 +1,14 @@
 """Every scripted baseline after the env's true state went non-finite: the flagged zero action
-(``baselines.base.guard_nonfinite``), never a NaN thrust and never a solve on NaN data."""
+(``satenv.baselines.base.guard_nonfinite``), never a NaN thrust and never a solve on NaN data."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-import baselines
 import satenv
-from baselines.base import NONFINITE_ACTION, NONFINITE_STATE
+from satenv import baselines
+from satenv.baselines.base import NONFINITE_ACTION, NONFINITE_STATE
 
 CASES = [("apf", "cluster_v0"), ("dmpc", "platoon_v0"), ("nmpc", "servicing_v0"),
          ("tube_rdmpc", "cluster_v0"), ("cgmres", "formation_v0")]

@@ -14,10 +14,10 @@ import sys
 import numpy as np
 import pytest
 
-import baselines
 import satenv
-from baselines import BaselineError, BaselineTypeError
-from baselines.base import guarded_solve, new_info
+from satenv import baselines
+from satenv.baselines import BaselineError, BaselineTypeError
+from satenv.baselines.base import guarded_solve, new_info
 
 FAULTS = ("raise", "shape", "nan", "infeasible")
 
@@ -40,10 +40,10 @@ def test_registry_names_and_supporting_envs():
 
 def test_cheap_table_matches_the_classes_and_imports_no_solver():
     assert {n for n in baselines.BASELINES if baselines.get(n).cheap} == baselines.registry.CHEAP
-    code = ("import sys, satenv, baselines\n"
-            "for e in satenv.ENV_IDS: baselines.supporting(satenv.make(e), cheap=True)\n"
-            "print(sorted(m for m in ('casadi', 'daqp', 'osqp', 'baselines.cgmres', 'baselines.nmpc',"
-            " 'baselines.tube_rdmpc') if m in sys.modules))")
+    code = ("import sys, satenv\nfrom satenv import baselines\n"
+            "for e in satenv.ENV_IDS: satenv.baselines.supporting(satenv.make(e), cheap=True)\n"
+            "print(sorted(m for m in ('casadi', 'daqp', 'osqp', 'satenv.baselines.cgmres', 'satenv.baselines.nmpc',"
+            " 'satenv.baselines.tube_rdmpc') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
@@ -165,7 +165,7 @@ def _bad_point(kind, x):
 
 @pytest.mark.parametrize("kind", FAULTS)
 def test_dmpc_solver_faults(monkeypatch, kind):
-    from baselines.dmpc import QPSolver
+    from satenv.baselines.dmpc import QPSolver
 
     env = satenv.platoon_v0(topology="BDL")
     pol = baselines.DMPC(env, seed=0)
@@ -189,7 +189,7 @@ def test_dmpc_solver_faults(monkeypatch, kind):
 
 def test_dmpc_row_violation_is_caught(monkeypatch):
     """A point inside the input box that breaks the velocity rows (40) is a failure too."""
-    from baselines.dmpc import QPSolver
+    from satenv.baselines.dmpc import QPSolver
 
     env = satenv.platoon_v0(topology="BDL", v_max=0.5)
     pol = baselines.DMPC(env, seed=0)
@@ -218,7 +218,7 @@ def test_apf_faults(monkeypatch, kind):
 
 @pytest.mark.parametrize("kind", FAULTS)
 def test_cgmres_faults(monkeypatch, kind):
-    import baselines.cgmres as mod
+    import satenv.baselines.cgmres as mod
 
     env = satenv.formation_v0(max_steps=6)
     pol = baselines.CGMRES(env)

@@ -1,4 +1,4 @@
-"""training.benchmarl_train: a tiny BenchMARL MAPPO run exports a policy the scoreboard ranks."""
+"""satenv.training.benchmarl_train: a tiny BenchMARL MAPPO run exports a policy the scoreboard ranks."""
 
 import json
 from importlib.util import find_spec
@@ -6,8 +6,8 @@ from importlib.util import find_spec
 import numpy as np
 import pytest
 
-import training
-from training.benchmarl_train import BenchMARLConfig, main
+from satenv import training
+from satenv.training.benchmarl_train import BenchMARLConfig, main
 
 pytestmark = pytest.mark.skipif(find_spec("benchmarl") is None,
                                 reason="benchmarl not installed (pip install -c constraints.txt -e '.[marl]')")
@@ -15,7 +15,7 @@ pytestmark = pytest.mark.skipif(find_spec("benchmarl") is None,
 
 @pytest.fixture(autouse=True)
 def _private_baseline_cache(tmp_path_factory, monkeypatch):
-    """Baseline results are cached on disk (training.evaluate.cache_dir): one cache per test session."""
+    """Baseline results are cached on disk (satenv.training.evaluate.cache_dir): one cache per test session."""
     monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "satenv_cache"))
 
 
@@ -35,7 +35,7 @@ def test_mappo_tiny_run_exports_a_rankable_policy(tmp_path):
     env = satenv.make("platoon_v0", max_steps=20)
     obs, _ = env.reset(seed=0)
     assert all(np.all(np.abs(a) <= 1) for a in policy.act(obs).values())
-    from benchmarks.scoreboard import main as scoreboard
+    from satenv.bench.scoreboard import main as scoreboard
 
     board = tmp_path / "board"
     scoreboard(["--scenarios", "platoon-PLF-cw", "--policies", "zero", "--policy", str(out / "final"), "--seeds", "0",
@@ -69,7 +69,7 @@ def test_yaml_task_configs_load_through_benchmarl_apis():
     from hydra import compose, initialize_config_dir
 
     import satenv
-    from training.benchmarl_task import CONF_DIR, SatenvTask
+    from satenv.training.benchmarl_task import CONF_DIR, SatenvTask
 
     assert {f"{t.name.lower()}_v0" for t in SatenvTask} == set(satenv.ENV_IDS)
     for t in SatenvTask:  # BenchMARL's Task.get_from_yaml(), as for VMAS tasks
@@ -96,6 +96,6 @@ def test_benchmarl_hydra_runner_trains_a_satenv_task(tmp_path):
                  "experiment.on_policy_n_minibatch_iters=1", "experiment.loggers=[csv]", "experiment.evaluation=false",
                  "experiment.render=false", "experiment.checkpoint_at_end=false",
                  f"experiment.save_folder={tmp_path}", f"hydra.run.dir={tmp_path / 'hydra'}"]
-    subprocess.run([sys.executable, "-m", "training.benchmarl_task", *overrides], check=True, cwd=tmp_path,
+    subprocess.run([sys.executable, "-m", "satenv.training.benchmarl_task", *overrides], check=True, cwd=tmp_path,
                    env={**__import__("os").environ, "PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1])})
     assert list(tmp_path.rglob("collection_reward_reward_min.csv"))

@@ -1,27 +1,27 @@
-"""The scoreboard's summary (benchmarks.scoreboard.headline): best scripted vs best learned per
+"""The scoreboard's summary (satenv.bench.scoreboard.headline): best scripted vs best learned per
 system, ratios on matched completed episodes, the markdown section, the figure, re-aggregation."""
 
 import json
 
 import pytest
 
-from benchmarks.scoreboard import SCENARIOS, ScoreboardError, aggregate, rank
-from benchmarks.scoreboard.board import reaggregate
-from benchmarks.scoreboard.headline import (
+from satenv.bench.scoreboard import SCENARIOS, ScoreboardError, aggregate, rank
+from satenv.bench.scoreboard.board import reaggregate
+from satenv.bench.scoreboard.headline import (
     FIGURE,
     headline,
     headline_figure,
     headline_section,
     is_learned,
 )
-from benchmarks.scoreboard.registry import SYSTEMS, discover_trained_policies
+from satenv.bench.scoreboard.registry import SYSTEMS, discover_trained_policies
 
 SCEN = "cluster-case1-random"
 
 
 def _ep(policy, seed, success=True, rmse=1.0, delta_v=1.0, collisions=0, terminated=False,
         scenario=SCEN, error=None):
-    if error is not None:   # as benchmarks.scoreboard.runner.error_record writes it
+    if error is not None:   # as satenv.bench.scoreboard.runner.error_record writes it
         return {"scenario": scenario, "policy": policy, "seed": seed, "error": error, "success": False}
     rec = {m: 0.0 for m in ("rmsee", "foe", "final_error_m", "min_separation_m", "violations", "safety_cost",
                             "fallbacks", "compute_ms_per_decision", "episode_return", "steps")}
@@ -160,7 +160,7 @@ def test_a_policy_shipped_with_its_filter_has_its_network_alone_beside_it():
 
 
 def test_shield_twins_skip_a_policy_shipped_with_its_filter():
-    from benchmarks.scoreboard.plan import select
+    from satenv.bench.scoreboard.plan import select
 
     registry = {**discover_trained_policies()}
     notes: list[str] = []
@@ -198,7 +198,7 @@ def test_an_episode_behind_the_filter_records_its_share_of_agent_steps():
     import numpy as np
 
     import satenv
-    from benchmarks.scoreboard.specs import episode_metrics
+    from satenv.bench.scoreboard.specs import episode_metrics
     from satenv.rollout import rollout
     from satenv.safety import shield
 

@@ -1,4 +1,4 @@
-"""training.card both ways: the network alone and as shipped, from each folder's own files."""
+"""satenv.training.card both ways: the network alone and as shipped, from each folder's own files."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import shutil
 
 import pytest
 
-import training
-from training import card as cardmod
-from training.card import (
+from satenv import training
+from satenv.training import card as cardmod
+from satenv.training.card import (
     AS_SHIPPED,
     BOTH_WAYS_BEGIN,
     BOTH_WAYS_FILE,
@@ -31,7 +31,7 @@ def _agg(episodes: int, successes: int, collisions: int, violations: int, **extr
 
 
 def _both_ways(interventions: int, infeasible: int, agent_steps: int = 10_000) -> dict:
-    """A both-ways evaluation (benchmarks.safety_alone's folder format) with chosen counts."""
+    """A both-ways evaluation (satenv.bench.safety_alone's folder format) with chosen counts."""
     ratios = {"matched_seeds": 4, "rmse_ratio": 1.1, "delta_v_ratio": 0.9}
     return {"test_seeds": list(range(900_000, 900_010)), "source": "x/safety_alone.json", "command": "python -m x",
             "system": "platoon-pereira2023", "task": "platoon-tplf30-random-cw", "controller": "dmpc",
@@ -101,7 +101,7 @@ def test_every_policy_readme_has_its_current_both_ways_section():
     for folder in FOLDERS:
         text = (folder / "README.md").read_text()
         assert both_ways(folder) in text, (f"{folder.name}/README.md: the both-ways section is stale: "
-                                           "run `python -m training.card --readmes`")
+                                           "run `python -m satenv.training.card --readmes`")
 
 
 def test_update_readme_inserts_the_section_once_then_replaces_it(filtered_folder):

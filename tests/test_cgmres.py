@@ -1,4 +1,4 @@
-"""baselines.cgmres: Ohtsuka's C/GMRES NMPC against a direct ipopt solve, fallbacks, reproduction.
+"""satenv.baselines.cgmres: Ohtsuka's C/GMRES NMPC against a direct ipopt solve, fallbacks, reproduction.
 
 Documented tolerances (normalised input w = u / u_max, so 0.01 = 0.5 m/s^2):
 
@@ -15,7 +15,7 @@ Documented tolerances (normalised input w = u / u_max, so 0.01 = 0.5 m/s^2):
 import numpy as np
 import pytest
 
-from baselines.cgmres import CGMRES, FormationOCP, gmres
+from satenv.baselines.cgmres import CGMRES, FormationOCP, gmres
 from satenv.envs.formation_v0 import parallel_env
 
 PRESETS = ["kannan2022-position", "kannan2022-collision"]

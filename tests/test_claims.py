@@ -1,4 +1,4 @@
-"""benchmarks.claims: claim and departure records, the exit-code rule, and every reproduction's
+"""satenv.bench.claims: claim and departure records, the exit-code rule, and every reproduction's
 departures against its paper-valued config."""
 
 import dataclasses
@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from benchmarks import claims, reproduce
+from satenv.bench import claims, reproduce
 
 SRC = "The convergence time of the distributed RDMPC controller is 1000 s."
 
@@ -98,8 +98,8 @@ def _covered(departures) -> set[str]:
 
 
 def test_li2022_departures_cover_every_field_ours_changes():
-    from baselines.tube_rdmpc import TubeRDMPCConfig
-    from benchmarks.reproductions import li2022
+    from satenv.baselines.tube_rdmpc import TubeRDMPCConfig
+    from satenv.bench.reproductions import li2022
 
     paper = li2022.paper_config()
     diff = _differing(TubeRDMPCConfig(), paper) | set(li2022.PAPER_ENV)
@@ -112,17 +112,17 @@ def test_li2022_departures_cover_every_field_ours_changes():
 
 
 def test_servicing_departures_cover_the_terminal_attitude_weight():
-    from baselines.nmpc import NMPCConfig
-    from benchmarks.reproductions import pereira2022_servicing as serv
+    from satenv.baselines.nmpc import NMPCConfig
+    from satenv.bench.reproductions import pereira2022_servicing as serv
 
     paper = NMPCConfig(**serv.VARIANTS["as published"])
     assert _differing(NMPCConfig(), paper) <= _covered(serv.departures({}))
 
 
 def test_platoon_departures_cover_the_config_fields():
-    from baselines.dmpc import PAPER_CONFIGS
-    from benchmarks.reproductions import pereira2022_platoon as plat
-    from benchmarks.reproductions import pereira2023 as p23
+    from satenv.baselines.dmpc import PAPER_CONFIGS
+    from satenv.bench.reproductions import pereira2022_platoon as plat
+    from satenv.bench.reproductions import pereira2023 as p23
 
     p23_paper = dataclasses.replace(PAPER_CONFIGS["pereira2023"], velocity_margin=0.0)
     assert _differing(PAPER_CONFIGS["pereira2023"], p23_paper) <= _covered(p23.departures())
@@ -135,7 +135,7 @@ def test_platoon_departures_cover_the_config_fields():
 def test_kannan_departures_cover_the_preset_choices():
     """kannan2022 gives no weights, horizon, sampling time, duration, range or input unit: every
     scenario field that holds one of those choices is in the table."""
-    from benchmarks.reproductions import kannan2022
+    from satenv.bench.reproductions import kannan2022
 
     ours = {"offset_weight", "u_max", "dt", "max_steps", "position_weight", "input_weight", "length_scale",
             "connection_range"}
@@ -159,7 +159,7 @@ AS_THE_PAPER = {"terminal_weight"}
 
 
 def _departures(paper: str) -> list[dict]:
-    from benchmarks import reproduce
+    from satenv.bench import reproduce
 
     module = reproduce.load(paper)
     return module.departures({}) if paper in ("pereira2022-platoon", "pereira2022-servicing") else module.departures()
@@ -169,11 +169,11 @@ def _departures(paper: str) -> list[dict]:
 def test_departures_cover_fallbacks_warm_starts_error_definitions_and_designs(paper):
     """Each behaviour the paper leaves open is a departure with the paper's value (or 'not
     stated'), ours and an effect; and every controller config field of those kinds is covered."""
-    from baselines.apf import APFConfig
-    from baselines.cgmres import CGMRESConfig
-    from baselines.dmpc import DMPCConfig
-    from baselines.nmpc import NMPCConfig
-    from baselines.tube_rdmpc import TubeRDMPCConfig
+    from satenv.baselines.apf import APFConfig
+    from satenv.baselines.cgmres import CGMRESConfig
+    from satenv.baselines.dmpc import DMPCConfig
+    from satenv.baselines.nmpc import NMPCConfig
+    from satenv.baselines.tube_rdmpc import TubeRDMPCConfig
 
     deps = _departures(paper)
     covered = _covered(deps)

@@ -7,12 +7,12 @@ import re
 
 import pytest
 
-from training.benchmarl_train import BenchMARLConfig
-from training.config import DEPRECATED_FLAGS, TrainConfig, canonical_flags, parse_args
-from training.rllib_train import RLlibConfig
+from satenv.training.benchmarl_train import BenchMARLConfig
+from satenv.training.config import DEPRECATED_FLAGS, TrainConfig, canonical_flags, parse_args
+from satenv.training.rllib_train import RLlibConfig
 
-TRAINERS = [(TrainConfig, "python -m training.train"), (BenchMARLConfig, "python -m training.benchmarl_train"),
-            (RLlibConfig, "python -m training.rllib_train")]
+TRAINERS = [(TrainConfig, "python -m satenv.training.train"), (BenchMARLConfig, "python -m satenv.training.benchmarl_train"),
+            (RLlibConfig, "python -m satenv.training.rllib_train")]
 
 
 def _help(cls, prog, capsys) -> str:
@@ -69,7 +69,7 @@ def test_the_budget_is_agent_steps_in_every_trainer():
 
 
 def test_the_scoreboard_booleans_are_in_the_trainers_style():
-    from benchmarks.scoreboard.cli import build_parser
+    from satenv.bench.scoreboard.cli import build_parser
 
     parser = build_parser()
     args = parser.parse_args(["--plots", "false", "--progress", "true"])

@@ -1,8 +1,8 @@
-"""Crash windows of the run folders (:mod:`training.runfolder`): a run killed at each write
+"""Crash windows of the run folders (:mod:`satenv.training.runfolder`): a run killed at each write
 boundary, then resumed to the end, finishes with exactly the rounds / results of an uninterrupted
 run with the same seed (none lost, none duplicated; weights bitwise equal).
 
-The boundaries are counted by :func:`training.runfolder.boundary` (``SATENV_WRITE_LOG``) in an
+The boundaries are counted by :func:`satenv.training.runfolder.boundary` (``SATENV_WRITE_LOG``) in an
 uninterrupted run; run ``k`` is then ended at boundary ``k`` (``SATENV_CRASH_AT_WRITE=k``). The
 default tests crash in-process (:class:`Killed`, raised where ``os._exit`` would end the process,
 unwinding without the error clean-up of a write, so the disk is left as a kill leaves it); the
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from training import runfolder
+from satenv.training import runfolder
 
 TESTS = Path(__file__).resolve().parent
 TIMING_KEYS = ("collect_s", "fit_s", "session_wall_s", "compute_ms_per_agent", "compute_ms_per_decision",
@@ -89,7 +89,7 @@ def tiny_dagger(monkeypatch_setattr) -> tuple:
     """A DAgger run of seconds: the platoon (pereira2022) cut to 12 steps and a proportional
     expert (deterministic); returns ``(run, config)``."""
     import satenv
-    from training import imitate
+    from satenv.training import imitate
 
     def make_envs(cfg):
         make = satenv.make
@@ -213,7 +213,7 @@ def test_dagger_resume_reads_the_history_not_the_label_files(tmp_path, monkeypat
     (out / "labels" / "round_0000.npz").write_bytes(b"PK")
     with pytest.raises(runfolder.RunFolderError, match="round_0000.npz: the labels of round 0"):
         run(cfg, out)
-    from training.recipes import dagger
+    from satenv.training.recipes import dagger
 
     with pytest.raises(SystemExit, match="cannot resume .*round_0000.npz"):    # the CLI: no traceback
         dagger.main(["--run-dir", str(out)])
@@ -254,11 +254,11 @@ def test_dagger_killed_for_real_at_every_write_boundary(tmp_path):
         assert dagger_result(out) == reference, f"killed at boundary {k}"
 
 
-# ------------------------------------------------------------------------ training.train
+# ------------------------------------------------------------------------ satenv.training.train
 def tiny_train_config(out: Path):
     """A PPO run of seconds on the toy env (tests/test_env_base.py): 4 rollouts, an evaluation
     and a checkpoint every rollout."""
-    from training.config import TrainConfig
+    from satenv.training.config import TrainConfig
 
     return TrainConfig(env_id="test_env_base:ToyEnv", env_kwargs={"max_steps": 10}, num_envs=2,
                        total_timesteps=192, n_steps=8, batch_size=48, n_epochs=1, net_arch=(8,),
@@ -269,8 +269,7 @@ def tiny_train_config(out: Path):
 def train_result(out: Path) -> tuple[list[int], str, bytes, dict]:
     """What a finished training run leaves: its evaluation steps, the final folder's evaluation
     (times aside) and weights, and ``best/``'s step (the folders are loaded: whole and consistent)."""
-    import training
-
+    from satenv import training
     for name in ("final", "best"):
         training.load(out / name)
     steps = [h["step"] for h in json.loads((out / "eval_history.json").read_text())]
@@ -282,7 +281,7 @@ def train_result(out: Path) -> tuple[list[int], str, bytes, dict]:
 
 
 def _train_sweep(tmp_path, monkeypatch, picks) -> dict[str, int]:
-    from training.train import latest_checkpoint, train
+    from satenv.training.train import latest_checkpoint, train
 
     monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path / "cache"))
     ref = tmp_path / "ref"
@@ -348,8 +347,8 @@ def test_train_killed_at_every_write_boundary_resumes_to_the_end(tmp_path, monke
 
 def test_bad_training_input_is_a_named_value_error(tmp_path, monkeypatch, capsys):
     """Accepted-then-fatal inputs are refused up front; --resume on a malformed folder names the file."""
-    from training.config import MAX_LAYER_WIDTH, TrainConfig
-    from training.train import main, train
+    from satenv.training.config import MAX_LAYER_WIDTH, TrainConfig
+    from satenv.training.train import main, train
 
     with pytest.raises(ValueError, match="lr must be a finite number"):
         TrainConfig(lr=float("inf"))
@@ -412,7 +411,7 @@ def test_dagger_starts_for_every_system_name(tmp_path, capsys):
     old names included, builds its envs and experts (a run of 0 rounds)."""
     import warnings
 
-    from training.recipes import LEGACY_SYSTEM_NAMES, dagger
+    from satenv.training.recipes import LEGACY_SYSTEM_NAMES, dagger
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
@@ -426,10 +425,10 @@ def test_dagger_starts_for_every_system_name(tmp_path, capsys):
                                            ("cluster_v0", {"randomize": True}), ("servicing_v0", {"randomize": True}),
                                            ("formation_v0", {"randomize": True})])
 def test_a_training_env_state_resumes_its_episodes_bit_for_bit(env_id, kwargs):
-    """:meth:`training.vec_env.SatVecEnv.get_state` holds everything the next steps read (every core,
+    """:meth:`satenv.training.vec_env.SatVecEnv.get_state` holds everything the next steps read (every core,
     its generators, episodes ending and auto-resetting on the way)."""
     import satenv
-    from training.vec_env import SatVecEnv
+    from satenv.training.vec_env import SatVecEnv
 
     def run(venv, actions):
         out = []

@@ -9,7 +9,7 @@ import pytest
 
 minari = pytest.importorskip("minari")
 
-from benchmarks.learning import datasets  # noqa: E402
+from satenv.bench.learning import datasets  # noqa: E402
 
 SYSTEM = "platoon-pereira2023"   # the DMPC flies it in a fraction of a second per episode
 
@@ -90,8 +90,7 @@ def test_an_episode_of_a_controller_acting_inside_the_env_replays(cluster_episod
 
 
 def test_the_inner_loop_is_what_the_actions_alone_do_not_replay(cluster_episode, monkeypatch):
-    import baselines
-
+    from satenv import baselines
     assert datasets.inner_loop_name(CLUSTER) == "TubeController"
     assert datasets.inner_loop_name(SYSTEM) is None
     # without the tube controller in the env (a controller that installs nothing) the same actions fly elsewhere

@@ -40,8 +40,8 @@ CONFIGS: list[tuple[str, dict, str, int]] = [
 
 def digests() -> list[str]:
     """One sha256 per configuration of a ``STEPS``-step episode (obs, actions, rewards, infos)."""
-    import baselines
     import satenv
+    from satenv import baselines
 
     out = []
     for env_id, kwargs, policy, seed in CONFIGS:

@@ -1,10 +1,17 @@
-"""baselines.dmpc: the 1-hop DMPC (pereira2023) and the convex-step DMPC (pereira2022)."""
+"""satenv.baselines.dmpc: the 1-hop DMPC (pereira2023) and the convex-step DMPC (pereira2022)."""
 
 import numpy as np
 import pytest
 
-from baselines import BaselineError, BaselineTypeError
-from baselines.dmpc import DMPC, ConvexStepDMPC, DMPCConfig, OneHopDMPC, QPSolver, centralised_gain
+from satenv.baselines import BaselineError, BaselineTypeError
+from satenv.baselines.dmpc import (
+    DMPC,
+    ConvexStepDMPC,
+    DMPCConfig,
+    OneHopDMPC,
+    QPSolver,
+    centralised_gain,
+)
 from satenv.dynamics import cw_matrices, prediction_matrices
 from satenv.envs.platoon_v0 import parallel_env
 from satenv.graph import make_topology
@@ -279,8 +286,8 @@ def test_custom_topology_object_is_accepted():
 
 def test_dmpc_reaches_the_chain_formation_without_collision():
     """The 1-hop DMPC targets (L_bar x*)_f, so it serves the collision-free chain formation too."""
-    from baselines.dmpc import DMPC
     from satenv import metrics
+    from satenv.baselines.dmpc import DMPC
     from satenv.envs.platoon_v0 import parallel_env
     from satenv.rollout import rollout
 

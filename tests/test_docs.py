@@ -87,6 +87,6 @@ def test_docstring_conversion():
     md = hooks.rst_to_markdown(doc)
     assert "## Spaces" in md and '* ``preset``: ``"a"`` or ``"b"``.' in md and "next ``Y``" in md
     assert "| entries | meaning |" in md and "| 0–2 | first more |" in md and "| 3 | second |" in md
-    with pytest.raises(Exception, match="not defined in baselines/dmpc.py"):
-        hooks.check_source_refs("`baselines/dmpc.py::OneHopDMPC.gone`", "page.md")
-    hooks.check_source_refs("`baselines/dmpc.py::OneHopDMPC.solve` `satenv/allocation.py`", "page.md")
+    with pytest.raises(Exception, match="not defined in satenv/baselines/dmpc.py"):
+        hooks.check_source_refs("`satenv/baselines/dmpc.py::OneHopDMPC.gone`", "page.md")
+    hooks.check_source_refs("`satenv/baselines/dmpc.py::OneHopDMPC.solve` `satenv/allocation.py`", "page.md")

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
-from baselines.base import RandomPolicy, ZeroPolicy
 from satenv import metrics
+from satenv.baselines.base import RandomPolicy, ZeroPolicy
 from satenv.envs.base import BatchedCore, SatenvError, SatParallelEnv, StepResult
 from satenv.rollout import Trajectory, rollout
 

@@ -255,7 +255,7 @@ def test_make_vec_is_a_gymnasium_vector_env_over_the_batched_core(gym_id):
 
 def test_training_gym_view_is_the_same_class():
     from satenv.gym_env import CentralisedEnv
-    from training.gym_view import CentralisedEnv as Reexported
+    from satenv.training.gym_view import CentralisedEnv as Reexported
 
     assert Reexported is CentralisedEnv
 
@@ -312,9 +312,9 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     collision in the chain formation voids it everywhere."""
     baselines = pytest.importorskip("baselines")
     pytest.importorskip("daqp")
-    from benchmarks.scoreboard import Task, run_episode
-    from benchmarks.scoreboard.registry import POLICIES, SCENARIOS
-    from training.evaluate import evaluate
+    from satenv.bench.scoreboard import Task, run_episode
+    from satenv.bench.scoreboard.registry import POLICIES, SCENARIOS
+    from satenv.training.evaluate import evaluate
 
     spec = SCENARIOS["platoon-PLF-cw"]
     env = spec.make()
@@ -327,8 +327,8 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     assert summary["success"] is record["success"] is evaluated["success"] is True
     assert record["collisions"] == summary["collisions"] == evaluated["collisions"]
 
-    from baselines.base import ZeroPolicy
-    from benchmarks.scoreboard import ScenarioSpec
+    from satenv.baselines.base import ZeroPolicy
+    from satenv.bench.scoreboard import ScenarioSpec
 
     x0 = [[0.0, -8.0 * (k + 1), 0.0, 0, 0, 0] for k in range(4)]
     x0[1][1] = -9.0                      # 1 m from follower 1: a collision at reset

@@ -7,8 +7,8 @@ pereira2022 §5.2 servicing scenario under the NMPC, each solved by the interpre
 (the reference) and by the compiled one. Agreement: objective within 1e-6 relative, first control
 within 1e-6 (tube: of the unit-ball-scaled input; NMPC: in N, of inputs up to 3 N). The horizons are
 shortened (N = 3) so the gcc compile stays a few seconds in the default suite;
-``benchmarks.perf`` times the full horizons against the same reference. Last, the parallel
-expert labeller (``training.labeller.ExpertPool``) against labelling in one process.
+``satenv.bench.perf`` times the full horizons against the same reference. Last, the parallel
+expert labeller (``satenv.training.labeller.ExpertPool``) against labelling in one process.
 """
 
 import numpy as np
@@ -16,8 +16,8 @@ import pytest
 
 pytest.importorskip("casadi")
 
-from baselines.nmpc import NMPC, NMPCConfig  # noqa: E402
-from baselines.tube_rdmpc import TubeRDMPC  # noqa: E402
+from satenv.baselines.nmpc import NMPC, NMPCConfig  # noqa: E402
+from satenv.baselines.tube_rdmpc import TubeRDMPC  # noqa: E402
 from satenv.envs.cluster_v0 import parallel_env as cluster_env  # noqa: E402
 from satenv.envs.servicing_v0 import parallel_env as servicing_env  # noqa: E402
 
@@ -161,7 +161,7 @@ def test_solver_option_is_validated():
 
 # --------------------------------------------------------------------------- parallel expert labels
 def test_expert_pool_rejects_a_bad_worker_count():
-    from training.labeller import ExpertPool
+    from satenv.training.labeller import ExpertPool
 
     for bad in (0, -1, 1.5, True):
         with pytest.raises(ValueError, match="workers"):
@@ -172,8 +172,8 @@ def test_expert_pool_rejects_a_bad_worker_count():
 def test_expert_pool_labels_are_those_of_one_process():
     """Two workers label three short platoon episodes (one flown by the expert with action noise):
     the rows and stats of each equal those of ``label_episode`` in this process."""
-    from training import labeller
-    from training.labeller import ExpertPool, LabelJob
+    from satenv.training import labeller
+    from satenv.training.labeller import ExpertPool, LabelJob
 
     kw = {"max_steps": 4}
     jobs = [LabelJob("platoon-pereira2022-random", seed=s, noise=n, rng=s, env_kwargs=kw)

@@ -1,10 +1,10 @@
-"""training.recipes.heldout --controller-seeds: a slow controller runs on a subset of the held-out
+"""satenv.training.recipes.heldout --controller-seeds: a slow controller runs on a subset of the held-out
 seeds; the learned variants on all of them; ratios on the matched subset (issue 27, servicing)."""
 
 from __future__ import annotations
 
-import training
-from training.recipes import heldout
+from satenv import training
+from satenv.training.recipes import heldout
 
 
 def _fake_episodes(env, policy, seeds):
@@ -15,8 +15,7 @@ def _fake_episodes(env, policy, seeds):
 
 def test_the_controller_runs_on_its_seeds_only(monkeypatch):
     monkeypatch.setattr(heldout, "episodes", _fake_episodes)
-    import baselines
-
+    from satenv import baselines
     monkeypatch.setattr(baselines, "make", lambda name, env: "ctrl")
     folder = training.POLICIES_DIR / "servicing_pereira2022_dagger_shield"
     res = heldout.evaluate_policies("servicing-pereira2022", folder, [900000, 900001, 900002], [0],

@@ -1,4 +1,4 @@
-"""DAgger (training.imitate, the one engine): config grammar and validation, data collection, a tiny run,
+"""DAgger (satenv.training.imitate, the one engine): config grammar and validation, data collection, a tiny run,
 resume, the saved configs of earlier releases."""
 
 from __future__ import annotations
@@ -8,17 +8,16 @@ import json
 import numpy as np
 import pytest
 
-import baselines
 import satenv
-import training
-from training.imitate import DaggerConfig, ImitationConfig, collect_episode, main
+from satenv import baselines, training
+from satenv.training.imitate import DaggerConfig, ImitationConfig, collect_episode, main
 
 SHORT = {"preset": "pereira2022", "randomize": True, "max_steps": 12}
 
 
 @pytest.fixture(autouse=True)
 def _private_baseline_cache(tmp_path_factory, monkeypatch):
-    """Baseline results are cached on disk (training.evaluate.cache_dir): one cache per test session."""
+    """Baseline results are cached on disk (satenv.training.evaluate.cache_dir): one cache per test session."""
     monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "satenv_cache"))
 
 
@@ -41,12 +40,12 @@ def test_config_validation_names_the_field(capsys):
         main(["--expert-options", "[1]"])
     assert "--expert-options" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="unknown DaggerConfig field"):
-        main(["--config", "tests/../training/policies/platoon_tplf_ppo/config.json"])
+        main(["--config", "tests/../satenv/training/policies/platoon_tplf_ppo/config.json"])
     assert ImitationConfig is DaggerConfig
 
 
 def test_a_task_brings_its_system_expert_and_defaults_and_flags_override_them():
-    from training.imitate import SYSTEM_DEFAULTS, parse
+    from satenv.training.imitate import SYSTEM_DEFAULTS, parse
 
     cfg, resume = parse(["--task", "cluster-case1-random", "--epochs", "3"])
     assert (cfg.expert, cfg.obs_drop_dims, cfg.epochs, resume) == ("replanning_tube_rdmpc", (18,), 3, False)
@@ -60,10 +59,10 @@ def test_a_task_brings_its_system_expert_and_defaults_and_flags_override_them():
 
 
 def test_a_run_folder_of_the_earlier_imitate_is_not_silently_restarted(tmp_path):
-    from training.imitate import run
+    from satenv.training.imitate import run
 
     (tmp_path / "eval_history.json").write_text("[]")
-    with pytest.raises(ValueError, match="earlier training.imitate .* --config"):
+    with pytest.raises(ValueError, match="earlier satenv.training.imitate .* --config"):
         run(DaggerConfig(out_dir=str(tmp_path)))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["eval_history.json"]
 
@@ -111,17 +110,18 @@ def test_tiny_run_on_an_env_without_a_task_writes_a_loadable_policy_and_resumes(
 
 def test_every_saved_dagger_config_parses(tmp_path):
     """The shipped policies' DAgger configs (``--config``) and the committed run folders (resumed by
-    ``python -m training.recipes.dagger --run-dir``) load, in either earlier format, without running."""
+    ``python -m satenv.training.recipes.dagger --run-dir``) load, in either earlier format, without running."""
     import shutil
     from pathlib import Path
 
-    from training.imitate import parse
-    from training.recipes.dagger import UNTIL_STOPPED
+    from satenv.training.imitate import parse
+    from satenv.training.recipes.dagger import UNTIL_STOPPED
 
-    root = Path(__file__).parents[1] / "training"
+    root = Path(__file__).parents[1] / "satenv" / "training"
+    runs = Path(__file__).parents[1] / "studies" / "runs"
     replays = [p for p in sorted(root.glob("policies/*/*config.json"))   # DAgger's (another recipe's: not)
                if ("expert" in json.loads(p.read_text()) or "system" in json.loads(p.read_text()))
-               and json.loads(p.read_text()).get("recipe", "training.recipes.dagger") != "training.safe_imitation"]
+               and not json.loads(p.read_text()).get("recipe", "").endswith("training.safe_imitation")]
     assert len(replays) >= 9
     for path in replays:
         saved = json.loads(path.read_text())
@@ -131,7 +131,7 @@ def test_every_saved_dagger_config_parses(tmp_path):
     for name, task in (("cluster_case1_dagger", "cluster-case1-random"),
                        ("servicing_pereira2022_dagger", "servicing-pereira2022-random")):
         run = tmp_path / name
-        shutil.copytree(root / "runs" / name / "", run, ignore=shutil.ignore_patterns("labels", "rounds"))
+        shutil.copytree(runs / name / "", run, ignore=shutil.ignore_patterns("labels", "rounds"))
         saved = json.loads((run / "config.json").read_text())
         cfg, resume = parse(["--run-dir", str(run)], auto_resume=True, defaults={"--rounds": str(UNTIL_STOPPED)})
         assert resume and cfg.task == task and cfg.rounds == saved["rounds"] and cfg.learner_shield
@@ -143,7 +143,7 @@ def test_every_saved_dagger_config_parses(tmp_path):
 
 
 def test_policy_cards_read_every_shipped_folder_and_judge_the_targets():
-    from training.card import card, shipped_table, targets
+    from satenv.training.card import card, shipped_table, targets
 
     table = shipped_table()
     for folder in training.POLICIES_DIR.iterdir():
@@ -165,7 +165,7 @@ def test_policy_cards_read_every_shipped_folder_and_judge_the_targets():
 def test_training_page_lists_every_shipped_policy_with_its_current_numbers():
     from pathlib import Path
 
-    from training.card import shipped_table
+    from satenv.training.card import shipped_table
 
     page = (Path(__file__).parents[1] / "docs" / "training.md").read_text()
-    assert shipped_table() in page, "docs/training.md's shipped-policies table is stale: paste `python -m training.card`"
+    assert shipped_table() in page, "docs/training.md's shipped-policies table is stale: paste `python -m satenv.training.card`"

@@ -1,5 +1,5 @@
-"""The import direction of the design: ``satenv`` -> ``baselines`` -> ``training`` -> ``benchmarks``,
-never upward, and no cycle between modules (imports inside functions included: a lazy import
+"""The import direction of the design, floor by floor: the core (``satenv``) -> ``satenv.baselines``
+-> ``satenv.training`` -> ``satenv.bench``, never upward, and no cycle between modules (imports inside functions included: a lazy import
 hides a cycle, it does not remove it)."""
 
 from __future__ import annotations
@@ -11,7 +11,13 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LAYERS = ("satenv", "baselines", "training", "benchmarks")
+FLOORS = ("satenv", "satenv.baselines", "satenv.training", "satenv.bench")
+"""The floors, lowest first; a module belongs to the highest floor its name starts with."""
+
+
+def floor(module: str) -> int:
+    """The floor of a module (an index into :data:`FLOORS`)."""
+    return max(i for i, f in enumerate(FLOORS) if module == f or module.startswith(f + "."))
 
 
 def _module(path: Path) -> str:
@@ -33,12 +39,12 @@ def _imports(path: Path, module: str) -> set[str]:
                 base = ".".join([*anchor, base] if base else anchor)
             out.add(base)
             out |= {f"{base}.{a.name}" for a in node.names}
-    return {m for m in out if m.split(".")[0] in LAYERS}
+    return {m for m in out if m.split(".")[0] == "satenv"}
 
 
 @functools.cache
 def _graph() -> dict[str, set[str]]:
-    files = [p for layer in LAYERS for p in (ROOT / layer).rglob("*.py")]
+    files = [p for p in (ROOT / "satenv").rglob("*.py") if "policies" not in p.relative_to(ROOT).parts]
     modules = {_module(p): p for p in files}
     graph = {}
     for name, path in modules.items():
@@ -53,10 +59,8 @@ def _graph() -> dict[str, set[str]]:
 
 
 def test_no_upward_import():
-    rank = {layer: i for i, layer in enumerate(LAYERS)}
-    upward = sorted(f"{m} imports {t}" for m, ts in _graph().items() for t in ts
-                    if rank[t.split(".")[0]] > rank[m.split(".")[0]])
-    assert upward == [], "imports go satenv -> baselines -> training -> benchmarks:\n" + "\n".join(upward)
+    upward = sorted(f"{m} imports {t}" for m, ts in _graph().items() for t in ts if floor(t) > floor(m))
+    assert upward == [], "imports go " + " -> ".join(FLOORS) + ", never up:\n" + "\n".join(upward)
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -95,7 +99,7 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def test_no_import_cycle():
-    graph = {m: {t for t in ts if not m.startswith(t + ".") and t not in LAYERS} for m, ts in _graph().items()}
+    graph = {m: {t for t in ts if not m.startswith(t + ".") and t not in FLOORS} for m, ts in _graph().items()}
     cycles = _cycles(graph)
     assert cycles == [], "import cycles (imports inside functions count):\n" + "\n".join(map(" <-> ".join, cycles))
 
@@ -106,6 +110,11 @@ def test_the_check_can_fail(tmp_path):
         ["a", "b"], ["c", "d", "e"]]
 
 
-@pytest.mark.parametrize("layer", LAYERS)
-def test_every_layer_is_scanned(layer):
-    assert any(m.split(".")[0] == layer for m in _graph())
+@pytest.mark.parametrize("level", range(len(FLOORS)))
+def test_every_floor_is_scanned(level):
+    assert any(floor(m) == level for m in _graph())
+
+
+def test_the_floors_are_told_apart():
+    assert [floor(m) for m in ("satenv.tasks", "satenv.baselines.dmpc", "satenv.training", "satenv.bench.perf",
+                               "satenv.benchmark")] == [0, 1, 2, 3, 0]

@@ -1,4 +1,4 @@
-"""``training.load``'s contract with a caller: shipped filters fail closed, run folders resolve to
+"""``satenv.training.load``'s contract with a caller: shipped filters fail closed, run folders resolve to
 ``final/``, inference on one torch thread without touching the caller's setting, typed errors."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import satenv
-import training
-from training.policy import PolicyLoadError, ShippedFilterError, write_manifest
+from satenv import training
+from satenv.training.policy import PolicyLoadError, ShippedFilterError, write_manifest
 
 SHIPPED = sorted(p.name for p in training.POLICIES_DIR.iterdir() if (p / "manifest.json").is_file())
 FILTERED = [n for n in SHIPPED if "safety_filter" in json.loads((training.POLICIES_DIR / n / "env.json").read_text())]
@@ -46,7 +46,7 @@ def test_a_filtered_folder_with_its_env_is_returned_behind_the_filter():
 
 
 def test_a_run_folder_resolves_to_its_final(tmp_path):
-    """``training.load(out_dir)`` of a trainer's run folder loads ``out_dir/final``; a folder with
+    """``satenv.training.load(out_dir)`` of a trainer's run folder loads ``out_dir/final``; a folder with
     neither policy files nor ``final/`` names what is missing."""
     src = training.POLICIES_DIR / "platoon_pereira2022_ppo"
     run = tmp_path / "run"
@@ -93,7 +93,7 @@ def test_an_observation_shape_that_does_not_fit_names_the_files(tmp_path):
 def test_inference_runs_on_one_thread_and_restores_the_callers_count():
     import torch
 
-    from training import policy as tp
+    from satenv.training import policy as tp
 
     pol = training.load(training.POLICIES_DIR / "platoon_pereira2022_ppo")
     seen = []

@@ -16,9 +16,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import baselines
 import satenv
-from satenv import metrics
+from satenv import baselines, metrics
 from satenv.errors import SatenvError
 from satenv.rollout import rollout
 

@@ -1,11 +1,11 @@
-"""baselines.nmpc: the cooperative NMPC of pereira2022 §4 on satenv.servicing_v0."""
+"""satenv.baselines.nmpc: the cooperative NMPC of pereira2022 §4 on satenv.servicing_v0."""
 
 import numpy as np
 import pytest
 
 pytest.importorskip("casadi")
 
-from baselines.nmpc import NMPC, attitude_reference_sym, build_model, quaternion_cost_terms  # noqa: E402
+from satenv.baselines.nmpc import NMPC, attitude_reference_sym, build_model, quaternion_cost_terms  # noqa: E402
 from satenv.dynamics import cw_continuous  # noqa: E402
 from satenv.dynamics.attitude import attitude_derivative, quat_error, thruster_matrices  # noqa: E402
 from satenv.envs.servicing_v0 import attitude_reference, parallel_env  # noqa: E402
@@ -160,7 +160,7 @@ def test_attitude_reference_inside_the_nlp_matches_the_env():
 def test_full_pereira2022_run_meets_the_three_claims_per_phase():
     """The whole §5.2 episode (120 s, about 1.5 min): constraints, waypoints, and the pointing error
     <= 5 deg at the end of every phase of every spacecraft and over its last 10 s."""
-    from benchmarks.reproductions.pereira2022_servicing import POINTING_TOL_DEG, analyse
+    from satenv.bench.reproductions.pereira2022_servicing import POINTING_TOL_DEG, analyse
 
     env = parallel_env()
     policy = NMPC(env)

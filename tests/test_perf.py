@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from benchmarks import perf
+from satenv.bench import perf
 
 
 def test_perf_smoke_writes_figures_and_ratios(tmp_path):
@@ -75,7 +75,7 @@ def test_perf_reproductions_section_smoke(tmp_path, monkeypatch):
 
 def test_perf_scaling_section_smoke(tmp_path, monkeypatch):
     """The swarm table of issue 19 at tiny sizes, through the command line: JSON, targets, plot."""
-    from benchmarks.perf import scaling
+    from satenv.bench.perf import scaling
 
     monkeypatch.setattr(scaling, "SIZES", (2, 3))
     monkeypatch.setattr(scaling, "COPIES", 2)
@@ -96,7 +96,7 @@ def test_perf_scaling_section_smoke(tmp_path, monkeypatch):
 
 
 def test_fast_solver_targets_are_flagged_against_issue_17():
-    from benchmarks.perf import FAST_SOLVER_TARGETS_MS, _ratios
+    from satenv.bench.perf import FAST_SOLVER_TARGETS_MS, _ratios
 
     rows = {key: {"fast_ms_per_agent_decision_median": goal * factor, "speedup": 2.0, "target_ms": goal}
             for (key, goal), factor in zip(FAST_SOLVER_TARGETS_MS.items(), (0.5, 3.0), strict=True)}
@@ -109,7 +109,7 @@ def test_fast_solver_targets_are_flagged_against_issue_17():
 
 def test_perf_envs_section_smoke():
     """The envs comparisons at tiny sizes: each target is the ratio of two figures of the run."""
-    from benchmarks.perf import envs
+    from satenv.bench.perf import envs
 
     out = envs.env_speed(0.002, 0.01, batch=2, swarm_sizes=(4, 8), log=lambda line: None)
     rates = out["ring_swarm"]["agent_steps_per_s"]
@@ -129,7 +129,7 @@ def test_perf_envs_section_smoke():
     if "vmas_agent_steps_per_s" in out["make_vec"]:
         assert out["make_vec"]["satenv_agent_steps_per_s"] > 0
     # the report collects a section's own targets
-    from benchmarks.perf import _ratios
+    from satenv.bench.perf import _ratios
 
     assert _ratios({"envs": out})[1] == out["targets"]
 
@@ -140,9 +140,9 @@ def test_perf_package_has_no_import_cycle_and_runs_as_a_module():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    code = "import benchmarks.perf.scaling, benchmarks.perf.envs; import benchmarks.perf as p; print(len(p.REGISTRY))"
+    code = "import satenv.bench.perf.scaling, satenv.bench.perf.envs; import satenv.bench.perf as p; print(len(p.REGISTRY))"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
     assert int(proc.stdout.strip()) >= 7
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.perf", "--help"], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "satenv.bench.perf", "--help"], capture_output=True, text=True,
                           check=True, cwd=root)
     assert "--sections" in proc.stdout and "envs" in proc.stdout

@@ -1,11 +1,11 @@
-"""benchmarks.perf's learning section (tiny sizes; no timing assertions)."""
+"""satenv.bench.perf's learning section (tiny sizes; no timing assertions)."""
 
 from importlib.util import find_spec
 
 import pytest
 
-from benchmarks import perf
-from benchmarks.perf import learning
+from satenv.bench import perf
+from satenv.bench.perf import learning
 
 
 @pytest.mark.skipif(find_spec("torchrl") is None, reason="torchrl not installed (marl extra)")
@@ -40,12 +40,12 @@ def test_dagger_end_to_end_splits_expert_env_and_learner():
 
 def test_fast_configs_are_valid_trainer_configs():
     """Every fast configuration builds its trainer's validated config (no stale field names)."""
-    from training.config import TrainConfig
-    from training.imitate import ImitationConfig
+    from satenv.training.config import TrainConfig
+    from satenv.training.imitate import ImitationConfig
 
     TrainConfig(**learning.FAST_CONFIGS["sb3_ppo"])
     ImitationConfig(**learning.FAST_CONFIGS["dagger"])
     if find_spec("benchmarl") is not None:
-        from training.benchmarl_train import BenchMARLConfig
+        from satenv.training.benchmarl_train import BenchMARLConfig
 
         BenchMARLConfig(**learning.FAST_CONFIGS["benchmarl_mappo"])

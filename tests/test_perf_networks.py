@@ -1,4 +1,4 @@
-"""benchmarks.perf policy_threads: every shipped network's decision time per agent, with its target."""
+"""satenv.bench.perf policy_threads: every shipped network's decision time per agent, with its target."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ pytest.importorskip("torch")
 
 @pytest.mark.slow     # loads every shipped folder and its env (about 15 s)
 def test_every_shipped_network_is_timed_per_agent_beside_its_env_step():
-    import training
-    from benchmarks.perf.policy_threads import NETWORK_MS_PER_AGENT_LIMIT, network_times
+    from satenv import training
+    from satenv.bench.perf.policy_threads import NETWORK_MS_PER_AGENT_LIMIT, network_times
 
     rows = network_times(seconds=0.0, log=lambda _: None)
     shipped = sorted(p.name for p in training.POLICIES_DIR.iterdir() if (p / "env.json").is_file())

@@ -95,7 +95,7 @@ def test_kernel_flags_the_copies_that_are_not_finite():
     expected = [np.isfinite(obs[b]).all() and np.isfinite(res.rewards[b]).all()
                 and np.isfinite(res.info["state"][b]).all() for b in range(4)]
     assert res.finite.tolist() == expected == [True, False, False, True]
-    kernel.fused_check = False          # the env's StepGuard checks instead (benchmarks.perf's A/B)
+    kernel.fused_check = False          # the env's StepGuard checks instead (satenv.bench.perf's A/B)
     assert kernel.step_observe(np.zeros((4, 4, 3)))[0].finite is None
     with pytest.raises(ValueError, match="kernel"):
         _cores(4)[1].fused_check = True

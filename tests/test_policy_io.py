@@ -1,4 +1,4 @@
-"""training.policy: the no-pickle policy format (export, save/load, manifest, normaliser, trust)."""
+"""satenv.training.policy: the no-pickle policy format (export, save/load, manifest, normaliser, trust)."""
 
 import base64
 import json
@@ -9,8 +9,14 @@ import numpy as np
 import pytest
 from test_env_base import ToyEnv
 
-import training
-from training.policy import ObsNormalizer, PolicyLoadError, convert_sb3, from_sb3, save_artifacts
+from satenv import training
+from satenv.training.policy import (
+    ObsNormalizer,
+    PolicyLoadError,
+    convert_sb3,
+    from_sb3,
+    save_artifacts,
+)
 
 META = {"env_id": "test_env_base:ToyEnv", "observation_shape": [6], "action_shape": [3]}
 
@@ -18,7 +24,7 @@ META = {"env_id": "test_env_base:ToyEnv", "observation_shape": [6], "action_shap
 def _model(algo):
     from stable_baselines3 import PPO, SAC
 
-    from training.vec_env import SatVecEnv
+    from satenv.training.vec_env import SatVecEnv
 
     vec = SatVecEnv(ToyEnv(), n_copies=1, seed=0)
     if algo == "ppo":
@@ -62,7 +68,7 @@ def test_manifest_is_checked(tmp_path):
     ([1, 2], "identity"),
 ])
 def test_bad_normaliser_is_a_policy_load_error(tmp_path, norm, match):
-    from training.policy import write_manifest
+    from satenv.training.policy import write_manifest
 
     folder = _saved(tmp_path)
     (folder / "obs_norm.json").write_text(json.dumps(norm))
@@ -84,7 +90,7 @@ class _Boom:
 def test_a_crafted_policy_folder_runs_no_code(tmp_path):
     marker = tmp_path / "PWNED"
     payload = pickle.dumps(_Boom(marker))
-    from training.policy import write_manifest
+    from satenv.training.policy import write_manifest
 
     # 1. weights.safetensors that is a malicious pickle
     folder = _saved(tmp_path)
@@ -136,15 +142,15 @@ def test_trusted_sb3_zip_loads_with_a_warning_and_converts(tmp_path):
 
 
 def test_a_folder_shipped_behind_the_safety_filter_loads_as_shipped(tmp_path):
-    """``env.json`` ``safety_filter``: ``training.load(folder, env=env)`` returns the filtered
+    """``env.json`` ``safety_filter``: ``satenv.training.load(folder, env=env)`` returns the filtered
     policy, ``shielded=False`` the network, no env an error; the entry is data (never imported)."""
     import json
     import shutil
 
     import satenv
     from satenv.safety import Shield
-    from training.card import card
-    from training.policy import PolicyLoadError, write_manifest
+    from satenv.training.card import card
+    from satenv.training.policy import PolicyLoadError, write_manifest
 
     src = training.POLICIES_DIR / "platoon_pereira2022_dagger_shield"
     env = satenv.platoon_v0(preset="pereira2022", randomize=True)

@@ -2,10 +2,10 @@
 
 For random inputs of random types and magnitudes, every call of the four env constructors,
 ``reset``, ``step``, ``Orbit``, ``simulate``, ``satenv.make_vec`` (construction and ``step``),
-``baselines.make`` (every baseline, random options, on envs it does and does not support and on
-non-envs) and ``training.load`` (random and corrupted policy folders) either raises a clear error
+``satenv.baselines.make`` (every baseline, random options, on envs it does and does not support and on
+non-envs) and ``satenv.training.load`` (random and corrupted policy folders) either raises a clear error
 (the package's ``ValueError``/``TypeError`` subclass: :class:`satenv.errors.SatenvError`,
-:class:`baselines.BaselineError`/``BaselineTypeError``, :class:`training.PolicyLoadError`) or
+:class:`satenv.baselines.BaselineError`/``BaselineTypeError``, :class:`satenv.training.PolicyLoadError`) or
 returns finite results; it never hangs (hypothesis ``deadline`` plus a hard SIGALRM timeout), and
 a rejected call leaves the object usable: it still steps and returns what a fresh one returns.
 
@@ -29,9 +29,8 @@ from audit_inputs import (  # tests/ on sys.path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import baselines
 import satenv
-import training
+from satenv import baselines, training
 from satenv.dynamics import Orbit, simulate
 from satenv.errors import SatenvError
 
@@ -250,7 +249,7 @@ def prop_baseline(case):
         assert_like_fresh(target, env)
 
 
-# ------------------------------------------------------------------------------- training.load
+# ------------------------------------------------------------------------------- satenv.training.load
 json_values = st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.integers(-10**30, 10**30),
                                      st.text(max_size=5)),
                            lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
@@ -286,7 +285,7 @@ def folder_edits(draw):
     return edits, draw(st.booleans()), draw(st.one_of(st.none(), norm_edits))
 
 
-try:  # warm the import, so the first training.load example does not pay for it
+try:  # warm the import, so the first satenv.training.load example does not pay for it
     import torch  # noqa: F401
 except ModuleNotFoundError:  # learned policies need torch; without it the load properties skip
     torch = None
@@ -297,7 +296,7 @@ def prop_load(case):
     import tempfile
     from pathlib import Path
 
-    from training.policy import PolicyLoadError, write_manifest
+    from satenv.training.policy import PolicyLoadError, write_manifest
 
     if torch is None:
         pytest.skip("torch is not installed")
@@ -320,7 +319,7 @@ def prop_load(case):
 
 
 def prop_load_path(path, trusted, env):
-    from training.policy import PolicyLoadError
+    from satenv.training.policy import PolicyLoadError
 
     call(training.load, path, env, trusted=trusted, errors=(PolicyLoadError,))
 

@@ -13,10 +13,8 @@ import warnings
 import numpy as np
 import pytest
 
-import baselines
 import satenv
-import training
-from satenv import metrics
+from satenv import baselines, metrics, training
 from satenv.errors import SatenvError
 from satenv.rollout import rollout
 
@@ -44,7 +42,7 @@ def test_an_unknown_reset_option_warns_once_per_env_and_key():
 def test_a_setting_mismatch_warns_once_per_process_however_many_loads():
     """The quick board loads several policies trained with randomize=True on fixed scenarios:
     one warning, not one per policy."""
-    from training import policy as tp
+    from satenv.training import policy as tp
 
     tp._WARNED_SETTINGS.clear()
     env = satenv.make("formation_v0")
@@ -83,7 +81,7 @@ def test_a_loaded_policy_flags_huge_observations_without_runtime_warnings(name):
 
 
 def test_reward_shaping_and_features_near_the_float_range_are_quiet():
-    from training.shaping import ObsFeatures, RewardShaping
+    from satenv.training.shaping import ObsFeatures, RewardShaping
 
     shaping = RewardShaping.from_dict({"tracking": 1.0, "precision": 1.0, "proximity": 1.0,
                                        "anticipation": 1.0, "anticipation_speed": 1.0})

@@ -1,4 +1,4 @@
-"""training.experts and training.recipes: stateless experts, the resumable DAgger command, the
+"""satenv.baselines.experts and satenv.training.recipes: stateless experts, the resumable DAgger command, the
 held-out target checks."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import satenv
-from training.experts import JointPlatoonMPC
-from training.recipes import dagger
-from training.recipes.heldout import matched_ratios, targets
+from satenv.baselines.experts import JointPlatoonMPC
+from satenv.training.recipes import dagger
+from satenv.training.recipes.heldout import matched_ratios, targets
 
 
 @pytest.fixture(scope="module")

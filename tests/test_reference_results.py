@@ -9,19 +9,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.learning import grid as G
-from benchmarks.learning import render, results, runner, trainers
+from satenv.bench.learning import grid as G
+from satenv.bench.learning import render, results, runner, trainers
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "benchmarks" / "learning" / "results.json"
+RESULTS = ROOT / "studies" / "reference_results" / "results.json"
 
 
 def test_page_is_the_render_of_results_json():
-    from benchmarks.learning.datasets import MANIFEST
+    from satenv.bench.learning.datasets import MANIFEST
 
     data = json.loads(RESULTS.read_text())
     assert render.PAGE.read_text() == render.render_page(data, render.read_manifest(MANIFEST)), \
-        "docs/reference_results.md is stale: python -m benchmarks.learning render"
+        "docs/reference_results.md is stale: python -m satenv.bench.learning render"
 
 
 def test_every_published_record_has_its_curve_and_test_block():
@@ -38,7 +38,7 @@ def test_every_published_record_has_its_curve_and_test_block():
         assert rec["test_seeds"] == list(G.test_seeds(rec["system"]))
         if rec["filter"]:
             assert "interventions_per_agent_step" in rec["test"]
-        assert rec["command"].startswith("python -m benchmarks.learning run ")
+        assert rec["command"].startswith("python -m satenv.bench.learning run ")
 
 
 def test_iqm_and_its_band():
@@ -57,8 +57,7 @@ def zero_trainer(monkeypatch):
     calls = []
 
     def fake(run, checkpoint, workdir):
-        import baselines
-
+        from satenv import baselines
         calls.append(run.label())
         for k, steps in enumerate(run.checkpoints):
             checkpoint(k, steps, 0.1 * (k + 1), lambda env: baselines.make("zero", env))
@@ -153,7 +152,7 @@ def test_interventions_are_per_agent_step():
 @pytest.mark.parametrize("args, field", [(["--budget", "-5"], "budget"), (["--seeds", "x"], "--seeds"),
                                          (["--workers", "0"], "--workers"), (["--systems", "nope"], "--systems")])
 def test_bad_run_arguments_are_a_one_line_error(tmp_path, capsys, args, field):
-    from benchmarks.learning.cli import main
+    from satenv.bench.learning.cli import main
 
     log = tmp_path / "log.jsonl"
     assert main(["run", "--log", str(log), *args]) == 2

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from benchmarks.reproductions.kannan2022 import (
+from satenv.bench.reproductions.kannan2022 import (
     SCENARIOS,
     format_table,
     reproduce,
@@ -48,7 +48,7 @@ def test_kannan_claim_records_judge_collision_avoidance_at_10_m():
 def test_smallest_connecting_range_is_the_longest_spanning_tree_edge():
     """The range the connectivity claim needs: three in a line 100 m apart need 100 m (not 200 m);
     moving the third to 130 m from the second needs 130 m, at the step where it is there."""
-    from benchmarks.reproductions.kannan2022 import smallest_connecting_range
+    from satenv.bench.reproductions.kannan2022 import smallest_connecting_range
 
     line = np.array([[[0, 0, 0], [0, 100, 0], [0, 200, 0]], [[0, 0, 0], [0, 100, 0], [0, 230, 0]]], float)
     assert smallest_connecting_range(line[:1]) == pytest.approx(100.0)

@@ -2,9 +2,8 @@
 
 import pytest
 
-from benchmarks.claims import NO_VALUE, passed
-from benchmarks.reproductions import li2022
-
+from satenv.bench.claims import NO_VALUE, passed
+from satenv.bench.reproductions import li2022
 
 CONV = "case 1 RDMPC: convergence time [s] (all within 0.071 m, staying)"
 
@@ -57,7 +56,7 @@ def test_tube_bound_is_derived_in_si_from_the_scenario():
     import dataclasses
 
     import satenv
-    from baselines.tube_rdmpc import TubeRDMPC
+    from satenv.baselines.tube_rdmpc import TubeRDMPC
 
     sc, cfg = li2022.scenario(1), li2022.variant_config("ours")
     eps = li2022.tube_bound(sc, cfg)

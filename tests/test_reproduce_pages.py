@@ -33,7 +33,7 @@ def test_committed_page_is_rendered_from_its_json(paper):
 
 
 def test_render_shows_departures_and_no_value_rows():
-    from benchmarks.claims import departure, no_value
+    from satenv.bench.claims import departure, no_value
 
     result = {"pass": False, "claims": [no_value("c", "The paper says so.", 1.0)],
               "departures": [departure("margin", "0", "5 m", "why", "effect")]}
@@ -42,8 +42,8 @@ def test_render_shows_departures_and_no_value_rows():
 
 
 def test_committed_li2022_departures_cover_the_config_fields_ours_changes():
-    from baselines.tube_rdmpc import TubeRDMPCConfig
-    from benchmarks.reproductions import li2022
+    from satenv.baselines.tube_rdmpc import TubeRDMPCConfig
+    from satenv.bench.reproductions import li2022
 
     result = json.loads((OUT / "li2022.json").read_text())
     ours, paper = dataclasses.asdict(TubeRDMPCConfig()), dataclasses.asdict(li2022.paper_config())

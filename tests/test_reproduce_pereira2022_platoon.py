@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from benchmarks import reproduce
-from benchmarks.reproductions import pereira2022_platoon as repro
+from satenv.bench import reproduce
+from satenv.bench.reproductions import pereira2022_platoon as repro
 
 
 def test_short_run_schema_and_claims(tmp_path):

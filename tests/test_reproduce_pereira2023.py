@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from benchmarks import reproduce
-from benchmarks.reproductions import pereira2023
+from satenv.bench import reproduce
+from satenv.bench.reproductions import pereira2023
 
 
 @pytest.fixture(scope="module")

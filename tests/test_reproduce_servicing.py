@@ -4,9 +4,9 @@ full run with its as-published row behind ``slow``."""
 import pytest
 
 import satenv
-from baselines.nmpc import NMPC
-from benchmarks.claims import NO_VALUE
-from benchmarks.reproductions import pereira2022_servicing as serv
+from satenv.baselines.nmpc import NMPC
+from satenv.bench.claims import NO_VALUE
+from satenv.bench.reproductions import pereira2022_servicing as serv
 from satenv.rollout import rollout
 
 
@@ -36,7 +36,7 @@ def test_as_published_uses_eq39_signed_quaternion_error():
     import casadi as ca
     import numpy as np
 
-    from baselines.nmpc import NMPCConfig, quaternion_cost_terms
+    from satenv.baselines.nmpc import NMPCConfig, quaternion_cost_terms
 
     assert NMPCConfig(**serv.VARIANTS["as published"]).quaternion_error == "signed"
     assert NMPCConfig().quaternion_error == "sign-free"

@@ -1,4 +1,4 @@
-"""``training.train --resume`` reads a run's checkpoint under a policy folder's rules: sizes from
+"""``satenv.training.train --resume`` reads a run's checkpoint under a policy folder's rules: sizes from
 headers first. ``sb3_state.pt`` is what ``torch.save`` writes (a zip of stored entries), at most
 the size the config's model allows; ``replay_buffer.npz`` is what ``np.savez`` writes, each
 array's header checked against the buffer before it is read."""
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from test_training import _cfg
 
-from training.runfolder import RunFolderError
-from training.train import CHECKPOINT_STATE, latest_checkpoint, train
-from training.trust import UntrustedDataError, npz_headers, stored_zip
+from satenv.training.runfolder import RunFolderError
+from satenv.training.train import CHECKPOINT_STATE, latest_checkpoint, train
+from satenv.training.trust import UntrustedDataError, npz_headers, stored_zip
 
 
 def _bomb(path, inflated: int) -> None:

@@ -1,4 +1,4 @@
-"""training.safe_imitation: the filter's rows as a differentiable intervention penalty."""
+"""satenv.training.safe_imitation: the filter's rows as a differentiable intervention penalty."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ torch = pytest.importorskip("torch")
 from satenv import tasks  # noqa: E402
 from satenv.errors import SatenvError  # noqa: E402
 from satenv.safety import SafetyFilter  # noqa: E402
-from training.safe_imitation import (  # noqa: E402
+from satenv.training.safe_imitation import (  # noqa: E402
     SafeDaggerConfig,
     _env_action,
     agent_constraints,
@@ -81,8 +81,8 @@ def test_env_action_applies_the_action_map():
 
 def test_fit_with_the_barrier_term_removes_interventions_on_its_rows():
     """A tiny actor fitted on rows whose labels break the filter: the barrier term pulls it inside."""
-    from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer
+    from satenv.training.actor import MLPActor
+    from satenv.training.policy import LearnedPolicy, ObsNormalizer
 
     rng = np.random.default_rng(0)
     n = 256
@@ -119,7 +119,7 @@ def test_a_system_without_expert_needs_self_labels():
 
 
 def test_terminal_affine_reproduces_the_feedback_blend():
-    from training.shaping import TerminalFeedback
+    from satenv.training.shaping import TerminalFeedback
 
     class P:
         terminal = TerminalFeedback(radius=30.0)
@@ -127,7 +127,7 @@ def test_terminal_affine_reproduces_the_feedback_blend():
     rng = np.random.default_rng(1)
     obs = rng.normal(scale=20.0, size=(50, 9))
     a = rng.uniform(-1, 1, size=(50, 3))
-    off, slope = __import__("training.safe_imitation", fromlist=["x"]).terminal_affine(P(), obs, 3)
+    off, slope = __import__("satenv.training.safe_imitation", fromlist=["x"]).terminal_affine(P(), obs, 3)
     assert np.allclose(off + slope * a, P.terminal(obs, a))
     assert np.any(slope < 0.999)                 # the blend is active on some rows
 
@@ -155,7 +155,7 @@ def test_interventions_are_counted_per_agent_step():
 def test_choose_ranks_rounds_safety_first_and_ship_never_overwrites(tmp_path):
     import json
 
-    from training.safe_imitation import choose, ship
+    from satenv.training.safe_imitation import choose, ship
 
     def val(coll, viol, succ, rate):
         return {"alone": {"collision_episodes": coll, "violation_episodes": viol, "success_rate": succ},
@@ -193,7 +193,7 @@ def test_collection_applies_the_flown_or_the_filtered_action(fly):
     """fly="alone" steps the network's own action (the filter's output only recorded): the
     recorded observations are those of an env stepped with that action; "filtered" steps the
     filter's output."""
-    from training.safe_imitation import collect_episode
+    from satenv.training.safe_imitation import collect_episode
 
     kw = {"terminate_on_collision": False, "max_steps": 30}
     env = tasks.training_task("platoon-pereira2022").make_env(**kw)
@@ -213,8 +213,8 @@ def test_collection_applies_the_flown_or_the_filtered_action(fly):
 
 def test_prior_rows_are_imitated_beside_the_runs_own():
     """Rows of an earlier DAgger run (``prior``) pull the actor to their labels where the run has none."""
-    from training.actor import MLPActor
-    from training.policy import LearnedPolicy, ObsNormalizer
+    from satenv.training.actor import MLPActor
+    from satenv.training.policy import LearnedPolicy, ObsNormalizer
 
     rng = np.random.default_rng(2)
     n = 256

@@ -1,4 +1,4 @@
-"""training.safe_imitation with the frozen composite (warm-start network + its shipped filter) as
+"""satenv.training.safe_imitation with the frozen composite (warm-start network + its shipped filter) as
 the expert, flown by the network alone: the label, the filter it uses and the objective."""
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ torch = pytest.importorskip("torch")
 from satenv import tasks  # noqa: E402
 from satenv.errors import SatenvError  # noqa: E402
 from satenv.safety import SafetyConfig, SafetyFilter  # noqa: E402
-from training.safe_imitation import (  # noqa: E402
+from satenv.training.safe_imitation import (  # noqa: E402
     SafeDaggerConfig,
+    agent_constraints,
     check_label_space,
     collect_episode,
-    agent_constraints,
     episode_flight,
     fit,
     label_filter_config,
@@ -113,7 +113,7 @@ def test_a_bad_label_filter_is_refused_naming_it(bad):
 def test_the_filter_is_the_warm_starts_shipped_one(tmp_path):
     """Servicing ships with a 0.005 margin: labels, rows and validation use it; a folder that ships
     no filter gets the default."""
-    cfg = warm_start_filter(tasks_root() / "training/policies/servicing_pereira2022_dagger_shield")
+    cfg = warm_start_filter(tasks_root() / "satenv/training/policies/servicing_pereira2022_dagger_shield")
     assert cfg.margin == pytest.approx(0.005)
     (tmp_path / "env.json").write_text(json.dumps({"env_id": "servicing_v0"}))
     assert warm_start_filter(tmp_path) == SafetyConfig()
@@ -139,7 +139,7 @@ def test_teacher_labels_with_terminal_feedback_must_be_compared_flown(feedback_p
 def test_the_warm_start_is_a_fixed_point_of_its_own_flown_teacher_labels(feedback_policy, unconstrained_rows):
     """With terminal feedback, the teacher's unfiltered flown action as the label: the flown
     objective is zero at the warm start (the fit does not move it), the network-space one is not."""
-    from training.actor import MLPActor
+    from satenv.training.actor import MLPActor
 
     rng = np.random.default_rng(4)
     n = 256
@@ -231,9 +231,9 @@ def test_prior_term_compares_in_its_own_space(prior_space, feedback_policy, unco
 def test_validate_round_writes_the_validation_of_a_round(tmp_path):
     """``--validate-round -1`` validates the warm start on the given seed counts into the run's
     ``validation/`` folder; a round the run does not have is refused, naming it."""
-    from training.safe_imitation import main
+    from satenv.training.safe_imitation import main
 
-    warm = str(tasks_root() / "training/policies/platoon_pereira2022_dagger_shield")
+    warm = str(tasks_root() / "satenv/training/policies/platoon_pereira2022_dagger_shield")
     argv = ["--run-dir", str(tmp_path), "--system", "platoon-pereira2022", "--warm-start", warm,
             "--val-seeds", "1", "--val-shield-seeds", "1"]
     main([*argv, "--validate-round", "-1"])

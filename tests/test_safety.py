@@ -9,9 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import baselines
 import satenv
-from satenv import safety
+from satenv import baselines, safety
 from satenv.safety import SafetyConfig, SafetyError, SafetyFilter, filter_actions
 
 
@@ -228,8 +227,8 @@ def test_bad_input_names_the_field():
 
 # ------------------------------------------------------------------------ scoreboard
 def test_scoreboard_ranks_a_policy_beside_its_shielded_twin(tmp_path):
-    from benchmarks.scoreboard import run_scoreboard
-    from benchmarks.scoreboard.cli import with_shield
+    from satenv.bench.scoreboard import run_scoreboard
+    from satenv.bench.scoreboard.cli import with_shield
 
     assert with_shield("random,dmpc", False) == "random,dmpc,random+shield,dmpc+shield"
     board = run_scoreboard(tmp_path, scenarios="platoon-chain-cw", policies=with_shield("random", False),

@@ -1,4 +1,4 @@
-"""benchmarks.safety_alone: the network alone and behind the filter, resumable, JSON + PNG."""
+"""satenv.bench.safety_alone: the network alone and behind the filter, resumable, JSON + PNG."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ pytest.importorskip("torch")
 
 
 def test_two_episodes_write_json_png_and_resume_from_the_cache(tmp_path):
-    from benchmarks import safety_alone
+    from satenv.bench import safety_alone
 
-    folder = "training/policies/platoon_tplf_safe_distill"
+    folder = "satenv/training/policies/platoon_tplf_safe_distill"
     args = ["--entry", f"platoon-pereira2023={folder}", "--seeds", "2", "--controller-seeds", "1", "--out", str(tmp_path)]
     safety_alone.main(args)
     res = json.loads((tmp_path / "safety_alone.json").read_text())
@@ -37,9 +37,9 @@ def test_a_run_is_written_into_a_policy_folder_that_the_card_reads(tmp_path):
     """--folders-from: each entry (no episode records) into its folder; the card reads it both ways."""
     import shutil
 
-    import training
-    from benchmarks import safety_alone
-    from training.card import BOTH_WAYS_FILE, card
+    from satenv import training
+    from satenv.bench import safety_alone
+    from satenv.training.card import BOTH_WAYS_FILE, card
 
     folder = tmp_path / "policy"
     shutil.copytree(training.POLICIES_DIR / "platoon_tplf_ppo_shield", folder)
@@ -61,7 +61,7 @@ def test_a_run_is_written_into_a_policy_folder_that_the_card_reads(tmp_path):
 
 
 def test_a_bad_entry_is_an_error(tmp_path):
-    from benchmarks import safety_alone
+    from satenv.bench import safety_alone
 
     with pytest.raises(SystemExit, match="system=policy-folder"):
         safety_alone.main(["--entry", "platoon-pereira2023", "--out", str(tmp_path)])
@@ -76,10 +76,10 @@ def test_a_bad_entry_is_an_error(tmp_path):
 
 
 def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(tmp_path):
-    from benchmarks import safety_alone
     from satenv import tasks
+    from satenv.bench import safety_alone
 
-    folder = "training/policies/platoon_tplf_safe_distill"
+    folder = "satenv/training/policies/platoon_tplf_safe_distill"
     base = ["--seeds", "1", "--controller-seeds", "0", "--perturbation-seeds", "1", "--out", str(tmp_path)]
     entries = ["--entry", f"platoon-pereira2023={folder}", "--entry", f"platoon-pereira2023={folder}@1:0"]
     safety_alone.main(entries + base + ["--perturbation-entries", "2"])

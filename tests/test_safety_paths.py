@@ -186,11 +186,11 @@ def test_torchrl_env_filters():
 
 def test_sb3_training_env_filters():
     pytest.importorskip("stable_baselines3")
-    from training.envs import make_env
-    from training.vec_env import SatVecEnv
+    from satenv.training.envs import make_env
+    from satenv.training.vec_env import SatVecEnv
 
     env_id, kwargs = SCENARIOS[1]
-    venv = SatVecEnv(make_env(env_id, safety_filter=True, **kwargs), 2, seed=0)   # as training.train builds it
+    venv = SatVecEnv(make_env(env_id, safety_filter=True, **kwargs), 2, seed=0)   # as satenv.training.train builds it
     assert venv.vec.safety is not None
     venv.reset()
     total = 0
@@ -203,7 +203,7 @@ def test_sb3_training_env_filters():
 
 def test_benchmarl_task_env_filters():
     pytest.importorskip("benchmarl")
-    from training.benchmarl_task import task_for
+    from satenv.training.benchmarl_task import task_for
 
     env_id, kwargs = SCENARIOS[1]
     env = task_for(env_id, {"safety_filter": True, **kwargs}).get_env_fun(2, True, 0, "cpu")()
@@ -216,7 +216,7 @@ def test_benchmarl_task_env_filters():
 
 def test_rllib_training_env_filters():
     pytest.importorskip("ray.rllib")
-    from training.rllib_train import _env_creator
+    from satenv.training.rllib_train import _env_creator
 
     env_id, kwargs = SCENARIOS[1]
     env = _env_creator(env_id, {"safety_filter": True, **kwargs})()

@@ -1,4 +1,4 @@
-"""The scoreboard (benchmarks.scoreboard): files and schema, resume, workers, bad input."""
+"""The scoreboard (satenv.bench.scoreboard): files and schema, resume, workers, bad input."""
 
 import json
 import os
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.scoreboard import (
+from satenv.bench.scoreboard import (
     EPISODES_FILE,
     METRICS,
     POLICIES,
@@ -186,7 +186,7 @@ def test_bad_input_fails_before_any_episode(tmp_path, kwargs, match):
 def test_unreadable_checkpoint_is_a_clear_error(tmp_path):
     training = pytest.importorskip("training")
     if not callable(getattr(training, "load", None)):
-        pytest.skip("training.load not available")
+        pytest.skip("satenv.training.load not available")
     bad = tmp_path / "ckpt"
     bad.mkdir()
     (bad / "model.zip").write_text("not a model")
@@ -220,16 +220,16 @@ def test_platoon_with_dmpc_through_the_board(tmp_path):
 
 def test_only_a_missing_optional_dependency_makes_an_entry_unavailable(tmp_path, monkeypatch):
     with pytest.raises(Unavailable, match="optional dependency"):
-        specs.resolve("baselines.base:ZeroPolicy", requires=("no_such_dependency_xyz",))
+        specs.resolve("satenv.baselines.base:ZeroPolicy", requires=("no_such_dependency_xyz",))
     with pytest.raises(ScoreboardError, match="has no attribute 'Nope'"):
-        specs.resolve("baselines.base:Nope")
+        specs.resolve("satenv.baselines.base:Nope")
     with pytest.raises(ModuleNotFoundError):          # no "not landed yet" tolerance
         specs.resolve("satenv.envs.not_landed_yet_xyz:parallel_env")
-    assert specs.resolve("baselines.base:ZeroPolicy") is POLICIES["zero"].factory()
+    assert specs.resolve("satenv.baselines.base:ZeroPolicy") is POLICIES["zero"].factory()
     with pytest.raises(ScoreboardError, match="env_id must be one of"):
         ScenarioSpec("x", "no_such_env_v0")
     with pytest.raises(ScoreboardError, match="'module:attribute'"):
-        PolicySpec("x", ("baselines:DMPC",))
+        PolicySpec("x", ("satenv.baselines:DMPC",))
 
 
 def test_policy_fits_by_env_id():
@@ -270,14 +270,14 @@ def test_intervals_stay_inside_the_metric_range():
     assert 5.0 <= lo and hi <= 47.7
     lo, hi = agg["success"]["ci95"]
     assert 0.0 <= lo < 1 / 3 < hi <= 1.0 and lo == pytest.approx(0.0615, abs=1e-4)  # Wilson, 1 of 3
-    from benchmarks.scoreboard.report import _cell
+    from satenv.bench.scoreboard.report import _cell
 
     assert _cell(agg["success"], "success") == "33 % [6, 79]"
     assert _cell(agg["min_separation_m"], "min_separation_m").startswith("20.9 [")
 
 
 def test_rliable_style_summary_has_known_answers():
-    from benchmarks.scoreboard.report import summarize
+    from satenv.bench.scoreboard.report import summarize
 
     def recs(pol, values, scen="s"):
         return [{"scenario": scen, "policy": pol, "seed": i, "error": None, "rmse": v} for i, v in enumerate(values)]
@@ -297,10 +297,10 @@ def test_rliable_style_summary_has_known_answers():
 
 
 def test_a_shipped_folder_given_with_policy_is_ranked_once():
-    from benchmarks.scoreboard.board import _user_specs
+    from satenv.bench.scoreboard.board import _user_specs
 
     reg = {**POLICIES, **registry.discover_trained_policies()}
-    folder = TESTS.parent / "training" / "policies" / "platoon_tplf_ppo"
+    folder = TESTS.parent / "satenv" / "training" / "policies" / "platoon_tplf_ppo"
     if "trained:platoon_tplf_ppo" not in reg:
         pytest.skip("shipped policy not found")
     assert [s.name for s in _user_specs([str(folder), str(folder) + "/"], reg)] == ["trained:platoon_tplf_ppo"] * 2
@@ -316,8 +316,8 @@ def test_parse_seeds():
 
 
 def test_quick_board_has_servicing_and_notes_say_where_a_baseline_applies():
-    from benchmarks.scoreboard.plan import _supported_envs
-    from benchmarks.scoreboard.registry import POLICIES, QUICK
+    from satenv.bench.scoreboard.plan import _supported_envs
+    from satenv.bench.scoreboard.registry import POLICIES, QUICK
 
     assert "servicing-pereira2022" in QUICK["scenarios"]
     for name in ("apf", "nmpc", "cgmres", "tube_rdmpc"):
@@ -344,9 +344,9 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
     pytest.importorskip("stable_baselines3")
     training = pytest.importorskip("training")
     if not callable(getattr(training, "load", None)):
-        pytest.skip("training.load not available")
+        pytest.skip("satenv.training.load not available")
     run = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "training.train", "--total-timesteps", "256", "--num-envs", "2",
+    proc = subprocess.run([sys.executable, "-m", "satenv.training.train", "--total-timesteps", "256", "--num-envs", "2",
                            "--n-steps", "32", "--batch-size", "64", "--eval-every", "0", "--test-seeds", "0",
                            "--eval-baselines", "zero", "--checkpoint-every", "0", "--progress", "false",
                            "--env-id", "platoon_v0", "--env-kwargs", '{"randomize": true}', "--out-dir", str(run)],
@@ -526,7 +526,7 @@ def test_workers_die_with_a_killed_parent(tmp_path):
 
 def test_cli_shares_the_training_grammar():
     """``--out-dir`` and ``--address`` as in every training CLI (the old names still work)."""
-    from benchmarks.scoreboard.cli import build_parser
+    from satenv.bench.scoreboard.cli import build_parser
 
     parse = build_parser().parse_args
     assert parse(["--out-dir", "a"]).out == parse(["--out", "a"]).out == "a"
@@ -536,8 +536,8 @@ def test_cli_shares_the_training_grammar():
 def test_perturbed_scenarios_run_and_fill_the_robustness_table(tmp_path):
     """``<task>@<perturbation>`` selects the task under each of its perturbations that match; the
     board's robustness section lists them beside the nominal task."""
-    from benchmarks.scoreboard.report import robustness
     from satenv import tasks
+    from satenv.bench.scoreboard.report import robustness
 
     name = "platoon-pereira2022-random"
     task = tasks.get(name)

@@ -1,5 +1,5 @@
 """The fixed, team-size-independent observation layout (``obs_neighbours``) of cluster_v0 and
-formation_v0, and the permutation-invariant set actor (training.set_policy) that reads it."""
+formation_v0, and the permutation-invariant set actor (satenv.training.set_policy) that reads it."""
 
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ import pytest
 import torch
 
 import satenv
-import training
+from satenv import training
 from satenv.envs.cluster_v0 import N_FIXED_OBS, POS_SCALE, ClusterCore
 from satenv.errors import SatenvError, SatenvTypeError
 from satenv.scenarios.cluster import resolve_scenario, swarm
-from training.policy import LearnedPolicy, ObsNormalizer, PolicyLoadError, save_artifacts
-from training.set_policy import SetActor, set_statistics, slot_layout
-from training.shaping import ObsFeatures
+from satenv.training.policy import LearnedPolicy, ObsNormalizer, PolicyLoadError, save_artifacts
+from satenv.training.set_policy import SetActor, set_statistics, slot_layout
+from satenv.training.shaping import ObsFeatures
 
 K = 4
 
@@ -170,7 +170,7 @@ def test_a_set_policy_does_not_load_on_the_default_layout_of_a_small_team(tmp_pa
 
 
 def test_a_bad_set_spec_is_a_load_error_naming_policy_json(tmp_path):
-    from training.policy import write_manifest
+    from satenv.training.policy import write_manifest
 
     folder = _folder(tmp_path, _cluster(10))
     spec = json.loads((folder / "policy.json").read_text())
@@ -183,7 +183,7 @@ def test_a_bad_set_spec_is_a_load_error_naming_policy_json(tmp_path):
 
 @pytest.mark.filterwarnings("ignore:env scenario differs")
 def test_dagger_trains_a_set_actor(tmp_path):
-    from training.imitate import main
+    from satenv.training.imitate import main
 
     kw = {**swarm(5), "obs_neighbours": K, "max_steps": 4}
     flags = ["--env-id", "cluster_v0", "--env-kwargs", json.dumps(kw), "--expert", "apf", "--rounds", "2",
@@ -203,7 +203,7 @@ def test_dagger_trains_a_set_actor(tmp_path):
 
 
 def test_team_sizes_reports_each_task_both_ways(tmp_path):
-    from training.team_sizes import evaluate, table
+    from satenv.training.team_sizes import evaluate, table
 
     folder = _folder(tmp_path, _cluster(10))
     out = tmp_path / "sizes.json"

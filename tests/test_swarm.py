@@ -148,7 +148,7 @@ def test_cluster_sparse_pair_minimum_is_exact_within_the_decision():
 
 
 def test_apf_neighbour_lists_match_dense(monkeypatch):
-    from baselines import apf
+    from satenv.baselines import apf
 
     rng = np.random.default_rng(3)
     env = satenv.make("cluster_v0", initial_positions=rng.uniform(-900, 900, (40, 3)),
@@ -187,8 +187,7 @@ def test_cluster_swarm_generator():
 
 
 def test_apf_runs_on_a_cluster_swarm():
-    import baselines
-
+    from satenv import baselines
     env = satenv.make("cluster_v0", **cluster_sc.swarm(64, dynamics="cw", disturbance="none"))
     obs, _ = env.reset(seed=0)
     policy = baselines.make("apf", env)

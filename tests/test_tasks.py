@@ -166,7 +166,7 @@ def test_every_registered_perturbation_builds(name):
 
 
 def test_a_baseline_runs_on_a_perturbed_env():
-    import baselines
+    from satenv import baselines
     from satenv.rollout import rollout
 
     task = tasks.get("platoon-pereira2022-random")

@@ -1,4 +1,4 @@
-"""training.shaping.TerminalFeedback: the feedback law a policy blends in near its target."""
+"""satenv.training.shaping.TerminalFeedback: the feedback law a policy blends in near its target."""
 
 import json
 
@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 from test_env_base import ToyEnv
 
-import training
-from training.actor import MLPActor
-from training.policy import (
+from satenv import training
+from satenv.training.actor import MLPActor
+from satenv.training.policy import (
     LearnedPolicy,
     ObsNormalizer,
     PolicyLoadError,
     save_artifacts,
     write_manifest,
 )
-from training.shaping import TerminalFeedback
+from satenv.training.shaping import TerminalFeedback
 
 META = {"env_id": "test_env_base:ToyEnv", "observation_shape": [6], "action_shape": [3]}
 TERM = {"radius": 10.0, "gain": 2.0, "bandwidth": 0.1, "speed": 0.5}

@@ -1,4 +1,4 @@
-"""``training.train --init-actor``: a PPO run started from a saved (e.g. DAgger) network."""
+"""``satenv.training.train --init-actor``: a PPO run started from a saved (e.g. DAgger) network."""
 
 import json
 
@@ -8,12 +8,12 @@ import torch
 from test_env_base import ToyEnv
 from test_training import TOY, _cfg
 
-import training
-from training.actor import MLPActor
-from training.envs import policy_env_meta
-from training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
-from training.shaping import ObsFeatures
-from training.train import build_model, init_policy, latest_checkpoint, seed_actor, train
+from satenv import training
+from satenv.training.actor import MLPActor
+from satenv.training.envs import policy_env_meta
+from satenv.training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
+from satenv.training.shaping import ObsFeatures
+from satenv.training.train import build_model, init_policy, latest_checkpoint, seed_actor, train
 
 SEED_FEATURES = {"obs_symlog_scale": 10.0, "obs_symlog_dims": 3}
 
@@ -60,7 +60,7 @@ def test_a_seeded_ppo_run_starts_from_the_seed_and_resumes(tmp_path):
 def test_the_seeding_check_fails_on_a_model_of_another_shape(tmp_path):
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from training.vec_env import SatVecEnv
+    from satenv.training.vec_env import SatVecEnv
 
     folder = _seed_folder(tmp_path)
     cfg = _cfg(tmp_path, **SEED_FEATURES)   # no init_actor: tanh hidden layers, no tanh on the head
@@ -89,7 +89,7 @@ def test_a_seed_that_does_not_fit_the_run_is_a_value_error_naming_the_field(tmp_
 
 
 def test_the_filtered_training_env_takes_the_filter_options_a_folder_ships_with():
-    from benchmarks.learning.trainers import filtered_task_env
+    from satenv.bench.learning.trainers import filtered_task_env
     from satenv.safety import SafetyError
 
     env = filtered_task_env("servicing-pereira2022-random", penalty=1.0, safety={"margin": 0.005})

@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 from test_env_base import ToyEnv
 
-import training
+from satenv import training
 from satenv.rollout import rollout
-from training.config import TrainConfig, config_from_json, parse_args
-from training.policy import PolicyLoadError
-from training.train import latest_checkpoint, main, train
+from satenv.training.config import TrainConfig, config_from_json, parse_args
+from satenv.training.policy import PolicyLoadError
+from satenv.training.train import latest_checkpoint, main, train
 
 TOY = "test_env_base:ToyEnv"
 
 
 @pytest.fixture(autouse=True)
 def _private_baseline_cache(tmp_path_factory, monkeypatch):
-    """Baseline results are cached on disk (training.evaluate.cache_dir): one cache per test session."""
+    """Baseline results are cached on disk (satenv.training.evaluate.cache_dir): one cache per test session."""
     monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "satenv_cache"))
 
 
@@ -54,7 +54,7 @@ def test_config_validation_and_json_round_trip():
 
 
 def test_one_seeds_grammar_with_a_cap():
-    from training.config import MAX_SEEDS, parse_seeds
+    from satenv.training.config import MAX_SEEDS, parse_seeds
 
     assert parse_seeds("0-4") == (0, 1, 2, 3, 4) and parse_seeds("7,3,7") == (7, 3)
     assert parse_seeds(["0-1", "9"]) == (0, 1, 9) and parse_seeds("5:8") == (5, 6, 7)
@@ -117,7 +117,7 @@ def test_cli_config_replay_and_readable_help(tmp_path, capsys):
 
 
 def test_total_timesteps_round_up_to_whole_rollouts(tmp_path, capsys):
-    from training.config import planned_timesteps
+    from satenv.training.config import planned_timesteps
 
     cfg = _cfg(tmp_path, total_timesteps=100, eval_every=0, checkpoint_every=0, test_seeds=(3,))
     assert planned_timesteps(cfg, 3) == 192  # rollouts of 16 steps x 2 copies x 3 agents = 96
@@ -227,7 +227,7 @@ def test_resume_continues_the_step_count(tmp_path):
 def test_centralised_gym_view_passes_check_env():
     from gymnasium.utils.env_checker import check_env
 
-    from training.gym_view import CentralisedEnv
+    from satenv.training.gym_view import CentralisedEnv
 
     env = CentralisedEnv(ToyEnv())
     check_env(env, skip_render_check=True)
@@ -242,7 +242,7 @@ def test_centralised_gym_view_passes_check_env():
 
 
 def test_reward_shaping_terms_and_obs_features():
-    from training.shaping import ObsFeatures, RewardShaping
+    from satenv.training.shaping import ObsFeatures, RewardShaping
 
     info = {"tracking_error": np.zeros((1, 2, 6)), "min_separation": np.array([[10.0, 6.75]]),
             "collision": np.array([[False, True]]), "delta_v": np.array([[0.0, 0.5]])}
@@ -268,7 +268,7 @@ def test_reward_shaping_terms_and_obs_features():
 
 
 def test_look_ahead_penalty():
-    from training.shaping import RewardShaping
+    from satenv.training.shaping import RewardShaping
 
     s = RewardShaping(anticipation=1.0, anticipation_distance=8.0, anticipation_width=2.0, anticipation_horizon=2.0)
     st = np.zeros((1, 3, 6))
@@ -286,7 +286,7 @@ def test_look_ahead_penalty():
 
 
 def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
-    from training.shaping import ActionMap
+    from satenv.training.shaping import ActionMap
 
     cfg = _cfg(tmp_path, obs_symlog_scale=10.0, obs_symlog_dims=3, obs_drop_dims=(4,), eval_every=0,
                checkpoint_every=0, action_power=3.0, reward_shaping={"tracking": 1.0, "tracking_scale": 5.0})
@@ -320,7 +320,7 @@ def test_features_and_action_map_are_reapplied_at_inference(tmp_path):
 @pytest.mark.rllib
 def test_rllib_one_iteration(tmp_path):
     pytest.importorskip("ray.rllib", reason="ray[rllib] not installed")
-    from training.rllib_train import RLlibConfig, run
+    from satenv.training.rllib_train import RLlibConfig, run
 
     cfg = RLlibConfig(env_id=TOY, env_kwargs={"max_steps": 10}, iterations=1, train_batch_size=200,
                       minibatch_size=100, num_epochs=1, net_arch=(16,), out_dir=str(tmp_path / "rl"),
@@ -340,8 +340,8 @@ def test_rllib_path_imports_no_stable_baselines3():
     import subprocess
     import sys
 
-    code = ("import sys, training.rllib_train as r; r._env_creator('platoon_v0', {})\n"
-            "from training.envs import make_env; make_env('platoon_v0')\n"
+    code = ("import sys, satenv.training.rllib_train as r; r._env_creator('platoon_v0', {})\n"
+            "from satenv.training.envs import make_env; make_env('platoon_v0')\n"
             "assert not [m for m in sys.modules if m.startswith('stable_baselines3')], 'SB3 imported'")
     subprocess.run([sys.executable, "-c", code], check=True)
 
@@ -349,7 +349,7 @@ def test_rllib_path_imports_no_stable_baselines3():
 def test_rllib_missing_ray_message(monkeypatch):
     import builtins
 
-    from training import rllib_train
+    from satenv.training import rllib_train
 
     real_import = builtins.__import__
 
@@ -402,12 +402,12 @@ def test_every_shipped_policy_loads_and_completes_an_episode(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_policy_reproduces_its_eval_json(name):
-    from training.evaluate import evaluate
+    from satenv.training.evaluate import evaluate
 
     folder = training.POLICIES_DIR / name
     env = _shipped_env(folder)
     saved = json.loads((folder / "eval.json").read_text())
-    if "network + filter" in saved:                 # benchmarks.safety_alone's format: one block per way
+    if "network + filter" in saved:                 # satenv.bench.safety_alone's format: one block per way
         block = saved["network + filter" if "safety_filter" in json.loads((folder / "env.json").read_text())
                       else "network alone"]
         seeds, expected = block["test_seeds"], block["aggregate"]
@@ -424,21 +424,21 @@ def test_every_training_command_in_the_docs_parses():
     import shlex
     from pathlib import Path
 
-    from training.benchmarl_train import BenchMARLConfig
-    from training.imitate import ImitationConfig
-    from training.rllib_train import RLlibConfig
+    from satenv.training.benchmarl_train import BenchMARLConfig
+    from satenv.training.imitate import ImitationConfig
+    from satenv.training.rllib_train import RLlibConfig
 
     classes = {"train": TrainConfig, "imitate": ImitationConfig, "benchmarl_train": BenchMARLConfig,
                "rllib_train": RLlibConfig}
     root = Path(__file__).parents[1]
-    pages = [root / "README.md", *root.glob("docs/**/*.md"), *root.glob("training/policies/*/README.md")]
+    pages = [root / "README.md", *root.glob("docs/**/*.md"), *root.glob("satenv/training/policies/*/README.md")]
     found = 0
     for page in pages:
         text = page.read_text().replace("\\\n", " ")
-        for m in re.finditer(r"python -m training\.(train|imitate|benchmarl_train|rllib_train)\b([^\n#`|]*)", text):
+        for m in re.finditer(r"python -m satenv\.training\.(train|imitate|benchmarl_train|rllib_train)\b([^\n#`|]*)", text):
             argv = [a for a in shlex.split(m.group(2)) if a not in ("--resume", "--help")]
             assert "..." not in argv, f"{page.name}: an incomplete example: {m.group(0)}"
-            if "--config" in argv and not argv[argv.index("--config") + 1].startswith("training/"):
+            if "--config" in argv and not argv[argv.index("--config") + 1].startswith("satenv/training/"):
                 continue  # a run of the reader's own (runs/x/config.json, FILE)
             parse_args(argv, cls=classes[m.group(1)])
             found += 1
@@ -446,8 +446,8 @@ def test_every_training_command_in_the_docs_parses():
 
 
 def test_evaluation_is_the_same_in_worker_processes_and_baselines_are_cached(tmp_path, monkeypatch, capsys):
-    import baselines
-    from training.evaluate import cache_dir, evaluate, evaluate_baselines
+    from satenv import baselines
+    from satenv.training.evaluate import cache_dir, evaluate, evaluate_baselines
 
     env = ToyEnv(max_steps=6)
     one = evaluate(env, baselines.make("random", env), [3, 1, 2], workers=1, progress=False)
@@ -462,7 +462,7 @@ def test_evaluation_is_the_same_in_worker_processes_and_baselines_are_cached(tmp
     first = evaluate_baselines(env, ["zero"], [0, 1], progress=False)
     assert len(list(cache_dir().glob("*.json"))) == 1
     calls = []
-    monkeypatch.setattr("training.evaluate.evaluate", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr("satenv.training.evaluate.evaluate", lambda *a, **k: calls.append(a))
     assert evaluate_baselines(env, ["zero"], [0, 1], progress=False) == json.loads(json.dumps(first))
     assert not calls, "a cached baseline was evaluated again"
     evaluate_baselines(env, ["zero"], [0, 2], progress=False)  # other seeds: another entry

@@ -1,8 +1,8 @@
 """Replayed configs are data, and the remaining entry points' caps and types (issue 29 items 2, 4).
 
-``training.trust.check_replayed_config`` admits only registered env ids and baseline names (a
+``satenv.training.trust.check_replayed_config`` admits only registered env ids and baseline names (a
 ``module:callable`` env id only with ``allow_code_env_id=True``) and imports nothing it names;
-``python -m training.train --config`` calls it before anything runs. Then: ``make_vec(...).reset(
+``python -m satenv.training.train --config`` calls it before anything runs. Then: ``make_vec(...).reset(
 indices=...)``, ``satenv.make`` with a non-string id, ``scoreboard --out`` naming a file,
 overflowing scenario fields, ``cluster_v0(n_neighbours=10**400)`` and a TorchRL ``device`` this
 torch lacks — each a clear error naming the field.
@@ -19,12 +19,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import satenv
-from baselines.registry import BASELINES
+from satenv.baselines.registry import BASELINES
 from satenv.errors import SatenvError, SatenvTypeError
-from training.trust import CODE_FLAG, UntrustedDataError, check_replayed_config
+from satenv.training.trust import CODE_FLAG, UntrustedDataError, check_replayed_config
 
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
-SHIPPED_CONFIG = "training/policies/platoon_tplf_ppo/config.json"
+SHIPPED_CONFIG = "satenv/training/policies/platoon_tplf_ppo/config.json"
 
 
 # ------------------------------------------------------------------- replayed configs
@@ -50,7 +50,7 @@ def test_only_registered_env_ids_pass_and_nothing_is_imported(env_id, allow):
     else:
         with pytest.raises(UntrustedDataError, match="env_id"):
             check_replayed_config(data, allow_code_env_id=allow)
-    assert set(sys.modules) - before <= {"baselines.registry"}, set(sys.modules) - before
+    assert set(sys.modules) - before <= {"satenv.baselines.registry"}, set(sys.modules) - before
 
 
 @FAST
@@ -77,7 +77,7 @@ def test_the_code_flag_must_be_a_bool_and_the_config_an_object():
 @pytest.mark.parametrize("cli", ["train", "imitate", "benchmarl_train", "rllib_train"])
 def test_config_replay_refuses_code_before_anything_runs(tmp_path, cli):
     """The audit's case: ``env_id: "subprocess:run"`` ran a shell command before the type check.
-    Every CLI reads ``--config`` through ``training.config.load_config``, which vets it."""
+    Every CLI reads ``--config`` through ``satenv.training.config.load_config``, which vets it."""
     import importlib
 
     main = importlib.import_module(f"training.{cli}").main
@@ -139,7 +139,7 @@ def test_huge_scenario_fields_are_rejected_by_their_own_name(env_id, field, valu
 
 
 def test_scoreboard_out_naming_a_file_is_the_cli_error(tmp_path, capsys):
-    from benchmarks.scoreboard.cli import main
+    from satenv.bench.scoreboard.cli import main
 
     target = tmp_path / "passwd"
     target.write_text("root:x:0:0\n")

@@ -1,8 +1,8 @@
-"""Policy folders are untrusted data (issue 29 item 1): ``training.load`` and ``training.trust``.
+"""Policy folders are untrusted data (issue 29 item 1): ``satenv.training.load`` and ``satenv.training.trust``.
 
 Crafted folders: links out of (and inside) the folder, directories, FIFOs and sparse giant files
 in place of members, safetensors headers declaring huge or wrong tensors, tampered bytes, a
-missing manifest. Each must be refused with a :class:`training.PolicyLoadError` naming the file,
+missing manifest. Each must be refused with a :class:`satenv.training.PolicyLoadError` naming the file,
 quickly, without reading outside the folder, without allocating past the cap and without
 echoing the file's content; a good folder loads bit for bit.
 """
@@ -22,9 +22,9 @@ from audit_inputs import good_policy_folder
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import training
-from training.policy import LEGACY_WEIGHTS, MANIFEST, POLICY_FILES, WEIGHTS, write_manifest
-from training.trust import UntrustedDataError, read_member, safetensors_arrays, sha256_file
+from satenv import training
+from satenv.training.policy import LEGACY_WEIGHTS, MANIFEST, POLICY_FILES, WEIGHTS, write_manifest
+from satenv.training.trust import UntrustedDataError, read_member, safetensors_arrays, sha256_file
 
 SECRET = "TOP-SECRET-7f3a9c"
 MEMBERS = (*POLICY_FILES, MANIFEST)
@@ -245,7 +245,7 @@ def test_errors_name_the_file_and_never_echo_its_content(tmp_path_factory, name,
 def test_a_legacy_folder_is_refused_unless_trusted_and_converts(folder):
     import torch
 
-    from training.policy import convert_weights_pt
+    from satenv.training.policy import convert_weights_pt
 
     policy = training.load(folder)
     torch.save(dict(policy.actor.state_dict()), folder / LEGACY_WEIGHTS)

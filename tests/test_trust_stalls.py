@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from test_baseline_registry import _check_episode_goes_on
 
-import baselines
 import satenv
-from baselines import BaselineError
-from baselines.base import MAX_SOLVE_TIME, guarded_solve, new_info
+from satenv import baselines
+from satenv.baselines import BaselineError
+from satenv.baselines.base import MAX_SOLVE_TIME, guarded_solve, new_info
 
 STALL = 0.06
 LIMIT = 0.02
@@ -58,7 +58,7 @@ def test_every_solver_config_has_a_default_limit():
 
 
 def test_dmpc_stall_is_a_flagged_fallback(monkeypatch):
-    from baselines.dmpc import QPSolver
+    from satenv.baselines.dmpc import QPSolver
 
     env = satenv.platoon_v0(topology="BDL", max_steps=5)
     pol = baselines.DMPC(env, seed=0, solve_time_limit=LIMIT, max_iterations=2)
@@ -81,7 +81,7 @@ def test_apf_stall_is_a_flagged_fallback(monkeypatch):
 
 
 def test_cgmres_stall_is_a_flagged_fallback(monkeypatch):
-    import baselines.cgmres as mod
+    import satenv.baselines.cgmres as mod
 
     env = satenv.formation_v0(max_steps=6)
     pol = baselines.CGMRES(env, solve_time_limit=LIMIT)

@@ -1,4 +1,4 @@
-"""baselines.TubeRDMPC (li2022 §3): tube bound (15), collision avoidance, fallbacks, options."""
+"""satenv.baselines.TubeRDMPC (li2022 §3): tube bound (15), collision avoidance, fallbacks, options."""
 
 import math
 
@@ -7,8 +7,8 @@ import pytest
 
 pytest.importorskip("casadi")
 
-from baselines.tube_rdmpc import TubeController, TubeRDMPC, TubeRDMPCConfig, slot_sizes  # noqa: E402
 from satenv import metrics  # noqa: E402
+from satenv.baselines.tube_rdmpc import TubeController, TubeRDMPC, TubeRDMPCConfig, slot_sizes  # noqa: E402
 from satenv.envs.cluster_v0 import parallel_env  # noqa: E402
 from satenv.rollout import rollout  # noqa: E402
 

@@ -1,11 +1,11 @@
-"""training.vec_env.SatVecEnv: the parameter-shared SB3 VecEnv over a batched core (toy core)."""
+"""satenv.training.vec_env.SatVecEnv: the parameter-shared SB3 VecEnv over a batched core (toy core)."""
 
 import numpy as np
 import pytest
 from test_env_base import ToyEnv
 
 from satenv.envs.base import SatenvError
-from training.vec_env import SatVecEnv, env_version, make_env
+from satenv.training.vec_env import SatVecEnv, env_version, make_env
 
 B, M = 4, 3
 
@@ -152,7 +152,7 @@ def test_sb3_wrappers_and_ppo_step():
 
 
 def test_action_obs_and_reward_maps():
-    from training.shaping import ActionMap, ObsFeatures
+    from satenv.training.shaping import ActionMap, ObsFeatures
 
     calls = []
 

@@ -4,7 +4,7 @@ Every satenv environment has two layers:
 
 * a :class:`BatchedCore` subclass holding the physics and task logic for ``B`` independent
   copies of the scenario at once (arrays ``(B, M, ...)``, pure numpy, no dicts). The training
-  path (``training.vec_env``) drives this core directly with ``B`` = number of env copies.
+  path (``satenv.training.vec_env``) drives this core directly with ``B`` = number of env copies.
 * :class:`SatParallelEnv`, the PettingZoo ``ParallelEnv`` wrapper (``B = 1``), which only
   converts dicts to arrays and back, validates input, seeds, truncates and renders.
 

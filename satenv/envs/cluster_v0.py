@@ -37,7 +37,7 @@ li2022 eq. 13): ``env.set_inner_loop(obj)`` registers an object with a method
 ``t`` (B,) [s], the true states ``x`` (B, M, 6), the reference satellite's ECI state
 ``chief`` (B, 6) and the commanded accelerations ``u_cmd`` (B, M, 3) of the current decision; the
 env applies ``saturate_norm(u_cmd + correction, u_max)``. ``reset()`` removes the hook (a
-controller registers it again for its episode: ``baselines.TubeRDMPC`` does so itself).
+controller registers it again for its episode: ``satenv.baselines.TubeRDMPC`` does so itself).
 
 Spaces (per agent; float32)
 ---------------------------
@@ -64,7 +64,7 @@ With ``obs_neighbours = K`` (an int, default ``None``) the layout is fixed whate
 ``19 + 7 K`` entries, the same 19 first, then always ``K`` slots of the ``K`` nearest other
 satellites within ``comm_range`` (whatever ``n_neighbours``), nearest first, each
 ``[1, (q_j - q_i) / L, (p_j - p_i) / V]`` or zeros (flag 0) when fewer are in range. A policy on
-it flies any team size; a set encoder (``training.set_policy``) reads the slots as an unordered
+it flies any team size; a set encoder (``satenv.training.set_policy``) reads the slots as an unordered
 set. With ``K = n_neighbours <= M - 1`` it equals the default layout entry for entry.
 
 ``state()`` returns the global state ``(6 M + 6,)``: the satellites' states, then the obstacle's

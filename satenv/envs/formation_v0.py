@@ -55,7 +55,7 @@ last       1 if the proximity graph is connected, else 0
 With ``obs_neighbours = K`` (an int, default ``None``) the layout is fixed whatever ``M``:
 ``7 + 7 K`` entries, ``e_i / L``, ``v_i / V``, the connectivity flag, then ``K`` slots of the
 nearest other spacecraft, nearest first, each ``[1, (x_j - x_i) / (L, V)]`` or zeros (flag 0)
-beyond ``M - 1`` (for a set encoder, ``training.set_policy``).
+beyond ``M - 1`` (for a set encoder, ``satenv.training.set_policy``).
 
 ``state()`` returns the global state: the M LVLH states flattened ``(6 M,)`` float64.
 

@@ -347,7 +347,7 @@ class PlatoonCore(BatchedCore):
     def fused_check(self) -> bool:
         """Whether the compiled kernel checks that its outputs are finite in its own pass
         (:attr:`StepResult.finite`; on by default). Off, the env's :class:`StepGuard` checks
-        instead; ``benchmarks.perf`` turns it off (and that guard) to time the check."""
+        instead; ``satenv.bench.perf`` turns it off (and that guard) to time the check."""
         return self._kernel is not None and bool(self._params[23])
 
     @fused_check.setter

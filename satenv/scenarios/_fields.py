@@ -31,7 +31,7 @@ __all__ = ["MAX_AGENTS", "MAX_INT", "MAX_MAGNITUDE", "MAX_RELATIVE_SPEED", "MAX_
 
 MAX_AGENTS: int = 1024
 """Cap on the number of agents of a scenario: the swarm sizes the envs are built and measured for
-(per-agent cost flat in N, ``benchmarks.perf --sections scaling``); the dense per-scenario
+(per-agent cost flat in N, ``satenv.bench.perf --sections scaling``); the dense per-scenario
 matrices (graph adjacency, Laplacian, allocation cost) stay below 10 MB at this size."""
 
 MAX_RELATIVE_SPEED: float = 2 * 11.2e3

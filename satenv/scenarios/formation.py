@@ -29,7 +29,7 @@ Units of the input bound: the paper writes ``-50 <= u <= 50`` without a unit; in
 about 5 g, far beyond real formation-flying thrusters: the paper's scenario is a numerical
 example, and manoeuvres of a few hundred metres take seconds.
 
-Cost weights (normalised, used by :class:`baselines.cgmres.CGMRES` and the env reward): with the
+Cost weights (normalised, used by :class:`satenv.baselines.cgmres.CGMRES` and the env reward): with the
 length scale ``L = length_scale`` and ``w = u / u_max``, the stage cost is
 ``1/2 sum_i (e_i / L)^T diag(q_i) (e_i / L) + 1/2 input_weight |w|^2`` where, per agent, ``e_i``
 is the position error to its goal (weights ``position_weight`` on every axis), or for a follower

@@ -73,7 +73,7 @@ class PlatoonScenario:
             cost weights (N,) — the stage cost of eq. 14 (the env's reward; the DMPC minimises
             it too). The controller's own settings (horizon N, terminal weight P, Jacobi
             tolerance sigma, variant, convex weights, iterations) are
-            ``baselines.dmpc.DMPCConfig``.
+            ``satenv.baselines.dmpc.DMPCConfig``.
         u_max: per-axis acceleration limit [m/s^2]; v_max: velocity limit [m/s].
         follower_radius: r_f [m]; leader_radius [m] (collision when distance < r_i + r_j).
         min_error_constraint: the minimum-tracking-error constraint (41) is part of the task
@@ -307,7 +307,7 @@ PRESETS: dict[str, PlatoonScenario] = {
     # per pair (chain formation); Q weights the position output only. n_k is not given in
     # the paper: 300 steps (30 s) is our choice. The env's observations use the PLF graph.
     # Its controller (convex step, N = 40, P, gamma = 2, w = (0.6, 0.4)) is
-    # ``baselines.dmpc.PAPER_CONFIGS["pereira2022"]``.
+    # ``satenv.baselines.dmpc.PAPER_CONFIGS["pereira2022"]``.
     "pereira2022": PlatoonScenario(
         name="pereira2022",
         initial_state=(

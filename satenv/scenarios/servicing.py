@@ -76,7 +76,7 @@ class ServicingScenario:
         substeps: integration substeps per dt (attitude RK4 and, for ``"body"``, the translation).
         position_weight, velocity_weight, quaternion_weight, omega_weight, input_weight: the
             diagonals of Q_p, Q_v, Q_q, Q_w, H of eq. 39 (the env's reward; the NMPC minimises the
-            same cost, its horizon N is ``baselines.nmpc.NMPCConfig.horizon``).
+            same cost, its horizon N is ``satenv.baselines.nmpc.NMPCConfig.horizon``).
         max_distance: an episode terminates when a spacecraft is farther than this [m].
         contact_tolerance: distances within this of a limit still count as satisfying eq. 40 /
             41 [m] (float round-off: the §5.2 initial positions and waypoints lie exactly on the

@@ -1,6 +1,0 @@
-"""``python -m benchmarks.perf``."""
-
-from benchmarks.perf import main
-
-if __name__ == "__main__":   # the expert pools spawn workers that import this module again
-    main()

@@ -1,9 +1,0 @@
-"""The paper reproductions, one module per paper (``python -m benchmarks.reproduce <paper>``).
-
-Each module exposes ``reproduce(plots=None, seed=0, **options) -> dict`` and
-``format_table(result) -> str`` (and optionally ``add_arguments(parser)`` and ``RUN_TIME``). A
-result carries ``claims`` (:func:`benchmarks.claims.claim` records: the paper's sentence, its
-value, the rule, what we measured) and ``departures`` (:func:`benchmarks.claims.departure`
-records: every setting where the run differs from the paper, with its measured effect); the
-reproduction pages render both (``docs/gen_reproductions.py``).
-"""

@@ -1,0 +1,163 @@
+"""How each algorithm of the grid is trained, with an evaluation at every checkpoint.
+
+Every trainer gets a :class:`~satenv.bench.learning.grid.Run` and a callback
+``checkpoint(k, agent_steps, wall_s, make_policy)`` that it calls at each of the run's
+checkpoints (``make_policy(env)`` gives the current policy for an env; ``wall_s`` is the training
+wall time so far, evaluations excluded). Each uses the project's own trainer at its documented
+defaults plus the fast configuration (:data:`satenv.bench.perf.learning.FAST_CONFIGS`):
+
+* ``ppo``: ``satenv.training.train.train`` (SB3 PPO, parameter sharing, ``task=``) run to each checkpoint's budget
+  in turn, resuming from its own checkpoint (``--resume`` semantics: the env copies are re-seeded
+  at each resume); the filter-in-training row trains on ``satenv.make(..., safety_filter=
+  SafetyConfig(penalty=FILTER_PENALTY))`` through :func:`filtered_task_env`;
+* ``mappo``, ``ippo``, ``masac``, ``isac``: ``satenv.training.benchmarl_train.build_experiment`` with a
+  BenchMARL callback that exports the actor (``satenv.training.benchmarl_train.export_actor``) at each
+  checkpoint;
+* ``dagger``: ``satenv.training.recipes.dagger.run`` (the project's one DAgger, the system's expert and
+  defaults, :data:`~satenv.training.recipes.dagger.SYSTEM_DEFAULTS`) one round per checkpoint.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from satenv.bench.learning.grid import CHECKPOINTS, FILTER_PENALTY, Run
+
+__all__ = ["Checkpoint", "DAGGER_EPISODES", "filtered_task_env", "train"]
+
+Checkpoint = Callable[[int, int, float, Callable[[Any], Any]], None]
+
+DAGGER_EPISODES: dict[str, int] = {
+    "platoon-pereira2023": 4, "platoon-pereira2022": 4, "formation-kannan2022-position": 1,
+    "formation-kannan2022-collision": 1, "cluster-li2022": 1, "servicing-pereira2022": 1}
+"""DAgger's episodes per round (round 0: the expert flies; each later round the network flies and
+the expert labels): one round per checkpoint, so the labels are ``CHECKPOINTS x this x agents x
+episode steps`` (:data:`satenv.bench.learning.grid.DAGGER_LABELS`)."""
+
+
+def filtered_task_env(task: str, penalty: float = FILTER_PENALTY, safety: dict[str, Any] | None = None,
+                      **overrides: Any) -> Any:
+    """The training task's env with the safety filter inside its ``step`` and the intervention
+    penalty on (an env id ``satenv.bench.learning.trainers:filtered_task_env`` for ``satenv.training.train``);
+    ``safety``: the filter's other options (``satenv.safety.SafetyConfig`` fields, e.g. the margin a
+    policy folder ships with, ``{"margin": 0.005}``)."""
+    from satenv import tasks
+    from satenv.safety import SafetyConfig
+
+    config = SafetyConfig.from_options(SafetyConfig(penalty=penalty), **(safety or {}))
+    return tasks.get(task).make_env(safety_filter=config, **overrides)
+
+
+def _fast(trainer: str) -> dict[str, Any]:
+    from satenv.bench.perf.learning import FAST_CONFIGS
+
+    return dict(FAST_CONFIGS[trainer])
+
+
+def train_ppo(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
+    from satenv import training
+    from satenv.training.config import TrainConfig
+    from satenv.training.train import train
+
+    task = run.task
+    env = ({"env_id": "satenv.bench.learning.trainers:filtered_task_env", "env_kwargs": {"task": task.name}}
+           if run.filter else {"task": task.name})
+    wall = 0.0
+    for k, target in enumerate(run.checkpoints):
+        cfg = TrainConfig(**env, seed=run.seed, total_timesteps=target,
+                          eval_every=0, checkpoint_every=run.budget, eval_baselines=("zero",),
+                          test_seeds=task.seeds("validation", 1), out_dir=str(workdir), progress=False,
+                          workers=1, **_fast("sb3_ppo"))
+        t0 = time.perf_counter()
+        final = train(cfg, resume=k > 0)
+        wall += time.perf_counter() - t0
+        steps = int(training.load(final).meta["step"])
+        checkpoint(k, steps, wall, lambda env, final=final: training.load(final, env=env))
+
+
+def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
+    from benchmarl.experiment.callback import Callback
+
+    import satenv
+    from satenv.training.benchmarl_train import BenchMARLConfig, build_experiment, export_actor
+    from satenv.training.envs import policy_env_meta
+    from satenv.training.policy import LearnedPolicy, ObsNormalizer
+
+    task = run.task
+    env = satenv.make(task.env_id, **task.env_kwargs)
+    n_agents = len(env.possible_agents)
+    agent = env.possible_agents[0]
+    obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
+    cfg = BenchMARLConfig(algorithm=run.algorithm, task=task.name,
+                          seed=run.seed, max_frames=math.ceil(run.budget / n_agents), out_dir=str(workdir),
+                          progress=False, workers=1, **_fast("benchmarl_mappo")).planned()
+    experiment = build_experiment(cfg)
+    experiment.config.checkpoint_at_end = False
+    meta = policy_env_meta(task.env_id, env, dict(task.env_kwargs), dict(task.env_kwargs))
+    targets = run.checkpoints
+
+    class Checkpoints(Callback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.k, self.t0, self.eval_s = 0, time.perf_counter(), 0.0
+
+        def on_train_end(self, training_td: Any, group: str) -> None:
+            steps = int(self.experiment.total_frames) * n_agents
+            while self.k < len(targets) and (steps >= targets[self.k] or steps >= cfg.max_frames * n_agents):
+                t1 = time.perf_counter()
+                actor = export_actor(self.experiment.policy, obs_dim, act_dim, n_agents)
+                policy = LearnedPolicy(actor, ObsNormalizer(), obs_shape=(obs_dim,), meta={**meta, "step": steps})
+                checkpoint(self.k, steps, t1 - self.t0 - self.eval_s, lambda _env, p=policy: p)
+                self.eval_s += time.perf_counter() - t1
+                self.k += 1
+
+    cb = Checkpoints()
+    cb.experiment = experiment
+    experiment.callbacks.append(cb)
+    experiment.run()
+    if cb.k < len(targets):
+        raise RuntimeError(f"{run.label()}: BenchMARL stopped at {experiment.total_frames} frames, before "
+                           f"checkpoint {cb.k + 1} of {len(targets)}")
+
+
+def train_dagger(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
+    import dataclasses
+    import json
+
+    from satenv import training
+    from satenv.training.recipes import dagger
+
+    task = run.task
+    fast = {k: v for k, v in _fast("dagger").items() if k != "torch_threads"}
+    episodes = DAGGER_EPISODES[run.system]
+    cfg = dagger.system_config(run.system, **{**fast, "seed": run.seed,
+                                              "train_seed": task.seeds("train")[0] + 10_000 * run.seed,
+                                              "round0_episodes": episodes, "episodes_per_round": episodes,
+                                              "eval_seeds": task.seeds("validation", 1), "final_eval": False})
+    for k in range(CHECKPOINTS):
+        dagger.run(dataclasses.replace(cfg, rounds=k + 1), workdir)
+        history = json.loads((workdir / "history.json").read_text())
+        wall = sum(h["collect_s"] + h["fit_s"] for h in history)
+        folder = workdir / "rounds" / f"{k:04d}"
+        checkpoint(k, int(history[-1]["labels"]), wall, lambda env, folder=folder: training.load(folder, env=env))
+
+
+TRAINERS: dict[str, Callable[[Run, Checkpoint, Path], None]] = {
+    "ppo": train_ppo, "mappo": train_benchmarl, "ippo": train_benchmarl, "masac": train_benchmarl,
+    "isac": train_benchmarl, "dagger": train_dagger}
+
+
+def train(run: Run, checkpoint: Checkpoint) -> None:
+    """Train ``run`` in a temporary folder (weights are not kept), calling ``checkpoint`` at each
+    checkpoint; the controller (no training) is one checkpoint of its scripted policy."""
+    if run.algorithm == "controller":
+        from satenv import baselines
+        checkpoint(0, 0, 0.0, lambda env: baselines.make(run.task.controller, env))
+        return
+    with tempfile.TemporaryDirectory(prefix=f"learning-{run.algorithm}-") as d:
+        TRAINERS[run.algorithm](run, checkpoint, Path(d))

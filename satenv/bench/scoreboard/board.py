@@ -1,0 +1,283 @@
+"""``run_scoreboard``: select, preflight, resume, run, aggregate, write — one step per function."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterator, Mapping
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from satenv.bench.scoreboard.backends import stream
+from satenv.bench.scoreboard.headline import headline
+from satenv.bench.scoreboard.plan import (
+    PERTURBATION_SEP,
+    Plan,
+    Selection,
+    board_seeds,
+    make_plan,
+    select,
+    split_names,
+)
+from satenv.bench.scoreboard.registry import (
+    POLICIES,
+    QUICK,
+    SCENARIOS,
+    discover_trained_policies,
+    user_policies,
+)
+from satenv.bench.scoreboard.report import (
+    RANKING,
+    Board,
+    aggregate,
+    git_revision,
+    machine,
+    rank,
+    render_markdown,
+    satenv_version,
+    summarize,
+    write_outputs,
+)
+from satenv.bench.scoreboard.runner import EPISODES_FILE, EpisodeLog, Task, read_episodes
+from satenv.bench.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
+
+__all__ = ["reaggregate", "run_scoreboard"]
+
+Key = tuple[str, str, int]
+Record = dict[str, Any]
+
+
+def _check_options(workers: int, backend: str, resume: bool, overwrite: bool) -> None:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ScoreboardError(f"--workers must be a positive integer, got {workers!r}")
+    if backend not in ("process", "ray"):
+        raise ScoreboardError(f"--backend must be 'process' or 'ray', got {backend!r}")
+    if resume and overwrite:
+        raise ScoreboardError("--resume and --overwrite contradict each other: pick one")
+
+
+def _registries(scenario_registry: Mapping[str, ScenarioSpec] | None,
+                policy_registry: Mapping[str, PolicySpec] | None
+                ) -> tuple[dict[str, ScenarioSpec], dict[str, PolicySpec]]:
+    scen_reg = dict(SCENARIOS if scenario_registry is None else scenario_registry)
+    pol_reg = dict(POLICIES if policy_registry is None else policy_registry)
+    for reg in (scen_reg, pol_reg):
+        for key, spec in reg.items():
+            if key != spec.name:
+                raise ScoreboardError(f"registry entry {key!r} holds a spec named {spec.name!r}: "
+                                      "the key must be the spec's name")
+    if policy_registry is None:
+        for name, spec in discover_trained_policies().items():
+            pol_reg.setdefault(name, spec)
+    return scen_reg, pol_reg
+
+
+def _user_specs(paths: list[str], pol_reg: Mapping[str, PolicySpec]) -> list[PolicySpec]:
+    """The ``--policy`` folders' specs; a folder of a shipped policy is its ``trained:<name>``
+    entry (so it is ranked once, not also as ``user:<name>``)."""
+    shipped = {Path(spec.checkpoint).resolve(): spec for spec in pol_reg.values() if spec.checkpoint}
+    same = [shipped[Path(p).resolve()] for p in paths if Path(p).resolve() in shipped]
+    return user_policies([p for p in paths if Path(p).resolve() not in shipped], pol_reg) + same
+
+
+def _selections(scenarios, policies, quick: bool, user: list[PolicySpec], scen_reg, pol_reg,
+                notes: list[str]) -> tuple[Selection, Selection]:
+    req_scen, req_pol = split_names(scenarios), split_names(policies)
+    if quick:
+        req_scen = req_scen if req_scen is not None else list(QUICK["scenarios"])
+        req_pol = req_pol if req_pol is not None else list(QUICK["policies"])
+    if req_pol is not None and user:
+        req_pol = req_pol + [s.name for s in user if s.name not in req_pol]
+    scen = select(req_scen, scen_reg, "scenario", notes, strict=not quick or scenarios is not None)
+    pol = select(req_pol, pol_reg, "policy", notes, strict=not quick or policies is not None)
+    pol.explicit |= {spec.name for spec in user}
+    for kind, sel in (("scenario", scen), ("policy", pol)):
+        if not sel.names:
+            raise ScoreboardError(f"no {kind} to run: none of the selected {kind}s is available "
+                                  f"({'; '.join(notes) or 'empty selection'})")
+    return scen, pol
+
+
+def _check_log_free(log_path: Path, resume: bool, overwrite: bool) -> None:
+    if log_path.exists() and not resume and not overwrite and log_path.stat().st_size > 0:
+        raise ScoreboardError(f"{log_path} already holds episodes of an earlier run: pass --resume to "
+                              "continue it, --overwrite to discard it, or choose another --out")
+
+
+def _prepare_out(out: Path, overwrite: bool) -> None:
+    if overwrite:
+        (out / EPISODES_FILE).unlink(missing_ok=True)
+        for f in (out / "trajectories").glob("*.npz"):
+            f.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def _resumed(log_path: Path, plan: Plan, fps: dict[str, str]) -> dict[Key, Record]:
+    """The planned episodes already in the log (whose definitions must match today's)."""
+    planned, done = set(plan.keys), {}
+    for rec in read_episodes(log_path, repair=True):
+        key = (rec["scenario"], rec["policy"], rec["seed"])
+        if key not in planned:
+            continue
+        for kind, fp in (("scenario", "scenario_fp"), ("policy", "policy_fp")):
+            if rec.get(fp) != fps[rec[kind]]:
+                raise ScoreboardError(f"{log_path} holds episodes of a different definition of {kind} "
+                                      f"{rec[kind]!r} (fingerprint {rec.get(fp)} != {fps[rec[kind]]}): "
+                                      "pass --overwrite or choose another --out")
+        done[key] = rec
+    return done
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+
+
+def trajectory_path(out: Path, scen: str, pol: str, seed: int) -> Path:
+    return out / "trajectories" / f"{_safe(scen)}__{_safe(pol)}__seed{seed}.npz"
+
+
+def _tasks(plan: Plan, done: Mapping[Key, Record], scen_reg, pol_reg, out: Path, plots: bool) -> list[Task]:
+    return [Task(scen_reg[s], pol_reg[p], seed,
+                 str(trajectory_path(out, s, p, seed)) if plots and plan.is_example((s, p, seed)) else None)
+            for s, p, seed in plan.keys if (s, p, seed) not in done]
+
+
+def _header(plan: Plan, scen_reg, pol_reg, pol_names: list[str], notes: list[str], done: int,
+            quick: bool, backend: str, workers: int, argv: list[str] | None) -> dict[str, Any]:
+    return {
+        "title": "satenv scoreboard" + (" (quick)" if quick else ""),
+        "satenv_version": satenv_version(), "git": git_revision(),
+        "generated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "command": "python -m satenv.bench.scoreboard " + " ".join(argv if argv is not None else []),
+        "machine": machine(), "backend": backend, "workers": workers, "seeds": plan.seeds,
+        "scenario_seeds": plan.caps, "env_versions": sorted(set(plan.env_ids.values())),
+        "scenarios": {n: {"env": env, "kwargs": dict(scen_reg[n].kwargs),
+                          "description": scen_reg[n].description, **scen_reg[n].success_rule()}
+                      for n, env in plan.env_ids.items()},
+        "policies": {n: {"description": pol_reg[n].description,
+                         **({"checkpoint": pol_reg[n].checkpoint} if pol_reg[n].checkpoint else {})}
+                     for n in pol_names},
+        "episodes_planned": len(plan.keys), "episodes_resumed": done,
+        "ranking": RANKING,
+        "notes": notes,
+    }
+
+
+def _run(records: Iterator[Record], log_path: Path, done: dict[Key, Record], total: int, progress: bool,
+         on_record: Callable[[Record], None] | None) -> None:
+    """Append each record to the log as it arrives (with a progress bar)."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, initial=len(done), desc="scoreboard", unit="ep", disable=not progress,
+               file=sys.stderr, dynamic_ncols=True)
+    log = EpisodeLog(log_path)
+    try:
+        for rec in records:
+            log.append(rec)
+            done[(rec["scenario"], rec["policy"], rec["seed"])] = rec
+            bar.update(1)
+            bar.set_postfix_str(f"{rec['scenario']} / {rec['policy']}", refresh=False)
+            if on_record is not None:
+                on_record(rec)
+    finally:
+        close = getattr(records, "close", None)
+        if close is not None:
+            close()
+        log.close()
+        bar.close()
+
+
+def _finish(out: Path, header: dict[str, Any], records: list[Record], notes: list[str], plots: bool) -> Board:
+    """Aggregate, rank and write ``records`` (in plan order: scenarios in that order)."""
+    agg = aggregate(records)
+    agg = {s: agg[s] for s in dict.fromkeys(r["scenario"] for r in records)}
+    board = Board(out, header, records, agg, {s: rank(agg[s]) for s in agg}, notes)
+    board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg  # nominal scenarios only
+                                        if PERTURBATION_SEP not in s})
+    board.headline = headline(records, board.ranking)
+    board.markdown = render_markdown(board, plots=plots)
+    write_outputs(board, plots=plots)
+    return board
+
+
+def _with_intervention_rates(records: list[Record], scenarios: Mapping[str, Any]) -> list[Record]:
+    """``records`` with ``interventions_per_agent_step`` where an older record has the filter's
+    ``interventions`` but not their share: ``interventions / (steps x agents)`` (the filter decides
+    once per step for every agent), the agents counted on the scenario's env (header kwargs)."""
+    import satenv
+
+    agents: dict[str, int] = {}
+    out = []
+    for rec in records:
+        if rec.get("interventions") is not None and "interventions_per_agent_step" not in rec and rec.get("steps"):
+            scen = scenarios[rec["scenario"]]
+            if rec["scenario"] not in agents:
+                agents[rec["scenario"]] = len(satenv.make(scen["env"], **scen["kwargs"]).possible_agents)
+            rec = {**rec, "interventions_per_agent_step": rec["interventions"] / (rec["steps"] * agents[rec["scenario"]])}
+        out.append(rec)
+    return out
+
+
+def reaggregate(out: str | Path, plots: bool = True) -> Board:
+    """Re-write a finished board's outputs in ``out`` from its ``episodes.jsonl`` and the header of
+    its ``scoreboard.json`` (running no episode, checking no fingerprint): e.g. after the report
+    code changed. Episodes (the first line of each key, as ``--resume`` reads them) are ordered as
+    the header lists scenarios and policies, then by seed; scenarios not in the header are left out."""
+    out = Path(out)
+    try:
+        header = json.loads((out / "scoreboard.json").read_text())["header"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise ScoreboardError(f"{out}/scoreboard.json: no board header to re-aggregate with ({exc}); "
+                              "finish the run first (--resume)") from None
+    scen, pol = list(header["scenarios"]), list(header["policies"])
+
+    def order(r: Record) -> tuple:
+        return scen.index(r["scenario"]), pol.index(r["policy"]) if r["policy"] in pol else len(pol), \
+            r["policy"], r["seed"]
+
+    records = sorted((r for r in read_episodes(out / EPISODES_FILE) if r["scenario"] in scen), key=order)
+    records = _with_intervention_rates(records, header["scenarios"])
+    header["ranking"] = RANKING       # re-ranked by the current rule
+    return _finish(out, header, records, list(header.get("notes", [])), plots)
+
+
+def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | list[str] | None = None,
+                   policies: str | list[str] | None = None, seeds: list[int] | str | None = None,
+                   checkpoints: list[str] = (), quick: bool = False,
+                   scenario_seeds: dict[str, list[int]] | None = None, workers: int = 1,
+                   backend: str = "process", ray_address: str | None = None, resume: bool = False,
+                   overwrite: bool = False, plots: bool = True, progress: bool = True,
+                   scenario_registry: Mapping[str, ScenarioSpec] | None = None,
+                   policy_registry: Mapping[str, PolicySpec] | None = None,
+                   on_record: Callable[[Record], None] | None = None,
+                   argv: list[str] | None = None) -> Board:
+    """Run the board and write its files (see :mod:`satenv.bench.scoreboard`); returns the :class:`Board`.
+
+    ``seeds`` default to the board's (``FULL`` or ``QUICK``); ``scenario_seeds`` caps the seeds of
+    expensive scenarios (``{name: seeds}``, intersected with ``seeds``), by default the board's
+    caps unless ``seeds`` were given; ``scenario_registry`` / ``policy_registry`` replace the
+    registry's dicts (tests, plugins); ``on_record`` is called after each record is written.
+    """
+    _check_options(workers, backend, resume, overwrite)
+    seed_list, caps = board_seeds(seeds, quick, scenario_seeds)
+    scen_reg, pol_reg = _registries(scenario_registry, policy_registry)
+    user = _user_specs(list(checkpoints), pol_reg)
+    pol_reg.update({spec.name: spec for spec in user})
+    notes: list[str] = []
+    scen_sel, pol_sel = _selections(scenarios, policies, quick, user, scen_reg, pol_reg, notes)
+    out = Path(out)
+    _check_log_free(out / EPISODES_FILE, resume, overwrite)
+    plan = make_plan(scen_reg, pol_reg, scen_sel, pol_sel, seed_list, caps, notes)
+    _prepare_out(out, overwrite)
+    fps = {n: scen_reg[n].fingerprint() for n in scen_sel.names} | {n: pol_reg[n].fingerprint()
+                                                                   for n in pol_sel.names}
+    done = _resumed(out / EPISODES_FILE, plan, fps)
+    tasks = _tasks(plan, done, scen_reg, pol_reg, out, plots)
+    header = _header(plan, scen_reg, pol_reg, pol_sel.names, notes, len(done), quick, backend, workers, argv)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    _run(stream(tasks, backend, workers, ray_address), out / EPISODES_FILE, done, len(plan.keys),
+         progress, on_record)
+    records = [done[k] for k in plan.keys if k in done]       # plan order: registry order, then seed
+    return _finish(out, header, records, notes, plots)
