@@ -128,25 +128,44 @@ class System:
     expert: str
     training_task: str
     paper_task: str
+    imitation: Mapping[str, Any] = field(default_factory=dict)
+    """Imitation hyper-parameters of the system (``satenv.training.imitation`` config fields;
+    ``validation_seeds``: how many of the validation band each round is scored on)."""
 
     @property
     def controller(self) -> str:
         return CONTROLLERS[TASKS[self.training_task].env_id]
 
 
+_SHORT_EPISODES = {"round0_episodes": 40, "episodes_per_round": 16, "noise_std": 0.15, "obs_symlog_scale": 20.0,
+                   "epochs": 6, "validation_seeds": 3}
+# the reference controllers of the cluster and servicing (tube-RDMPC, NMPC) take minutes an episode:
+# imitation scores them on the first test seeds only (baseline_seeds), the network on all; the
+# cooperative NMPC warm-starts against the other spacecraft's previous plan and C/GMRES and the
+# pereira2023 DMPC continue their previous solutions, so their labels are close to, not exactly,
+# what they would do
 SYSTEMS: Mapping[str, System] = MappingProxyType({s.name: s for s in [
     System("platoon-pereira2023", "platoon, pereira2023", "dmpc",
-           "platoon-tplf30-random-cw", "platoon-PLF-cw"),
+           "platoon-tplf30-random-cw", "platoon-PLF-cw", MappingProxyType({**_SHORT_EPISODES, "obs_drop_dims": (14,)})),
     System("platoon-pereira2022", "platoon, pereira2022 §5.1", "joint_platoon_mpc",
-           "platoon-pereira2022-random", "platoon-pereira2022"),
+           "platoon-pereira2022-random", "platoon-pereira2022",
+           MappingProxyType({**_SHORT_EPISODES, "validation_seeds": 12, "obs_drop_dims": (14,),
+                             "expert_options": MappingProxyType({"coupling": "sequential"})})),
     System("cluster-li2022", "cluster, li2022", "replanning_tube_rdmpc",
-           "cluster-case1-random", "cluster-case1"),
+           "cluster-case1-random", "cluster-case1",
+           MappingProxyType({"round0_episodes": 6, "episodes_per_round": 4, "validation_seeds": 3,
+                             "obs_drop_dims": (18,), "obs_symlog_scale": 300.0, "noise_std": 0.1, "epochs": 20,
+                             "baseline_seeds": 3})),
     System("servicing-pereira2022", "servicing, pereira2022 §5.2", "nmpc",
-           "servicing-pereira2022-random", "servicing-pereira2022"),
+           "servicing-pereira2022-random", "servicing-pereira2022",
+           MappingProxyType({"round0_episodes": 4, "episodes_per_round": 2, "validation_seeds": 3,
+                             "obs_drop_dims": (), "obs_symlog_scale": 10.0, "noise_std": 0.05, "epochs": 20,
+                             "baseline_seeds": 3})),
     System("formation-kannan2022-position", "formation, kannan2022 position", "cgmres",
-           "formation-kannan2022-position-random", "formation-kannan2022-position"),
+           "formation-kannan2022-position-random", "formation-kannan2022-position", MappingProxyType(_SHORT_EPISODES)),
     System("formation-kannan2022-collision", "formation, kannan2022 collision", "cgmres",
-           "formation-kannan2022-collision-random", "formation-kannan2022-collision"),
+           "formation-kannan2022-collision-random", "formation-kannan2022-collision",
+           MappingProxyType(_SHORT_EPISODES)),
 ]})
 """The six paper systems, in the order the board's summary lists them."""
 
