@@ -32,8 +32,8 @@ def _cfg(tmp_path, **kw):
 
 
 def _text(boxed: str) -> str:
-    """tyro's boxed help or error as one line of words."""
-    return " ".join(re.sub("[│╭╮╰╯─]", " ", boxed).split())
+    """A help or error text as one line of words."""
+    return " ".join(boxed.split())
 
 
 def test_config_validation_and_json_round_trip():
@@ -77,7 +77,7 @@ def test_cli_flags_parse_into_the_config(capsys):
         old, _ = parse_args(["--n-copies", "4", "--learning-rate", "0.01", "--eval-seeds", "5:8"])
     assert (old.num_envs, old.lr, old.eval_seeds) == (4, 0.01, (5, 6, 7))
     for argv, match in [(["--env-kwargs", "randomize"], "JSON object"), (["--num-envs", "many"], "num-envs"),
-                        (["--algo", "dqn"], "ppo"), (["--num-envs", "0"], "num_envs must be an int >= 1"),
+                        (["--algo", "dqn"], "ppo"), (["--num-envs", "0"], "error: --num-envs must be an int >= 1, got 0"),
                         (["--test-seeds", "0-999999999"], "more than 100000 seeds")]:
         with pytest.raises(SystemExit):
             parse_args(argv)

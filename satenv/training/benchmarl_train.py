@@ -29,8 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import tyro
-
+from satenv.cliargs import Arg
 from satenv.training.config import RunConfig, check_int, check_number, parse_args
 
 __all__ = ["BenchMARLConfig", "run", "main", "export_actor", "ALGORITHMS"]
@@ -44,7 +43,7 @@ class BenchMARLConfig(RunConfig):
     """One BenchMARL run (``python -m satenv.training.benchmarl_train``; frames are env steps of one copy)."""
 
     algorithm: Annotated[Literal["mappo", "ippo", "masac", "isac", "maddpg", "iddpg"],
-                         tyro.conf.arg(name="algo")] = "mappo"
+                         Arg(name="algo")] = "mappo"
     """BenchMARL algorithm (continuous actions; ``algorithm`` in ``config.json``)."""
     budget: int | None = None
     """The budget: agent-steps to train for; the run collects ``ceil(budget / agents)`` frames,

@@ -4,12 +4,13 @@ Each CLI (``satenv.training.train``, ``satenv.training.imitate``, ``satenv.train
 ``satenv.training.rllib_train``) is a frozen, validated dataclass whose fields are its flags: the
 shared ones (:class:`RunConfig`: ``--env-id``, ``--env-kwargs``, ``--lr``, ``--eval-seeds``,
 ``--test-seeds``, ``--out-dir``, ...) have the same name, type and meaning everywhere. The
-command line is parsed by `tyro <https://brentyi.github.io/tyro/>`_ (:func:`parse_args`), so
-``--help`` shows each field's description (its docstring below), type, default and choices.
+command line is parsed by argparse through :mod:`satenv.cliargs` (:func:`parse_args`), so
+``--help`` shows each field's description (its docstring below), default and choices.
 
 Grammar: JSON objects for kwargs (``--env-kwargs '{"randomize": true}'``), comma or space
 separated lists (``--net-arch 64,64``), seeds as ``A-B`` (inclusive) or lists (``--test-seeds
-0-49``, ``1,5,9``; at most :data:`MAX_SEEDS`), booleans as ``true``/``false``.
+0-49``, ``1,5,9``; at most :data:`MAX_SEEDS`), booleans as ``--flag true|false`` (or ``--flag`` /
+``--no-flag``).
 """
 
 from __future__ import annotations
@@ -22,12 +23,10 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import tyro
-from tyro.constructors import PrimitiveConstructorSpec
-
+from satenv.cliargs import Arg, add_config_flags, config_from_args, new_parser, parse_bool, parse_json_object
 from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
-__all__ = ["BUDGET_FLAG", "RunConfig", "TrainConfig", "canonical_flags", "parse_args", "parse_seeds",
+__all__ = ["BUDGET_FLAG", "RunConfig", "TrainConfig", "canonical_flags", "parse_args", "parse_bool", "parse_seeds",
            "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
@@ -47,47 +46,21 @@ OLD_BUDGET_FLAGS = {"--max-frames": "frames: env steps of one copy, all agents a
 ``--budget`` to them; giving one with ``--budget`` is an error."""
 
 
-def parse_bool(text: str) -> bool:
-    """A boolean flag's value, the trainers' style: ``true``/``false`` (also ``1``/``0``, ``yes``/``no``)."""
-    low = text.lower()
-    if low not in ("true", "false", "1", "0", "yes", "no"):
-        raise ValueError(f"expected true or false, got {text!r}")
-    return low in ("true", "1", "yes")
-
-
-def _bool(args: list[str]) -> bool:
-    return parse_bool(args[0])
-
-
-def _json_object(args: list[str]) -> dict[str, Any]:
+def _ints(tokens: list[str]) -> tuple[int, ...]:
     try:
-        value = json.loads(args[0])
-    except json.JSONDecodeError:
-        value = None
-    if not isinstance(value, dict):
-        raise ValueError(f"expected a JSON object, e.g. '{{\"randomize\": true}}', got {args[0]!r}")
-    return value
+        return tuple(int(p) for a in tokens for p in a.split(",") if p.strip())
+    except ValueError:
+        raise ValueError(f"expected ints, e.g. 64,64, got {' '.join(tokens)!r}") from None
 
 
-def _ints(args: list[str]) -> tuple[int, ...]:
-    return tuple(int(p) for a in args for p in a.split(",") if p.strip())
-
-
-JsonDict = Annotated[dict[str, Any], PrimitiveConstructorSpec(
-    nargs=1, metavar="JSON", instance_from_str=_json_object, is_instance=lambda x: isinstance(x, dict),
-    str_from_instance=lambda x: [json.dumps(x)])]
-Ints = Annotated[tuple[int, ...], PrimitiveConstructorSpec(
-    nargs="*", metavar="INT,...", instance_from_str=_ints, is_instance=lambda x: isinstance(x, tuple),
-    str_from_instance=lambda x: [",".join(map(str, x))])]
-Names = Annotated[tuple[str, ...], PrimitiveConstructorSpec(
-    nargs="*", metavar="NAME,...", instance_from_str=lambda a: tuple(p.strip() for s in a for p in s.split(",") if p.strip()),
-    is_instance=lambda x: isinstance(x, tuple), str_from_instance=lambda x: [",".join(x)])]
-Seeds = Annotated[tuple[int, ...], PrimitiveConstructorSpec(
-    nargs="+", metavar="A-B|A,B,...", instance_from_str=parse_seeds, is_instance=lambda x: isinstance(x, tuple),
-    str_from_instance=lambda x: [show_seeds(x)])]
-Flag = Annotated[bool, PrimitiveConstructorSpec(
-    nargs=1, metavar="{true,false}", instance_from_str=_bool, is_instance=lambda x: isinstance(x, bool),
-    str_from_instance=lambda x: [str(x).lower()])]
+JsonDict = Annotated[dict[str, Any], Arg(parse=parse_json_object, metavar="JSON", show=json.dumps)]
+Ints = Annotated[tuple[int, ...], Arg(parse=_ints, many=True, metavar="INT,...")]
+Names = Annotated[tuple[str, ...], Arg(
+    parse=lambda a: tuple(p.strip() for s in a for p in s.split(",") if p.strip()), many=True,
+    metavar="NAME,...")]
+Seeds = Annotated[tuple[int, ...], Arg(parse=parse_seeds, many=True, metavar="A-B|A,B,...", show=show_seeds)]
+Flag = bool
+"""A boolean field (``--flag``, ``--flag true|false``, ``--no-flag``)."""
 
 
 def check_number(name: str, v: Any, lo: float, hi: float) -> None:
@@ -197,7 +170,7 @@ class TrainConfig(RunConfig):
 
     algo: Literal["ppo", "sac"] = "ppo"
     """The algorithm."""
-    total_timesteps: Annotated[int, tyro.conf.arg(name="budget")] = 1_000_000
+    total_timesteps: Annotated[int, Arg(name="budget")] = 1_000_000
     """The budget: agent-steps to train for, rounded up to whole collection rounds (PPO: ``n_steps
     * num_envs * n_agents``; SAC: ``num_envs * n_agents``); the rounded figure is printed and
     saved (``total_timesteps`` in ``config.json``)."""
@@ -406,31 +379,41 @@ class CliOptions(typing.NamedTuple):
 def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: Any = None,
                description: str | None = None, resume: bool = False,
                prog: str | None = None) -> tuple[Any, CliOptions]:
-    """Parse ``argv`` into a ``cls`` config with tyro: flags override ``base``, else ``--config
-    FILE`` (a saved ``config.json`` to replay), else, with ``--resume`` (when ``resume`` is
-    offered), the run folder's saved ``config.json``, else the field defaults.
+    """Parse ``argv`` into a ``cls`` config: flags override ``base``, else ``--config FILE`` (a
+    saved ``config.json`` to replay), else, with ``--resume`` (when ``resume`` is offered), the run
+    folder's saved ``config.json``, else the field defaults.
 
-    A bad flag or value exits (``SystemExit(2)``) with the flag's help; a bad ``--config`` file
-    raises ``ValueError``.
+    A bad flag or value exits (``SystemExit(2)``) with one ``error:`` line naming the flag; a bad
+    ``--config`` file raises ``ValueError``.
     """
     import sys
 
+    from satenv.training.trust import CODE_FLAG
+
     argv = canonical_flags(list(sys.argv[1:] if argv is None else argv))
-    argv, opts = _split_options(argv, resume)
+    old_flags = ", ".join(f"{o} (now {n})" for o, n in DEPRECATED_FLAGS.items())
+    parser = new_parser(prog, description or cls.__doc__,
+                        f"Old flags still accepted, with a FutureWarning: {old_flags}.", usage="%(prog)s [OPTIONS]")
+    add_config_flags(parser, cls)
+    runs = parser.add_argument_group("replay and resume")
+    runs.add_argument("--config", metavar="FILE", help="replay a run: its config.json (flags given override it)")
+    runs.add_argument(CODE_FLAG, dest="allow_code_env_id", action="store_true",
+                      help="a replayed config may name only registered env ids and baselines; this also "
+                           "admits a 'module:callable' env id, which imports and runs that code (only for a "
+                           "file you trust)")
+    if resume:
+        runs.add_argument("--resume", action="store_true",
+                          help="continue the run in --out-dir from its saved config.json and last checkpoint "
+                               "(flags given override it)")
+    ns = parser.parse_args(argv)
+    if ns.config == "":
+        parser.error("--config '': expected a FILE (a run's config.json)")
+    opts = CliOptions(ns.config, getattr(ns, "resume", False), ns.allow_code_env_id)
     if base is None and opts.config is not None:
         base = load_config(opts.config, cls, allow_code_env_id=opts.allow_code_env_id)
-    extra = ("--config FILE replays a run (its config.json; flags given override it). A replayed "
-             "config may name only registered env ids and baselines; --allow-code-env-id also admits "
-             "a 'module:callable' env id, which imports and runs that code (only for a file you trust)."
-             + ("\n--resume continues the run in --out-dir from its saved config.json and last "
-                "checkpoint (flags given override it)." if resume else ""))
-    old_flags = ", ".join(f"{o} (now {n})" for o, n in DEPRECATED_FLAGS.items())
-    extra += f"\nOld flags still accepted, with a FutureWarning: {old_flags}."
-    text = "\n\n".join(filter(None, [description or (cls.__doc__ or "").strip(), extra]))
-    opts_ = {"description": text, "prog": prog, "config": (tyro.conf.FlagConversionOff,)}
     # without a base the field defaults (not a resolved instance: the default task's env must not
     # stick to a run given another --task)
-    cfg = tyro.cli(cls, args=argv, **({"default": base} if base is not None else {}), **opts_)
+    cfg = config_from_args(parser, cls, ns, base)
     if opts.resume and base is None:
         saved = f"{cfg.out_dir}/config.json"
         try:
@@ -438,7 +421,7 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
         except ValueError as err:
             raise ValueError(f"--resume: {err} (a run folder's config.json, written by a run without "
                              "--resume)") from None
-        cfg = tyro.cli(cls, args=argv, default=saved_cfg, **opts_)
+        cfg = config_from_args(parser, cls, ns, saved_cfg)
     return cfg, opts
 
 
@@ -462,23 +445,3 @@ def canonical_flags(argv: list[str]) -> list[str]:
     if len(budgets) > 1:
         raise SystemExit(f"error: give one budget flag, got {' and '.join(budgets)} ({BUDGET_FLAG} N: agent-steps)")
     return out
-
-
-def _split_options(argv: list[str], resume: bool) -> tuple[list[str], CliOptions]:
-    """``argv`` without ``--config FILE`` / ``--resume``, and their values."""
-    from satenv.training.trust import CODE_FLAG
-
-    rest, config, resumed, allow_code = [], None, False, False
-    it = iter(argv)
-    for arg in it:
-        if arg == "--config" or arg.startswith("--config="):
-            config = arg.split("=", 1)[1] if "=" in arg else next(it, None)
-            if not config:
-                raise SystemExit("error: --config needs a FILE (a run's config.json)")
-        elif arg == "--resume" and resume:
-            resumed = True
-        elif arg == CODE_FLAG:
-            allow_code = True
-        else:
-            rest.append(arg)
-    return rest, CliOptions(config, resumed, allow_code)
