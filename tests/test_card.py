@@ -118,9 +118,15 @@ def test_update_readme_inserts_the_section_once_then_replaces_it(filtered_folder
     assert text.count(BOTH_WAYS_BEGIN) == 1 and "0.7 %" in text
 
 
-def test_the_command_line_refuses_an_unknown_folder():
-    with pytest.raises(SystemExit, match="shipped policy"):
+def test_the_command_line_refuses_an_unknown_folder_and_has_a_help(capsys):
+    with pytest.raises(SystemExit) as exit_:
         cardmod.main(["no_such_policy"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "error: NAME 'no_such_policy': expected a shipped policy" in err
+    with pytest.raises(SystemExit) as exit_:
+        cardmod.main(["--help"])
+    out = capsys.readouterr().out
+    assert exit_.value.code == 0 and "--readmes" in out and "``" not in out and ":data:" not in out
 
 
 def test_the_perturbations_are_a_table_of_each_variant_beside_the_controller():

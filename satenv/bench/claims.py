@@ -259,21 +259,30 @@ def summary_rows(result: dict[str, Any]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the README table rows of reproduction JSON files (``--summary``: one row per run)."""
-    args = sys.argv[1:] if argv is None else list(argv)
-    summary = "--summary" in args
-    paths = [a for a in args if a != "--summary"]
-    if not paths:
-        print("usage: python -m satenv.bench.claims [--summary] RESULT.json [...]", file=sys.stderr)
-        return 2
-    if summary:
+    from satenv.cliargs import new_parser
+
+    parser = new_parser("python -m satenv.bench.claims", "Print the README claim-table rows of reproduction "
+                        "result files (satenv reproduce writes them).")
+    parser.add_argument("results", nargs="+", metavar="RESULT.json", help="reproduction result files")
+    parser.add_argument("--summary", action="store_true", help="one row per run instead of one per claim")
+    args = parser.parse_args(argv)
+    tables = []
+    for p in args.results:
+        try:
+            result = json.loads(Path(p).read_text())
+        except (OSError, ValueError) as err:
+            parser.error(f"RESULT.json {p!r}: expected a readable reproduction result file ({err})")
+        if not isinstance(result, dict):
+            parser.error(f"RESULT.json {p!r}: expected a JSON object with 'claims', got {type(result).__name__}")
+        tables.append(result)
+    if args.summary:
         print("| paper | run | paper-valued claims met | not met: measured (paper) | no paper value |")
         print("|---|---|---|---|---|")
     else:
         print("| paper | claim | run | paper value | measured | rule | status |")
         print("|---|---|---|---|---|---|---|")
-    for p in paths:
-        result = json.loads(Path(p).read_text())
-        for row in (summary_rows(result) if summary else markdown_rows(result)):
+    for result in tables:
+        for row in (summary_rows(result) if args.summary else markdown_rows(result)):
             print(row)
     return 0
 

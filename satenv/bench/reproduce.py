@@ -1,4 +1,4 @@
-"""Reproduce a paper's table or claims: ``python -m satenv.bench.reproduce <paper> --out FILE.json``.
+"""Reproduce a paper's table or claims: ``satenv reproduce <paper> --out FILE.json``.
 
 Each paper lives in its own module ``satenv/bench/reproductions/<paper>.py`` (``-`` in the paper
 name becomes ``_``) exposing::
@@ -7,8 +7,9 @@ name becomes ``_``) exposing::
     format_table(result: dict) -> str                                  # printed beside the paper
 
 A module may also define ``add_arguments(parser)`` to add its own options (e.g. li2022's
-``--case``); their values are passed to ``reproduce`` as keyword arguments, and ``RUN_TIME`` (str,
-e.g. ``"about 1 s"``), the expected wall time that ``--help`` lists. Progress goes to stderr
+``--case``; ``satenv reproduce --help`` lists them, ``satenv reproduce <paper> --help`` explains
+them); their values are passed to ``reproduce`` as keyword arguments, and ``RUN_TIME`` (str, e.g.
+``"about 1 s"``), the expected wall time that ``--help`` lists and the command prints first. Progress goes to stderr
 (:func:`satenv.bench._io.progress`).
 
 Register it in :data:`PAPERS` (no other name is loaded). The command prints the table, writes the
@@ -48,12 +49,35 @@ def load(paper: str) -> ModuleType:
     return importlib.import_module(PAPERS[paper])
 
 
-def run_times() -> str:
-    """``--help`` epilog: each registered paper with its module's ``RUN_TIME``."""
-    lines = ["papers (expected wall time on one core):"]
+def build_parser() -> argparse.ArgumentParser:
+    """``satenv reproduce PAPER [options]``: one sub-parser per paper with the common options
+    (``--out``, ``--plots``, ``--seed``) and the paper's own; the epilog lists each paper's
+    expected wall time and its own options."""
+    from satenv.cliargs import new_parser
+
+    common = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
+    common.add_argument("--out", type=Path, default=None, help="write the result JSON here (a new .json file "
+                        "or an earlier result)")
+    common.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) in this directory")
+    common.add_argument("--seed", type=int, default=0, help="seed of the env and the policy (default 0)")
+    parser = new_parser("satenv reproduce", __doc__.split("\n\n")[0])
+    papers = parser.add_subparsers(dest="paper", metavar="PAPER", required=True,
+                                   parser_class=argparse.ArgumentParser)
     for paper in sorted(PAPERS):
-        lines.append(f"  {paper:<24} {getattr(load(paper), 'RUN_TIME', '?')}")
-    return "\n".join(lines)
+        module = load(paper)
+        run_time = getattr(module, "RUN_TIME", "not stated")
+        own = argparse.ArgumentParser(add_help=False)
+        if hasattr(module, "add_arguments"):
+            module.add_arguments(own)
+        flags = [a.option_strings[0] for a in own._actions if a.option_strings]
+        papers.add_parser(paper, parents=[common, own], allow_abbrev=False,
+                                help=f"{run_time}" + (f"; own options: {' '.join(flags)}" if flags else ""),
+                                description=f"{(module.__doc__ or paper).strip().splitlines()[0]}\n\n"
+                                            f"Expected wall time: {run_time}.",
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.epilog = ("PAPER is followed by --out, --plots, --seed and its own options; "
+                     "satenv reproduce PAPER --help explains them.")
+    return parser
 
 
 MAX_RESULT_BYTES = 64 * 2**20
@@ -82,29 +106,15 @@ def _unsafe_out(path: Path) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m satenv.bench.reproduce", description=__doc__.splitlines()[0],
-                                     epilog=run_times(), formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("paper", help=f"paper to reproduce, e.g. {', '.join(sorted(PAPERS))}")
-    parser.add_argument("--out", type=Path, default=None, help="write the result JSON here")
-    parser.add_argument("--plots", type=Path, default=None, help="save the figures (PNG) in this directory")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the env and the policy (default 0)")
-    pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("paper", nargs="?")
-    known, _ = pre.parse_known_args(argv)
-    base = {"paper", "out", "plots", "seed"}
-    module = None
-    if known.paper is not None and not known.paper.startswith("-"):
-        try:
-            module = load(known.paper)
-        except ValueError as exc:
-            parser.error(str(exc))
-    if module is not None and hasattr(module, "add_arguments"):
-        module.add_arguments(parser)
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.out is not None and (problem := _unsafe_out(args.out)):
         parser.error(f"--out {str(args.out)!r}: {problem}")
-    module = module or load(args.paper)
-    extra = {k: v for k, v in vars(args).items() if k not in base}
+    module = load(args.paper)
+    extra = {k: v for k, v in vars(args).items() if k not in {"paper", "out", "plots", "seed"}}
+    print(f"reproducing {args.paper}: expected wall time {getattr(module, 'RUN_TIME', 'not stated')}"
+          + (f"; the result goes to {args.out}" if args.out else "; --out FILE.json keeps the result")
+          + (f", the figures to {args.plots}/" if args.plots else ""), file=sys.stderr, flush=True)
     result = module.reproduce(plots=args.plots, seed=args.seed, **extra)
     print(module.format_table(result))
     if args.out is not None:

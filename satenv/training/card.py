@@ -1,8 +1,8 @@
 """Policy cards: the shipped policies' numbers, both ways, read from each folder's own files.
 
-    python -m satenv.training.card            # the shipped-policies table of docs/training.md
-    python -m satenv.training.card NAME       # one folder's evaluation table and its targets
-    python -m satenv.training.card --readmes  # rewrite each folder README's both-ways section
+    satenv card             # the shipped-policies table of docs/training.md
+    satenv card NAME        # one folder's evaluation table and its targets
+    satenv card --readmes   # rewrite each folder README's both-ways section
 
 Each row compares the learned policy with the scripted baseline its ``eval.json`` names (the
 ``vs_<BASELINE>`` entry: ratios on the same held-out seeds) against the targets of
@@ -14,7 +14,7 @@ Each row compares the learned policy with the scripted baseline its ``eval.json`
 matched rule has only all-seed ratios (``all_seeds``): the card shows them, marked, and holds
 them to the same limit.
 
-Every policy is reported **both ways**: the network alone and as shipped (behind
+Every policy is reported **both ways** (:mod:`satenv.training.both_ways`): the network alone and as shipped (behind
 ``satenv.safety.shield`` when its ``env.json`` has ``"safety_filter"``), with the filter's
 interventions and infeasible steps per agent-step. A folder's both-ways evaluation is
 :data:`BOTH_WAYS_FILE` (one entry of ``satenv.bench.safety_alone``: both variants on the same test
@@ -26,21 +26,15 @@ filter has the network alone as its shipped policy: the same numbers both ways, 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
 from satenv import scoring
 from satenv.training import POLICIES_DIR
+from satenv.training.both_ways import AS_SHIPPED, NETWORK_ALONE
 
 __all__ = ["AS_SHIPPED", "BOTH_WAYS_FILE", "INTERVENTIONS_LIMIT", "NETWORK_ALONE", "both_ways", "both_ways_file",
            "card", "targets", "shipped_table", "folder_table", "readme", "update_readme"]
-
-NETWORK_ALONE = "network alone"
-"""A both-ways evaluation's entry for the network by itself (``satenv.training.load(..., shielded=False)``)."""
-
-AS_SHIPPED = "network + filter"
-"""... and for the network behind the safety filter, with the options the folder ships with."""
 
 BOTH_WAYS_FILE = "safety_alone.json"
 """A policy folder's both-ways evaluation (``python -m satenv.bench.safety_alone --write-folders``)."""
@@ -121,7 +115,7 @@ def _recipe_fields(ev: dict[str, Any]) -> dict[str, Any]:
     alone_ratios = ratios.get("matched", ratios.get("all_seeds", {}))
     alone = dict(agg["learned"])
     if alone.get("violation_episodes") is None and ev.get("learned_episodes"):
-        alone["violation_episodes"] = sum(bool(e.get("violations")) for e in ev["learned_episodes"])
+        alone["violation_episodes"] = scoring.aggregate(ev["learned_episodes"])["violation_episodes"]
     return {"own": alone if shipped == "learned" else agg[shipped],
             "ratios": alone_ratios if shipped == "learned" else ratios.get(shipped, {}),
             "alone": alone, "alone_ratios": alone_ratios, "reference": reference,
@@ -352,18 +346,28 @@ def readme(folder: Path, *, title: str, about: str, command: str, notes: str = "
 
 
 def main(argv: list[str] | None = None) -> None:
-    argv = sys.argv[1:] if argv is None else argv
+    """Print the shipped-policies table, one folder's table (``NAME``), or rewrite the READMEs."""
+    from satenv.cliargs import new_parser
+
     folders = sorted(p for p in POLICIES_DIR.iterdir() if (p / "eval.json").is_file())
-    if argv == ["--readmes"]:
+    parser = new_parser("satenv card", __doc__)
+    parser.add_argument("name", nargs="?", metavar="NAME",
+                        help="a shipped policy: print its evaluation table and targets "
+                             f"(one of: {', '.join(f.name for f in folders)})")
+    parser.add_argument("--readmes", action="store_true",
+                        help="rewrite the both-ways section of every shipped folder's README.md")
+    args = parser.parse_args(argv)
+    if args.readmes and args.name:
+        parser.error(f"give NAME or --readmes, not both (got NAME {args.name!r})")
+    if args.readmes:
         for folder in folders:
             if update_readme(folder):
                 print("updated", folder / "README.md")
-    elif argv:
-        folder = POLICIES_DIR / argv[0]
-        if len(argv) > 1 or not (folder / "eval.json").is_file():
-            raise SystemExit(f"error: expected no argument, --readmes or the name of a shipped policy with an "
-                             f"eval.json under {POLICIES_DIR}, got {' '.join(argv)!r}")
-        print(folder_table(folder))
+    elif args.name is not None:
+        if args.name not in {f.name for f in folders}:
+            parser.error(f"NAME {args.name!r}: expected a shipped policy with an eval.json, one of "
+                         f"{', '.join(f.name for f in folders)}")
+        print(folder_table(POLICIES_DIR / args.name))
     else:
         print(shipped_table())
 

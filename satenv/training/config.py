@@ -23,7 +23,14 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from satenv.cliargs import Arg, add_config_flags, config_from_args, new_parser, parse_bool, parse_json_object
+from satenv.cliargs import (
+    Arg,
+    add_config_flags,
+    config_from_args,
+    new_parser,
+    parse_bool,
+    parse_json_object,
+)
 from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
 __all__ = ["BUDGET_FLAG", "RunConfig", "TrainConfig", "canonical_flags", "parse_args", "parse_bool", "parse_seeds",
