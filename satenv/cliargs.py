@@ -38,7 +38,8 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 __all__ = ["Arg", "add_config_flags", "config_from_args", "config_parser", "config_to_argv", "flag_name",
-           "new_parser", "parse_bool", "parse_config", "parse_json_object", "plain"]
+           "int_at_least", "new_parser", "out_file", "out_folder", "parse_bool", "parse_config", "parse_json_object",
+           "plain"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,41 @@ def parse_json_object(text: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise ValueError(f"expected a JSON object, e.g. '{{\"randomize\": true}}', got {text!r}")
     return value
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse ``type``: an int >= ``minimum`` (else the flag's error names the value)."""
+    def read(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an int >= {minimum}, got {text!r}")
+        return value
+
+    read.__name__ = f"int >= {minimum}"
+    return read
+
+
+def out_folder(text: str) -> Path:
+    """An argparse ``type``: an output folder (a new path or an existing folder; not '', not a file)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a folder path, got {text!r}")
+    path = Path(text)
+    if path.exists() and not path.is_dir() or path.is_symlink() and not path.exists():
+        raise argparse.ArgumentTypeError(f"{text!r} exists and is not a folder; give a new or an existing folder")
+    return path
+
+
+def out_file(text: str) -> Path:
+    """An argparse ``type``: an output file path (not '', not an existing folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a file path, got {text!r}")
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; expected a file path")
+    return path
 
 
 _ROLE = re.compile(r":[a-z:]+:`~?([^`]+)`")
@@ -114,7 +150,7 @@ def _docstrings(cls: type) -> dict[str, str]:
         except (OSError, TypeError):
             continue
         body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
-        for node, nxt in zip(body, body[1:]):
+        for node, nxt in zip(body, body[1:], strict=False):
             if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
                     and isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant)
                     and isinstance(nxt.value.value, str)):

@@ -60,22 +60,44 @@ def test_a_run_is_written_into_a_policy_folder_that_the_card_reads(tmp_path):
     assert (folder / BOTH_WAYS_FILE).stat().st_mtime_ns == stamp   # the same evaluation: left as it is
 
 
-def test_a_bad_entry_is_an_error(tmp_path):
+def _error(capsys, argv) -> str:
+    """The one ``error:`` line of a rejected command line (exit status 2)."""
     from satenv.bench import safety_alone
 
-    with pytest.raises(SystemExit, match="system=policy-folder"):
-        safety_alone.main(["--entry", "platoon-pereira2023", "--out", str(tmp_path)])
-    with pytest.raises(SystemExit, match="system=policy-folder"):
-        safety_alone.main(["--entry", "platoon-pereira2023=x@many", "--out", str(tmp_path)])
-    with pytest.raises(SystemExit, match="system=policy-folder"):
-        safety_alone.main(["--entry", "platoon-pereira2023=x@10:some", "--out", str(tmp_path)])
-    with pytest.raises(SystemExit, match="--entry"):
-        safety_alone.main(["--out", str(tmp_path)])
-    with pytest.raises(SystemExit, match="folders-from"):
-        safety_alone.main(["--folders-from", str(tmp_path / "missing.json")])
+    with pytest.raises(SystemExit) as exit_:
+        safety_alone.main(argv)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2, err
+    return err.strip().splitlines()[-1]
 
 
-def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(tmp_path):
+def test_a_bad_command_line_is_one_error_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    folder = "satenv/training/policies/platoon_tplf_safe_distill"
+    entry = ["--entry", f"platoon-pereira2023={folder}"]
+    out = tmp_path / "out"
+    for argv, expected in [
+            (["--entry", "platoon-pereira2023", "--out", str(out)], "system=policy-folder"),
+            (["--entry", "platoon-pereira2023=x@many", "--out", str(out)], "system=policy-folder"),
+            (["--entry", "platoon-pereira2023=x@10:some", "--out", str(out)], "system=policy-folder"),
+            (["--entry", f"nope={folder}", "--out", str(out)], "system 'nope' is not one of"),
+            (["--entry", f"platoon-pereira2023={tmp_path}", "--out", str(out)], "is not a policy folder"),
+            (["--out", str(out)], "--entry"),
+            (["--folders-from", str(tmp_path / "missing.json")], "--folders-from"),
+            ([*entry, "--out", ""], "argument --out: expected a folder path, got ''"),
+            ([*entry, "--controller-seeds", "-1", "--out", str(out)],
+             "argument --controller-seeds: expected an int >= 0, got '-1'"),
+            ([*entry, "--seeds", "0", "--out", str(out)], "argument --seeds: expected an int >= 1, got '0'")]:
+        line = _error(capsys, argv)
+        assert line.startswith("satenv safety-alone: error:") and expected in line, (argv, line)
+    (tmp_path / "a_file").write_text("x")
+    line = _error(capsys, [*entry, "--out", str(tmp_path / "a_file")])
+    assert "argument --out:" in line and "exists and is not a folder" in line
+    monkeypatch.chdir(tmp_path)
+    _error(capsys, [*entry, "--out", ""])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]       # nothing written
+
+
+def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(tmp_path, capsys):
     from satenv import tasks
     from satenv.bench import safety_alone
 
@@ -89,7 +111,7 @@ def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(
     safety_alone.main(entries + base)                       # the default: the first entry only
     first, second = json.loads((tmp_path / "safety_alone.json").read_text())["entries"]
     assert set(first["perturbations"]) - {"seeds"} == names and "perturbations" not in second
-    with pytest.raises(SystemExit, match="perturbation-entries"):
-        safety_alone.main(entries + base + ["--perturbation-entries", "0"])
-    with pytest.raises(SystemExit, match="perturbation-entries"):
-        safety_alone.main(entries + base + ["--perturbation-entries", "3"])
+    for n in ("0", "3"):
+        with pytest.raises(SystemExit):
+            safety_alone.main(entries + base + ["--perturbation-entries", n])
+        assert "--perturbation-entries" in capsys.readouterr().err

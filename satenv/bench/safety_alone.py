@@ -1,13 +1,13 @@
 """Are the learned policies safe on their own? The network alone and as shipped, on test seeds.
 
 For each entry ``system=folder`` (a policy folder under ``satenv/training/policies``), on the system's
-training task (:mod:`satenv.tasks`, test seeds 900000..), it runs
+training task (:mod:`satenv.tasks`, test seeds 900000..), it runs the folder both ways
+(:func:`satenv.training.both_ways.evaluate`):
 
 * ``network alone`` — ``satenv.training.load(folder, env=env, shielded=False)``;
-* ``network + filter`` — the same network behind ``satenv.safety.shield`` with the options of the
-  folder's ``env.json`` ``"safety_filter"`` (what a folder that ships with the filter loads as,
-  :func:`as_shipped`; the filter's defaults for a folder shipped without it): interventions and
-  infeasible steps per agent-step;
+* ``network + filter`` — the folder as shipped, ``satenv.training.load(folder, env=env)``: behind
+  ``satenv.safety.shield`` with the options of its ``env.json`` ``"safety_filter"`` (interventions
+  and infeasible steps per agent-step); a folder shipped without the filter is the network alone;
 * the system's controller (``satenv.tasks.CONTROLLERS``) on the first ``--controller-seeds`` of
   the seeds (the comparator of the success and ratio targets, :func:`satenv.scoring.targets`),
 
@@ -20,7 +20,7 @@ records into its policy folder (:func:`folder_evaluation`: what ``satenv.trainin
 from). Each entry's episodes are cached in ``<out>/cache/`` so an interrupted run resumes where it
 stopped::
 
-    nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m satenv.bench.safety_alone \\
+    nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 satenv safety-alone \\
         --entry platoon-pereira2022=satenv/training/policies/platoon_pereira2022_safe_dagger \\
         --entry platoon-pereira2022=satenv/training/policies/platoon_pereira2022_dagger_shield \\
         --seeds 1000 --controller-seeds 200 --out studies/published/safety_alone
@@ -34,30 +34,18 @@ import time
 from pathlib import Path
 from typing import Any
 
-from satenv.training.card import (
-    AS_SHIPPED,
-    BOTH_WAYS_FILE,
-    INTERVENTIONS_LIMIT,
-    NETWORK_ALONE,
-    both_ways_file,
-)
+from satenv.training import both_ways
+from satenv.training.both_ways import NETWORK_ALONE, VARIANTS
+from satenv.training.card import BOTH_WAYS_FILE, INTERVENTIONS_LIMIT, both_ways_file
 
-__all__ = ["VARIANTS", "as_shipped", "evaluate_entry", "evaluate_perturbed", "folder_evaluation", "plot", "main"]
-
-VARIANTS = (NETWORK_ALONE, AS_SHIPPED)
-"""The two ways every policy is reported."""
+__all__ = ["VARIANTS", "evaluate_entry", "evaluate_perturbed", "folder_evaluation", "plot", "main"]
 
 
-def as_shipped(folder: Path, network: Any, env: Any) -> Any:
-    """``network`` behind the safety filter as ``folder`` ships it: with the options of its
-    ``env.json`` ``"safety_filter"`` (:func:`satenv.training.policy.shipped_filter`), the filter's
-    defaults when the folder ships without it."""
-    from satenv.safety import shield
-    from satenv.training.policy import policy_folder, shipped_filter
-
-    root = policy_folder(folder)
-    config = shipped_filter(root, json.loads((root / "env.json").read_text()))
-    return shield(network, env, config)
+def _cached(cache_dir: Path, tag: str) -> both_ways.Episodes:
+    """The both-ways episode runner of an entry: :func:`_episodes` into ``<cache_dir>/<tag>__<variant>.jsonl``."""
+    def run(env: Any, policy: Any, seeds: list[int], variant: str) -> list[dict[str, Any]]:
+        return _episodes(env, policy, seeds, cache_dir / f"{tag}__{variant.replace(' ', '_').replace('+', 'plus')}.jsonl")
+    return run
 
 
 def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict[str, Any]]:
@@ -100,7 +88,7 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
     """Every perturbation of the system's training task (:mod:`satenv.perturbations`; a navigation
     error is read by the filter too): the network alone and behind the filter on the first
     ``n_seeds`` test seeds, the controller on the first ``n_controller``; aggregates only."""
-    from satenv import baselines, perturbations, tasks, training
+    from satenv import baselines, perturbations, tasks
     from satenv.scoring import aggregate
 
     task = tasks.training_task(system)
@@ -108,11 +96,8 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
     out: dict[str, Any] = {"seeds": [seeds[0], seeds[-1]]}
     for name in task.perturbations:
         env = perturbations.make_env(task, name)
-        net = training.load(folder, env=env, shielded=False)
-        row: dict[str, Any] = {}
-        for variant, pol in ((VARIANTS[0], net), (VARIANTS[1], as_shipped(folder, net, env))):
-            cache = cache_dir / f"{system}__{folder.name}__{name}__{variant.replace(' ', '_').replace('+', 'plus')}.jsonl"
-            row[variant] = aggregate(_episodes(env, pol, seeds, cache))
+        eps = both_ways.evaluate(folder, env, seeds, episodes=_cached(cache_dir, f"{system}__{folder.name}__{name}"))
+        row: dict[str, Any] = {variant: aggregate(eps[variant]) for variant in VARIANTS}
         if n_controller:
             try:
                 ctrl = baselines.make(task.controller, env)
@@ -131,20 +116,17 @@ def evaluate_entry(system: str, folder: Path, n_seeds: int, n_controller: int, c
                    n_filter: int | None = None) -> dict[str, Any]:
     """One entry's block of the JSON (module docstring); the filtered variant on the first
     ``n_filter`` seeds only when given (a slow system)."""
-    from satenv import baselines, tasks, training
+    from satenv import baselines, tasks
     from satenv.scoring import aggregate, matched_ratios, targets
 
     task = tasks.training_task(system)
     env = task.make_env()
     seeds = list(task.seeds("test", n_seeds))
-    net = training.load(folder, env=env, shielded=False)
-    tag = f"{system}__{folder.name}"
     block: dict[str, Any] = {"system": system, "task": task.name, "policy": str(folder), "seeds": [seeds[0], seeds[-1]],
                              "controller": task.controller}
-    eps = {}
-    for name, pol in ((VARIANTS[0], net), (VARIANTS[1], as_shipped(folder, net, env))):
-        ss = seeds if name == VARIANTS[0] or not n_filter else seeds[:n_filter]
-        eps[name] = _episodes(env, pol, ss, cache_dir / f"{tag}__{name.replace(' ', '_').replace('+', 'plus')}.jsonl")
+    eps = both_ways.evaluate(folder, env, seeds, shipped_seeds=n_filter or None,
+                             episodes=_cached(cache_dir, f"{system}__{folder.name}"))
+    for name in VARIANTS:
         block[name] = {"aggregate": aggregate(eps[name]), "wall_s": _wall_s(eps[name])}
         print(system, folder.name, name, json.dumps(block[name]["aggregate"], default=float), flush=True)
     if n_controller:
@@ -230,52 +212,81 @@ def plot(result: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> None:
-    import torch
+def _entry(spec: str) -> tuple[str, Path, int | None, int | None]:
+    """An ``--entry`` value: ``(system, folder, episodes or None, filtered or None)``."""
+    from satenv import tasks
 
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--entry", action="append", default=[],
+    system, sep, folder = spec.partition("=")
+    folder, at, count = folder.partition("@")
+    count, colon, nf = count.partition(":")
+    if not sep or not folder or (at and not count.isdigit()) or (colon and not nf.isdigit()):
+        raise argparse.ArgumentTypeError(f"expected system=policy-folder[@episodes[:filtered]], got {spec!r}")
+    if system not in tasks.SYSTEMS:
+        raise argparse.ArgumentTypeError(f"{spec!r}: system {system!r} is not one of {sorted(tasks.SYSTEMS)}")
+    if not (Path(folder) / "manifest.json").is_file():
+        raise argparse.ArgumentTypeError(f"{spec!r}: {folder!r} is not a policy folder (no manifest.json)")
+    return system, Path(folder), int(count) if at else None, int(nf) if colon else None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from satenv.cliargs import int_at_least, new_parser, out_folder
+
+    p = new_parser("satenv safety-alone", __doc__)
+    p.add_argument("--entry", action="append", default=[], type=_entry,
                    help="system=policy-folder[@episodes[:filtered]] (repeatable; @n: this entry on the first n "
                         "test seeds; :f: behind the filter on the first f of them)")
-    p.add_argument("--seeds", type=int, default=1000, help="test seeds per entry (the first n of the test split)")
-    p.add_argument("--controller-seeds", type=int, default=200, help="the controller on the first n (0: none)")
-    p.add_argument("--filter-seeds", type=int, default=None,
+    p.add_argument("--seeds", type=int_at_least(1), default=1000,
+                   help="test seeds per entry (the first n of the test split; default 1000)")
+    p.add_argument("--controller-seeds", type=int_at_least(0), default=200,
+                   help="the controller on the first n (0: none; default 200)")
+    p.add_argument("--filter-seeds", type=int_at_least(1), default=None,
                    help="the network behind the filter on the first n of each entry's seeds only (default: all)")
-    p.add_argument("--perturbation-seeds", type=int, default=0,
+    p.add_argument("--perturbation-seeds", type=int_at_least(0), default=0,
                    help="the first entry (more: --perturbation-entries) also under every perturbation of "
                         "its task, on the first n test seeds (0: none)")
-    p.add_argument("--perturbation-entries", type=int, default=1,
+    p.add_argument("--perturbation-entries", type=int_at_least(1), default=1,
                    help="with --perturbation-seeds: the first n entries under the perturbations (default: the first)")
-    p.add_argument("--perturbation-controller-seeds", type=int, default=None,
+    p.add_argument("--perturbation-controller-seeds", type=int_at_least(0), default=None,
                    help="the controller under each perturbation on the first n (default: min of the two counts above)")
-    p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--out", type=out_folder, default=None,
+                   help="the output folder: safety_alone.json, safety_alone.png, cache/ (resumes from it)")
     p.add_argument("--write-folders", action="store_true",
                    help="also write each entry's evaluation (no episode records) into its policy folder")
     p.add_argument("--folders-from", type=Path, default=None, metavar="SAFETY_ALONE_JSON",
                    help="only write the policy folders' evaluations from this earlier run's JSON (runs nothing)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> None:
+    import sys
+
+    p = build_parser()
     ns = p.parse_args(argv)
     if ns.folders_from is not None:
         if not ns.folders_from.is_file():
-            raise SystemExit(f"error: --folders-from must be a safety_alone.json, got {str(ns.folders_from)!r}")
+            p.error(f"--folders-from {str(ns.folders_from)!r}: expected a safety_alone.json file")
         for path in write_folders(json.loads(ns.folders_from.read_text()), ns.folders_from):
             print("wrote", path)
         return
     if not ns.entry or ns.out is None:
-        raise SystemExit("error: --entry system=policy-folder[@episodes[:filtered]] (one or more) and --out are required")
-    if not 1 <= ns.perturbation_entries <= len(ns.entry):
-        raise SystemExit(f"error: --perturbation-entries must be between 1 and the {len(ns.entry)} --entry "
-                         f"given, got {ns.perturbation_entries}")
+        p.error("--entry system=policy-folder[@episodes[:filtered]] (one or more) and --out FOLDER are required")
+    if not ns.perturbation_entries <= len(ns.entry):
+        p.error(f"--perturbation-entries {ns.perturbation_entries}: expected between 1 and the {len(ns.entry)} "
+                "--entry given")
+    entries = [(s, f, ns.seeds if n is None else n, ns.filter_seeds if nf is None else nf) for s, f, n, nf in ns.entry]
+    import torch
+
     torch.set_num_threads(1)
-    entries = []
-    for spec in ns.entry:
-        system, sep, folder = spec.partition("=")
-        folder, at, count = folder.partition("@")
-        count, colon, nf = count.partition(":")
-        if not sep or not folder or (at and not count.isdigit()) or (colon and not nf.isdigit()):
-            raise SystemExit(f"error: --entry must be system=policy-folder[@episodes[:filtered]], got {spec!r}")
-        entries.append((system, Path(folder), int(count) if at else ns.seeds, int(nf) if colon else ns.filter_seeds))
+    alone = sum(n for _, _, n, _ in entries)
+    print(f"planning {len(entries)} entries: {alone} episodes of the network alone, "
+          f"{sum(n if nf is None else min(n, nf) for _, _, n, nf in entries)} behind the filter, "
+          f"{ns.controller_seeds * len(entries)} of the controller"
+          + (f", and the perturbations of the first {ns.perturbation_entries} on {ns.perturbation_seeds} seeds each"
+             if ns.perturbation_seeds else "")
+          + f"; episodes are cached in {ns.out / 'cache'} (a rerun resumes), the result goes to "
+            f"{ns.out / 'safety_alone.json'}", file=sys.stderr, flush=True)
     ns.out.mkdir(parents=True, exist_ok=True)
-    result = {"command": "python -m satenv.bench.safety_alone " + " ".join(argv or __import__("sys").argv[1:]),
+    result = {"command": "satenv safety-alone " + " ".join(sys.argv[1:] if argv is None else argv),
               "entries": [evaluate_entry(s, f, n, ns.controller_seeds, ns.out / "cache", nf)
                           for s, f, n, nf in entries]}
     if ns.perturbation_seeds:   # the policies under study: the first entries
@@ -285,6 +296,7 @@ def main(argv: list[str] | None = None) -> None:
         for (s, f, _, _), block in zip(entries[:k], result["entries"][:k], strict=True):
             block["perturbations"] = evaluate_perturbed(s, f, ns.perturbation_seeds, n_controller, ns.out / "cache")
     (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
+    print(f"plotting {ns.out / 'safety_alone.png'}", file=sys.stderr, flush=True)
     plot(result, ns.out / "safety_alone.png")
     if ns.write_folders:
         for path in write_folders(result, ns.out / "safety_alone.json"):
