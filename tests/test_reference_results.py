@@ -149,14 +149,21 @@ def test_interventions_are_per_agent_step():
     assert block["interventions_per_agent_step"] == pytest.approx(0.5)
 
 
-@pytest.mark.parametrize("args, field", [(["--budget", "-5"], "budget"), (["--seeds", "x"], "--seeds"),
-                                         (["--workers", "0"], "--workers"), (["--systems", "nope"], "--systems")])
+@pytest.mark.parametrize("args, field", [
+    (["--budget", "-5"], "argument --budget: expected an int >= 0, got '-5'"), (["--seeds", "x"], "--seeds 'x'"),
+    (["--workers", "0"], "argument --workers: expected an int >= 1, got '0'"),
+    (["--systems", "nope"], "--systems 'nope': expected comma-separated names"),
+    (["--systems", ","], "--systems ',': expected comma-separated names"),
+    (["--log", "."], "argument --log: '.' is a folder; expected a file path"),
+    (["--log", ""], "argument --log: expected a file path, got ''")])
 def test_bad_run_arguments_are_a_one_line_error(tmp_path, capsys, args, field):
     from satenv.bench.learning.cli import main
 
     log = tmp_path / "log.jsonl"
-    assert main(["run", "--log", str(log), *args]) == 2
+    with pytest.raises(SystemExit) as exit_:
+        main(["run", "--log", str(log), *args])
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and field in err and "Traceback" not in err
-    assert err.count("\n") == 1
+    assert exit_.value.code == 2 and "Traceback" not in err
+    (line,) = [x for x in err.splitlines() if "error:" in x]
+    assert line.startswith("satenv results run: error: ") and field in line, line
     assert not log.exists()   # nothing ran, nothing was written

@@ -1,9 +1,9 @@
-"""``python -m satenv.bench.learning``: run the grid, write ``results.json``, render the docs page.
+"""``satenv results``: the reference-results grid: run it, write ``results.json``, render the docs page.
 
-    nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m satenv.bench.learning run \\
+    nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 satenv results run \\
         --systems platoon-pereira2023,platoon-pereira2022 --seeds 0-2 --workers 2
-    python -m satenv.bench.learning results      # studies/reference_results/log.jsonl -> results.json
-    python -m satenv.bench.learning render       # results.json -> docs/reference_results.md + figures
+    satenv results results      # studies/reference_results/log.jsonl -> results.json
+    satenv results render       # results.json -> docs/reference_results.md + figures
 
 ``run`` is resumable: the same command skips every run already in the log (kill -9 safe).
 """
@@ -33,24 +33,36 @@ def _names(text: str, allowed, what: str) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip()]
     bad = [n for n in names if n not in allowed]
     if bad or not names:
-        raise LearningError(f"--{what} must name some of {list(allowed)}, got {text!r}")
+        raise LearningError(f"--{what} {text!r}: expected comma-separated names among {list(allowed)}")
     return names
 
 
 def _runs(ns: argparse.Namespace, log_path: Path) -> list:
-    """The runs ``run`` asks for (every argument checked: a :class:`LearningError` or a
-    :class:`~satenv.errors.SatenvError` naming the bad one)."""
+    """The runs ``run`` asks for (every argument checked: a :class:`LearningError` naming the bad one)."""
     from satenv.bench.learning.grid import ALGORITHMS
 
-    if ns.workers < 1:
-        raise LearningError(f"--workers must be an int >= 1, got {ns.workers}")
     try:
         seeds = tasks.parse_seeds(ns.seeds)
     except SatenvError as exc:
-        raise LearningError(f"--seeds: {exc}") from exc
+        raise LearningError(f"--seeds {ns.seeds!r}: {exc}") from exc
     return grid(_names(ns.systems, tasks.SYSTEMS, "systems"), _names(ns.algorithms, ALGORITHMS, "algorithms"),
                 seeds, _names(ns.filter_systems, tasks.SYSTEMS, "filter-systems") if ns.filter_systems else (),
                 log_path=str(log_path.resolve()), budget=ns.budget)
+
+
+def _estimate(todo: list, log: list[dict], workers: int = 1) -> str:
+    """The expected wall time of ``todo`` from the runs of the same system and algorithm already in
+    ``log`` (their longest ``wall_s``), or why there is none."""
+    measured: dict[tuple, float] = {}
+    for rec in log:
+        key = (rec.get("system"), rec.get("algorithm"), rec.get("filter"))
+        measured[key] = max(measured.get(key, 0.0), float(rec.get("wall_s") or 0.0))
+    known = [measured[(r.system, r.algorithm, r.filter)] for r in todo if (r.system, r.algorithm, r.filter) in measured]
+    if not known:
+        return "no run of these systems and algorithms in the log to time them by"
+    unknown = len(todo) - len(known)
+    return (f"about {sum(known) / 3600 / workers:.1f} h on {workers} worker(s) for the {len(known)} whose system "
+            "and algorithm the logs have timed" + (f" (+{unknown} not timed yet)" if unknown else ""))
 
 
 def cmd_run(ns: argparse.Namespace) -> int:
@@ -62,14 +74,16 @@ def cmd_run(ns: argparse.Namespace) -> int:
     log_path = Path(ns.log)
     try:
         runs = _runs(ns, log_path)
-    except LearningError as exc:   # bad input: one line, no traceback (the scoreboard's convention)
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    log_path.parent.mkdir(parents=True, exist_ok=True)
-    read_log(log_path, repair=True)
+    except LearningError as exc:   # bad input: one error line, nothing written
+        ns.parser.error(str(exc))
+    if not ns.dry_run:
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+    log = read_log(log_path, repair=not ns.dry_run) if log_path.is_file() else []
     done = done_runs(runs, log_path)
     todo = [r for r in runs if r not in done]
-    print(f"{len(runs)} runs, {len(done)} already in {log_path}, {len(todo)} to run", flush=True)
+    print(f"{len(runs)} runs, {len(done)} already in {log_path}, {len(todo)} to run"
+          + (f": {_estimate(todo, log + (read_log(LOG) if LOG.is_file() else []), ns.workers)}; the same command resumes after an interruption" if todo else ""),
+          flush=True)
     if ns.dry_run:
         for r in todo:
             print(" ", r.label())
@@ -93,6 +107,8 @@ def cmd_run(ns: argparse.Namespace) -> int:
 def cmd_results(ns: argparse.Namespace) -> int:
     from satenv.bench.learning.results import write_results
 
+    if not Path(ns.log).is_file():
+        ns.parser.error(f"--log {ns.log!r}: expected the grid's log file (satenv results run writes it)")
     out = write_results(Path(ns.log), Path(ns.out))
     print(f"wrote {out}")
     return 0
@@ -101,34 +117,44 @@ def cmd_results(ns: argparse.Namespace) -> int:
 def cmd_render(ns: argparse.Namespace) -> int:
     from satenv.bench.learning.render import write_page
 
+    if not Path(ns.results).is_file():
+        ns.parser.error(f"--results {ns.results!r}: expected a results.json file (satenv results results writes it)")
     page = write_page(Path(ns.results))
     print(f"wrote {page}")
     return 0
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m satenv.bench.learning", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", help="train and evaluate the grid (resumable)")
-    r.add_argument("--log", default=str(LOG))
-    r.add_argument("--systems", default=",".join(SYSTEM_ORDER))
-    r.add_argument("--algorithms", default=",".join(DEFAULT_ALGORITHMS))
-    r.add_argument("--seeds", default="0-2", help="training seeds, e.g. 0-2")
+    from satenv.cliargs import int_at_least, new_parser, out_file
+
+    p = new_parser("satenv results", __doc__)
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help: str, func) -> argparse.ArgumentParser:
+        c = sub.add_parser(name, help=help, description=help, allow_abbrev=False,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        c.set_defaults(func=func, parser=c)
+        return c
+
+    r = command("run", "train and evaluate the grid (resumable: the same command skips the runs in the log)", cmd_run)
+    r.add_argument("--log", type=out_file, default=LOG, help="the evaluation log (JSON lines; default: studies/reference_results/log.jsonl)")
+    r.add_argument("--systems", default=",".join(SYSTEM_ORDER), help="comma-separated systems (default: all)")
+    r.add_argument("--algorithms", default=",".join(DEFAULT_ALGORITHMS),
+                   help="comma-separated algorithms (default: %(default)s)")
+    r.add_argument("--seeds", default="0-2", help="training seeds, e.g. 0-2 (default: %(default)s)")
     r.add_argument("--filter-systems", default=",".join(FILTER_SYSTEMS),
                    help="systems with the filter-in-training PPO row ('' for none)")
-    r.add_argument("--budget", type=int, default=0, help="RL agent-steps for every system (0: the grid's)")
+    r.add_argument("--budget", type=int_at_least(0), default=0,
+                   help="RL agent-steps for every system (0: the grid's)")
     r.add_argument("--backend", choices=("local", "ray"), default="local")
-    r.add_argument("--workers", type=int, default=1)
+    r.add_argument("--workers", type=int_at_least(1), default=1, help="parallel runs (default: 1)")
     r.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
-    r.add_argument("--dry-run", action="store_true")
-    r.set_defaults(func=cmd_run)
-    s = sub.add_parser("results", help="log -> results.json")
-    s.add_argument("--log", default=str(LOG))
-    s.add_argument("--out", default=str(RESULTS))
-    s.set_defaults(func=cmd_results)
-    d = sub.add_parser("render", help="results.json -> docs page and figures")
-    d.add_argument("--results", default=str(RESULTS))
-    d.set_defaults(func=cmd_render)
+    r.add_argument("--dry-run", action="store_true", help="list the runs to do, with the time estimate, and stop")
+    s = command("results", "log -> results.json", cmd_results)
+    s.add_argument("--log", type=out_file, default=LOG, help="the evaluation log (default: studies/reference_results/log.jsonl)")
+    s.add_argument("--out", type=out_file, default=RESULTS, help="the results file (default: studies/reference_results/results.json)")
+    d = command("render", "results.json -> docs page and figures", cmd_render)
+    d.add_argument("--results", type=out_file, default=RESULTS, help="the results file (default: studies/reference_results/results.json)")
     return p
 
 
