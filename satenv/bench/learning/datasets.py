@@ -1,9 +1,9 @@
 """Demonstration datasets in Minari: the controller's episodes on each paper system's training task.
 
-    python -m satenv.bench.learning.datasets write --systems platoon-pereira2023 --episodes 50
-    python -m satenv.bench.learning.datasets read  --systems platoon-pereira2023
-    python -m satenv.bench.learning.datasets write --systems all --root /data/minari   # every system
-    python -m satenv.bench.learning.datasets write --systems cluster-li2022 --workers 2  # episodes in parallel
+    satenv datasets write --systems platoon-pereira2023 --episodes 50
+    satenv datasets read  --systems platoon-pereira2023
+    satenv datasets write --systems all --root /data/minari   # every system
+    satenv datasets write --systems cluster-li2022 --workers 2  # episodes in parallel
 
 Each dataset (id ``satenv/<system>/<controller>-v0``, e.g. ``satenv/platoon-pereira2023/dmpc-v0``)
 holds the system controller's episodes (:data:`satenv.tasks.CONTROLLERS`) on the first
@@ -360,27 +360,56 @@ def replays_exactly(error: dict[str, float]) -> bool:
 
 
 def _systems(text: str) -> list[str]:
+    """An argparse ``type``: ``all`` or comma-separated systems of :data:`satenv.tasks.SYSTEMS`."""
     if text == "all":
         return list(tasks.SYSTEMS)
     names = [s.strip() for s in text.split(",") if s.strip()]
-    for n in names:
-        tasks.system(n)
+    if not names or any(n not in tasks.SYSTEMS for n in names):
+        raise argparse.ArgumentTypeError(f"expected 'all' or comma-separated systems among {sorted(tasks.SYSTEMS)}, "
+                                         f"got {text!r}")
     return names
 
 
+def _estimate(systems: list[str], episodes: int, workers: int) -> str:
+    """The expected wall time of writing ``systems`` from the manifest's timed runs."""
+    try:
+        timed = json.loads(MANIFEST.read_text())
+    except (OSError, ValueError):
+        timed = {}
+    per_episode = [timed[s]["wall_s"] / timed[s]["episodes"] for s in systems
+                   if isinstance(timed.get(s), dict) and timed[s].get("wall_s") and timed[s].get("episodes")]
+    if not per_episode:
+        return "no timed run of these systems in the manifest"
+    return (f"about {sum(per_episode) * episodes / workers / 60:.0f} min on {workers} worker(s) at the measured "
+            f"rate of {len(per_episode)} of them (episodes already in the cache are replayed, not recorded)")
+
+
 def main(argv: Iterable[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m satenv.bench.learning.datasets", description=__doc__.split("\n\n")[0])
-    p.add_argument("command", choices=("write", "read"))
-    p.add_argument("--systems", default="all", help="comma-separated systems or 'all'")
-    p.add_argument("--episodes", type=int, default=50)
-    p.add_argument("--root", default=None, help="Minari's dataset folder (MINARI_DATASETS_PATH)")
-    p.add_argument("--manifest", default=str(MANIFEST), help="JSON file of what was written ('' for none)")
-    p.add_argument("--workers", type=int, default=1, help="episodes recorded in parallel")
-    p.add_argument("--cache", default=str(CACHE), help="recorded episodes kept until the dataset is written")
+    from satenv.cliargs import int_at_least, new_parser, out_file, out_folder
+
+    p = new_parser("satenv datasets", __doc__.split("**Layout")[0])
+    p.add_argument("command", choices=("write", "read"), help="record and write the datasets, or read them back")
+    p.add_argument("--systems", type=_systems, default="all", help="comma-separated systems or 'all' (default)")
+    p.add_argument("--episodes", type=int_at_least(1), default=50, help="episodes per dataset (default 50)")
+    p.add_argument("--root", type=out_folder, default=None, help="Minari's dataset folder (MINARI_DATASETS_PATH)")
+    p.add_argument("--manifest", default=str(MANIFEST),
+                   help="JSON file of what was written ('' for none; default: the packaged datasets.json)")
+    p.add_argument("--workers", type=int_at_least(1), default=1, help="episodes recorded in parallel")
+    p.add_argument("--cache", type=out_folder, default=CACHE,
+                   help="recorded episodes kept until the dataset is written (default: ~/.cache/satenv/episodes)")
     ns = p.parse_args(None if argv is None else list(argv))
+    if ns.manifest:
+        try:
+            out_file(ns.manifest)
+        except argparse.ArgumentTypeError as err:
+            p.error(f"argument --manifest: {err}")
     if ns.root:
-        os.environ["MINARI_DATASETS_PATH"] = ns.root
-    for system in _systems(ns.systems):
+        os.environ["MINARI_DATASETS_PATH"] = str(ns.root)
+    if ns.command == "write":
+        print(f"writing {len(ns.systems)} dataset(s) of {ns.episodes} episodes: "
+              f"{_estimate(ns.systems, ns.episodes, ns.workers)}; to {ns.root or 'MINARI_DATASETS_PATH (~/.minari/datasets)'}",
+              file=sys.stderr, flush=True)
+    for system in ns.systems:
         ds = (write(system, ns.episodes, manifest=Path(ns.manifest) if ns.manifest else None, workers=ns.workers,
                     cache=Path(ns.cache))
               if ns.command == "write" else read(system))
