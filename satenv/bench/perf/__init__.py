@@ -55,6 +55,10 @@ More sections run only when named in ``--sections`` (they take minutes):
               fast configuration (:data:`satenv.bench.perf.learning.FAST_CONFIGS`, about ``16384 x
               --solver-scale`` agent-steps each) and the env / learner (/ expert) shares of the
               wall time, each skipped with a note when its extra is missing.
+* ``learning_loop`` agent-steps/s of the lean PPO (:mod:`satenv.training.rl.ppo`) and SB3 PPO,
+              updates included, with the same network and batch on each training task (TPLF
+              platoon, cluster), the env's share of an iteration and the lean/SB3 ratio ``vs_sb3``
+              (:mod:`satenv.bench.perf.learning_loop`; targets >= 4x, env >= 30 % on the platoon).
 * ``experts`` DAgger expert labels per second (:mod:`satenv.bench.perf.experts`): each system's
               expert (NMPC on servicing, re-planning tube-RDMPC on the cluster) through
               :class:`satenv.baselines.experts.ExpertPool` with one worker and with two, and the targets
@@ -93,6 +97,7 @@ from . import (
     envs,
     experts,
     learning,
+    learning_loop,
     policy_threads,
     reproductions,
     safety,
@@ -117,7 +122,7 @@ __all__ = ["AGENTS", "API_VS_MPE2", "CORE_VS_VMAS", "EXTRA_SECTIONS", "FAST_SOLV
 SECTIONS = ("api", "mpe2", "batched", "vmas", "solvers", "guard", "envs")
 """The default sections."""
 EXTRA_SECTIONS = ("fast_solvers", "cgmres_ipopt", "training", "learning", "scaling", "reproductions", "safety",
-                  "policy_threads", "experts")
+                  "policy_threads", "experts", "learning_loop")
 """Sections that run only when named in ``--sections``."""
 DEFAULT_BATCHES = "1,4,16,64,256,1024,4096"
 
@@ -168,6 +173,7 @@ REGISTRY: dict[str, Callable[[Options, Log], Any]] = {
     "reproductions": lambda o, log: reproductions.reproduction_times(log),
     "safety": safety.run,
     "experts": experts.run,
+    "learning_loop": learning_loop.run,
     "policy_threads": policy_threads.run,
     "cgmres_ipopt": _cgmres,
     "training": _training,

@@ -93,8 +93,11 @@ def _sb3(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -> d
     from satenv.training.vec_env import SatVecEnv
     from satenv.vector import SatVectorEnv
 
-    cfg = TrainConfig(env_id=env_id, out_dir=out_dir, **fast)
-    env = make_env(env_id)
+    from satenv import tasks
+
+    where = {"task": env_id} if env_id in tasks.TASKS else {"env_id": env_id}   # an env id or a task name
+    cfg = TrainConfig(**where, out_dir=out_dir, **fast)
+    env = make_env(cfg.env_id, **cfg.env_kwargs)
     venv = VecNormalize(VecMonitor(SatVecEnv(env, cfg.num_envs, seed=cfg.seed)), gamma=cfg.gamma)
     model = build_model(cfg, venv)
     rows = cfg.num_envs * len(env.possible_agents) * cfg.n_steps

@@ -1,0 +1,672 @@
+"""The lean batched PPO learner (PPO, IPPO, MAPPO) over ``satenv.make_vec`` arrays, read top to bottom.
+
+    python -m satenv.training.rl.ppo --task platoon-tplf30-random-cw --budget 2000000 \\
+        --out-dir runs/tplf_lean
+    python -m satenv.training.rl.ppo --out-dir runs/tplf_lean --resume --budget 4000000
+    tensorboard --logdir runs/tplf_lean/tb
+
+One iteration collects ``n_steps`` decisions of ``num_envs`` copies of the task's env (every agent of
+every copy at once: observations and actions are ``(num_envs, n_agents, dim)`` arrays, stepped by
+:class:`satenv.vector.SatVectorEnv`), then runs ``n_epochs`` passes of clipped-PPO minibatch updates
+over them. Budgets count agent-steps (one agent's one decision). Read in this order:
+
+1. configuration (:class:`LeanConfig`; the fields every trainer shares come from
+   :class:`satenv.training.config.RunConfig`); ``--variant`` picks the parameters:
+
+   * ``ppo``   one actor and one critic shared by every agent, the critic on the agent's own
+     observation (what SB3 PPO trains through ``satenv.training.vec_env.SatVecEnv``);
+   * ``ippo``  per-agent actor and critic parameters (independent learners), local critics;
+   * ``mappo`` a shared actor and a centralised critic on the global state (``vec.state()``)
+     concatenated with the agent's observation;
+
+2. defaults chosen for a ``[-1, 1]`` thrust box: the action is a Gaussian whose mean is
+   ``tanh`` of the actor's output (initialised near zero thrust) with initial std
+   ``init_std = 0.25``, clipped to the box by the env; γ matched to the horizon: ``gamma = 1 -
+   gamma_k / max_steps`` when ``--gamma`` is not given (the return then weighs a reward at the end of
+   an episode by about ``exp(-gamma_k)``; ``gamma_k = 3``: 5 %);
+3. normalisation in the loop: observations (and the central state) by running mean / variance,
+   frozen during an iteration and updated after it; rewards divided by the running std of the
+   discounted return (SB3 ``VecNormalize``'s rule), both clipped to ``clip_obs``;
+4. the rollout (:func:`collect`): truncated episodes bootstrap from the critic's value of the
+   last observation; finished copies are reset at once;
+5. GAE (:func:`gae`) and the update (:func:`update`), large minibatches (``minibatch_size`` agent-steps);
+6. checkpoints (``checkpoints/step_<N>/``, safetensors + npz + JSON, no pickle) every
+   ``checkpoint_every`` agent-steps and at the end: ``--resume`` continues bit for bit;
+7. logs: TensorBoard (``tb/``) and ``progress.jsonl`` (agent-steps, mean episode return, success);
+8. the policy folder ``final/`` (:func:`satenv.training.policy.save_artifacts`, with ``eval.json`` on the
+   held-out test seeds); ``ippo`` writes one folder per agent in ``final/agents/<agent>/`` (the
+   folder format holds one shared actor) and its evaluation in ``final/eval.json``.
+
+Torch runs on ``--torch-threads`` threads (default 1: measured, a second thread only competes with
+the env for the other core). Before it starts, the run prints its size: budget, iterations and the
+expected wall time at a rate measured on a throwaway iteration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from satenv.training import runfolder
+from satenv.training.config import RunConfig, check_int, check_number, config_from_json
+from satenv.training.rl.nets import ActorCritic, export_actor
+
+__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "train"]
+
+VARIANTS = ("ppo", "ippo", "mappo")
+
+
+def horizon_gamma(max_steps: int, k: float) -> float:
+    """γ whose effective horizon ``1 / (1 - γ)`` is ``max_steps / k`` decisions."""
+    return 1.0 - k / max_steps
+
+
+# --------------------------------------------------------------------------- 1. configuration
+@dataclass(frozen=True)
+class LeanConfig(RunConfig):
+    """One lean PPO run (module docstring). Agent-steps count one agent's one decision."""
+
+    variant: str = "ppo"
+    """``ppo`` (shared actor and local critic), ``ippo`` (per-agent parameters), ``mappo``
+    (shared actor, centralised critic)."""
+    budget: int = 1_000_000
+    """Agent-steps to train for, rounded up to whole iterations (``num_envs * n_agents * n_steps``)."""
+    num_envs: int = 64
+    """Env copies stepped together."""
+    n_steps: int = 32
+    """Decisions per copy per iteration."""
+    minibatch_size: int = 4096
+    """Agent-steps per gradient step (rounded down to whole copies-steps of ``n_agents`` rows)."""
+    n_epochs: int = 2
+    """Passes over each iteration's data."""
+    gamma: float | None = None
+    """Discount; ``None``: ``1 - gamma_k / max_steps`` (:func:`horizon_gamma`)."""
+    gamma_k: float = 3.0
+    """Episodes per effective horizon when ``gamma`` is not given."""
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    init_std: float = 0.25
+    """Initial action standard deviation on the ``[-1, 1]`` box."""
+    norm_obs: bool = True
+    norm_reward: bool = True
+    clip_obs: float = 10.0
+    """Clip of the normalised observations and rewards."""
+    checkpoint_every: int = 500_000
+    """Agent-steps between checkpoints (0: only at the end)."""
+    out_dir: str = "runs/lean_ppo"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant must be one of {VARIANTS}, got {self.variant!r}")
+        for name in ("budget", "num_envs", "n_steps", "minibatch_size", "n_epochs"):
+            check_int(name, getattr(self, name), minimum=1)
+        check_int("checkpoint_every", self.checkpoint_every, minimum=0)
+        if self.gamma is not None:
+            check_number("gamma", self.gamma, 0.0, 1.0)
+        for name, lo, hi in (("gamma_k", 0.0, math.inf), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
+                             ("max_grad_norm", 0.0, math.inf), ("init_std", 0.0, 10.0), ("clip_obs", 0.0, math.inf)):
+            check_number(name, getattr(self, name), lo, hi)
+        for name in ("ent_coef", "vf_coef"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v < math.inf:
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        for name in ("norm_obs", "norm_reward"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
+
+
+# --------------------------------------------------------------------------- 3. normalisation
+class RunningMeanStd:
+    """Running mean and variance over the leading axes (Chan's parallel update), float64."""
+
+    def __init__(self, shape: tuple[int, ...] = ()) -> None:
+        self.mean, self.var, self.count = np.zeros(shape), np.ones(shape), 1e-4
+
+    def update(self, x: np.ndarray) -> None:
+        x = x.reshape(-1, *self.mean.shape)
+        n, mean, var = x.shape[0], x.mean(0), x.var(0)
+        delta, total = mean - self.mean, self.count + n
+        self.mean = self.mean + delta * n / total
+        self.var = (self.var * self.count + var * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+    def normalize(self, x: np.ndarray, clip: float) -> np.ndarray:
+        return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -clip, clip).astype(np.float32)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"mean": self.mean.tolist(), "var": self.var.tolist(), "count": self.count}
+
+    def load_json(self, d: dict[str, Any]) -> None:
+        self.mean, self.var = np.asarray(d["mean"], dtype=np.float64), np.asarray(d["var"], dtype=np.float64)
+        self.count = float(d["count"])
+
+
+class Normalizers:
+    """The run's running statistics: observations, central state, discounted return."""
+
+    def __init__(self, obs_dim: int, state_dim: int, num_envs: int, n_agents: int) -> None:
+        self.obs, self.state, self.ret = RunningMeanStd((obs_dim,)), RunningMeanStd((state_dim,)), RunningMeanStd()
+        self.returns = np.zeros((num_envs, n_agents))    # the running discounted return per agent
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: getattr(self, k).to_json() for k in ("obs", "state", "ret")}
+
+    def load_json(self, d: dict[str, Any]) -> None:
+        for k in ("obs", "state", "ret"):
+            getattr(self, k).load_json(d[k])
+
+
+# --------------------------------------------------------------------------- the run's state
+class Run:
+    """Everything a run carries between iterations (what a checkpoint saves)."""
+
+    def __init__(self, cfg: LeanConfig, vec: Any, gamma: float) -> None:
+        self.cfg, self.vec, self.gamma = cfg, vec, gamma
+        m = vec.n_agents
+        self.obs_dim = vec.single_observation_space.shape[0]
+        self.act_dim = vec.single_action_space.shape[0]
+        self.central = cfg.variant == "mappo"
+        self.state_dim = vec.state().shape[1] if self.central else 0
+        torch.manual_seed(cfg.seed)
+        self.net = ActorCritic(self.obs_dim, self.act_dim, self.state_dim + self.obs_dim, cfg.net_arch,
+                               m if cfg.variant == "ippo" else 1, cfg.init_std)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
+        self.gen = torch.Generator().manual_seed(cfg.seed)
+        self.norm = Normalizers(self.obs_dim, max(self.state_dim, 1), cfg.num_envs, m)
+        self.steps = 0                                   # agent-steps done
+        self.obs, _ = vec.reset(seed=cfg.seed)
+        self.episode = {"ret": np.zeros(cfg.num_envs), "len": np.zeros(cfg.num_envs, dtype=np.int64),
+                        "collided": np.zeros(cfg.num_envs, dtype=bool)}
+
+
+# --------------------------------------------------------------------------- 4. the rollout
+def _critic_in(run: Run, obs_n: np.ndarray, state: np.ndarray | None) -> np.ndarray:
+    """The critic's input ``(B, M, C)``: the normalised observation, after the normalised global
+    state for a centralised critic."""
+    if not run.central:
+        return obs_n
+    s = run.norm.state.normalize(state, run.cfg.clip_obs) if run.cfg.norm_obs else state.astype(np.float32)
+    return np.concatenate([np.broadcast_to(s[:, None], (*obs_n.shape[:2], s.shape[-1])), obs_n], axis=-1)
+
+
+def _norm_obs(run: Run, obs: np.ndarray) -> np.ndarray:
+    return run.norm.obs.normalize(obs, run.cfg.clip_obs) if run.cfg.norm_obs else obs.astype(np.float32)
+
+
+def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
+    """``n_steps`` decisions of every copy with the current policy; returns the rollout (torch
+    tensors ``(T, B, M, ...)``) and the finished episodes' returns and successes."""
+    cfg, vec, net = run.cfg, run.vec, run.net
+    T, (B, M) = cfg.n_steps, run.obs.shape[:2]
+    scenario = vec.scenario
+    raw_obs = np.empty((T, B, M, run.obs_dim), dtype=np.float32)
+    critic_obs = np.empty((T, B, M, run.state_dim + run.obs_dim), dtype=np.float32)
+    actions = torch.empty(T, B, M, run.act_dim)
+    logp = torch.empty(T, B, M)
+    rewards = np.empty((T, B, M), dtype=np.float32)
+    dones = np.empty((T, B), dtype=bool)
+    boot: list[tuple[int, np.ndarray, np.ndarray]] = []   # (t, truncated copies, their critic input)
+    states = np.empty((T, B, run.state_dim)) if run.central else None
+    finished: dict[str, list[float]] = {"return": [], "success": [], "length": []}
+    std = run.net.log_std.detach().exp()                  # (K, A)
+    log_norm = (run.net.log_std.detach().sum(-1) + 0.5 * run.act_dim * math.log(2 * math.pi))   # (K,)
+    obs = run.obs
+    for t in range(T):
+        t0 = time.perf_counter()
+        raw_obs[t] = obs
+        obs_n = _norm_obs(run, obs)
+        state = vec.state() if run.central else None
+        if run.central:
+            states[t] = state
+        critic_obs[t] = _critic_in(run, obs_n, state)
+        with torch.no_grad():
+            mean = net.mean(torch.from_numpy(obs_n))
+            noise = torch.randn(mean.shape, generator=run.gen)
+            actions[t] = mean + std * noise
+            logp[t] = -0.5 * (noise * noise).sum(-1) - log_norm
+        act = actions[t].numpy().clip(-1.0, 1.0)
+        t1 = time.perf_counter()
+        obs, rew, term, trunc, info = vec.step(act)
+        t2 = time.perf_counter()
+        timers["env"] += t2 - t1
+        done = term[:, 0] | trunc[:, 0]
+        ep = run.episode
+        ep["ret"] += rew.mean(1)
+        ep["len"] += 1
+        ep["collided"] |= np.asarray(info["collision"]).reshape(B, -1).any(1)
+        if cfg.norm_reward:
+            run.norm.returns = run.norm.returns * run.gamma + rew
+            run.norm.ret.update(run.norm.returns)
+            run.norm.returns[done] = 0.0
+            rew = np.clip(rew / np.sqrt(run.norm.ret.var + 1e-8), -cfg.clip_obs, cfg.clip_obs)
+        rewards[t], dones[t] = rew, done
+        if done.any():
+            idx = np.flatnonzero(done)
+            truncated = idx[trunc[idx, 0]]
+            if truncated.size:    # bootstrap from the last observation (normalised as this iteration's)
+                last_state = vec.state()[truncated] if run.central else None
+                boot.append((t, truncated, _critic_in(run, _norm_obs(run, obs[truncated]), last_state)))
+            err = np.linalg.norm(np.asarray(info["tracking_error"])[idx, :, :3], axis=-1).max(1)
+            voided = ep["collided"][idx] & bool(scenario.collision_voids_success)
+            finished["return"] += ep["ret"][idx].tolist()
+            finished["length"] += ep["len"][idx].tolist()
+            finished["success"] += ((err <= scenario.success_tol) & ~voided).astype(float).tolist()
+            ep["ret"][idx], ep["len"][idx], ep["collided"][idx] = 0.0, 0, False
+            t3 = time.perf_counter()
+            obs, _ = vec.reset(indices=idx)
+            timers["env"] += time.perf_counter() - t3
+        timers["forward"] += t1 - t0
+    run.obs = obs
+    last = _critic_in(run, _norm_obs(run, obs), vec.state() if run.central else None)
+    if cfg.norm_obs:   # the statistics move after the iteration that used them
+        run.norm.obs.update(raw_obs)
+        if run.central:
+            run.norm.state.update(states)
+    return {"critic_obs": torch.from_numpy(critic_obs), "actions": actions,
+            "logp": logp, "rewards": torch.from_numpy(rewards), "dones": torch.from_numpy(dones),
+            "boot": boot, "last": torch.from_numpy(last), "finished": finished}
+
+
+# --------------------------------------------------------------------------- 5. GAE and the update
+def gae(rewards: torch.Tensor, values: torch.Tensor, last_value: torch.Tensor, dones: torch.Tensor,
+        gamma: float, lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Advantages and returns ``(T, B, M)``; ``dones (T, B)`` end a copy's episode after step t
+    (a truncation's bootstrap is already in its reward)."""
+    adv = torch.zeros_like(rewards)
+    running = torch.zeros_like(last_value)
+    next_value = last_value
+    for t in range(rewards.shape[0] - 1, -1, -1):
+        live = (~dones[t]).float()[:, None]
+        delta = rewards[t] + gamma * next_value * live - values[t]
+        running = delta + gamma * lam * live * running
+        adv[t] = running
+        next_value = values[t]
+    return adv, adv + values
+
+
+def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[str, float]:
+    """GAE, then ``n_epochs`` passes of clipped-PPO minibatch steps over the iteration's data."""
+    cfg, net = run.cfg, run.net
+    t0 = time.perf_counter()
+    T, B, M = batch["rewards"].shape
+    rewards = batch["rewards"].clone()
+    with torch.no_grad():
+        values = net.value(batch["critic_obs"].reshape(T * B, M, -1)).reshape(T, B, M)
+        last_value = net.value(batch["last"])
+        for t, copies, cin in batch["boot"]:
+            rewards[t, torch.from_numpy(copies)] += run.gamma * net.value(torch.from_numpy(cin))
+    adv, returns = gae(rewards, values, last_value, batch["dones"], run.gamma, cfg.gae_lambda)
+    n = T * B
+    cin = batch["critic_obs"].reshape(n, M, -1)
+    obs = cin[..., run.state_dim:]                 # the normalised observations the actor saw
+    actions, old_logp = batch["actions"].reshape(n, M, -1), batch["logp"].reshape(n, M)
+    adv, returns = adv.reshape(n, M), returns.reshape(n, M)
+    rows = max(1, min(n, cfg.minibatch_size // M))
+    stats = {"policy_loss": 0.0, "value_loss": 0.0, "clip_fraction": 0.0, "approx_kl": 0.0}
+    count = 0
+    for _ in range(cfg.n_epochs):
+        perm = torch.randperm(n, generator=run.gen)
+        for start in range(0, n - rows + 1, rows):
+            mb = perm[start:start + rows]
+            mean = net.mean(obs[mb])
+            log_std = net.log_std                                    # (K, A), broadcast over rows
+            z = (actions[mb] - mean) / log_std.exp()
+            logp = -0.5 * (z * z).sum(-1) - log_std.sum(-1) - 0.5 * run.act_dim * math.log(2 * math.pi)
+            log_ratio = logp - old_logp[mb]
+            ratio = log_ratio.exp()
+            a = adv[mb]
+            a = (a - a.mean()) / (a.std() + 1e-8)
+            pg = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_range, 1 + cfg.clip_range)).mean()
+            v_loss = 0.5 * (net.value(cin[mb]) - returns[mb]).pow(2).mean()
+            entropy = (log_std.sum(-1) + 0.5 * run.act_dim * (1 + math.log(2 * math.pi))).mean()
+            loss = pg + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
+            run.opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
+            run.opt.step()
+            with torch.no_grad():
+                stats["policy_loss"] += float(pg)
+                stats["value_loss"] += float(v_loss)
+                stats["clip_fraction"] += float(((ratio - 1).abs() > cfg.clip_range).float().mean())
+                stats["approx_kl"] += float(((ratio - 1) - log_ratio).mean())
+            count += 1
+    timers["update"] += time.perf_counter() - t0
+    return {k: v / max(count, 1) for k, v in stats.items()} | {"std": float(net.log_std.detach().exp().mean())}
+
+
+# --------------------------------------------------------------------------- 6. checkpoints
+CHECKPOINT_TENSORS = "state.safetensors"
+CHECKPOINT_ARRAYS = "env_state.npz"
+CHECKPOINT_JSON = "state.json"
+
+
+def _env_state(vec: Any) -> dict[str, np.ndarray]:
+    """The batched env's episodes in flight (the SB3 adapter's record of them, one home)."""
+    from types import SimpleNamespace
+
+    from satenv.training.vec_env import SatVecEnv
+
+    return SatVecEnv.get_state(SimpleNamespace(vec=vec, core=vec.core, n_copies=vec.num_envs))
+
+
+def _set_env_state(vec: Any, state: dict[str, np.ndarray]) -> None:
+    from types import SimpleNamespace
+
+    from satenv.training.vec_env import SatVecEnv
+
+    SatVecEnv.set_state(SimpleNamespace(vec=vec, core=vec.core, n_copies=vec.num_envs), state)
+
+
+def save_checkpoint(run: Run, out: Path) -> Path:
+    """``checkpoints/step_<N>/``: weights and Adam moments (safetensors), the env's episodes and
+    the generators (npz), the statistics (JSON); written whole or not at all."""
+    from safetensors.torch import save_file
+
+    folder = out / "checkpoints" / f"step_{run.steps}"
+    tmp = runfolder.staging(folder)
+    tensors = {f"net.{k}": v.detach().contiguous() for k, v in run.net.state_dict().items()}
+    names = dict(zip(map(id, run.net.parameters()), (k for k, _ in run.net.named_parameters()), strict=True))
+    steps = {}
+    for p, s in run.opt.state.items():
+        tensors[f"adam.{names[id(p)]}.exp_avg"] = s["exp_avg"].contiguous()
+        tensors[f"adam.{names[id(p)]}.exp_avg_sq"] = s["exp_avg_sq"].contiguous()
+        steps[names[id(p)]] = float(s["step"])
+    save_file(tensors, str(tmp / CHECKPOINT_TENSORS))
+    arrays = {f"env.{k}": v for k, v in _env_state(run.vec).items()}
+    arrays.update({"obs": run.obs, "returns": run.norm.returns, "generator": run.gen.get_state().numpy(),
+                   **{f"episode.{k}": v for k, v in run.episode.items()}})
+    np.savez(tmp / CHECKPOINT_ARRAYS, **arrays)
+    (tmp / CHECKPOINT_JSON).write_text(json.dumps({"steps": run.steps, "adam_steps": steps,
+                                                   "norm": run.norm.to_json()}) + "\n")
+    return runfolder.replace_folder(tmp, folder)
+
+
+def latest_checkpoint(out: Path) -> Path | None:
+    """The newest complete ``checkpoints/step_<N>`` (an interrupted swap finished or undone first)."""
+    found = []
+    for p in (out / "checkpoints").glob("step_*"):
+        if p.name.endswith((".old", ".tmp")):
+            runfolder.recover_folder(p.with_suffix(""))
+            continue
+        if (p / CHECKPOINT_JSON).is_file() and p.name[5:].isdigit():
+            found.append((int(p.name[5:]), p))
+    return max(found)[1] if found else None
+
+
+def load_checkpoint(run: Run, folder: Path) -> None:
+    """Restore :func:`save_checkpoint` into a freshly built ``run`` (shapes checked by torch)."""
+    from safetensors.torch import load_file
+
+    try:
+        tensors = load_file(str(folder / CHECKPOINT_TENSORS))
+        meta = json.loads((folder / CHECKPOINT_JSON).read_text())
+        run.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
+        for name, p in run.net.named_parameters():
+            if name in meta["adam_steps"]:
+                run.opt.state[p] = {"step": torch.tensor(meta["adam_steps"][name]),
+                                    "exp_avg": tensors[f"adam.{name}.exp_avg"].clone(),
+                                    "exp_avg_sq": tensors[f"adam.{name}.exp_avg_sq"].clone()}
+        with np.load(folder / CHECKPOINT_ARRAYS, allow_pickle=False) as d:
+            data = {k: d[k] for k in d.files}
+        _set_env_state(run.vec, {k[4:]: v for k, v in data.items() if k.startswith("env.")})
+        run.obs, run.norm.returns = data["obs"].copy(), data["returns"].copy()
+        run.gen.set_state(torch.from_numpy(data["generator"].copy()))
+        run.episode = {k: data[f"episode.{k}"].copy() for k in run.episode}
+        run.norm.load_json(meta["norm"])
+        run.steps = int(meta["steps"])
+    except (KeyError, ValueError, RuntimeError, OSError, TypeError) as err:
+        raise runfolder.RunFolderError(f"--resume: the checkpoint {folder} is malformed or from another "
+                                       f"config ({type(err).__name__}: {str(err)[:160]})") from None
+
+
+# --------------------------------------------------------------------------- 7.-8. logs and the policy folder
+def _policies(run: Run, meta: dict[str, Any], config: dict[str, Any]) -> list[Any]:
+    """The learned policy of each actor copy (one for shared parameters)."""
+    from satenv.training.policy import LearnedPolicy, ObsNormalizer
+
+    norm = ObsNormalizer(run.norm.obs.mean, run.norm.obs.var, run.cfg.clip_obs) if run.cfg.norm_obs else ObsNormalizer()
+    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.obs_dim,), meta=meta)
+            for k in range(run.net.actor.copies)]
+
+
+class PerAgentPolicy:
+    """Per-agent learned policies behind the baseline interface (``ippo``'s evaluation)."""
+
+    name = "learned"
+
+    def __init__(self, policies: dict[str, Any]) -> None:
+        self.policies, self.info = policies, {"fallbacks": 0}
+
+    def reset(self, seed: int | None = None) -> None:
+        self.info = {"fallbacks": 0}
+
+    def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {a: self.policies[a].act({a: o})[a] for a, o in observations.items()}
+
+
+def write_final(run: Run, out: Path, env: Any, wall: float) -> Path:
+    """``final/``: the policy folder(s) with ``eval.json`` on the held-out test seeds."""
+    from satenv.tasks import CONTROLLERS
+    from satenv.training.envs import policy_env_meta
+    from satenv.training.evaluate import run_summary
+
+    cfg = run.cfg
+    meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs), "step": run.steps}
+    config = {**cfg.to_json(), "gamma_used": run.gamma, "trainer": "satenv.training.rl.ppo"}
+    policies = _policies(run, meta, config)
+    learned = policies[0] if len(policies) == 1 else PerAgentPolicy(dict(zip(env.possible_agents, policies, strict=True)))
+    summary = run_summary(cfg, learned, reference=CONTROLLERS.get(cfg.env_id, "dmpc"), steps=run.steps,
+                          train_wall_s_this_session=round(wall, 1))
+    from satenv.training.policy import _jsonable, save_artifacts
+
+    staged = runfolder.staging(out / "final")
+    source = f"satenv lean PPO ({cfg.variant})"
+    if len(policies) == 1:
+        save_artifacts(staged, policies[0], env_meta=meta, config=config, evaluation=summary, source=source)
+    else:
+        for agent, policy in zip(env.possible_agents, policies, strict=True):
+            save_artifacts(staged / "agents" / agent, policy, env_meta={**meta, "agent": agent}, config=config,
+                           source=source)
+        runfolder.write_json(staged / "eval.json", summary, indent=2, default=_jsonable)
+    final = runfolder.replace_folder(staged, out / "final")
+    print(f"final policy ({run.steps} agent-steps) on {len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
+    return final
+
+
+def _probe_seconds(run: Run, steps: int = 4) -> tuple[float, float]:
+    """Seconds of one rollout step and of one minibatch update, measured on throwaway copies (the
+    run's networks, generators and env are not touched)."""
+    from satenv.vector import SatVectorEnv
+
+    cfg = run.cfg
+    vec = SatVectorEnv(run.vec.env, cfg.num_envs, seed=cfg.seed, autoreset=True)
+    net = copy.deepcopy(run.net)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    obs, _ = vec.reset()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        with torch.no_grad():
+            act = net.mean(torch.from_numpy(obs.astype(np.float32))).numpy()
+        obs = vec.step(act)[0]
+    step_s = (time.perf_counter() - t0) / steps
+    rows = max(1, cfg.minibatch_size // vec.n_agents)
+    x = torch.zeros(rows, vec.n_agents, run.state_dim + run.obs_dim)
+    t0 = time.perf_counter()
+    for _ in range(3):
+        loss = net.mean(x[..., run.state_dim:]).sum() + net.value(x).sum()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    return step_s, (time.perf_counter() - t0) / 3
+
+
+def plan(cfg: LeanConfig, n_agents: int, done: int = 0) -> tuple[int, int]:
+    """``(agent-steps per iteration, iterations)`` to reach the budget from ``done``."""
+    per = cfg.num_envs * n_agents * cfg.n_steps
+    return per, max(0, -(-(cfg.budget - done) // per))
+
+
+# --------------------------------------------------------------------------- the loop
+def train(cfg: LeanConfig, resume: bool = False) -> Path:
+    """Run (or resume) a lean PPO run; returns the ``final/`` folder."""
+    from satenv import tasks
+    from satenv.training.envs import make_env
+    from satenv.vector import SatVectorEnv
+
+    torch.set_num_threads(cfg.torch_threads)
+    out = Path(cfg.out_dir)
+    ckpt = latest_checkpoint(out) if resume else None
+    if resume and ckpt is None:
+        raise ValueError(f"--resume: no checkpoint under {out / 'checkpoints'}; train first without --resume")
+    if not resume and latest_checkpoint(out) is not None:
+        raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
+    out.mkdir(parents=True, exist_ok=True)
+    runfolder.recover_folder(out / "final")
+    env = tasks.get(cfg.task).make_env(**cfg.env_kwargs) if cfg.task else make_env(cfg.env_id, **cfg.env_kwargs)
+    vec = SatVectorEnv(env, cfg.num_envs, autoreset=False)
+    gamma = cfg.gamma if cfg.gamma is not None else horizon_gamma(vec.max_steps, cfg.gamma_k)
+    if not 0.0 < gamma < 1.0:
+        raise ValueError(f"gamma_k {cfg.gamma_k} gives gamma {gamma:.4f} for max_steps {vec.max_steps}; "
+                         f"gamma_k must be below max_steps (or give --gamma in (0, 1))")
+    run = Run(cfg, vec, gamma)
+    if ckpt is not None:
+        load_checkpoint(run, ckpt)
+    runfolder.write_json(out / "config.json", {**cfg.to_json(), "gamma_used": gamma}, indent=2)
+    per_iter, iterations = plan(cfg, vec.n_agents, run.steps)
+    step_s, update_s = _probe_seconds(run)
+    updates = cfg.n_epochs * max(1, cfg.num_envs * cfg.n_steps // max(1, cfg.minibatch_size // vec.n_agents))
+    eta = iterations * (cfg.n_steps * step_s + updates * update_s)
+    print(f"lean {cfg.variant} on {cfg.task or cfg.env_id}: budget {cfg.budget:,} agent-steps "
+          f"({run.steps:,} done), {iterations} iterations of {per_iter:,} agent-steps "
+          f"({cfg.num_envs} copies x {vec.n_agents} agents x {cfg.n_steps} steps), {updates} gradient steps "
+          f"each; gamma {gamma:.4f}; expected {eta / 60:.1f} min at the measured "
+          f"{per_iter / (cfg.n_steps * step_s + updates * update_s):,.0f} agent-steps/s", file=sys.stderr)
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(out / "tb"), purge_step=run.steps or None)
+    log_path = out / "progress.jsonl"
+    if log_path.is_file():   # keep the lines up to the checkpoint resumed from
+        kept = [ln for ln in log_path.read_text().splitlines() if ln and json.loads(ln)["agent_steps"] <= run.steps]
+        runfolder.write_text(log_path, "".join(k + "\n" for k in kept))
+    every = cfg.checkpoint_every or math.inf
+    next_ckpt = (run.steps // every + 1) * every if cfg.checkpoint_every else math.inf
+    t_start = time.perf_counter()
+    for _ in range(iterations):
+        timers = {"env": 0.0, "forward": 0.0, "update": 0.0}
+        t0 = time.perf_counter()
+        batch = collect(run, timers)
+        stats = update(run, batch, timers)
+        run.steps += per_iter
+        wall = time.perf_counter() - t0
+        fin = batch["finished"]
+        row = {"agent_steps": run.steps, "episodes": len(fin["return"]),
+               "return": float(np.mean(fin["return"])) if fin["return"] else None,
+               "success": float(np.mean(fin["success"])) if fin["success"] else None,
+               "agent_steps_per_s": per_iter / wall, "env_share": timers["env"] / wall, **stats}
+        with log_path.open("a") as fh:
+            fh.write(json.dumps(row) + "\n")
+        for k, v in row.items():
+            if v is not None and k != "agent_steps":
+                writer.add_scalar(f"lean/{k}", v, run.steps)
+        if run.steps >= next_ckpt:
+            save_checkpoint(run, out)
+            next_ckpt += cfg.checkpoint_every
+    writer.close()
+    wall = time.perf_counter() - t_start
+    if latest_checkpoint(out) is None or latest_checkpoint(out).name != f"step_{run.steps}":
+        save_checkpoint(run, out)
+    return write_final(run, out, env, wall)
+
+
+# --------------------------------------------------------------------------- CLI
+def parser() -> argparse.ArgumentParser:
+    """The command line (flags named as every trainer's: ``--task``, ``--budget``, ``--num-envs``, ...)."""
+    p = argparse.ArgumentParser(prog="satenv ppo", description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p.add_argument("--task", help="a task of satenv.tasks (its env and kwargs)")
+    p.add_argument("--env-id", help="a satenv env id (default: the task's)")
+    p.add_argument("--env-kwargs", type=_json_object, help="JSON object of env keyword arguments")
+    p.add_argument("--variant", choices=VARIANTS)
+    for name, kind in (("num-envs", int), ("n-steps", int), ("minibatch-size", int), ("n-epochs", int),
+                       ("budget", int), ("seed", int), ("torch-threads", int), ("checkpoint-every", int),
+                       ("lr", float), ("gamma", float), ("gamma-k", float), ("gae-lambda", float),
+                       ("clip-range", float), ("ent-coef", float), ("init-std", float), ("workers", int)):
+        p.add_argument(f"--{name}", type=kind)
+    p.add_argument("--net-arch", type=lambda s: tuple(int(x) for x in s.split(",")), help="e.g. 64,64")
+    p.add_argument("--test-seeds", type=_seeds, help="held-out seeds of eval.json, e.g. 900000-900019")
+    p.add_argument("--eval-baselines", type=lambda s: tuple(x for x in s.split(",") if x),
+                   help="scripted baselines beside the learned policy (e.g. zero,dmpc; default auto)")
+    p.add_argument("--tuned", action="store_true", help="start from the task's tuned config (tuned/<task>.json)")
+    p.add_argument("--out-dir")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its last checkpoint")
+    p.add_argument("--no-progress", action="store_true", help="hide the evaluation progress bars")
+    return p
+
+
+def _json_object(text: str) -> dict[str, Any]:
+    value = json.loads(text)
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r:.80}")
+    return value
+
+
+def _seeds(text: str) -> tuple[int, ...]:
+    from satenv.tasks import parse_seeds
+
+    return parse_seeds(text)
+
+
+TUNED_DIR = Path(__file__).parent / "tuned"
+"""Tuned configurations per task (``<task>.json``: fields of :class:`LeanConfig`), chosen on
+validation seeds."""
+
+
+def tuned(task: str) -> dict[str, Any]:
+    """The tuned fields of ``task`` (``{}`` when none is committed)."""
+    path = TUNED_DIR / f"{task}.json"
+    return json.loads(path.read_text())["config"] if path.is_file() else {}
+
+
+def config_from_args(argv: list[str] | None) -> tuple[LeanConfig, bool]:
+    args = parser().parse_args(argv)
+    given = {k: v for k, v in vars(args).items() if v is not None and k not in ("resume", "tuned", "no_progress")}
+    if args.no_progress:
+        given["progress"] = False
+    if args.resume:
+        out = Path(given.get("out_dir", LeanConfig.out_dir))
+        saved = runfolder.read_json(out / "config.json", "the run's config")
+        saved.pop("gamma_used", None)
+        return config_from_json({**saved, **given}, LeanConfig), True
+    if args.tuned:
+        given = {**tuned(given.get("task") or LeanConfig(**given).task), **given}
+    return LeanConfig(**given), False
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``satenv ppo``: parse, train, print where the policy is; 0 on success, 2 on a bad input."""
+    try:
+        cfg, resume = config_from_args(argv)
+        final = train(cfg, resume=resume)
+    except ValueError as err:   # satenv's input errors and RunFolderError are ValueErrors
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"policy folder: {final}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
