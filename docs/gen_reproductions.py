@@ -30,7 +30,13 @@ ROOT = DOCS.parent
 OUT = DOCS / "assets" / "reproductions"
 
 sys.path.insert(0, str(ROOT))
-from satenv.bench.claims import count, markdown_claims, markdown_departures  # noqa: E402
+from satenv.bench.claims import (  # noqa: E402
+    count,
+    design_comparisons,
+    markdown_claims,
+    markdown_departures,
+    paper_claims,
+)
 
 PAPERS: dict[str, bool] = {
     "pereira2023": False,
@@ -90,7 +96,22 @@ def render(result: dict) -> str:
         parts += ["### Departures from the paper",
                   "Every setting where our run differs from the paper, with its measured effect on the claims.",
                   markdown_departures(result["departures"])]
-    parts += ["### Claims", markdown_claims(result.get("claims", []))]
+    claims = result.get("claims", [])
+    parts += ["### Claims", markdown_claims(paper_claims(claims))]
+    ours_designs = design_comparisons(claims)
+    if ours_designs:
+        designs = ", ".join(dict.fromkeys(c["against_our_design"] for c in ours_designs))
+        parts += ["### Comparisons with our own designs (not gating)",
+                  f"These rows compare with a design of ours the paper does not give ({designs}): they say how the "
+                  "two designs compare here, not whether the paper reproduces, and never count in the verdict.",
+                  markdown_claims(ours_designs, verdict=False)]
+    if result.get("readings"):
+        parts += ["### Other readings (our run under each)",
+                  "Where the paper's text allows two readings of a setting, our run under the other one (its claims "
+                  "are the variant rows of the table above) and the claims whose status it changes:",
+                  table(result["readings"], ["variant", "case", "convergence_time_s", "final_error_m", "max_rise_m",
+                                             "collisions", "max_thrust_N", "delta_v_total_mps",
+                                             "gating_claims_changed", "changed_claims"])]
     timed = [r for r in result.get("rows", []) if isinstance(r, dict) and r.get("convergence_time_by_tolerance_s")]
     if timed:
         tols = list(dict.fromkeys(k for r in timed for k in r["convergence_time_by_tolerance_s"]))

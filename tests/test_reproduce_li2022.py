@@ -14,7 +14,7 @@ def _row(**kw):
            "final_error_m": 0.0227, "satellites_within_1m_at_end": 10, "relaxed_solves": 0, "fallbacks": 0,
            "failed_solves": 0, "final_nominal_error_m": 0.02, "max_tube_error_m": 0.001, "lyapunov_floor_m": 0.0224,
            "collisions": 0, "max_thrust_N": 0.97, "max_rise_m": 0.01, "wall_time_s": 1.0, "reallocations": 0,
-           "min_pair_distance_m": 210.0, "min_obstacle_distance_m": 405.0}
+           "min_pair_distance_m": 210.0, "min_obstacle_distance_m": 405.0, "delta_v_total_mps": 131.0}
     return {**row, **kw}
 
 
@@ -47,6 +47,52 @@ def test_case1_claims_are_bands_around_the_papers_numbers():
     assert faster["met"] and "our own design" in faster["note"]
     assert not c["case 1: RDMPC converges faster than APF [s] (rdmpc, apf)", "as published"]["met"]
     assert not passed({"claims": list(c.values())})                       # the accuracy band fails
+
+
+def test_apf_comparisons_are_apart_and_never_gate():
+    """li2022 gives neither the APF's law nor its gains: every claim that compares with our APF is
+    marked as a comparison with our design and none gates, whatever its status."""
+    from satenv.bench.claims import design_comparisons, gating
+
+    rows = [_row(), _row(controller="apf", convergence_time_s=1605.0, final_error_m=0.27)]
+    checks = li2022.check_claims(rows)
+    apart = design_comparisons(checks)
+    assert apart and all(c["against_our_design"] == li2022.OUR_APF and not c["gating"] for c in apart)
+    assert not any("APF" in c["claim"] for c in gating(checks))
+    assert {c["claim"] for c in apart} >= {"case 1: RDMPC converges faster than APF [s] (rdmpc, apf)",
+                                           "case 1: RDMPC more accurate than APF [m] (rdmpc, apf)"}
+
+
+def test_eps_bar_verdicts_state_the_eta_range_they_hold_for():
+    """eps_bar scales as sqrt(eta): a final error e meets it for eta >= eta (e / eps_bar)^2; the
+    range of our run is from the largest threshold met to the smallest missed."""
+    checks = li2022.check_claims([_row(max_rise_m=0.001)])
+    eps = li2022.tube_bound(li2022.scenario(1), li2022.variant_config("ours"))
+    theorem2 = next(c for c in checks if "(Theorem 2)" in c["claim"])
+    assert theorem2["eta_threshold"] == pytest.approx((0.0227 / eps) ** 2) and not theorem2["met"]
+    assert "the paper's limit" not in theorem2["rule"] and "li2022 states no eta" in theorem2["rule"]
+    span = li2022.eta_range(checks, k2=4.0)
+    assert span["low"] == pytest.approx((0.001 / eps) ** 2) and span["high"] == pytest.approx(theorem2["eta_threshold"])
+    assert span["theorem1_smallest_eta"] == 1 / 16
+    acc = next(c for c in checks if "control accuracy" in c["claim"])
+    assert acc["more_accurate_than_paper"] and "more accurate" in acc["note"] and "Lyapunov tolerance" in acc["note"]
+
+
+def test_beta_reading_is_a_variant_and_a_departure_naming_the_changed_claims():
+    """β on the acceleration (eqs. 4-5) is β / m^2 in our thrust-priced cost; its run is a
+    non-gating variant whose gating-claim changes the β departure names."""
+    cfg = li2022.variant_setup("ours-beta-on-acceleration")[1]["config"]
+    assert cfg.beta == pytest.approx(li2022.variant_config("ours").beta / li2022.scenario(1).mass ** 2)
+    label = li2022.LABELS["ours-beta-on-acceleration"]
+    rows = [_row(), _row(variant="ours-beta-on-acceleration", final_error_m=0.00045, max_rise_m=0.0002)]
+    checks = li2022.check_claims(rows)
+    assert not any(c["gating"] for c in checks if c["variant"] == label)
+    readings = li2022.reading_rows(rows, checks)
+    assert [r["variant"] for r in readings] == [label] and li2022.ablation(rows, checks) == []
+    assert "case 1 RDMPC: converged within eps_bar (Theorem 2) [m] -> met" in readings[0]["gating_claims_changed"]
+    beta = next(d for d in li2022.departures([], rows, readings) if d["fields"] == ["beta"])
+    assert "Theorem 2" in beta["effect"] and "control force" in beta["source"]
+    assert "not measured" in next(d for d in li2022.departures() if d["fields"] == ["beta"])["effect"]
 
 
 def test_tube_bound_is_derived_in_si_from_the_scenario():
@@ -110,7 +156,7 @@ def test_full_li2022_reproduction_of_our_rdmpc(case):
     as they stand (case 1's accuracy band is not met: 0.0227 m against 0.071 m; Theorem 2's eps_bar
     in SI, 0.0024 m, is not met either: the final error is our tolerance's floor)."""
     result = li2022.run(case=case, tube=False, variants=("ours",), sensitivity=False, ablate=False,
-                        controllers=("tube_rdmpc",))
+                        controllers=("tube_rdmpc",), readings=False)
     by = {c["claim"]: c for c in result["claims"]}
     theorem2 = by[f"case {case} RDMPC: converged within eps_bar (Theorem 2) [m]"]
     assert not theorem2["met"] and theorem2["measured"] > theorem2["paper"]

@@ -134,6 +134,7 @@ def test_comparative_sentences_hold_on_the_papers_own_table():
     assert len(stated) == 4 and all(c["met"] and c["gating"] for c in stated)
     most = by["PLF gives the best value in most (follower, metric) cells [cells of 12]"]
     assert most["paper"] == most["measured"] == 7 and most["table_ii_ordering_reproduced"] == 12
+    assert most["cells_strict"] == most["cells_with_ties"] == 7        # Table II has no tie
     assert all(c["source"] in (pereira2023.SOURCE_MOST, pereira2023.SOURCE_F1, pereira2023.SOURCE_F2,
                                pereira2023.SOURCE_F4) for c in stated)
     bdl4 = dict(zip(pereira2023.METRICS, pereira2023.TABLE_II["BDL"][3], strict=True))
@@ -141,6 +142,19 @@ def test_comparative_sentences_hold_on_the_papers_own_table():
     swapped = pereira2023.comparative_claims(_table_ii_rows(PLF4=bdl4, BDL4=plf4))
     f4 = next(c for c in swapped if c["claim"].startswith("follower 4: PLF better than BDL on all"))
     assert not f4["met"] and f4["measured"] == 0
+
+
+def test_plf_most_cases_records_strict_and_tied_counts_and_judges_by_ties():
+    """PLF and TPLF identical for followers 1-2 (as in our runs): each tie counts as a cell where the
+    best value is obtained for PLF; the strict count is recorded beside it."""
+    same = {f"TPLF{f}": dict(zip(pereira2023.METRICS, pereira2023.TABLE_II["PLF"][f - 1], strict=True))
+            for f in (1, 2)}
+    most = next(c for c in pereira2023.comparative_claims(_table_ii_rows(**same)) if c["claim"].startswith("PLF gives"))
+    assert most["cells_strict"] < most["cells_with_ties"] == most["measured"]
+    assert "shared or not" in most["rule"] and most["met"] == (most["cells_with_ties"] > 6)
+    worse = {f"PLF{f}": {m: 1e9 for m in pereira2023.METRICS} for f in (1, 2, 3, 4)}
+    assert not next(c for c in pereira2023.comparative_claims(_table_ii_rows(**worse))
+                    if c["claim"].startswith("PLF gives"))["met"]
 
 
 def test_as_published_run_and_its_departures(result):

@@ -16,8 +16,9 @@ def test_claims_of_a_short_episode_quote_the_paper_and_can_fail():
     traj = rollout(env, policy, seed=0)
     claims = serv.claims_of(serv.analyse(traj, env, policy), "as published")
     assert all(c["source"] == serv.SOURCE for c in claims)
-    positions = [c for c in claims if "position at the phase end" in c["claim"]]
-    assert positions and not any(c["met"] for c in positions)        # 2 s is too short to reach 15 m away
+    waypoints = [c for c in claims if "distance to the waypoint" in c["claim"]]
+    assert waypoints and all(c["status"] == NO_VALUE and not c["gating"] for c in waypoints)  # the band is ours
+    assert all("our test" in c["rule"] and c["rule"].endswith("not met") for c in waypoints)  # 2 s: too short
     point = claims[-1]
     assert point["status"] == NO_VALUE and "our test" in point["rule"] and not point["gating"]
     assert not any(c["gating"] for c in claims)                       # as-published rows never gate
@@ -46,6 +47,14 @@ def test_as_published_uses_eq39_signed_quaternion_error():
         assert first == expected and np.allclose(np.asarray(quaternion_cost_terms(q, q, signed)), 0.0)
 
 
+def test_failed_solves_are_counted_by_stop_reason_never_by_a_clock():
+    assert serv.SOLVE_CAP == {"solve_time_limit": None}
+    assert serv.stop_reason("failed: Maximum_Iterations_Exceeded") == "Maximum_Iterations_Exceeded"
+    assert serv.stop_reason("infeasible: constraint violated by 0.0123 (Solve_Succeeded)") == \
+        "infeasible: constraint violated (Solve_Succeeded)"
+    assert serv.stop_reason("time limit: the solve took 12 s > 10 s (Solve_Succeeded)") == "time limit"
+
+
 @pytest.mark.slow
 def test_full_reproduction_reports_both_runs():
     result = serv.reproduce(diagnostics=False)
@@ -55,3 +64,7 @@ def test_full_reproduction_reports_both_runs():
     gating = [c for c in result["claims"] if c["gating"]]
     assert gating and all(c["met"] for c in gating), gating
     assert "eq. 39 as printed" in result["departures"][0]["effect"]
+    reasons = result["stop_reasons"]
+    assert set(reasons) == {"ours", "as published"}
+    assert sum(reasons["as published"].values()) == result["runs"]["as published"]["fallbacks"]
+    assert not any("time limit" in r for run in reasons.values() for r in run)

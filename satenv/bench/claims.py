@@ -18,6 +18,9 @@ The rule comes from the paper's text, never from the measured number:
 * the paper gives no value (figures only, or a claim that is ours): :func:`no_value`; its status
   is ``"no paper value"``, it is never counted as met and never gates.
 
+A claim that compares with a design of ours the paper does not give (li2022's APF) is marked by
+:func:`against_our_design`: reported in its own section, never gating.
+
 ``variant`` says which run the claim judges (``"ours"``, ``"as published"``, an ablation); only
 paper-valued claims of ``"ours"`` gate: ``python -m satenv.bench.reproduce`` exits 0 only when every
 one of them is met (:func:`passed`); as-published and ablation rows are reported, not gating.
@@ -40,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["BAND", "NO_VALUE", "NOT_STATED", "band", "bound", "statement", "no_value", "departure",
-           "gating", "passed", "count", "format_claims", "markdown_claims", "markdown_departures",
+           "against_our_design", "paper_claims", "design_comparisons", "gating", "passed", "count", "format_claims", "markdown_claims", "markdown_departures",
            "markdown_rows", "summary_rows", "changed_claims"]
 
 BAND = 0.10
@@ -99,13 +102,16 @@ def band(name: str, source: str, paper: float | Sequence[float], measured: Any, 
 
 
 def bound(name: str, source: str, limit: float, measured: Any, *, op: str = "<=", unit: str = "",
-          variant: str = OURS, note: str | None = None, **context: Any) -> dict[str, Any]:
-    """The paper states a limit: met when ``measured op limit`` (``op`` ``"<="`` or ``">="``)."""
+          variant: str = OURS, note: str | None = None, basis: str = "the paper's limit",
+          **context: Any) -> dict[str, Any]:
+    """The paper states a limit: met when ``measured op limit`` (``op`` ``"<="`` or ``">="``);
+    ``basis`` says where the number comes from when the paper states the limit as a formula whose
+    value rests on our reading (e.g. ``"(15) with eta = 1, ours"``)."""
     if op not in ("<=", ">="):
         raise ValueError(f"bound {name!r}: op must be '<=' or '>=', got {op!r}")
     got = _numbers(measured)
     ok = got is not None and all(math.isfinite(g) and (g <= limit if op == "<=" else g >= limit) for g in got)
-    rule = f"{op} {_fmt(float(limit))}{(' ' + unit) if unit else ''} (the paper's limit)"
+    rule = f"{op} {_fmt(float(limit))}{(' ' + unit) if unit else ''} ({basis})"
     return _record(name, source, limit, measured, rule, "met" if ok else "not met", variant, note, context)
 
 
@@ -135,6 +141,25 @@ def departure(name: str, paper: Any, ours: Any, why: str, effect: str, *,
     if source is not None:
         rec["source"] = source
     return rec
+
+
+def against_our_design(record: dict[str, Any], design: str) -> dict[str, Any]:
+    """A claim that compares with a design of ours the paper does not give (``design``, e.g. our
+    APF): it says how the two designs compare here, not whether the paper reproduces, so it is
+    reported in its own section (``against_our_design``) and never gates."""
+    if not isinstance(design, str) or not design:
+        raise TypeError(f"claim {record.get('claim')!r}: design must name our design, got {design!r}")
+    return {**record, "against_our_design": design, "gating": False}
+
+
+def paper_claims(claims: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The claims judged against the paper alone (those of :func:`against_our_design` left out)."""
+    return [c for c in claims if not c.get("against_our_design")]
+
+
+def design_comparisons(claims: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The claims that compare with a design of ours (:func:`against_our_design`)."""
+    return [c for c in claims if c.get("against_our_design")]
 
 
 def gating(claims: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -218,13 +243,14 @@ def _status(c: dict[str, Any]) -> str:
     return {"met": "met", "not met": "**not met**"}.get(c["status"], "*" + NO_VALUE + "*")
 
 
-def markdown_claims(claims: Iterable[dict[str, Any]]) -> str:
-    """A Markdown table of claims: claim, run, the paper's sentence, its value, rule, measured, status."""
+def markdown_claims(claims: Iterable[dict[str, Any]], verdict: bool = True) -> str:
+    """A Markdown table of claims: claim, run, the paper's sentence, its value, rule, measured, status
+    (``verdict``: followed by the verdict line of these claims)."""
     rows = ["| claim | run | the paper says | paper | rule | measured | status |", "|---|---|---|---|---|---|---|"]
     for c in claims:
         rows.append(f"| {_cell(c['claim'])} | {_cell(c['variant'])} | \u201c{_cell(c['source'])}\u201d | "
                     f"{_cell(c['paper'])} | {_cell(c['rule'])} | {_cell(c['measured'])} | {_status(c)} |")
-    return "\n".join(rows) + "\n\n" + _verdict(list(claims)) + "."
+    return "\n".join(rows) + ("\n\n" + _verdict(list(claims)) + "." if verdict else "")
 
 
 def markdown_departures(departures: Iterable[dict[str, Any]]) -> str:

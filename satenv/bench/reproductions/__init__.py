@@ -7,3 +7,19 @@ value, the rule, what we measured) and ``departures`` (:func:`satenv.bench.claim
 records: every setting where the run differs from the paper, with its measured effect); the
 reproduction pages render both (``docs/gen_reproductions.py``).
 """
+
+from pathlib import Path
+
+REPOSITORY = Path(__file__).resolve().parents[3]
+"""The folder holding the ``satenv`` package (the repository in a source checkout)."""
+
+
+def figure_paths(paths, plots: str | Path) -> list[str]:
+    """The figure paths a result records: relative to the repository when they lie in it, else
+    relative to the ``plots`` folder, so no result names the machine that wrote it."""
+    out = []
+    for p in map(Path, paths):
+        full = p.resolve()
+        base = REPOSITORY if full.is_relative_to(REPOSITORY) else Path(plots).resolve()
+        out.append(full.relative_to(base).as_posix() if full.is_relative_to(base) else p.name)
+    return out

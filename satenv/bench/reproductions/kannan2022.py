@@ -44,6 +44,7 @@ from satenv.bench.claims import (
     passed,
     statement,
 )
+from satenv.bench.reproductions import figure_paths
 
 PAPER = "kannan2022"
 SCENARIOS: dict[str, dict[str, Any]] = {
@@ -277,7 +278,23 @@ def departures(k1: dict[str, Any] | None = None, rows: list[dict[str, Any]] | No
         departure("C/GMRES settings", NOT_STATED, f"T_f = {cg.horizon} s, N = {cg.horizon_steps}, alpha = "
                   f"{cg.horizon_rate}, kmax = {cg.kmax}, dummy input weight {cg.dummy_weight}",
                   "Ohtsuka's standard choices; the paper names MPC only", unmeasured),
+        departure("controller structure", NOT_STATED + " (the paper names MPC; its introduction mentions "
+                  "centralized and decentralized solutions)", "one centralised C/GMRES over the three satellites' "
+                  "states and inputs", "the cost (34) couples the satellites through their offsets", unmeasured),
+        departure("collision check window", "'a distance of 10 m' with no time window",
+                  f"judged from t = {TOLERANCES['separation_after_s']:g} s on; the first second (all three start at "
+                  "one point) reported apart", "no separation can hold at t = 0, when the three coincide",
+                  _window_effect(rows), fields=["separation_after_s"]),
     ]
+
+
+def _window_effect(rows: list[dict[str, Any]] | None) -> str:
+    rows = [r for r in rows or [] if "min_pairwise_distance_m_t_lt_1s" in r]
+    if not rows:
+        return "not measured in this result"
+    return "; ".join(f"{r['scenario']}: min pair distance {r['min_pairwise_distance_m_t_lt_1s']:.3g} m before "
+                     f"t = {TOLERANCES['separation_after_s']:g} s, {r['min_pairwise_distance_m_t_ge_1s']:.3g} m after"
+                     for r in rows) + " (the claim judges the 'after' value)"
 
 
 def _range_effect(rows: list[dict[str, Any]] | None) -> str:
@@ -346,7 +363,7 @@ def reproduce(plots: str | Path | None = None, seed: int = 0, max_steps: int | N
         "claims": checks,
         "departures": departures(k1, [_clean(r) for r in rows]),
         "k1_collision_row": k1,
-        "plots": files,
+        "plots": figure_paths(files, plots) if plots is not None else [],
         "notes": [
             "The paper gives no weights, horizon, sampling time, duration or network range: "
             "the values used are the defaults of satenv.scenarios.formation and satenv.baselines.cgmres.",

@@ -20,15 +20,18 @@ re-planned flight trajectory but at the same time point to the desired attitude 
 all the constraints considered in this scenario.":
 
 * the constraints (eq. 40-42, input bounds) hold at every step: 0 violations;
-* the waypoints of eq. (50) are followed: at the end of each phase every spacecraft within +-10 %
-  of its waypoint (1.5 m on the 15 m waypoints);
+  (the one gating claim);
+* the waypoints of eq. (50) are followed: the distance to the waypoint at each phase end, with our
+  test (within 10 % of the waypoint's norm, 1.5 m on the 15 m waypoints; §5.2 states no tolerance),
+  reported, not counted;
 * the pointing: the paper gives no value (figures of Euler angles only): the worst pointing error
   is reported with our test (<= 5 deg at every phase end and over its last 10 s), not counted.
 
 Two runs: ``ours`` (NMPC default: the terminal attitude weight x100 and the sign-free quaternion
 error ``1 - |eta~|``, both ours) and ``as published`` (``terminal_attitude_weight=0``,
 ``quaternion_error="signed"``: eq. 39's cost as printed); :func:`departures` lists every setting
-that differs from the paper with its measured effect.
+that differs from the paper with its measured effect. Every solve is capped by ipopt's iterations
+(:data:`SOLVE_CAP`), never by a clock; the failed solves are counted by stop reason (``stop_reasons``).
 
 ``diagnostics`` adds an attitude-only step response (30 deg initial error, spacecraft at rest)
 with N = 30 and N = 100, which separates the horizon's effect on the attitude settling.
@@ -36,7 +39,9 @@ with N = 30 and N = 100, which separates the horizon's effect on the attitude se
 
 from __future__ import annotations
 
+import re
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +50,6 @@ import numpy as np
 from satenv.bench._io import progress
 from satenv.bench.claims import (
     NOT_STATED,
-    band,
     changed_claims,
     departure,
     format_claims,
@@ -53,6 +57,7 @@ from satenv.bench.claims import (
     passed,
     statement,
 )
+from satenv.bench.reproductions import figure_paths
 
 PAPER = "pereira2022-servicing"
 COMMAND = "python -m satenv.bench.reproduce pereira2022-servicing --out FILE.json --plots DIR"
@@ -63,6 +68,13 @@ SOURCE = ("From Fig. 4 and 5 it is showcased not only that each spacecraft is ab
 VARIANTS = {"ours": {}, "as published": {"terminal_attitude_weight": 0.0, "quaternion_error": "signed"}}
 """Run -> NMPC options: our default and eq. 39's cost as printed (stage costs only, the signed
 quaternion error ``1 - eta~``)."""
+SOLVE_CAP = {"solve_time_limit": None}
+"""NMPC options of every run here: a solve stops at ipopt's iteration cap (``NMPCConfig.max_iter``),
+never on a wall clock, so which solves fail does not depend on the machine or its load."""
+WAYPOINT_BAND = 0.10
+"""Our test of "follow the re-planned flight trajectory": within 10 % of the waypoint's norm (1.5 m
+on the 15 m waypoints). §5.2 gives the waypoints (eq. 50) and figures, no tolerance: the band is
+ours, so the waypoint rows are reported, never gating."""
 POINTING_TOL_DEG = 5.0     # our threshold for "pointing achieved"
 SETTLE_WINDOW_S = 10.0     # last seconds of each phase
 RUN_TIME = "about 5-10 min on 2 shared cores (two episodes, the as-published one slower; the attitude step responses: --no-diagnostics)"
@@ -177,15 +189,36 @@ def claims_of(analysis: dict[str, Any], variant: str = "ours") -> list[dict[str,
                           f"|v_j| <= {sc.v_max}, |w_j| <= {sc.omega_max}", variant=variant, worst=worst)]
     for r in analysis["rows"]:
         for p in r["phases"]:
-            out.append(band(f"{r['agent']} phase {p['phase']}: position at the phase end [m]", SOURCE,
-                            p["waypoint_m"], p["position_at_phase_end_m"], unit="m", variant=variant,
-                            error_m=p["error_at_phase_end_m"], time_to_reach_0_5m_s=p["time_to_reach_s"]))
+            radius = WAYPOINT_BAND * float(np.linalg.norm(p["waypoint_m"]))
+            out.append(no_value(f"{r['agent']} phase {p['phase']}: distance to the waypoint at the phase end [m]",
+                                SOURCE, p["error_at_phase_end_m"], variant=variant,
+                                ours=f"within {100 * WAYPOINT_BAND:.0f} % of the waypoint's norm ({radius:.3g} m): "
+                                     f"{'met' if p['error_at_phase_end_m'] <= radius else 'not met'}",
+                                note="§5.2 gives the waypoints (eq. 50) and figures, no tolerance: the band is ours",
+                                waypoint_m=p["waypoint_m"], position_m=p["position_at_phase_end_m"],
+                                time_to_reach_0_5m_s=p["time_to_reach_s"]))
     point, where = max((max(p["pointing_at_phase_end_deg"], p["pointing_max_last_10s_deg"]), (r["agent"], p["phase"]))
                        for r in analysis["rows"] for p in r["phases"])
     out.append(no_value("pointing: worst error at a phase end or over its last 10 s [deg]", SOURCE, point,
                         ours=f"<= {POINTING_TOL_DEG} deg: {'met' if point <= POINTING_TOL_DEG else 'not met'}",
                         variant=variant, worst_at=f"{where[0]} phase {where[1]}"))
     return out
+
+
+def stop_reason(reason: str) -> str:
+    """The kind of a failed solve's recorded reason (``guarded_solve``'s text without its numbers):
+    the solver's status (``Maximum_Iterations_Exceeded``), ``infeasible: constraint violated
+    (<status>)``, ``time limit``, ``error``."""
+    if reason.startswith("failed: "):
+        return reason[len("failed: "):]
+    if (m := re.match(r"(infeasible: \w+ violated) by \S+ \((.*)\)$", reason)):
+        return f"{m[1]} ({m[2]})"
+    return reason.split(":")[0]
+
+
+def stop_reasons(policy) -> dict[str, int]:
+    """Failed solves of an episode counted by :func:`stop_reason`."""
+    return dict(Counter(stop_reason(r) for _, r in policy.info["fallback_steps"]))
 
 
 def attitude_step_response(horizons=(30, 100), seconds: float = 25.0) -> dict[str, Any]:
@@ -208,7 +241,7 @@ def attitude_step_response(horizons=(30, 100), seconds: float = 25.0) -> dict[st
         x0 = np.zeros((1, 13))
         x0[:, :3] = p
         x0[:, 6:10] = quat_multiply(q_d, np.r_[np.cos(half), np.sin(half) * axis])
-        policy = NMPC(env, horizon=n_h)
+        policy = NMPC(env, horizon=n_h, **SOLVE_CAP)
         traj = rollout(env, policy, seed=0, options={"initial_state": x0})
         err = np.degrees(traj.info["attitude_error"][:, 0])
         k_min = int(np.argmin(err[:150]))              # first minimum within 15 s
@@ -340,7 +373,8 @@ def departures(runs: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
                   f"published, {'met' if po['measured'] <= POINTING_TOL_DEG else 'not met'} ours; the paper gives no "
                   f"pointing value); paper-valued claims changed: {changed}")
         fallback_effect = (f"failed solves: ours {failed['ours']} of {solves['ours']}, as published {failed['pub']} of "
-                           f"{solves['pub']}")
+                           f"{solves['pub']}; by stop reason: ours {ours['stop_reasons'] or 'none'}, as published "
+                           f"{pub['stop_reasons'] or 'none'}")
     else:
         effect = fallback_effect = "not measured in this result"
     unmeasured = "not measured separately"
@@ -371,7 +405,8 @@ def departures(runs: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
                   "the integrator between samples; keeps the env's checks clean", unmeasured,
                   fields=["keepout_margin", "separation_margin", "bound_margin"]),
         departure("solver", "CasADi (solver not named)", f"ipopt, Gauss-Newton Hessian, tol {cfg.tol:g}, "
-                  f"{cfg.order} (Gauss-Seidel) agents",
+                  f"{cfg.order} (Gauss-Seidel) agents, a solve capped at {cfg.max_iter} iterations (no wall-clock "
+                  "limit here)",
                   "the same optimum faster (satenv/baselines/nmpc.py)", unmeasured,
                   fields=["solver", "hessian", "tol", "max_iter", "order", "formulation", "solve_time_limit"]),
         departure("episode length", NOT_STATED, "120 s (three 40 s phases)", "eq. (50) switches at 40 s and 80 s",
@@ -397,11 +432,13 @@ def reproduce(plots: str | Path | None = None, seed: int = 0, diagnostics: bool 
         if variant == "ours" and name != "ours":
             continue
         progress(f"pereira2022-servicing: {name} ...")
-        traj, env, policy = run_episode(seed=seed, **{**opts, **nmpc_options})
+        traj, env, policy = run_episode(seed=seed, **{**SOLVE_CAP, **opts, **nmpc_options})
         analysis = analyse(traj, env, policy)
         runs[name] = {"rows": analysis["rows"], "claims": claims_of(analysis, name),
                       "fallbacks": int(policy.info["fallbacks"]),
+                      "stop_reasons": stop_reasons(policy),
                       "solver_statuses": dict(policy.info["statuses"]),
+                      "iteration_cap": policy.cfg.max_iter, "solve_time_limit": policy.cfg.solve_time_limit,
                       "terminal_attitude_weight": policy.cfg.terminal_attitude_weight,
                       "quaternion_error": policy.cfg.quaternion_error}
         if name == "ours":
@@ -418,12 +455,13 @@ def reproduce(plots: str | Path | None = None, seed: int = 0, diagnostics: bool 
         "departures": departures(runs),
         "runs": {k: {kk: vv for kk, vv in v.items() if kk != "claims"} for k, v in runs.items()},
         "fallbacks": runs["ours"]["fallbacks"], "solver_statuses": runs["ours"]["solver_statuses"], "seed": seed,
+        "stop_reasons": {k: v["stop_reasons"] for k, v in runs.items()},
     }
     result["pass"] = passed(result)
     if diagnostics:
         result["attitude_step_response"] = attitude_step_response()
     if plots is not None:
-        result["plots"] = plot_figures(*ours_run, Path(plots))
+        result["plots"] = figure_paths(plot_figures(*ours_run, Path(plots)), plots)
     result["wall_time_s"] = round(time.perf_counter() - start, 1)
     return result
 
