@@ -251,13 +251,16 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
                    scenario_registry: Mapping[str, ScenarioSpec] | None = None,
                    policy_registry: Mapping[str, PolicySpec] | None = None,
                    on_record: Callable[[Record], None] | None = None,
+                   on_plan: Callable[[Plan, Mapping[Key, Record]], None] | None = None,
                    argv: list[str] | None = None) -> Board:
     """Run the board and write its files (see :mod:`satenv.bench.scoreboard`); returns the :class:`Board`.
 
     ``seeds`` default to the board's (``FULL`` or ``QUICK``); ``scenario_seeds`` caps the seeds of
     expensive scenarios (``{name: seeds}``, intersected with ``seeds``), by default the board's
     caps unless ``seeds`` were given; ``scenario_registry`` / ``policy_registry`` replace the
-    registry's dicts (tests, plugins); ``on_record`` is called after each record is written.
+    registry's dicts (tests, plugins); ``on_plan(plan, done)`` is called once the plan is made
+    (``done``: the records already in the log), before any episode runs; ``on_record`` is called
+    after each record is written.
     """
     _check_options(workers, backend, resume, overwrite)
     seed_list, caps = board_seeds(seeds, quick, scenario_seeds)
@@ -277,6 +280,8 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
     header = _header(plan, scen_reg, pol_reg, pol_sel.names, notes, len(done), quick, backend, workers, argv)
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
+    if on_plan is not None:
+        on_plan(plan, done)
     _run(stream(tasks, backend, workers, ray_address), out / EPISODES_FILE, done, len(plan.keys),
          progress, on_record)
     records = [done[k] for k in plan.keys if k in done]       # plan order: registry order, then seed
