@@ -36,8 +36,9 @@ from typing import Any
 
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["CONTROLLERS", "SEED_SPLITS", "SPLITS", "SYSTEMS", "TASKS", "MAX_SEEDS", "System", "Task", "check_splits",
-           "get", "names", "paper_task", "parse_seeds", "show_seeds", "system", "training_task"]
+__all__ = ["CONTROLLERS", "LADDERS", "SEED_SPLITS", "SPLITS", "SYSTEMS", "TASKS", "MAX_SEEDS", "System", "Task",
+           "check_splits", "get", "ladder", "names", "paper_task", "parse_seeds", "show_seeds", "system",
+           "training_task"]
 
 SPLITS = ("train", "validation", "test")
 """The seed splits, in the order a study uses them."""
@@ -235,9 +236,16 @@ class Task:
         """The split a seed belongs to (``None`` for a seed in no band)."""
         return next((s for s, band in SEED_SPLITS.items() if seed in band), None)
 
+    @property
+    def paper_env_kwargs(self) -> Mapping[str, Any]:
+        """``env_kwargs`` without the ``reward`` keyword: the env with the paper's cost (the
+        scoreboard's and the reproductions' env)."""
+        return _frozen({k: v for k, v in self.env_kwargs.items() if k != "reward"})
+
     def make_env(self, **overrides: Any) -> Any:
         """``satenv.make(env_id, **env_kwargs, **overrides)``, with ``metadata["task"]`` and
-        ``metadata["cost_budget"]`` set on the env."""
+        ``metadata["cost_budget"]`` set on the env (a training task's reward is the training
+        reward unless ``reward="paper"`` is passed)."""
         import satenv
 
         env = satenv.make(self.env_id, **{**self.env_kwargs, **overrides})
@@ -250,6 +258,7 @@ _TABLE1_NOTE = ("the Table I formation puts followers closer than 2 r_f, so coll
                 "but do not end the episode or void success")
 _TPLF30 = {"preset": "pereira2023", "topology": "TPLF", "desired_error": (0.0, -30.0, 0.0, 0.0, 0.0, 0.0),
            "terminate_on_collision": True}
+_TRAINING = {"reward": "training"}
 _NAV = ("nav-0.1m", "nav-1m")
 _TRANSLATION = (*_NAV, "thrust-80")
 
@@ -264,6 +273,50 @@ def _platoon(name: str, description: str, *, system: str | None = None, role: st
 
 
 def _tasks() -> list[Task]:
+    tasks = _registered()
+    by_name = {t.name: t for t in tasks}
+    return tasks + [_rung(by_name[SYSTEMS[system].training_task], prefix, k, label, what, changes)
+                    for system, (prefix, rungs) in _ladder_rungs().items()
+                    for k, (label, what, changes) in enumerate(rungs, start=1)]
+
+
+def _rung(base: Task, prefix: str, k: int, label: str, what: str, changes: Mapping[str, Any]) -> Task:
+    """Rung ``k`` of ``base``'s ladder: its task with ``changes`` (never the physics)."""
+    return Task(f"{prefix}-rung{k}-{label}", base.env_id, {**base.env_kwargs, **changes}, base.system, "extra",
+                f"ladder rung {k} of {base.name}: {what}", (), base.cost_budget)
+
+
+def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]], ...]]]:
+    """Per system: the rungs' name prefix and, easiest first, each rung's label, what it changes
+    and its env keywords on top of the training task's (the training task is the last rung)."""
+    from satenv.scenarios.platoon import resolve_scenario
+
+    def near_targets(preset: str, **kwargs: Any) -> Any:
+        """The scenario's target states, as the ``initial_state`` the random starts are drawn around."""
+        targets = resolve_scenario(preset, **kwargs).desired_states()
+        return tuple(tuple(float(v) for v in row) for row in targets)
+
+    def platoon(targets: Any) -> tuple[tuple[str, str, dict[str, Any]], ...]:
+        return (("near", "starts drawn within 5 m (per axis) of the targets",
+                 {"initial_state": targets, "random_position_spread": 5.0}),
+                ("mid", "starts drawn within 20 m (per axis) of the targets",
+                 {"initial_state": targets, "random_position_spread": 20.0}))
+
+    def tolerance(coarse: float, middle: float) -> tuple[tuple[str, str, dict[str, Any]], ...]:
+        return tuple((f"tol{tol:g}", f"success tolerance {tol:g} m", {"success_tol": tol}) for tol in (coarse, middle))
+
+    tplf30 = {k: v for k, v in _TPLF30.items() if k != "preset"}
+    return {
+        "platoon-pereira2023": ("platoon-tplf30", platoon(near_targets("pereira2023", **tplf30))),
+        "platoon-pereira2022": ("platoon-pereira2022", platoon(near_targets("pereira2022"))),
+        "cluster-li2022": ("cluster-case1", tolerance(10.0, 3.0)),
+        "servicing-pereira2022": ("servicing-pereira2022", tolerance(2.0, 1.0)),
+        "formation-kannan2022-position": ("formation-kannan2022-position", tolerance(10.0, 3.0)),
+        "formation-kannan2022-collision": ("formation-kannan2022-collision", tolerance(10.0, 3.0)),
+    }
+
+
+def _registered() -> list[Task]:
     from satenv.scenarios import cluster as _cluster
     from satenv.scenarios.platoon import swarm
 
@@ -287,7 +340,7 @@ def _tasks() -> list[Task]:
         _platoon("platoon-tplf30-random-cw", "pereira2023 TPLF with E_d = [0, -30, 0] (targets 8-15 m "
                  "apart, collision-free) and randomised initial states, cw; a collision ends the episode",
                  system="platoon-pereira2023", role="training",
-                 perturbations=(*_TRANSLATION, "model-j2"), **_TPLF30, randomize=True),
+                 perturbations=(*_TRANSLATION, "model-j2"), **_TPLF30, randomize=True, **_TRAINING),
         _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, "
                  "LOS cone (collision-free success)", system="platoon-pereira2022", role="paper",
                  preset="pereira2022"),
@@ -297,12 +350,12 @@ def _tasks() -> list[Task]:
         _platoon("platoon-pereira2022-random", "pereira2022 §5.1 with randomised initial states (inside "
                  "the LOS cone, outside the keep-out sphere)", system="platoon-pereira2022",
                  role="training", perturbations=(*_TRANSLATION, "model-j2"),
-                 preset="pereira2022", randomize=True),
+                 preset="pereira2022", randomize=True, **_TRAINING),
         Task("cluster-case1", "cluster_v0", {"preset": "li2022-case1"}, "cluster-li2022", "paper",
              "li2022 case 1: 10 satellites, moving obstacle, J2 + drag + disturbance"),
         Task("cluster-case2", "cluster_v0", {"preset": "li2022-case2"}, None, "extra",
              "li2022 case 2: 10 satellites, moving obstacle, J2 + drag + disturbance"),
-        Task("cluster-case1-random", "cluster_v0", {"preset": "li2022-case1", "randomize": True},
+        Task("cluster-case1-random", "cluster_v0", {"preset": "li2022-case1", "randomize": True, **_TRAINING},
              "cluster-li2022", "training",
              "li2022 case 1 with randomised starts (±50 m) and target slots (on the 300 m sphere)",
              (*_TRANSLATION, "disturbance-x2", "model-cw")),
@@ -315,7 +368,7 @@ def _tasks() -> list[Task]:
              "allocation), cw truth (satenv.scenarios.cluster.swarm)"),
         Task("servicing-pereira2022", "servicing_v0", {"preset": "pereira2022"},
              "servicing-pereira2022", "paper", "pereira2022 §5.2: 6-DOF servicing around a passive object"),
-        Task("servicing-pereira2022-random", "servicing_v0", {"preset": "pereira2022", "randomize": True},
+        Task("servicing-pereira2022-random", "servicing_v0", {"preset": "pereira2022", "randomize": True, **_TRAINING},
              "servicing-pereira2022", "training",
              "pereira2022 §5.2 with randomised initial states (every start at least 1 m outside the "
              "keep-out sphere)", (*_TRANSLATION, "inertia-x1.5", "inertia-x0.5")),
@@ -325,11 +378,11 @@ def _tasks() -> list[Task]:
         Task("formation-kannan2022-collision", "formation_v0", {"preset": "kannan2022-collision"},
              "formation-kannan2022-collision", "paper", "kannan2022 §5.2: leader-follower y-spacing of 10 m"),
         Task("formation-kannan2022-position-random", "formation_v0",
-             {"preset": "kannan2022-position", "randomize": True}, "formation-kannan2022-position",
+             {"preset": "kannan2022-position", "randomize": True, **_TRAINING}, "formation-kannan2022-position",
              "training", "kannan2022 §5.1 with randomised starts (±20 m, ±1 m/s around the origin)",
              (*_TRANSLATION, "model-j2")),
         Task("formation-kannan2022-collision-random", "formation_v0",
-             {"preset": "kannan2022-collision", "randomize": True}, "formation-kannan2022-collision",
+             {"preset": "kannan2022-collision", "randomize": True, **_TRAINING}, "formation-kannan2022-collision",
              "training", "kannan2022 §5.2 with randomised starts (±20 m, ±1 m/s around the origin)",
              (*_TRANSLATION, "model-j2")),
     ]
@@ -337,6 +390,12 @@ def _tasks() -> list[Task]:
 
 TASKS: Mapping[str, Task] = MappingProxyType({t.name: t for t in _tasks()})
 """Every task by name (the scoreboard's scenarios)."""
+
+LADDERS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    s: (*(t.name for t in TASKS.values() if t.system == s and "-rung" in t.name), SYSTEMS[s].training_task)
+    for s in SYSTEMS})
+"""Per system, its ladder's task names, easiest first, ending at its training task (:func:`ladder`)."""
+
 
 def names() -> tuple[str, ...]:
     """Every task name, registry order."""
@@ -360,6 +419,12 @@ def system(name: str) -> System:
 def training_task(system_name: str) -> Task:
     """The system's training task (randomised start from the seed)."""
     return TASKS[system(system_name).training_task]
+
+
+def ladder(system_name: str) -> tuple[str, ...]:
+    """The system's ladder: task names, easiest first, ending at its training task. A rung
+    changes where the starts are drawn or the success tolerance, never the physics."""
+    return LADDERS[system(system_name).name]
 
 
 def paper_task(system_name: str) -> Task:

@@ -10,7 +10,11 @@ and ``M`` agents:
 * ``("agents", "observation")`` float32 ``(B, M, obs_dim)``; ``"state"`` float32 ``(B, state_dim)``
   (the PettingZoo env's ``state()``, for centralised critics);
 * ``("agents", "action")`` in ``[-1, 1]`` ``(B, M, act_dim)``;
-* ``("agents", "reward")`` float32 ``(B, M, 1)``;
+* ``("agents", "reward")`` float32 ``(B, M, 1)`` (the env's ``reward=``: ``"paper"`` or
+  ``"training"``, :mod:`satenv.rewards`);
+* ``("agents", "safety_cost")`` float32 ``(B, M, 1)``: 1 on a collision or a hard-bound violation
+  of the agent in the step, else 0 (:func:`satenv.rewards.safety_cost`; 0 at reset), for
+  constrained RL against the task's ``cost_budget``;
 * ``done``/``terminated``/``truncated`` bool, per copy ``(B, 1)`` and per agent
   ``("agents", "done")`` etc. ``(B, M, 1)`` (termination is team-wide, so they agree).
 
@@ -73,6 +77,7 @@ class SatTorchRLEnv(EnvBase):
         self._safety = vec.safety is not None   # a filtered batch (satenv.vector: safety_filter)
         extra = ({"safety_intervened": Categorical(2, (b, m, 1), dtype=torch.bool, device=device),
                   "safety_delta": Unbounded((b, m, 1), dtype=f32, device=device)} if self._safety else {})
+        extra["safety_cost"] = Unbounded((b, m, 1), dtype=f32, device=device)
         self.observation_spec = Composite(
             agents=Composite(observation=Unbounded((b, m, obs_dim), dtype=f32, device=device), **extra,
                              shape=(b, m), device=device),
@@ -116,13 +121,14 @@ class SatTorchRLEnv(EnvBase):
         zeros = np.zeros((self.vec.num_envs, self.vec.n_agents), dtype=bool)
         data = _merge(self._flags(zeros, zeros), "agents", self._observation(obs))
         data["state"] = self._observation(obs)["state"]
-        self._safety_entries(data, {"safety_intervened": zeros, "safety_delta": zeros.astype(np.float32)})
+        self._safety_entries(data, {"safety_intervened": zeros, "safety_delta": zeros.astype(np.float32),
+                                    "safety_cost": zeros.astype(np.float32)})
         return self._tensordict(data)
 
     def _safety_entries(self, data: dict[str, Any], infos: dict[str, Any]) -> None:
-        if self._safety:
-            for key, dtype in (("safety_intervened", torch.bool), ("safety_delta", torch.float32)):
-                data["agents"][key] = torch.as_tensor(np.asarray(infos[key]), dtype=dtype, device=self.device)[..., None]
+        keys = ((("safety_intervened", torch.bool), ("safety_delta", torch.float32)) if self._safety else ())
+        for key, dtype in (*keys, ("safety_cost", torch.float32)):
+            data["agents"][key] = torch.as_tensor(np.asarray(infos[key]), dtype=dtype, device=self.device)[..., None]
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get(("agents", "action")).detach().cpu().numpy()

@@ -58,6 +58,7 @@ from satenv.dynamics import unit_box_to_accel
 from satenv.dynamics._checks import MAX_COPIES, all_finite, first_nonfinite, integer, numeric
 from satenv.envs.base import SatParallelEnv
 from satenv.errors import SatenvError, SatenvTypeError
+from satenv.rewards import RewardState, TrainingReward, with_safety_cost
 
 __all__ = ["FINAL_ALIASES", "FilteredVectorEnv", "SatVectorEnv", "filtered_vec", "make_vec"]
 
@@ -140,6 +141,8 @@ class SatVectorEnv:
         self.autoreset = bool(autoreset)
         self._ended = np.zeros(self.num_envs, dtype=bool)
         self.safety = _bind_filter(self, env, safety_filter)
+        self.reward_state = (RewardState(TrainingReward.of(self.scenario), self.num_envs, self.n_agents)
+                             if env.reward == "training" else None)
 
     def __repr__(self) -> str:
         return f"SatVectorEnv({self.metadata.get('name')}, num_envs={self.num_envs}, n_agents={self.n_agents})"
@@ -167,7 +170,7 @@ class SatVectorEnv:
             self._rngs = CopyGenerators([np.random.default_rng(s) for s in
                                          np.random.SeedSequence().spawn(self.num_envs)])
         idx = np.arange(self.num_envs)
-        info = self.core.reset(self._sample(idx), None, self._rngs)
+        info = self._reset_info(self.core.reset(self._sample(idx), None, self._rngs), None)
         self._ended[:] = False
         obs = self.core.observe()
         self._guard(idx, obs[idx], info["state"])
@@ -190,12 +193,19 @@ class SatVectorEnv:
         idx = idx.astype(np.int64, copy=False).reshape(-1)
         if idx.size and (idx.min() < 0 or idx.max() >= self.num_envs):
             raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), got {str(idx.tolist())[:80]}")
-        info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)) if idx.size else {}
+        info = self._reset_info(self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)), idx) if idx.size else {}
         self._ended[idx] = False
         obs = self.core.observe()
         if idx.size:
             self._guard(idx, obs[idx], info["state"])
         return obs, dict(info)
+
+    def _reset_info(self, info: dict[str, np.ndarray], idx: np.ndarray | None) -> dict[str, np.ndarray]:
+        """The reset copies' infos with ``safety_cost``; their training-reward memory restarted."""
+        info = with_safety_cost(info)
+        if self.reward_state is not None:
+            self.reward_state.reset(info, idx)
+        return info
 
     def _sample(self, idx: np.ndarray) -> np.ndarray:
         gens = self._rngs.generators
@@ -217,10 +227,11 @@ class SatVectorEnv:
         res, obs = self.core.step_observe(accel, self._rngs)
         terminated = np.asarray(res.terminated, dtype=bool)
         truncated = (self.core.t >= self.max_steps) & ~terminated
-        rewards = np.asarray(res.rewards, dtype=np.float64)
-        step_info = res.info
+        step_info = with_safety_cost(res.info)
+        rewards = (np.asarray(res.rewards, dtype=np.float64) if self.reward_state is None
+                   else self.reward_state.step(step_info, terminated, self.core.t >= self.max_steps))
         if record is not None:
-            step_info = {**res.info, **record.infos()}
+            step_info = {**step_info, **record.infos()}
             if self.safety.config.penalty:
                 rewards = rewards - self.safety.config.penalty * record.delta
         done = terminated | truncated
@@ -233,7 +244,7 @@ class SatVectorEnv:
             self._ended |= done
         elif done.any():
             idx = np.flatnonzero(done)
-            reset_info = self.core.reset(self._sample(idx), idx, self._rngs.subset(idx))
+            reset_info = self._reset_info(self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)), idx)
             infos = {k: v.copy() for k, v in step_info.items()}
             for k, v in reset_info.items():
                 infos[k][idx] = v

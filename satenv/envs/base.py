@@ -45,6 +45,7 @@ from pettingzoo import ParallelEnv
 from satenv.dynamics import unit_box_to_accel
 from satenv.dynamics._checks import StepGuard, all_finite, first_nonfinite, numeric
 from satenv.errors import SatenvError, SatenvTypeError
+from satenv.rewards import RewardState, TrainingReward, check_reward, with_safety_cost
 from satenv.scenarios._fields import states_in_region
 
 __all__ = ["INFO_KEYS", "BatchedCore", "SatParallelEnv", "SatenvError", "SatenvTypeError", "StepResult",
@@ -161,14 +162,16 @@ class SatParallelEnv(ParallelEnv):
     """Reset options passed only to check that ``reset`` takes ``options`` (PettingZoo's
     ``parallel_api_test`` passes ``{"options": 1}``): ignored without a warning."""
 
-    def __init__(self, scenario: Any, *, render_mode: str | None = None) -> None:
+    def __init__(self, scenario: Any, *, render_mode: str | None = None, reward: str = "paper") -> None:
+        self.reward = check_reward(reward)
         if render_mode is not None and (not isinstance(render_mode, str)
                                         or render_mode not in self.metadata["render_modes"]):
             raise SatenvError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
                               f"got {render_mode!r}")
         self.scenario = scenario
         self.render_mode = render_mode
-        self.metadata = {**type(self).metadata, "render_fps": self.render_speedup / scenario.dt}
+        self.metadata = {**type(self).metadata, "render_fps": self.render_speedup / scenario.dt,
+                         "reward": self.reward}
         self.core = self._build_core(scenario)
         m = self.core.n_agents
         self.possible_agents = [f"{self.agent_prefix}_{i + 1}" for i in range(m)]
@@ -185,6 +188,8 @@ class SatParallelEnv(ParallelEnv):
         self.observation_spaces = dict.fromkeys(self.possible_agents, self._obs_space)
         self.action_spaces = dict.fromkeys(self.possible_agents, self._act_space)
         self._rng: np.random.Generator | None = None
+        self.reward_state = (RewardState(TrainingReward.of(scenario), 1, m)
+                             if self.reward == "training" else None)
         self._last_info: dict[str, np.ndarray] | None = None
         self._trails: list[np.ndarray] = []
         self._fig = None
@@ -280,7 +285,9 @@ class SatParallelEnv(ParallelEnv):
         rng = self.np_random
         if x0 is None:
             x0 = self.core.sample_initial_state(rng, 1)[0]
-        info = self.core.reset(x0[None], None, rng)
+        info = with_safety_cost(self.core.reset(x0[None], None, rng))
+        if self.reward_state is not None:
+            self.reward_state.reset(info)
         self._last_info = info
         self._trails = []
         obs = self.core.observe()
@@ -303,19 +310,22 @@ class SatParallelEnv(ParallelEnv):
         a = self._action_array(actions)
         accel = unit_box_to_accel(a, self.scenario.u_max, self.scenario.thrust_mode)
         res, obs_arr = self.core.step_observe(accel[None], self.np_random)
-        self._last_info = res.info
-        reward_list = res.rewards[0].tolist()
-        if not (res.finite[0] if res.finite is not None
-                else self._finite_step(obs_arr, res.info["state"], sum(reward_list))):
-            self._nonfinite(obs_arr, res.rewards, res.info["state"])
+        info = with_safety_cost(res.info)
+        self._last_info = info
         truncated = bool(self.core.t[0] >= self.scenario.max_steps)
         terminated = bool(res.terminated[0])
+        step_rewards = res.rewards if self.reward_state is None else self.reward_state.step(
+            info, res.terminated, self.core.t >= self.scenario.max_steps)
+        reward_list = step_rewards[0].tolist()
+        if not (res.finite[0] if res.finite is not None
+                else self._finite_step(obs_arr, res.info["state"], sum(reward_list))):
+            self._nonfinite(obs_arr, step_rewards, res.info["state"])
         # zips of equal lengths (the core's rows); strict= costs time
         obs = dict(zip(self.possible_agents, self._rows(obs_arr[0])))  # noqa: B905
         rewards = dict(zip(self.possible_agents, reward_list))  # noqa: B905
         terms = dict.fromkeys(self.agents, terminated)
         truncs = dict.fromkeys(self.agents, truncated and not terminated)
-        infos = self._info_dicts(res.info)
+        infos = self._info_dicts(info)
         if terminated or truncated:
             self.agents = []
         if self.render_mode == "human":

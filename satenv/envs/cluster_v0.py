@@ -538,9 +538,9 @@ class ClusterEnv(SatParallelEnv):
     core_class = ClusterCore
     agent_prefix = "sat"
 
-    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, **kwargs) -> None:
+    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, reward: str = "paper", **kwargs) -> None:
         scenario = resolve_preset("cluster_v0", preset, PRESETS, resolve_scenario, kwargs)
-        super().__init__(scenario, render_mode=render_mode)
+        super().__init__(scenario, render_mode=render_mode, reward=reward)
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         self.core.inner_loop = None

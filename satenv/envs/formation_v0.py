@@ -296,9 +296,9 @@ class FormationFlyingEnv(SatParallelEnv):
     agent_prefix = "sat"
 
     def __init__(self, preset: str = "kannan2022-position", render_mode: str | None = None,
-                 **kwargs) -> None:
+                 reward: str = "paper", **kwargs) -> None:
         scenario = resolve_preset("formation_v0", preset, PRESETS, resolve_scenario, kwargs)
-        super().__init__(scenario, render_mode=render_mode)
+        super().__init__(scenario, render_mode=render_mode, reward=reward)
 
 
 def parallel_env(**kwargs) -> FormationFlyingEnv:

@@ -1,0 +1,152 @@
+"""The training reward and the per-agent safety cost, one home for every env, ``make_vec`` and TorchRL.
+
+Every env takes ``reward=`` (:data:`REWARDS`): ``"paper"`` (the default of ``satenv.make``) keeps
+the paper's stage cost, what the reproductions and the board's paper metrics use; ``"training"``
+(the default of a training task's env, :mod:`satenv.tasks`) replaces it with a reward that points
+at success. Per agent ``i`` and step, with ``d_i`` the distance to its target (the norm of the
+position part of ``tracking_error``, the quantity :func:`satenv.metrics.success` judges)::
+
+    r_i = phi(d_i') - phi(d_i)                       progress (potential-based, telescopes)
+        + IN_TOLERANCE_BONUS / H  [d_i' <= tol]      bonus inside the success tolerance
+        + SUCCESS_BONUS           [the team succeeds at the last step]
+        - PENALTY [collision_i] - PENALTY [violation_i] - PENALTY [agent i left the region]
+
+with the potential ``phi(d) = -log(1 + d / tol) / log(1 + reach / tol)`` in ``[-1, 0]`` inside
+the region (``reach = 2 max_distance``, the farthest a target can be from an agent still in the
+region) and ``H`` the horizon (``max_steps``). The sizes are derived, not tuned:
+
+* without succeeding an agent earns at most :data:`EARNABLE` (the potential's span, 1, plus the
+  whole in-tolerance bonus), over a whole episode or over any rest of one;
+* :data:`SUCCESS_BONUS` exceeds that by a further potential span, so a successful episode without
+  collisions or violations out-scores every failing one, whatever either's start;
+* :data:`PENALTY` exceeds everything an agent could still gain (``EARNABLE + SUCCESS_BONUS``), so
+  a collision, a violation of a hard bound or leaving the region never pays.
+
+Collisions cost without ending the episode where the task does not end it; termination stays the
+env's. ``safety_cost`` (per agent and step, 1.0 on a collision or a hard-bound violation, else
+0.0; Safety-Gymnasium's convention) is in the infos under either reward, beside the env's own
+``cost``; a task's ``cost_budget`` bounds its sum over an episode.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from satenv.errors import SatenvError, SatenvTypeError
+
+__all__ = ["EARNABLE", "IN_TOLERANCE_BONUS", "PENALTY", "POTENTIAL_SPAN", "REWARDS", "SUCCESS_BONUS",
+           "RewardState", "TrainingReward", "check_reward", "potential", "safety_cost", "target_distance",
+           "training_rewards", "with_safety_cost"]
+
+REWARDS = ("paper", "training")
+"""The values of every env's ``reward=`` keyword (module docstring)."""
+
+POTENTIAL_SPAN = 1.0
+"""``phi`` runs from ``-POTENTIAL_SPAN`` (at ``reach``) to 0 (on the target)."""
+IN_TOLERANCE_BONUS = 1.0
+"""The most the in-tolerance bonus pays an agent over an episode (``1 / H`` per step inside)."""
+EARNABLE = POTENTIAL_SPAN + IN_TOLERANCE_BONUS
+"""The most an agent can gain, over an episode or any rest of one, without the success bonus."""
+SUCCESS_BONUS = EARNABLE + POTENTIAL_SPAN
+"""Paid to every agent at the last step of a successful episode: more than a failing agent can
+earn plus the potential still left inside the tolerance (``|phi(tol)| < POTENTIAL_SPAN``)."""
+PENALTY = EARNABLE + SUCCESS_BONUS + POTENTIAL_SPAN
+"""Per agent and event (collision, hard-bound violation, leaving the region): more than all an
+agent could still gain."""
+
+
+def check_reward(reward: Any) -> str:
+    """``reward`` if it is one of :data:`REWARDS`, else a clear error naming the value."""
+    if not isinstance(reward, str):
+        raise SatenvTypeError(f"reward must be one of {list(REWARDS)}, got {type(reward).__name__}")
+    if reward not in REWARDS:
+        raise SatenvError(f"reward must be one of {list(REWARDS)}, got {reward!r:.40}")
+    return reward
+
+
+@dataclass(frozen=True)
+class TrainingReward:
+    """The task quantities the training reward is derived from (one scenario)."""
+
+    tol: float              # success tolerance [m]
+    reach: float            # farthest target distance of an agent inside the region [m]
+    max_distance: float     # radius of the allowed region around the origin [m]
+    horizon: int            # max_steps
+    voids: bool             # a collision voids success
+
+    @classmethod
+    def of(cls, scenario: Any) -> TrainingReward:
+        return cls(float(scenario.success_tol), 2.0 * float(scenario.max_distance),
+                   float(scenario.max_distance), int(scenario.max_steps), bool(scenario.collision_voids_success))
+
+    @property
+    def log_reach(self) -> float:
+        return math.log1p(self.reach / self.tol)
+
+
+def potential(dist: np.ndarray, spec: TrainingReward) -> np.ndarray:
+    """``phi(d) = -POTENTIAL_SPAN log(1 + d / tol) / log(1 + reach / tol)``, ``d`` clipped to ``reach``."""
+    return np.log1p(np.minimum(dist, spec.reach) / spec.tol) * (-POTENTIAL_SPAN / spec.log_reach)
+
+
+def target_distance(info: dict[str, np.ndarray]) -> np.ndarray:
+    """``(B, M)`` distance of each agent to its target [m] (what success judges)."""
+    e = info["tracking_error"][..., :3]
+    return np.sqrt(np.einsum("...i,...i->...", e, e))
+
+
+def safety_cost(info: dict[str, np.ndarray]) -> np.ndarray:
+    """``(B, M)`` float: 1.0 where an agent collides or violates a hard bound this step."""
+    return (np.asarray(info["collision"], dtype=bool) | (np.asarray(info["violations"]) > 0)).astype(np.float64)
+
+
+def training_rewards(spec: TrainingReward, phi_before: np.ndarray, info: dict[str, np.ndarray],
+                     terminated: np.ndarray, collided: np.ndarray, final: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The training rewards ``(B, M)`` of one step and the new potentials ``(B, M)``.
+
+    ``phi_before`` the potentials before the step, ``info`` the step's info arrays, ``terminated``
+    ``(B,)``, ``collided`` ``(B,)`` whether the episode has had a collision (this step included),
+    ``final`` ``(B,)`` whether this is the episode's last step by the horizon."""
+    dist = target_distance(info)
+    phi = potential(dist, spec)
+    inside = dist <= spec.tol
+    rewards = phi - phi_before
+    rewards += inside * (IN_TOLERANCE_BONUS / spec.horizon)
+    success = final & ~terminated & inside.all(axis=-1) & ~(spec.voids & collided)
+    rewards += success[:, None] * SUCCESS_BONUS
+    pos = info["state"][..., :3]
+    left = np.einsum("...i,...i->...", pos, pos) > spec.max_distance ** 2
+    rewards -= PENALTY * (np.asarray(info["collision"], dtype=np.float64) + (np.asarray(info["violations"]) > 0) + left)
+    return rewards, phi
+
+
+class RewardState:
+    """The per-copy memory of the training reward for ``B`` copies: the agents' potentials and
+    whether each episode has had a collision (what :func:`training_rewards` needs)."""
+
+    def __init__(self, spec: TrainingReward, batch: int, n_agents: int) -> None:
+        self.spec = spec
+        self.phi = np.zeros((batch, n_agents))
+        self.collided = np.zeros(batch, dtype=bool)
+
+    def reset(self, info: dict[str, np.ndarray], idx: np.ndarray | None = None) -> None:
+        """Start the episodes of copies ``idx`` (all when ``None``) from their reset infos."""
+        sel = slice(None) if idx is None else idx
+        self.phi[sel] = potential(target_distance(info), self.spec)
+        self.collided[sel] = False
+
+    def step(self, info: dict[str, np.ndarray], terminated: np.ndarray, final: np.ndarray) -> np.ndarray:
+        """The rewards ``(B, M)`` of a step of every copy (``final``: truncated by the horizon)."""
+        self.collided |= np.asarray(info["collision"], dtype=bool).any(axis=-1)
+        rewards, self.phi = training_rewards(self.spec, self.phi, info, terminated, self.collided, final)
+        return rewards
+
+
+def with_safety_cost(info: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``info`` with the ``safety_cost`` ``(B, M)`` entry added (a new dict)."""
+    return {**info, "safety_cost": safety_cost(info)}
