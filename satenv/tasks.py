@@ -22,6 +22,16 @@ seed, usable by RL: every start outside the keep-out zones) and a **paper task**
 deterministic, reproducing the paper). The other tasks (``role="extra"``) are variants the
 scoreboard also runs (other topologies, J2 truth, swarms).
 
+A training task and its ladder's rungs build their env with ``reward="training"`` (in their
+``env_kwargs``, so ``satenv.make_vec(task.env_id, n, **task.env_kwargs)`` trains on it too): the
+reward of :mod:`satenv.rewards`, which points at success. Every other task, and a bare
+``satenv.make``, keeps the paper's cost; ``task.paper_env_kwargs`` (what the scoreboard builds)
+gives any task's env with the paper's cost.
+
+Each system has a **ladder** (:func:`ladder`, :data:`LADDERS`): registered tasks, easiest first,
+ending at its training task. A rung changes only what makes the task hard (where the starts are
+drawn, the success tolerance), never the physics; ``docs/tasks.md`` tabulates them.
+
 The registry imports no baseline: controllers and experts are names that ``satenv.baselines.make`` and
 ``satenv.baselines.experts.make`` resolve.
 """
