@@ -54,12 +54,12 @@ def feedback_policy():
 
 @pytest.fixture
 def unconstrained_rows():
-    """A factory of ``satenv.training.safe_imitation`` fit data whose every label is ``label`` and whose
+    """A factory of ``satenv.training.imitation.fit.fit_safe`` data whose every label is ``label`` and whose
     one filter row per agent-step can never bind: ``unconstrained_rows(obs, label)``."""
     def make(obs, label):
         import numpy as np
 
         n = len(obs)
-        return {"obs": obs, "label": label, "expert": label, "filtered": label, "intervened": np.zeros(n, bool),
+        return {"obs": obs, "label": label, "act": label, "filtered": label, "intervened": np.zeros(n, bool),
                 "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
     return make

@@ -18,7 +18,7 @@ __all__ = ["ExpertPool", "LabelJob", "label_episode"]
 
 @dataclass(frozen=True)
 class LabelJob:
-    """One episode to fly and label (the arguments of ``satenv.training.imitate.collect_episode``).
+    """One episode to fly and label (the arguments of ``satenv.training.imitation.collect_episode``).
 
     ``task`` is a :mod:`satenv.tasks` name (its env built with ``env_kwargs`` on top of the task's
     own), ``seed`` the episode's reset seed, ``beta`` the probability of flying the expert's action
@@ -66,7 +66,7 @@ def label_episode(job: LabelJob) -> tuple[dict[str, np.ndarray], dict[str, Any]]
     import json
 
     from satenv import tasks
-    from satenv.training.imitate import collect_episode
+    from satenv.training.imitation import collect_episode
 
     name, options = _WORKER["expert"]
     key = (job.task, json.dumps(job.env_kwargs, sort_keys=True))
@@ -81,7 +81,8 @@ def label_episode(job: LabelJob) -> tuple[dict[str, np.ndarray], dict[str, Any]]
 
             _WORKER["learner", job.learner] = load(job.learner)
         learner = _WORKER["learner", job.learner]
-    return collect_episode(env, expert, learner, job.seed, job.beta, job.noise, np.random.default_rng(job.rng))
+    return collect_episode(env, expert, learner, job.seed, beta=job.beta, noise=job.noise,
+                           rng=np.random.default_rng(job.rng))
 
 
 def _ready(_: int) -> bool:

@@ -223,7 +223,7 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "- **Algorithms**, each at its trainer's documented defaults plus the fast configuration "
         "(`satenv.bench.perf.learning.FAST_CONFIGS`, [Training](training.md#fast-configurations)): "
         "SB3 PPO with parameter sharing (`satenv.training.train`), BenchMARL MAPPO and MASAC "
-        "(`satenv.training.benchmarl_train`), DAgger of the system's expert (`satenv.training.recipes.dagger`, "
+        "(`satenv.training.benchmarl_train`), DAgger of the system's expert (`satenv imitate`, "
         "one round per checkpoint), and PPO once more with the **safety filter in the training env** "
         f"(`satenv.make(..., safety_filter=SafetyConfig(penalty={g['filter_penalty']}))`: the filter "
         "corrects every action and the reward pays for each unit of correction) on the cluster, "

@@ -13,8 +13,8 @@ defaults plus the fast configuration (:data:`satenv.bench.perf.learning.FAST_CON
 * ``mappo``, ``ippo``, ``masac``, ``isac``: ``satenv.training.benchmarl_train.build_experiment`` with a
   BenchMARL callback that exports the actor (``satenv.training.benchmarl_train.export_actor``) at each
   checkpoint;
-* ``dagger``: ``satenv.training.recipes.dagger.run`` (the project's one DAgger, the system's expert and
-  defaults, :data:`~satenv.training.recipes.dagger.SYSTEM_DEFAULTS`) one round per checkpoint.
+* ``dagger``: ``satenv.training.imitation.run`` (the project's one imitation engine, the system's expert
+  and hyper-parameters from :data:`satenv.tasks.SYSTEMS`) one round per checkpoint.
 """
 
 from __future__ import annotations
@@ -130,17 +130,17 @@ def train_dagger(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     import json
 
     from satenv import training
-    from satenv.training.recipes import dagger
+    from satenv.training import imitation
 
     task = run.task
     fast = {k: v for k, v in _fast("dagger").items() if k != "torch_threads"}
     episodes = DAGGER_EPISODES[run.system]
-    cfg = dagger.system_config(run.system, **{**fast, "seed": run.seed,
+    cfg = imitation.system_config(run.system, **{**fast, "seed": run.seed,
                                               "train_seed": task.seeds("train")[0] + 10_000 * run.seed,
                                               "round0_episodes": episodes, "episodes_per_round": episodes,
                                               "eval_seeds": task.seeds("validation", 1), "final_eval": False})
     for k in range(CHECKPOINTS):
-        dagger.run(dataclasses.replace(cfg, rounds=k + 1), workdir)
+        imitation.run(dataclasses.replace(cfg, rounds=k + 1), workdir)
         history = json.loads((workdir / "history.json").read_text())
         wall = sum(h["collect_s"] + h["fit_s"] for h in history)
         folder = workdir / "rounds" / f"{k:04d}"

@@ -4,7 +4,7 @@ end-to-end training throughput of each trainer on each env with its fast configu
 :data:`FAST_CONFIGS` is the documented fast configuration of each trainer (``docs/training.md``,
 "Fast configurations"): the fields of ``satenv.training.config.TrainConfig`` (SB3 PPO,
 ``python -m satenv.training.train``), ``satenv.training.benchmarl_train.BenchMARLConfig`` (BenchMARL MAPPO) and
-``satenv.training.imitate.DaggerConfig`` (DAgger) that set the speed. :func:`end_to_end` runs each
+``satenv.training.imitation.ImitationConfig`` (DAgger) that set the speed. :func:`end_to_end` runs each
 trainer's own building blocks with it for a few thousand agent-steps (no evaluation, no
 checkpoints) and splits the wall time into
 
@@ -87,13 +87,12 @@ def _row(agent_steps: int, wall: float, acc: dict[str, float], config: dict[str,
 def _sb3(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -> dict:
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+    from satenv import tasks
     from satenv.training.config import TrainConfig
     from satenv.training.envs import make_env
     from satenv.training.train import build_model
     from satenv.training.vec_env import SatVecEnv
     from satenv.vector import SatVectorEnv
-
-    from satenv import tasks
 
     where = {"task": env_id} if env_id in tasks.TASKS else {"env_id": env_id}   # an env id or a task name
     cfg = TrainConfig(**where, out_dir=out_dir, **fast)
@@ -132,7 +131,7 @@ def _benchmarl(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]
 
 def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -> dict:
     """Two DAgger rounds (the expert's own flights, then the learner's with ``beta = 0.5``) of
-    ``satenv.training.imitate``'s ``collect_episode`` and ``fit`` on episodes cut to ``max_steps`` so the
+    ``satenv.training.imitation``'s ``collect_episode`` and ``regress`` on episodes cut to ``max_steps`` so the
     rounds hold about ``agent_steps`` labels; evaluation and saving left out."""
     import torch
 
@@ -140,8 +139,11 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -
     from satenv.baselines.experts import make as make_expert
     from satenv.training.actor import MLPActor
     from satenv.training.envs import make_env
-    from satenv.training.imitate import DaggerConfig, collect_episode, features, fit
+    from satenv.training.imitation import ImitationConfig as DaggerConfig
+    from satenv.training.imitation import collect_episode
+    from satenv.training.imitation.fit import regress
     from satenv.training.policy import LearnedPolicy, ObsNormalizer
+    from satenv.training.shaping import ObsFeatures
 
     m = len(_agents(env_id))
     max_steps = max(2, agent_steps // (2 * DaggerConfig(**fast).episodes_per_round * m))
@@ -154,7 +156,7 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -
     expert = make_expert(cfg.expert, env)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
-    feats = features(cfg)
+    feats = ObsFeatures(cfg.obs_symlog_scale, cfg.obs_symlog_dims, cfg.obs_drop_dims)
     actor = MLPActor(feats.out_dim(obs_dim), act_dim, list(cfg.net_arch), cfg.activation, cfg.squash)
     generator, rng = torch.Generator().manual_seed(cfg.seed), np.random.default_rng(cfg.seed)
     acc = {"env": 0.0, "expert": 0.0, "learner": 0.0}
@@ -165,7 +167,7 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -
             learner = None if k == 0 else LearnedPolicy(actor, normalizer, obs_shape=(obs_dim,), features=feats)
             for e in range(cfg.episodes_per_round):
                 rows, _ = collect_episode(env, expert, learner, cfg.train_seed + k * cfg.episodes_per_round + e,
-                                          cfg.beta ** k, 0.0, rng)
+                                          beta=cfg.beta ** k, rng=rng)
                 xs.append(rows["obs"])
                 ys.append(np.clip(rows["act"], -1, 1))
             x_all, y_all = np.concatenate(xs), np.concatenate(ys)
@@ -173,7 +175,8 @@ def _dagger(env_id: str, agent_steps: int, out_dir: str, fast: dict[str, Any]) -
                 fx = feats(x_all.astype(np.float64))
                 normalizer = ObsNormalizer(fx.mean(0), fx.var(0), cfg.clip_obs)
             t1 = time.perf_counter()
-            fit(actor, normalizer, feats, x_all, y_all, cfg, generator, cfg.epochs)
+            regress(actor, normalizer(feats(x_all.astype(np.float64))), y_all, lr=cfg.lr, epochs=cfg.epochs,
+                    batch_size=cfg.batch_size, generator=generator, weight_decay=cfg.weight_decay)
             acc["learner"] += time.perf_counter() - t1
         wall = time.perf_counter() - t0
     return {**_row(sum(len(x) for x in xs), wall, acc, fast), "expert": cfg.expert,

@@ -193,12 +193,12 @@ def _act(ns: argparse.Namespace, cfg: ImitationConfig | None, resume: bool) -> i
         print(f"shipped round {k} to {ship.ship(out, k, ns.ship, with_filter=ns.ship_filter)}")
         return 0
     if ns.validate_round is not None:
-        from satenv.training.imitation.setup import warm_network
+        from satenv.training.imitation.setup import warm_start_filter
 
         task = tasks.get(cfg.task) if cfg.task else None
         seeds = task.seeds("validation", ns.validate_seeds) if task else cfg.eval_seeds
         shielded = seeds[:cfg.shield_seeds] if cfg.shield_seeds else seeds
-        filt = warm_network(cfg.warm_start, {}).shipped_filter if cfg.warm_start else None
+        filt = warm_start_filter(cfg.warm_start) if cfg.warm_start else None
         from satenv.training.envs import make_env
 
         env = make_env(cfg.env_id, **cfg.resolved_eval_env_kwargs)

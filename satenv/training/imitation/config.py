@@ -151,7 +151,9 @@ class ImitationConfig(RunConfig):
                      "shield_seeds"):
             check_int(name, getattr(self, name), minimum=0)
         for name in ("beta", "noise_share", "paper_start_share"):
-            check_number(name, getattr(self, name), 0.0, 1.0)
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v <= 1:
+                raise ValueError(f"{name} must be a number in [0, 1], got {v!r:.60}")
         for name in ("noise_std", "weight_decay", "obs_symlog_scale", "w_int", "w_bar", "bar_margin",
                      "prior_weight", "alone_weight"):
             _finite(name, getattr(self, name))
@@ -287,6 +289,8 @@ def _upgrade_safe(data: dict[str, Any]) -> dict[str, Any]:
     d["task"] = task.name
     d.setdefault("fly", "filtered")
     d.setdefault("label", "filtered")
+    d.setdefault("paper_start_share", 0.0)       # the earlier safe variant flew the training task only
+    d.setdefault("final_eval", False)            # and shipped a round chosen on validation
     n = d.pop("val_seeds", 100)
     d["eval_seeds"] = list(task.seeds("validation", n)) if isinstance(n, int) and not isinstance(n, bool) else n
     prior = d.get("prior_labels", "")

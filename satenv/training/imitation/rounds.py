@@ -93,7 +93,7 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
            setup.cold_network(envs.collect, {**cfg.to_json(), "out_dir": str(run_dir), "recipe": RECIPE}, meta,
                               cfg.seed))
     experts = _experts(cfg, envs)
-    label_config = _label_filter(cfg.label_filter, net.shipped_filter)
+    label_config = label_filter_config(cfg.label_filter, net.shipped_filter)
     if cfg.safe:
         check_label_space(cfg.label, cfg.imitation_space, net.policy)
     fitted = cfg.warm_start is not None          # the normaliser is the warm start's, or round 0's
@@ -147,7 +147,7 @@ def _experts(cfg: ImitationConfig, envs: setup.Envs) -> dict[int, Any]:
             if e is not None}
 
 
-def _label_filter(options: dict[str, Any], shipped: Any) -> Any:
+def label_filter_config(options: dict[str, Any], shipped: Any) -> Any:
     """The filter of the labels and barrier rows: the shipped one with ``options`` replaced
     (``None`` without options: the shipped filter itself)."""
     if not options:
@@ -216,13 +216,12 @@ def _fit(cfg: ImitationConfig, policy: Any, data: dict[str, np.ndarray], prior: 
          generator: Any, env: Any, cold_round0: bool) -> tuple[Any, int]:
     """The round's fit (the safe loss, or DAgger's regression on the prior and own labels);
     returns the loss and the rows fitted on."""
-    from satenv.training.imitation.fit import SafeLoss, fit_safe, inputs, regress
+    from satenv.training.imitation.fit import fit_safe, inputs, regress
 
     if cfg.safe:
         from satenv.safety import safety_model
 
-        loss = SafeLoss(cfg.label, cfg.w_int, cfg.w_bar, cfg.bar_margin, cfg.alone_weight, cfg.prior_weight,
-                        cfg.imitation_space, cfg.prior_space)
+        loss = safe_loss(cfg)
         norm_mode = safety_model(env).norm_mode if hasattr(env, "core") else False
         terms = fit_safe(policy, data, loss, lr=cfg.lr, epochs=cfg.epochs, batch_size=cfg.batch_size,
                          norm_mode=norm_mode, generator=generator, prior=prior)
@@ -234,6 +233,14 @@ def _fit(cfg: ImitationConfig, policy: Any, data: dict[str, np.ndarray], prior: 
     mse = regress(policy.actor, inputs(policy, x).numpy(), y, lr=cfg.lr, epochs=epochs, batch_size=cfg.batch_size,
                   generator=generator, weight_decay=cfg.weight_decay)
     return mse, int(len(x))
+
+
+def safe_loss(cfg: ImitationConfig) -> Any:
+    """The safe loss's terms and weights of ``cfg``."""
+    from satenv.training.imitation.fit import SafeLoss
+
+    return SafeLoss(cfg.label, cfg.w_int, cfg.w_bar, cfg.bar_margin, cfg.alone_weight, cfg.prior_weight,
+                    cfg.imitation_space, cfg.prior_space)
 
 
 def validate(cfg: ImitationConfig, envs: setup.Envs, net: setup.Network) -> dict[str, Any]:

@@ -8,7 +8,8 @@ from typing import Any, NamedTuple
 
 from satenv import tasks
 
-__all__ = ["Envs", "Network", "cold_network", "make_envs", "make_expert", "paper_task", "warm_network"]
+__all__ = ["Envs", "Network", "cold_network", "make_envs", "make_expert", "paper_task", "warm_network",
+           "warm_start_filter"]
 
 
 class Envs(NamedTuple):
@@ -101,13 +102,28 @@ def cold_network(env: Any, config: dict[str, Any], meta: dict[str, Any], seed: i
     return Network(policy, meta, config, None)
 
 
+def warm_start_filter(folder: str | Path) -> Any:
+    """The :class:`satenv.safety.SafetyConfig` a policy folder ships with (``env.json``
+    ``"safety_filter"``; the default filter when it ships none): the filter of the labels, the
+    rows, the flights behind it and the validation."""
+    from satenv.safety import SafetyConfig
+    from satenv.training.imitation.folder import check_folder, read_run_json
+    from satenv.training.policy import shipped_filter
+    from satenv.training.trust import MAX_JSON_BYTES
+
+    root = check_folder(Path(folder), "warm-start policy folder")
+    meta = read_run_json(root, "env.json", "the warm start's env.json", MAX_JSON_BYTES)
+    if not isinstance(meta, dict):
+        raise ValueError(f"warm_start {folder}: env.json must be a JSON object")
+    return shipped_filter(root, meta) or SafetyConfig()
+
+
 def warm_network(folder: str, imitation: dict[str, Any]) -> Network:
     """The network of the policy folder ``folder`` (its own features, normaliser and feedback),
     whose rounds carry its ``env.json`` and its ``config.json`` with the run's config under
     ``"imitation"``; the filter it ships with (the default filter when it ships none)."""
-    from satenv.safety import SafetyConfig
     from satenv.training.imitation.folder import check_folder, read_run_json
-    from satenv.training.policy import load, shipped_filter
+    from satenv.training.policy import load
     from satenv.training.trust import MAX_JSON_BYTES
 
     root = check_folder(Path(folder), "warm-start policy folder")
@@ -117,4 +133,4 @@ def warm_network(folder: str, imitation: dict[str, Any]) -> Network:
         raise ValueError(f"warm_start {folder}: env.json and config.json must be JSON objects")
     policy = load(root, shielded=False)
     config = {k: v for k, v in config.items() if k not in ("imitation", "safe_dagger", "round", "recipe")}
-    return Network(policy, meta, {**config, "imitation": imitation}, shipped_filter(root, meta) or SafetyConfig())
+    return Network(policy, meta, {**config, "imitation": imitation}, warm_start_filter(root))

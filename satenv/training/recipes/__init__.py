@@ -1,6 +1,6 @@
-"""Recipes: DAgger of a task's expert (:mod:`~satenv.training.recipes.dagger`), held-out evaluation
-(:mod:`~satenv.training.recipes.heldout`) and shipping a policy folder (:mod:`~satenv.training.recipes.ship`),
-each reading its system and seeds from :mod:`satenv.tasks`."""
+"""Recipes: held-out evaluation (:mod:`~satenv.training.recipes.heldout`), reading its system and
+seeds from :mod:`satenv.tasks`; imitation (DAgger, its safe variants and shipping) is
+:mod:`satenv.training.imitation`."""
 
 from __future__ import annotations
 
