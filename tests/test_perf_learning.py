@@ -41,7 +41,7 @@ def test_dagger_end_to_end_splits_expert_env_and_learner():
 def test_fast_configs_are_valid_trainer_configs():
     """Every fast configuration builds its trainer's validated config (no stale field names)."""
     from satenv.training.config import TrainConfig
-    from satenv.training.imitate import ImitationConfig
+    from satenv.training.imitation import ImitationConfig
 
     TrainConfig(**learning.FAST_CONFIGS["sb3_ppo"])
     ImitationConfig(**learning.FAST_CONFIGS["dagger"])

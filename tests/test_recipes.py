@@ -1,17 +1,13 @@
-"""satenv.baselines.experts and satenv.training.recipes: stateless experts, the resumable DAgger command, the
-held-out target checks."""
+"""satenv.baselines.experts and satenv.training.recipes: stateless experts and the held-out target checks
+(the resumable DAgger run: tests/test_imitation.py)."""
 
 from __future__ import annotations
-
-import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 import satenv
 from satenv.baselines.experts import JointPlatoonMPC
-from satenv.training.recipes import dagger
 from satenv.training.recipes.heldout import matched_ratios, targets
 
 
@@ -51,22 +47,6 @@ def test_expert_options_are_checked(env):
         JointPlatoonMPC(env, coupling="both")
     with pytest.raises(ValueError, match="u_scale"):
         JointPlatoonMPC(env, u_scale=0.0)
-
-
-@pytest.mark.slow  # ~15 s: two expert QP builds, three fits and learning-curve plots
-def test_dagger_run_saves_every_round_and_resumes(tmp_path):
-    cfg = dagger.system_config("platoon-pereira2022", env_kwargs={"max_steps": 6}, round0_episodes=2,
-                               episodes_per_round=1, rounds=2, eval_seeds=(700_000,), net_arch=(16,), epochs=1,
-                               final_eval=False)
-    dagger.run(cfg, tmp_path)
-    hist = json.loads((tmp_path / "history.json").read_text())
-    assert [h["round"] for h in hist] == [0, 1] and hist[-1]["labels"] == (2 + 1) * 6 * 2
-    assert (tmp_path / "rounds" / "0001" / "manifest.json").is_file()
-    dagger.run(replace(cfg, rounds=3), tmp_path)            # resume: one more round, labels kept
-    hist = json.loads((tmp_path / "history.json").read_text())
-    assert [h["round"] for h in hist] == [0, 1, 2] and hist[-1]["labels"] == 4 * 6 * 2
-    assert len(list((tmp_path / "labels").glob("round_*.npz"))) == 3
-    assert all(h["paper"]["episodes"] == 1 for h in hist)     # the system's paper start, evaluated every round
 
 
 def _ep(seed, rmse, dv, *, collided=False, terminated=False):

@@ -64,12 +64,19 @@ def test_one_seeds_grammar_with_a_cap():
             parse_seeds(bad)
 
 
+def _default_task_kwargs() -> dict:
+    from satenv import tasks
+    from satenv.training.config import DEFAULT_TASK
+
+    return dict(tasks.get(DEFAULT_TASK).env_kwargs)
+
+
 def test_cli_flags_parse_into_the_config(capsys):
     cfg, _ = parse_args(["--algo", "sac", "--net-arch", "32,32", "--env-kwargs", '{"randomize": true}',
                          "--eval-seeds", "5-7", "--progress", "false", "--gamma", "0.98", "--lr", "0.01",
                          "--num-envs", "4"])
     assert (cfg.algo, cfg.net_arch, cfg.env_kwargs, cfg.eval_seeds, cfg.progress, cfg.gamma, cfg.lr,
-            cfg.num_envs) == ("sac", (32, 32), {"preset": "pereira2022", "randomize": True}, (5, 6, 7), False,
+            cfg.num_envs) == ("sac", (32, 32), {**_default_task_kwargs(), "randomize": True}, (5, 6, 7), False,
                               0.98, 0.01, 4)
     assert cfg.task == "platoon-pereira2022-random"       # the default task, its kwargs under the flag's
     # the old spellings are deprecated aliases
@@ -425,7 +432,7 @@ def test_every_training_command_in_the_docs_parses():
     from pathlib import Path
 
     from satenv.training.benchmarl_train import BenchMARLConfig
-    from satenv.training.imitate import ImitationConfig
+    from satenv.training.imitation import ImitationConfig
     from satenv.training.rllib_train import RLlibConfig
 
     classes = {"train": TrainConfig, "imitate": ImitationConfig, "benchmarl_train": BenchMARLConfig,
