@@ -4,21 +4,32 @@ stronger disturbance, model mismatch.
     from satenv import tasks, perturbations
     env = perturbations.make_env(tasks.get("cluster-case1-random"), "nav-1m")
 
-A :class:`Perturbation` changes the truth, never the nominal model: the env's ``scenario`` stays the
-task's nominal one (what a controller or a filter built from the env plans with), while the core
-integrates the perturbed physics (``truth`` overrides: a weaker thruster is the truth's smaller
-``u_max`` under the nominal one the commands are normalised by). **Navigation error** is what everyone on board reads: between two steps the
-core's agent states are replaced by a noisy estimate (Gaussian, ``sigma_position`` [m] and
-``sigma_velocity`` [m/s] per axis, drawn from the episode's seed), so the policy's observation,
-``env.state()``, the scripted controllers and the safety filter wrapped around a policy
-(:class:`satenv.safety.Shield`) all see the same estimate; the truth is restored before the
-physics of the next step and the ``infos`` (what the metrics score) are the truth's. A filter
-built into the env (``safety_filter=True``) runs inside the step and reads the truth.
+**Planners never see the truth.** A :class:`Perturbation` changes the truth, never the nominal
+model: every filter, controller and expert plans with the task's nominal env, read through one
+accessor, :func:`nominal` (``nominal(env).scenario``, ``nominal(env).core`` for its model), while
+the core integrates the perturbed physics (``truth`` overrides: a weaker thruster is the truth's
+smaller ``u_max`` under the nominal one the commands are normalised by) and the ``infos`` (what
+the metrics score) are the truth's. **Navigation error** is what everyone on board reads: between
+two steps the core's agent states are replaced by a noisy estimate (Gaussian, ``sigma_position``
+[m] and ``sigma_velocity`` [m/s] per axis, drawn from the episode's seed), so the policy's
+observation, ``env.state()``, the scripted controllers and the safety filter wrapped around a
+policy (:class:`satenv.safety.Shield`) all see the same estimate; the truth is restored before the
+physics of the next step.
+
+**Declared bounds.** Each perturbation declares the :class:`UncertaintyBounds` a planner is told
+(:func:`declared_bounds`), and a safety filter built on the env tightens its constraints by them
+(:mod:`satenv.safety.margins`). A navigation system reports its error statistics, so the
+navigation perturbations declare a bound: the radius that holds a 3-axis Gaussian error of the
+declared sigma with probability :data:`NAV_BOUND_PROBABILITY` per draw. The truth changes
+(thrust, disturbance, model, inertia) declare nothing: they are what a planner does not know, and
+the board measures how it copes.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -27,25 +38,85 @@ from typing import Any
 import numpy as np
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
-from satenv.errors import SatenvError
+from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["PERTURBATIONS", "Perturbation", "PerturbedEnv", "get", "make_env", "names", "perturbed"]
+__all__ = ["NAV_BOUND_PROBABILITY", "PERTURBATIONS", "Perturbation", "PerturbedEnv", "UncertaintyBounds",
+           "declared_bounds", "get", "make_env", "names", "nominal", "perturbed"]
 
 NAV_SEED_KEY = 0x6E6176
 """Mixed with the episode seed to seed the navigation error (independent of the env's own draws)."""
+
+NAV_BOUND_PROBABILITY = 0.999
+"""The probability per draw that a navigation error lies within its declared bound."""
+
+
+@dataclass(frozen=True)
+class UncertaintyBounds:
+    """What a planner is told it cannot see (all >= 0; zero: exact knowledge).
+
+    Attributes:
+        position: bound on the norm of one agent's position estimate error [m].
+        velocity: bound on the norm of one agent's velocity estimate error [m/s].
+        disturbance: bound on an unmodelled disturbance acceleration per agent [m/s^2] (beyond the
+            nominal scenario's own disturbance).
+        thrust: the fraction of the commanded acceleration that may be lost, in [0, 1).
+    """
+
+    position: float = 0.0
+    velocity: float = 0.0
+    disturbance: float = 0.0
+    thrust: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise SatenvTypeError(f"UncertaintyBounds.{f.name} must be a real number, got {v!r:.40}")
+            high = 1.0 if f.name == "thrust" else math.inf
+            if not (math.isfinite(float(v)) and 0.0 <= float(v) < high):
+                raise SatenvError(f"UncertaintyBounds.{f.name} must be finite, >= 0"
+                                  f"{' and < 1' if high == 1.0 else ''}, got {v!r:.40}")
+            object.__setattr__(self, f.name, float(v))
+
+    @property
+    def exact(self) -> bool:
+        """No uncertainty at all (the filter is then exactly the nominal one)."""
+        return not (self.position or self.velocity or self.disturbance or self.thrust)
+
+
+def navigation_bounds(sigma_position: float, sigma_velocity: float) -> UncertaintyBounds:
+    """The bound on the norm of a 3-axis Gaussian error (sigma per axis) that holds with
+    probability :data:`NAV_BOUND_PROBABILITY`: ``sigma sqrt(chi2_3^-1(p))`` (4.03 sigma)."""
+    k = math.sqrt(_chi2_3_quantile(NAV_BOUND_PROBABILITY))
+    return UncertaintyBounds(position=k * sigma_position, velocity=k * sigma_velocity)
+
+
+def _chi2_3_quantile(p: float) -> float:
+    """``chi2_3^-1(p)`` by bisection on the closed-form CDF ``erf(sqrt(x/2)) - sqrt(2x/pi) e^(-x/2)``."""
+    lo, hi = 0.0, 100.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        cdf = math.erf(math.sqrt(mid / 2)) - math.sqrt(2 * mid / math.pi) * math.exp(-mid / 2)
+        lo, hi = (mid, hi) if cdf < p else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 @dataclass(frozen=True)
 class Perturbation:
     """One named perturbation: ``truth(scenario) -> overrides`` of the truth env's scenario (the
     nominal scenario stays what ``env.scenario`` shows), navigation error ``sigma_position`` [m]
-    and ``sigma_velocity`` [m/s]."""
+    and ``sigma_velocity`` [m/s]; :attr:`bounds` is what it declares to a planner."""
 
     name: str
     description: str
     truth: Callable[[Any], Mapping[str, Any]] = field(default=lambda sc: {})
     sigma_position: float = 0.0
     sigma_velocity: float = 0.0
+
+    @property
+    def bounds(self) -> UncertaintyBounds:
+        """The declared bounds: the navigation error's (module docstring), nothing else."""
+        return navigation_bounds(self.sigma_position, self.sigma_velocity)
 
 
 def _scaled_thrust(k: float) -> Callable[[Any], Mapping[str, Any]]:
@@ -92,13 +163,14 @@ def get(name: str) -> Perturbation:
 class PerturbedEnv(BaseParallelWrapper):
     """A satenv ``ParallelEnv`` under one :class:`Perturbation` (see the module docstring).
 
-    ``truth_env`` runs the perturbed physics; ``nominal_scenario`` is what ``env.scenario``
-    shows (the model a controller built from this env plans with)."""
+    ``truth_env`` runs the perturbed physics; ``nominal_env`` is the task's nominal env (never
+    stepped): what :func:`nominal` gives a planner, its scenario what ``env.scenario`` shows."""
 
-    def __init__(self, truth_env: Any, perturbation: Perturbation, nominal_scenario: Any) -> None:
+    def __init__(self, truth_env: Any, perturbation: Perturbation, nominal_env: Any) -> None:
         super().__init__(truth_env)
         self.perturbation = perturbation
-        self.nominal_scenario = nominal_scenario
+        self.nominal_env = nominal_env
+        self.nominal_scenario = nominal_env.scenario
         self.metadata = {**truth_env.metadata, "perturbation": perturbation.name}
         self._truth: np.ndarray | None = None
         self._nav_rng = np.random.default_rng(NAV_SEED_KEY)
@@ -109,7 +181,7 @@ class PerturbedEnv(BaseParallelWrapper):
 
     @property
     def unwrapped(self) -> Any:
-        return self   # controllers and filters read scenario/core through this wrapper
+        return self   # the state (the estimate) is read through this wrapper; the model: nominal()
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):
@@ -164,7 +236,20 @@ def perturbed(build: Callable[..., Any], perturbation: str | None) -> Any:
         return nominal
     p = get(perturbation)
     truth = build(**p.truth(nominal.scenario))
-    return _wrapper_class(type(truth))(truth, p, nominal.scenario)
+    return _wrapper_class(type(truth))(truth, p, nominal)
+
+
+def nominal(env: Any) -> Any:
+    """The env a planner models (the one accessor every filter, controller and expert reads its
+    scenario and model through): the nominal env of a perturbed env, else ``env`` itself."""
+    return getattr(env, "nominal_env", env)
+
+
+def declared_bounds(env: Any) -> UncertaintyBounds:
+    """The :class:`UncertaintyBounds` an env declares to its planners (its perturbation's; none
+    for a nominal env)."""
+    p = getattr(env, "perturbation", None)
+    return p.bounds if isinstance(p, Perturbation) else UncertaintyBounds()
 
 
 @functools.cache

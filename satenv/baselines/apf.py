@@ -53,6 +53,7 @@ from satenv.baselines.base import (
 from satenv.cluster_graph import nearest_neighbour_graph, neighbour_lists
 from satenv.dynamics import cw_continuous, saturate_norm
 from satenv.neighbours import DENSE_MAX
+from satenv.perturbations import nominal
 
 __all__ = ["APF", "APFConfig"]
 
@@ -122,7 +123,7 @@ class APF(Baseline):
     def __init__(self, env: Any, config: APFConfig | None = None, **options: Any) -> None:
         check_env(type(self), env)
         self.cfg = config_from_options(APFConfig, options, "APF", base=config)
-        sc = env.scenario
+        sc = nominal(env).scenario
         self.env = env
         self.sc = sc
         self.agents = list(env.possible_agents)

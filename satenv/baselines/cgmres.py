@@ -65,6 +65,7 @@ from satenv.baselines.base import (
     validate,
 )
 from satenv.dynamics import cw_continuous
+from satenv.perturbations import nominal
 
 __all__ = ["CGMRES", "CGMRESConfig", "FormationOCP", "gmres"]
 
@@ -390,7 +391,7 @@ class CGMRES(Baseline):
     def __init__(self, env: Any, config: CGMRESConfig | None = None, **options: Any) -> None:
         check_env(type(self), env)
         self.cfg = config_from_options(CGMRESConfig, options, "CGMRES", base=config)
-        sc = env.scenario
+        sc = nominal(env).scenario
         self.options = self.cfg.resolved(sc.dt)
         self.env = env
         self.scenario = sc

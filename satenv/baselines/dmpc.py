@@ -71,6 +71,7 @@ from satenv.baselines.base import (
     weights,
 )
 from satenv.dynamics import cw_matrices, prediction_matrices
+from satenv.perturbations import nominal
 
 __all__ = ["DMPC", "DMPCConfig", "OneHopDMPC", "ConvexStepDMPC", "centralised_gain", "QPSolver"]
 
@@ -178,7 +179,7 @@ class DMPCConfig:
     @classmethod
     def for_env(cls, env: Any) -> DMPCConfig:
         """:meth:`for_scenario` of ``env.scenario``."""
-        return cls.for_scenario(env.scenario)
+        return cls.for_scenario(nominal(env).scenario)
 
 
 PAPER_CONFIGS: dict[str, DMPCConfig] = {
@@ -714,7 +715,7 @@ class DMPC(Baseline):
 
     def __init__(self, env, config: DMPCConfig | None = None, **options: Any):
         check_env(type(self), env)
-        scenario = env.scenario
+        scenario = nominal(env).scenario
         base = DMPCConfig.for_env(env) if config is None else config
         self.cfg = config_from_options(DMPCConfig, options, "DMPC", base=base)
         self.env = env

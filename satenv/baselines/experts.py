@@ -28,6 +28,7 @@ import numpy as np
 
 from satenv.baselines.base import new_info, record_fallback
 from satenv.baselines.dmpc import ConvexStepDMPC, DMPCConfig, QPSolver
+from satenv.perturbations import nominal
 
 __all__ = ["EXPERTS", "JointPlatoonMPC", "ReplanningTubeRDMPC", "make"]
 
@@ -55,7 +56,7 @@ class JointPlatoonMPC:
         if coupling not in ("joint", "sequential"):
             raise ValueError(f"coupling must be 'joint' or 'sequential', got {coupling!r}")
         self.coupling = coupling
-        sc = env.scenario
+        sc = nominal(env).scenario
         if sc.formation != "chain":
             raise ValueError(f"JointPlatoonMPC needs a chain-formation platoon (pereira2022), got "
                              f"formation={sc.formation!r}")

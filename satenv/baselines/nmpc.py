@@ -90,6 +90,7 @@ from satenv.baselines.base import (
 from satenv.dynamics import cw_continuous, cw_matrices
 from satenv.dynamics.attitude import thruster_matrices
 from satenv.envs.servicing_v0 import unpack_global_state
+from satenv.perturbations import nominal
 
 __all__ = ["NMPC", "NMPCConfig", "attitude_reference_sym", "build_model", "quaternion_cost_terms"]
 
@@ -334,7 +335,7 @@ class NMPC(Baseline):
     def __init__(self, env: Any, config: NMPCConfig | None = None, **options: Any) -> None:
         check_env(type(self), env)
         cfg = self.cfg = config_from_options(NMPCConfig, options, "NMPC", base=config)
-        sc = env.scenario
+        sc = nominal(env).scenario
         self.env = env
         self.scenario = sc
         self.agents = list(env.possible_agents)

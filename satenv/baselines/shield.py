@@ -1,9 +1,10 @@
 """``satenv.baselines.make("shield", env, policy=...)``: any policy filtered by :mod:`satenv.safety`.
 
 The wrapped policy keeps its ``reset`` / ``act`` / ``info``; the filter changes an action only
-when it would lead to a violation (:class:`satenv.safety.Shield`), reading the env's true state
-(privileged, like the scripted baselines). ``info`` adds ``safety_interventions``,
-``safety_delta`` (sum of ``|du|``), ``safety_infeasible`` and ``safety_steps`` since ``reset``.
+when it would lead to a violation (:class:`satenv.safety.Shield`), reading the state the policy
+reads (under navigation error: the estimate) with the nominal model and the declared bounds.
+``info`` adds ``safety_interventions``, ``safety_delta`` (sum of ``|du|``), ``safety_infeasible``
+and ``safety_steps`` since ``reset``.
 ``policy`` may be a policy object or a registered baseline's name (built for the same env);
 every other option is a :class:`satenv.safety.SafetyConfig` field.
 """

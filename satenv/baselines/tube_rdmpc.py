@@ -113,6 +113,7 @@ from satenv.baselines.base import (
 )
 from satenv.cluster_graph import nearest_neighbour_graph
 from satenv.dynamics import cw_continuous, cw_matrices, prediction_matrices
+from satenv.perturbations import nominal
 
 __all__ = ["TubeController", "TubeRDMPC", "TubeRDMPCConfig", "slot_sizes"]
 
@@ -537,7 +538,7 @@ class TubeRDMPC(Baseline):
     def __init__(self, env: Any, config: TubeRDMPCConfig | None = None, **options: Any) -> None:
         check_env(type(self), env)
         self.cfg = config_from_options(TubeRDMPCConfig, options, "TubeRDMPC", base=config)
-        sc = env.scenario
+        sc = nominal(env).scenario
         self.env = env
         self.sc = sc
         self.agents = list(env.possible_agents)

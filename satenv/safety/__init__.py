@@ -70,6 +70,7 @@ pereira2023 minimum-error constraint (41) (implied by separation for the PLF top
 
 from __future__ import annotations
 
+from satenv.perturbations import UncertaintyBounds
 from satenv.safety.config import (
     CONSTRAINTS,
     MIN_MARGIN,
@@ -79,13 +80,17 @@ from satenv.safety.config import (
     SafetyTypeError,
     SafetyWarning,
 )
-from satenv.safety.core import SafetyFilter, _effective, filter_actions, solve_qp
+from satenv.safety.core import SafetyFilter, filter_actions, solve_qp
 from satenv.safety.model import SafetyModel, courtesy, safety_model
-from satenv.safety.rows import _omega_rows, constraint_rows
+from satenv.safety.rows import constraint_rows
 from satenv.safety.shield import Shield, shield
 from satenv.safety.wrapper import filtered_env, safety_config
-from satenv.dynamics import quat_to_matrix  # noqa: F401 - read by satenv.training.safe_imitation
 
 __all__ = ["CONSTRAINTS", "MIN_MARGIN", "SafetyConfig", "SafetyError", "SafetyFilter", "SafetyModel", "SafetyRecord",
            "SafetyTypeError", "SafetyWarning", "Shield", "constraint_rows", "courtesy", "filter_actions",
-           "filtered_env", "safety_config", "safety_model", "shield", "solve_qp"]
+           "filtered_env", "safety_config", "safety_model", "shield", "solve_qp", "UncertaintyBounds"]
+
+# read by satenv.training.safe_imitation (one step of the filter's own rows)
+from satenv.dynamics import quat_to_matrix as quat_to_matrix  # noqa: E402
+from satenv.safety.core import _effective as _effective  # noqa: E402
+from satenv.safety.rows import _omega_rows as _omega_rows  # noqa: E402

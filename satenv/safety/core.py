@@ -10,6 +10,7 @@ import numpy as np
 
 from satenv.dynamics import quat_to_matrix
 from satenv.dynamics._checks import all_finite
+from satenv.perturbations import UncertaintyBounds
 from satenv.safety.config import (
     _BIG,
     _QP_TOL,
@@ -20,6 +21,7 @@ from satenv.safety.config import (
     SafetyTypeError,
     SafetyWarning,
 )
+from satenv.safety.margins import tighten_lower
 from satenv.safety.model import SafetyModel, _core_of, _has_position_rows, safety_model
 from satenv.safety.rows import _omega_rows, constraint_rows
 
@@ -53,6 +55,7 @@ def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarr
     if m.attitude is not None:
         w_om, lo_om = _omega_rows(m, cfg, x)
         rows, lo = np.concatenate([rows, w_om], axis=2), np.concatenate([lo, lo_om], axis=2)
+    lo = tighten_lower(m, lo)
     kinds = np.asarray(m.kinds, dtype=np.int64)
     bsz, na, d = a.shape
     if not m.n_chain:
@@ -198,12 +201,18 @@ class SafetyFilter:
     Args:
         target: ``satenv.make(...)`` env, ``satenv.make_vec(...)`` batch or a ``BatchedCore``.
         config: a :class:`SafetyConfig`; ``options`` replace its fields (unknown ones raise).
+        bounds: the :class:`satenv.perturbations.UncertaintyBounds` its rows are tightened by
+            (:mod:`satenv.safety.margins`); default: the ones ``target`` declares.
+
+    The model is the nominal env's (:func:`satenv.perturbations.nominal`), the state the one
+    ``target`` holds: the navigation estimate between two steps of a perturbed env.
     """
 
-    def __init__(self, target: Any, config: SafetyConfig | None = None, **options: Any) -> None:
+    def __init__(self, target: Any, config: SafetyConfig | None = None, *,
+                 bounds: UncertaintyBounds | None = None, **options: Any) -> None:
         self.config = SafetyConfig.from_options(config, **options)
         self.core = _core_of(target)
-        self.model = safety_model(self.core)
+        self.model = safety_model(target, bounds)
         if not _has_position_rows(self.model):
             warnings.warn(f"safety filter on {self.model.env_id} ({getattr(self.core.scenario, 'name', '')}): the "
                           "scenario has no keep-out distance (collision_distance = 0), so the filter enforces "
@@ -222,6 +231,6 @@ class SafetyFilter:
                               f"filters for has {copies}; expected shape ({copies}, {self.model.n_agents}, "
                               f"{self.model.action_dim})" + (f" or ({self.model.n_agents}, {self.model.action_dim})"
                                                               if copies == 1 else ""))
-        t = self.core.t * float(self.core.scenario.dt)
+        t = self.core.t * self.model.dt
         out, rec = filter_actions(self.model, self.config, x, t, a[None] if single else a)
         return (out[0], rec) if single else (out, rec)

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from satenv.dynamics import cw_matrices, thruster_matrices
+from satenv.perturbations import UncertaintyBounds, declared_bounds, nominal
 from satenv.safety.config import _KIND, SafetyTypeError
 
 
@@ -59,6 +60,7 @@ class SafetyModel:
     attitude: tuple | None = None    # servicing: (j_f, j_l, omega_l, omega_max, G (3, d), substeps)
     kinds: tuple[int, ...] = ()
     budget: tuple[np.ndarray, np.ndarray] | None = None   # (own, other) (M, slots): braking fractions
+    bounds: UncertaintyBounds = UncertaintyBounds()       # what it cannot see (satenv.safety.margins)
 
     @functools.cached_property
     def body_state(self) -> np.ndarray:
@@ -78,9 +80,14 @@ class SafetyModel:
         return width >= (13 if self.body_frame or self.attitude is not None else 6)
 
 
-def safety_model(target: Any) -> SafetyModel:
-    """The :class:`SafetyModel` of an env, a ``make_vec`` batch or a batched core."""
-    core = _core_of(target)
+def safety_model(target: Any, bounds: UncertaintyBounds | None = None) -> SafetyModel:
+    """The :class:`SafetyModel` of an env, a ``make_vec`` batch or a batched core: built from the
+    nominal env (:func:`satenv.perturbations.nominal`, never the perturbed truth), with ``bounds``
+    (default: the env's declared bounds, :func:`satenv.perturbations.declared_bounds`)."""
+    if bounds is not None and not isinstance(bounds, UncertaintyBounds):
+        raise SafetyTypeError(f"bounds must be a satenv.perturbations.UncertaintyBounds or None, got "
+                              f"{type(bounds).__name__}")
+    core = _core_of(nominal(target))
     name = type(core).__name__
     sc = core.scenario
     builders = {"PlatoonCore": _platoon, "ClusterCore": _cluster, "ServicingCore": _servicing,
@@ -99,7 +106,7 @@ def safety_model(target: Any) -> SafetyModel:
         u_box=u_box, norm_mode=norm_mode, brake=float(sv.min()) * u_box,
         reach=float(np.linalg.norm(b[:3], 2)),
         accel_max=float(sv.max()) * u_box * math.sqrt(s.shape[1]))
-    model = SafetyModel(**fields)
+    model = SafetyModel(**fields, bounds=declared_bounds(target) if bounds is None else bounds)
     return dataclasses.replace(model, kinds=_row_kinds(model), budget=_budget(model))
 
 

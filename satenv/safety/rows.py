@@ -6,6 +6,7 @@ import numpy as np
 
 from satenv.dynamics import attitude_step
 from satenv.safety.config import _BIG, _FLOOR, SafetyConfig
+from satenv.safety.margins import estimated_agents, tighten_geometry, velocity_error
 from satenv.safety.model import SafetyModel, courtesy
 
 
@@ -75,16 +76,19 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
     bsz, na = x6.shape[:2]
     geos: list[tuple] = []                                # (gap0, rate0, gap_bar, dirn, vel_bar), (B, M, k)
     drifts: list[np.ndarray] = []
+    dists: list[np.ndarray] = []                          # predicted distance (inf: a half-space)
     if m.pair_distance > 0:
         r = x6[:, :, None] - x6[:, None]                  # (B, M, M, 6): agent i minus agent j
         geos.append(_sphere(cfg, r, xb[:, :, None] - xb[:, None], m.pair_distance))
         drifts.append(_drift(m, r))
+        dists.append(_norm(xb[:, :, None, :3] - xb[:, None, :, :3]))
     if m.bodies:   # (B, nb, 6) body states now and at the next decision (their own motion)
         centre = m.body_state[None, :, :3] + t[:, None, None] * m.body_state[None, :, 3:]
         now = np.concatenate([centre, np.broadcast_to(m.body_state[None, :, 3:], centre.shape)], -1)
         nxt = now + m.dt * np.concatenate([m.body_state[:, 3:], np.zeros((len(m.bodies), 3))], -1)
         geos.append(_sphere(cfg, x6[:, :, None] - now[:, None], xb[:, :, None] - nxt[:, None], m.body_radius))
         drifts.append(np.repeat(_drift(m, x6)[..., None], len(m.bodies), axis=-1))
+        dists.append(_norm(xb[:, :, None, :3] - nxt[:, None, :, :3]))
     n_chain = m.n_chain
     if n_chain:
         zero = np.zeros_like(x6[:, :1])
@@ -93,13 +97,16 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
         if m.chain_sphere is not None:
             off = np.r_[m.chain_sphere[0], np.zeros(3)]
             geos.append(tuple(v[:, :, None] for v in _sphere(cfg, r - off, rb - off, m.chain_sphere[1])))
+            dists.append(_norm(rb[..., None, :3] - off[:3]))
         if m.chain_halfspaces is not None:
             geos.append(_halfspaces(cfg, r, rb, *m.chain_halfspaces))
+            dists.append(np.full((bsz, na, len(m.chain_halfspaces[1])), np.inf))
         drifts.append(np.repeat(_drift(m, r)[..., None], n_chain, axis=-1))
     ws: list[np.ndarray] = []
     ls: list[np.ndarray] = []
     if geos:
         geo = [np.concatenate([g[f] for g in geos], axis=2) if len(geos) > 1 else geos[0][f] for f in range(5)]
+        geo = tighten_geometry(m, geo, np.concatenate(dists, axis=2), estimated_agents(m))
         drift = np.concatenate(drifts, axis=2) if len(drifts) > 1 else drifts[0]
         w1, l1, w2, l2, h0 = _shared(m, cfg, m.budget[0], m.budget[1], drift, *geo)
         if m.pair_distance > 0:                            # an agent and itself: no row
@@ -125,15 +132,22 @@ def constraint_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndar
 def _shared(m, cfg, own, other, drift, gap0, rate0, gap_bar, dirn, vel_bar):
     """:func:`_barrier` with the pair's authority, and this agent's share of the rows.
 
-    ``a = (own + other) a_i`` minus the drift bound and the disturbance of each moving agent
-    (floored at ``_FLOOR`` of the nominal: there the barrier is no longer a guarantee);
+    ``a = (own + other) (1 - theta) a_i`` minus the drift bound, the disturbance of each moving
+    agent and the declared disturbance bound of each estimated one (:mod:`satenv.safety.margins`;
+    floored at ``_FLOOR`` of the nominal: there the barrier is no longer a guarantee);
     ``delta = ||B_p|| max ||S u||`` per moving agent; this agent's share ``own / (own + other)``.
     """
     units, movers = own + other, 1.0 + (other > 0)
-    brake = np.maximum(units * m.brake - movers * m.disturbance - drift, _FLOOR * units * m.brake)
+    authority = units * m.brake * (1.0 - m.bounds.thrust)
+    unmodelled = estimated_agents(m) * m.bounds.disturbance
+    brake = np.maximum(authority - movers * m.disturbance - unmodelled - drift, _FLOOR * authority)
     w1, g1, w2, g2, h0 = _barrier(m, cfg, gap0, rate0, gap_bar, dirn, vel_bar, brake, movers * m.reach * m.accel_max)
     share = own / units
     return w1, -share * g1, w2, -share * g2, h0
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("...i,...i->...", v, v))
 
 
 def _up(v: np.ndarray, fill: float) -> np.ndarray:
@@ -153,12 +167,12 @@ def _velocity_rows(m, cfg, x6, xb, ws, ls) -> None:
         e_bar = np.einsum("ij,bjk->bik", m.lbar, xb[..., 3:])
         heard = -(m.lbar - np.diag(gd)).sum(axis=1)
         beta = heard[:, None] * (np.abs(bv @ m.S).sum(axis=1) * m.u_box)[None, :]
-        v_lim = gd[:, None] * m.v_max
+        v_lim = gd[:, None] * m.v_max - np.abs(m.lbar).sum(axis=1)[:, None] * velocity_error(m)
         gain = gd[:, None, None] * bv[None]
     else:
         e_bar = xb[..., 3:]
         beta = 0.0
-        v_lim = m.v_max
+        v_lim = m.v_max - velocity_error(m)
         gain = bv[None]
     lim = v_lim * (1.0 - cfg.velocity_margin)     # one decision can always come back inside
     g = np.broadcast_to(gain, (*x6.shape[:2], 3, 3))

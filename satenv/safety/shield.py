@@ -12,8 +12,9 @@ from satenv.safety.core import SafetyFilter, _real_array
 
 class Shield:
     """A policy filtered by :class:`SafetyFilter` for the env it acts on (same ``reset`` /
-    ``act`` / ``info`` as any policy). It reads the env's true state (privileged, like the
-    scripted baselines). An action that is safe is returned as the policy gave it (the same
+    ``act`` / ``info`` as any policy). It reads the state the env holds when the policy acts, as the
+    policy does (under a perturbation's navigation error: the estimate), and plans with the
+    nominal model and the env's declared bounds (:class:`SafetyFilter`). An action that is safe is returned as the policy gave it (the same
     object); ``info`` adds ``safety_interventions``, ``safety_delta`` (sum of ``|du|``),
     ``safety_infeasible`` (agent-steps) and ``safety_steps`` since :meth:`reset`, and
     ``safety_record`` (the last :class:`SafetyRecord`).
