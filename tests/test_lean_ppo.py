@@ -1,0 +1,168 @@
+"""The lean batched PPO (satenv.training.rl.ppo): tiny runs write a loadable policy folder, a seed
+fixes the run, a resumed run equals the uninterrupted one; the slow test compares it with SB3 PPO."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from satenv import tasks  # noqa: E402
+from satenv.training.rl import ppo  # noqa: E402
+
+TASK = "platoon-tplf30-random-cw"
+TINY = {"task": TASK, "num_envs": 4, "n_steps": 8, "minibatch_size": 64, "n_epochs": 2, "test_seeds": (900000,),
+        "eval_baselines": ("zero",), "workers": 1, "progress": False, "checkpoint_every": 0}
+"""128 agent-steps an iteration; the final evaluation on one test seed beside zero thrust."""
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path / "cache"))
+
+
+def _weights(folder):
+    from safetensors.numpy import load_file
+
+    return load_file(str(folder / "weights.safetensors"))
+
+
+def test_tiny_run_writes_a_loadable_policy_folder(tmp_path, capsys):
+    import satenv
+    from satenv.training import load
+
+    out = tmp_path / "run"
+    code = ppo.main(["--task", TASK, "--budget", "3000", "--num-envs", "4", "--n-steps", "8",
+                     "--minibatch-size", "64", "--test-seeds", "900000", "--eval-baselines", "zero",
+                     "--workers", "1", "--no-progress", "--out-dir", str(out)])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "budget 3,000 agent-steps" in err and "24 iterations" in err and "expected" in err
+    final = out / "final"
+    for name in ("policy.json", "weights.safetensors", "manifest.json", "eval.json", "obs_norm.json", "env.json"):
+        assert (final / name).is_file(), name
+    env = satenv.make("platoon_v0", **tasks.get(TASK).env_kwargs)
+    policy = load(final, env=env)
+    obs, _ = env.reset(seed=900001)
+    actions = policy.act(obs)
+    assert set(actions) == set(env.possible_agents)
+    assert all(a.shape == (3,) and np.all(np.abs(a) <= 1) for a in actions.values())
+    rows = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
+    assert [r["agent_steps"] for r in rows] == [128 * k for k in range(1, 25)]
+    assert json.loads((final / "eval.json").read_text())["steps"] == 3072
+    assert list((out / "tb").iterdir())
+
+
+def test_exported_actor_is_the_trained_mean(tmp_path):
+    import torch
+
+    from satenv.training import load
+
+    cfg = ppo.LeanConfig(**TINY, budget=256, out_dir=str(tmp_path / "run"))
+    ppo.train(cfg)
+    policy = load(tmp_path / "run" / "final")
+    norm = json.loads((tmp_path / "run" / "final" / "obs_norm.json").read_text())
+    obs = np.random.default_rng(0).normal(size=(5, policy.obs_shape[0])) * 10
+    run = ppo.Run(cfg, __import__("satenv.vector", fromlist=["x"]).SatVectorEnv(
+        tasks.get(TASK).make_env(), 4, autoreset=False), 0.99)
+    ckpt = ppo.latest_checkpoint(tmp_path / "run")
+    ppo.load_checkpoint(run, ckpt)
+    x = np.clip((obs - np.array(norm["mean"])) / np.sqrt(np.array(norm["var"]) + 1e-8), -10, 10)
+    with torch.no_grad():
+        mean = run.net.mean(torch.as_tensor(x, dtype=torch.float32)[:, None]).numpy()[:, 0]
+    assert np.allclose(policy.predict(obs), mean, atol=1e-6)
+
+
+def test_a_seed_fixes_the_run_and_resume_equals_uninterrupted(tmp_path):
+    whole = ppo.train(ppo.LeanConfig(**TINY, budget=512, out_dir=str(tmp_path / "a")))
+    again = ppo.train(ppo.LeanConfig(**TINY, budget=512, out_dir=str(tmp_path / "b")))
+    ppo.train(ppo.LeanConfig(**TINY, budget=256, out_dir=str(tmp_path / "c")))
+    assert ppo.main(["--out-dir", str(tmp_path / "c"), "--resume", "--budget", "512"]) == 0
+    other = ppo.train(ppo.LeanConfig(**{**TINY, "seed": 1}, budget=512, out_dir=str(tmp_path / "d")))
+    w = _weights(whole)
+    for folder in (again, tmp_path / "c" / "final"):
+        assert all(np.array_equal(w[k], v) for k, v in _weights(folder).items())
+    assert not all(np.array_equal(w[k], v) for k, v in _weights(other).items())
+    lines = (tmp_path / "c" / "progress.jsonl").read_text().splitlines()
+    assert [json.loads(x)["agent_steps"] for x in lines] == [128, 256, 384, 512]
+
+
+@pytest.mark.parametrize("variant", ["ippo", "mappo"])
+def test_variants_train_and_write_their_folders(tmp_path, variant):
+    from satenv.training import load
+
+    final = ppo.train(ppo.LeanConfig(**TINY, variant=variant, budget=256, out_dir=str(tmp_path / "run")))
+    env = tasks.get(TASK).make_env()
+    if variant == "ippo":   # one policy folder per agent, each its own actor
+        folders = [final / "agents" / a for a in env.possible_agents]
+        ws = [_weights(f) for f in folders]
+        assert not all(np.array_equal(ws[0][k], ws[1][k]) for k in ws[0])
+        assert (final / "eval.json").is_file()
+    else:
+        folders = [final]
+    for f in folders:
+        assert load(f).predict(np.zeros((2, 36))).shape == (2, 3)
+
+
+def test_gamma_follows_the_horizon_and_bad_input_is_named(tmp_path, capsys):
+    assert math.isclose(ppo.horizon_gamma(180, 3.0), 1 - 3 / 180)
+    with pytest.raises(ValueError, match="variant"):
+        ppo.LeanConfig(task=TASK, variant="sac")
+    with pytest.raises(ValueError, match="minibatch_size"):
+        ppo.LeanConfig(task=TASK, minibatch_size=0)
+    assert ppo.main(["--task", TASK, "--gamma-k", "500", "--budget", "128", "--num-envs", "4", "--n-steps", "8",
+                     "--out-dir", str(tmp_path / "x")]) == 2
+    assert "gamma_k" in capsys.readouterr().err
+    assert ppo.main(["--out-dir", str(tmp_path / "none"), "--resume"]) == 2
+    with pytest.raises(SystemExit):
+        ppo.main(["--budg", "10"])      # no abbreviations
+
+
+def test_untrained_mean_is_near_zero_thrust(tmp_path):
+    import torch
+
+    from satenv.training.rl.nets import ActorCritic
+
+    torch.manual_seed(0)
+    net = ActorCritic(36, 3, 36, (64, 64), 1, 0.25)
+    mean = net.mean(torch.randn(256, 4, 36) * 3)
+    assert float(mean.abs().max()) < 0.1 and math.isclose(float(net.log_std.exp().mean()), 0.25, rel_tol=1e-6)
+
+
+# ------------------------------------------------------------------------------------ slow
+SB3_MATCH_BUDGET = 2_000_000
+"""Agent-steps per run of the slow comparison (the same for both learners)."""
+SB3_MATCH_SEEDS = (0, 1, 2)
+SB3_MATCH_TEST_SEEDS = tuple(range(900000, 900020))
+
+
+@pytest.mark.slow
+def test_lean_ppo_matches_sb3_ppo_on_the_platoon(tmp_path):
+    """Same task, budget, seeds, network, batch and discount: the lean learner's mean test success
+    is within the seeds' spread of SB3 PPO's (the larger of the two standard deviations, and at
+    least one test episode's worth)."""
+    from satenv.training.config import TrainConfig
+    from satenv.training.train import train as sb3_train
+
+    shared = {"task": TASK, "test_seeds": SB3_MATCH_TEST_SEEDS, "eval_baselines": ("zero",), "workers": 1,
+              "progress": False, "net_arch": (64, 64), "lr": 3e-4}
+    gamma = ppo.horizon_gamma(tasks.get(TASK).make_env().scenario.max_steps, 3.0)
+    lean, sb3 = [], []
+    for seed in SB3_MATCH_SEEDS:
+        f = ppo.train(ppo.LeanConfig(**shared, seed=seed, budget=SB3_MATCH_BUDGET, num_envs=64, n_steps=32,
+                                     minibatch_size=4096, n_epochs=2, out_dir=str(tmp_path / f"lean{seed}")))
+        lean.append(json.loads((f / "eval.json").read_text())["aggregate"]["learned"])
+        f = sb3_train(TrainConfig(**shared, seed=seed, total_timesteps=SB3_MATCH_BUDGET, num_envs=64, n_steps=32,
+                                  batch_size=4096, n_epochs=2, gamma=gamma, log_std_init=math.log(0.25),
+                                  eval_every=0, checkpoint_every=0, out_dir=str(tmp_path / f"sb3{seed}")))
+        sb3.append(json.loads((f / "eval.json").read_text())["aggregate"]["learned"])
+    report = {name: {k: [r[k] for r in rows] for k in ("success_rate", "final_error_m", "rmse")}
+              for name, rows in (("lean", lean), ("sb3", sb3))}
+    print(json.dumps(report))
+    s_lean, s_sb3 = np.array(report["lean"]["success_rate"]), np.array(report["sb3"]["success_rate"])
+    spread = max(s_lean.std(), s_sb3.std(), 1 / len(SB3_MATCH_TEST_SEEDS))
+    assert abs(s_lean.mean() - s_sb3.mean()) <= spread, report
