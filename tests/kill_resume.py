@@ -2,9 +2,10 @@
 (not a pytest module; ``tests/test_scoreboard.py`` has the single-kill test).
 
     python tests/kill_resume.py [--kills 17] [--seeds 0-149] [--seed 0]
-    python tests/kill_resume.py --target dagger     # or train: a real kill at every write boundary
+    python tests/kill_resume.py --target dagger     # or safe, or train: a real kill at every write boundary
 
-``--target dagger`` / ``--target train`` run the tiny DAgger / PPO runs of
+``--target dagger`` / ``--target safe`` / ``--target train`` run the tiny DAgger, safe-imitation
+(:mod:`satenv.training.imitation` with a warm start flown with the filter) and PPO runs of
 ``tests/test_crash_windows.py`` in fresh interpreters: once uninterrupted (counting its write
 boundaries, :mod:`satenv.training.runfolder`), then, for every boundary ``k``, one run ended there by
 ``os._exit`` (``SATENV_CRASH_AT_WRITE=k``: the disk as a ``kill -9`` leaves it) and one resume to
@@ -62,6 +63,14 @@ from test_crash_windows import tiny_dagger
 run, cfg = tiny_dagger(lambda obj, name, value: setattr(obj, name, value))
 run(cfg, Path({out!r}))
 """,
+    "safe": """
+import sys
+sys.path.insert(0, {tests!r})
+from pathlib import Path
+from test_crash_windows import tiny_safe
+run, cfg = tiny_safe(lambda obj, name, value: setattr(obj, name, value))
+run(cfg, Path({out!r}))
+""",
     "train": """
 import sys
 sys.path.insert(0, {tests!r})
@@ -89,12 +98,13 @@ def sweep(target: str) -> int:
         return subprocess.run([sys.executable, "-c", code], env={**env, **extra}, cwd=TESTS.parent,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=900).returncode
 
-    result = dagger_result if target == "dagger" else train_result
+    rounds = target in ("dagger", "safe")
+    result = dagger_result if rounds else train_result
     log = tmp / "boundaries.log"
     assert go(tmp / "ref", **{runfolder.LOG_ENV: str(log)}) == 0
     labels = log.read_text().splitlines()
     reference = result(tmp / "ref")
-    ref_steps = [h["round"] for h in json.loads(reference[0])] if target == "dagger" else reference[0]
+    ref_steps = [h["round"] for h in json.loads(reference[0])] if rounds else reference[0]
     kills = unfinished = lost = duplicated = equal = 0
     for k in range(1, len(labels) + 1):
         out = tmp / f"k{k}"
@@ -104,7 +114,7 @@ def sweep(target: str) -> int:
             print(f"boundary {labels[k - 1]}: the resume did not finish", flush=True)
             continue
         got = result(out)
-        steps = [h["round"] for h in json.loads(got[0])] if target == "dagger" else got[0]
+        steps = [h["round"] for h in json.loads(got[0])] if rounds else got[0]
         lost += len(set(ref_steps) - set(steps))
         duplicated += len(steps) - len(set(steps))
         same = got == reference
@@ -112,7 +122,7 @@ def sweep(target: str) -> int:
         print(f"boundary {labels[k - 1]}: resumed, {'equal to' if same else 'differs from'} the uninterrupted run",
               flush=True)
     print(f"{target}: {kills} kills at {len(labels)} write boundaries; {unfinished} runs could not finish, "
-          f"{lost} {'rounds' if target == 'dagger' else 'evaluations'} lost, {duplicated} duplicated; "
+          f"{lost} {'rounds' if rounds else 'evaluations'} lost, {duplicated} duplicated; "
           f"{equal} of {len(labels)} resumed runs equal to the uninterrupted one")
     return 0 if (kills == len(labels) and unfinished == lost == duplicated == 0
                  and equal == len(labels)) else 1
@@ -123,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--kills", type=int, default=17)
     ap.add_argument("--seeds", default="0-149")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--target", choices=("scoreboard", "dagger", "train"), default="scoreboard")
+    ap.add_argument("--target", choices=("scoreboard", "dagger", "safe", "train"), default="scoreboard")
     args = ap.parse_args(argv)
     if args.target != "scoreboard":
         return sweep(args.target)

@@ -85,18 +85,18 @@ def test_a_write_is_whole_or_absent_and_a_folder_swap_recovers(tmp_path, monkeyp
 
 
 # ------------------------------------------------------------------------ DAgger
-def tiny_dagger(monkeypatch_setattr) -> tuple:
-    """A DAgger run of seconds: the platoon (pereira2022) cut to 12 steps and a proportional
-    expert (deterministic); returns ``(run, config)``."""
+def tiny_dagger(monkeypatch_setattr, **overrides) -> tuple:
+    """An imitation run of seconds (:mod:`satenv.training.imitation`): the platoon (pereira2022)
+    cut to 12 steps and a proportional expert (deterministic); returns ``(run, config)``."""
     import satenv
-    from satenv.training import imitate
+    from satenv.training.imitation import plot, run, setup, system_config
 
-    def make_envs(cfg):
+    def make_envs(env_id, env_kwargs, eval_env_kwargs, task, system, through_collisions):
         make = satenv.make
         kw = {"preset": "pereira2022", "max_steps": 12}
-        return imitate.Envs(make("platoon_v0", randomize=True, terminate_on_collision=False, **kw),
-                            make("platoon_v0", terminate_on_collision=False, **kw),
-                            make("platoon_v0", randomize=True, **kw), make("platoon_v0", **kw))
+        return setup.Envs(make("platoon_v0", randomize=True, terminate_on_collision=False, **kw),
+                          make("platoon_v0", terminate_on_collision=False, **kw),
+                          make("platoon_v0", randomize=True, **kw), make("platoon_v0", **kw))
 
     class Expert:
         def __init__(self, env):
@@ -109,15 +109,26 @@ def tiny_dagger(monkeypatch_setattr) -> tuple:
             return {a: np.clip(-0.05 * np.asarray(o[:3], dtype=np.float64), -1, 1).astype(np.float32)
                     for a, o in obs.items()}
 
-    monkeypatch_setattr(imitate, "make_envs", make_envs)
-    monkeypatch_setattr(imitate, "make_expert", lambda name, env, options: Expert(env))
+    monkeypatch_setattr(setup, "make_envs", make_envs)
+    monkeypatch_setattr(setup, "make_expert", lambda name, env, options: Expert(env))
     # the learning curve is drawn by matplotlib (seconds per round on a busy machine); its write
     # boundaries stay, its picture is a stub
-    monkeypatch_setattr(imitate, "plot_curve", lambda history, path: Path(path).write_bytes(b"curve"))
-    cfg = imitate.system_config("platoon-pereira2022", rounds=2, round0_episodes=2, episodes_per_round=1,
-                                eval_seeds=(700_000,), net_arch=(16,), epochs=1, batch_size=64,
-                                paper_start_share=0.3, expert_options={}, final_eval=False)
-    return imitate.run, cfg
+    monkeypatch_setattr(plot, "plot_curve", lambda history, path: Path(path).write_bytes(b"curve"))
+    cfg = system_config("platoon-pereira2022", **{"rounds": 2, "round0_episodes": 2, "episodes_per_round": 1,
+                                                  "eval_seeds": (700_000,), "net_arch": (16,), "epochs": 1,
+                                                  "batch_size": 64, "paper_start_share": 0.3, "expert_options": {},
+                                                  "final_eval": False, **overrides})
+    return run, cfg
+
+
+SAFE_WARM_START = str(TESTS.parent / "satenv" / "training" / "policies" / "platoon_pereira2022_dagger_shield")
+
+
+def tiny_safe(monkeypatch_setattr) -> tuple:
+    """The safe variant of :func:`tiny_dagger`: the shipped platoon network flies (alone and behind
+    its filter in turn), labelled by the expert through the filter, fitted on the safe loss."""
+    return tiny_dagger(monkeypatch_setattr, warm_start=SAFE_WARM_START, fly="mixed", label="filtered",
+                       shield_seeds=1, paper_start_share=0.0, lr=1e-4)
 
 
 def dagger_result(run_dir: Path) -> tuple[str, dict[str, bytes]]:
@@ -156,8 +167,8 @@ def kill_and_resume(run, k: int, monkeypatch) -> None:
     run()
 
 
-def _dagger_sweep(tmp_path, monkeypatch, last_round_only: bool) -> None:
-    run, cfg = tiny_dagger(monkeypatch.setattr)
+def _dagger_sweep(tmp_path, monkeypatch, last_round_only: bool, tiny=tiny_dagger) -> None:
+    run, cfg = tiny(monkeypatch.setattr)
     ref = tmp_path / "ref"
     labels = boundaries(lambda: run(cfg, ref), tmp_path, monkeypatch)
     reference = dagger_result(ref)
@@ -191,6 +202,20 @@ def test_dagger_killed_at_every_write_boundary_resumes_to_the_same_rounds(tmp_pa
     capsys.readouterr()
 
 
+def test_safe_imitation_killed_at_each_write_of_a_round_resumes_to_the_same_rounds(tmp_path, monkeypatch, capsys):
+    """The safe variant (a warm start flown with the filter, the safe loss): every boundary of the
+    last round; the resumed run's labels, weights and history equal the uninterrupted run's (the
+    fit's generator comes from (seed, round), not from the session)."""
+    _dagger_sweep(tmp_path, monkeypatch, last_round_only=True, tiny=tiny_safe)
+    capsys.readouterr()
+
+
+@pytest.mark.slow
+def test_safe_imitation_killed_at_every_write_boundary_resumes_to_the_same_rounds(tmp_path, monkeypatch, capsys):
+    _dagger_sweep(tmp_path, monkeypatch, last_round_only=False, tiny=tiny_safe)
+    capsys.readouterr()
+
+
 def test_dagger_resume_reads_the_history_not_the_label_files(tmp_path, monkeypatch, capsys):
     """Labels of an unfinished round (written before the kill) are not a finished round."""
     run, cfg = tiny_dagger(monkeypatch.setattr)
@@ -211,13 +236,14 @@ def test_dagger_resume_reads_the_history_not_the_label_files(tmp_path, monkeypat
         run(cfg, out)
     (out / "history.json").write_text('[{"round": 0}]')
     (out / "labels" / "round_0000.npz").write_bytes(b"PK")
-    with pytest.raises(runfolder.RunFolderError, match="round_0000.npz: the labels of round 0"):
+    with pytest.raises(runfolder.RunFolderError, match="round_0000.npz: cannot be read as the labels of round 0"):
         run(cfg, out)
-    from satenv.training.recipes import dagger
+    from satenv.training.imitation.cli import main
 
-    with pytest.raises(SystemExit, match="cannot resume .*round_0000.npz"):    # the CLI: no traceback
-        dagger.main(["--run-dir", str(out)])
     capsys.readouterr()
+    assert main(["--run-dir", str(out)]) == 2                     # the CLI: one line, no traceback
+    err = capsys.readouterr().err
+    assert "round_0000.npz" in err and "Traceback" not in err
 
 
 # ------------------------------------------------------------------------ real kills (slow)
@@ -226,20 +252,21 @@ import sys
 sys.path.insert(0, {tests!r})
 import pytest
 from pathlib import Path
-from test_crash_windows import tiny_dagger
-run, cfg = tiny_dagger(lambda obj, name, value: setattr(obj, name, value))
+from test_crash_windows import {tiny}
+run, cfg = {tiny}(lambda obj, name, value: setattr(obj, name, value))
 run(cfg, Path({out!r}))
 """
 
 
 @pytest.mark.slow
-def test_dagger_killed_for_real_at_every_write_boundary(tmp_path):
+@pytest.mark.parametrize("tiny", ["tiny_dagger", "tiny_safe"])
+def test_imitation_killed_for_real_at_every_write_boundary(tmp_path, tiny):
     """``os._exit`` (no clean-up at all) at every boundary of a subprocess, then a resume."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS.parent), str(TESTS)]),
            "OMP_NUM_THREADS": "1"}
 
     def go(out: Path, **extra: str) -> int:
-        code = textwrap.dedent(SCRIPT.format(tests=str(TESTS), out=str(out)))
+        code = textwrap.dedent(SCRIPT.format(tests=str(TESTS), out=str(out), tiny=tiny))
         return subprocess.run([sys.executable, "-c", code], env={**env, **extra}, cwd=TESTS.parent,
                               capture_output=True, timeout=600).returncode
 
@@ -411,12 +438,13 @@ def test_dagger_starts_for_every_system_name(tmp_path, capsys):
     old names included, builds its envs and experts (a run of 0 rounds)."""
     import warnings
 
-    from satenv.training.recipes import LEGACY_SYSTEM_NAMES, dagger
+    from satenv.training.imitation.cli import main
+    from satenv.training.recipes import LEGACY_SYSTEM_NAMES
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         for name in ("platoon-tplf30", *LEGACY_SYSTEM_NAMES.values()):
-            dagger.main(["--run-dir", str(tmp_path / name), "--system", name, "--rounds", "0"])
+            assert main(["--run-dir", str(tmp_path / name), "--system", name, "--rounds", "0"]) == 0
             assert json.loads((tmp_path / name / "config.json").read_text())["rounds"] == 0
     capsys.readouterr()
 
