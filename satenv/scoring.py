@@ -1,18 +1,24 @@
 """How an evaluation is scored, one home for the training evaluation, the held-out recipe, the
 policy card and the scoreboard.
 
-* **Episode record** (:func:`episode_record`): :func:`satenv.metrics.summary` of a trajectory, plus
-  ``seed``, ``compute_ms_per_agent`` and, for a policy behind the safety filter, its counts
+* **Episode record** (:func:`episode_record`, the one record of the board, the reference grid,
+  ``satenv.bench.safety_alone`` and the training evaluation): :func:`satenv.metrics.summary` of a
+  trajectory, plus ``seed``, ``compute_ms_per_agent``, ``episode_return`` (the env's reward summed
+  over the episode, mean over agents) and, for a policy behind the safety filter, its counts
   ``safety_interventions`` and ``safety_infeasible`` (agent-steps), ``safety_steps`` (decisions
-  filtered, as :class:`satenv.safety.Shield` counts them) and ``safety_agent_steps`` (decisions x
-  agents: the denominator of ``interventions_per_agent_step``).
+  filtered, as :class:`satenv.safety.Shield` counts them), ``safety_agent_steps`` (decisions x
+  agents), ``interventions_per_agent_step`` (their ratio) and ``safety_mean_du`` (mean ``|du|`` of
+  an intervention; ``None`` without any). Records written under older key names are read through
+  :func:`upgrade_record` (:data:`LEGACY_KEYS`).
 * **Aggregate** (:func:`aggregate`) of a list of records, keys:
 
   ================================  =============================================================
   ``episodes``, ``successes``       number of episodes, of successful ones
   ``success_rate``                  share of successful episodes (the scenario's rule, ``metrics.success``)
   ``success_ci95``                  95 % Wilson interval of ``success_rate`` (``None`` on one episode)
-  ``collision_episodes``            episodes with at least one collision flag
+  ``collision_episodes``            episodes with at least one collision flag, each counted once
+                                    however many flags it raised, an episode that crashed after
+                                    colliding included (:data:`COLLISION_EPISODE_RULE`)
   ``violation_episodes``            episodes with at least one hard-constraint violation
   ``safe_success_rate``             share reached with no collision and no violation
   ``violations``                    mean violations per episode
@@ -41,8 +47,9 @@ import numpy as np
 from satenv.errors import SatenvError
 from satenv.metrics import matched_ratios, summary
 
-__all__ = ["DECISION_MS_PER_AGENT_LIMIT", "RATIO_LIMIT", "SUCCESS_MARGIN", "SUCCESS_MIN", "aggregate",
-           "episode_record", "matched_ratios", "rank_key", "run_episodes", "targets", "wilson"]
+__all__ = ["COLLISION_EPISODE_RULE", "DECISION_MS_PER_AGENT_LIMIT", "LEGACY_KEYS", "RATIO_LIMIT", "SAFETY_COUNTS",
+           "SUCCESS_MARGIN", "SUCCESS_MIN", "aggregate", "collision_episodes", "episode_record", "matched_ratios",
+           "rank_key", "run_episodes", "targets", "upgrade_record", "wilson"]
 
 SUCCESS_MIN = 0.9
 """A learned policy's success rate must be at least this."""
@@ -54,21 +61,56 @@ DECISION_MS_PER_AGENT_LIMIT = 1.0
 """A learned policy's decision time per agent [ms]."""
 
 SAFETY_COUNTS = ("safety_interventions", "safety_infeasible", "safety_steps")
+"""The safety filter's counts an episode record copies from the policy's ``info``."""
+
+LEGACY_KEYS = {"interventions": "safety_interventions", "infeasible_steps": "safety_infeasible",
+               "mean_du": "safety_mean_du"}
+"""Older name -> name of the one record: the scoreboard's logs written before the record was one
+(``studies/published/episodes.jsonl``) are read through :func:`upgrade_record`."""
+
+COLLISION_EPISODE_RULE = "an episode with at least one collision flag counts once, errored or not"
+"""How :func:`aggregate` counts collision (and violation) episodes, in words."""
 
 
 def episode_record(traj: Any, seed: int, n_agents: int) -> dict[str, Any]:
-    """The one episode record: ``metrics.summary(traj)`` with ``seed``, ``compute_ms_per_agent``
-    and the filter's counts from the policy's ``info`` (``traj.policy_info``) when it has them."""
+    """The one episode record (module docstring): ``metrics.summary(traj)`` with ``seed``,
+    ``compute_ms_per_agent``, ``episode_return`` and the filter's counts from the policy's ``info``
+    (``traj.policy_info``) when it has them."""
     rec = summary(traj)
-    policy_info = traj.policy_info
+    info = traj.policy_info or {}
+    agents = max(1, int(n_agents))
     rec["seed"] = int(seed)
-    rec["compute_ms_per_agent"] = rec["compute_ms_per_decision"] / max(1, int(n_agents))
+    rec["compute_ms_per_agent"] = rec["compute_ms_per_decision"] / agents
+    rec["episode_return"] = float(np.mean(np.sum(traj.rewards, axis=0))) if traj.steps else 0.0
+    if "safety_steps" not in info:
+        return rec
     for key in SAFETY_COUNTS:
-        if policy_info and key in policy_info:
-            rec[key] = int(policy_info[key])
-    if "safety_steps" in rec:   # the filter counts decisions; an intervention is one agent's action
-        rec["safety_agent_steps"] = rec["safety_steps"] * max(1, int(n_agents))
+        rec[key] = int(info[key])
+    # the filter counts decisions; an intervention is one agent's action
+    rec["safety_agent_steps"] = rec["safety_steps"] * agents
+    n = rec["safety_interventions"]
+    rec["interventions_per_agent_step"] = n / rec["safety_agent_steps"] if rec["safety_agent_steps"] else None
+    rec["safety_mean_du"] = float(info["safety_delta"]) / n if n and "safety_delta" in info else None
     return rec
+
+
+def upgrade_record(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """``rec`` with its :data:`LEGACY_KEYS` renamed; a legacy key holding ``None`` (a policy
+    without the filter) is dropped, as the one record leaves the filter's keys out there."""
+    out = {}
+    for key, value in rec.items():
+        new = LEGACY_KEYS.get(key)
+        if new is None:
+            out[key] = value
+        elif value is not None and new not in rec:
+            out[new] = value
+    return out
+
+
+def collision_episodes(episodes: Iterable[Mapping[str, Any]], key: str = "collisions") -> int:
+    """Episodes whose ``key`` count is non-zero (:data:`COLLISION_EPISODE_RULE`; ``key="violations"``:
+    violation episodes)."""
+    return sum(bool(e.get(key)) for e in episodes)
 
 
 def run_episodes(env: Any, policy: Any, seeds: Iterable[int]) -> list[dict[str, Any]]:
@@ -100,7 +142,8 @@ def _mean(eps: list[dict[str, Any]], key: str) -> float | None:
 
 def aggregate(episodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
     """The aggregate of episode records (keys in the module docstring). Records with an ``error``
-    (an episode that crashed) count as failures and are left out of the means."""
+    (an episode that crashed) count as failures and are left out of the means; collision and
+    violation episodes count every record (:data:`COLLISION_EPISODE_RULE`)."""
     eps = list(episodes)
     if not eps:
         raise SatenvError("aggregate() needs at least one episode record, got none")
@@ -111,14 +154,14 @@ def aggregate(episodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {
         "episodes": len(eps), "errors": len(eps) - len(ok), "successes": wins, "success_rate": rate,
         "success_ci95": [lo, hi] if len(eps) > 1 else None,
-        "collision_episodes": sum(bool(e.get("collisions")) for e in eps),
-        "violation_episodes": sum(bool(e.get("violations")) for e in eps),
+        "collision_episodes": collision_episodes(eps),
+        "violation_episodes": collision_episodes(eps, "violations"),
         "safe_success_rate": safe / len(eps),
         "terminated": sum(bool(e.get("terminated")) for e in ok),
         "violations": _mean(ok, "violations"),
     }
     for key in ("rmse", "rmsee", "delta_v", "final_error_m", "time_to_converge_s", "compute_ms_per_agent",
-                "compute_ms_per_decision", "steps"):
+                "compute_ms_per_decision", "steps", "episode_return"):
         out[key] = _mean(ok, key)
     seps = [e["min_separation_m"] for e in ok if e.get("min_separation_m") is not None]
     out["min_separation_m"] = float(min(seps)) if seps else None
