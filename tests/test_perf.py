@@ -146,3 +146,25 @@ def test_perf_package_has_no_import_cycle_and_runs_as_a_module():
     proc = subprocess.run([sys.executable, "-m", "satenv.bench.perf", "--help"], capture_output=True, text=True,
                           check=True, cwd=root)
     assert "--sections" in proc.stdout and "envs" in proc.stdout
+
+
+def test_perf_learning_loop_section_smoke(monkeypatch):
+    """Lean PPO and SB3 PPO with the same settings on each training task, the lean/SB3 ratio and
+    the targets (tiny sizes; no timing assertions)."""
+    from satenv import tasks
+    from satenv.bench.perf import learning, learning_loop
+
+    assert learning_loop.sb3_config(learning_loop.SAME) == learning.FAST_CONFIGS["sb3_ppo"]
+    tiny = {**learning_loop.SAME, "num_envs": 2, "n_steps": 4, "minibatch_size": 40}
+    monkeypatch.setattr(learning_loop, "env_alone", lambda task, n, min_time=0.5: 1.0)
+    out = learning_loop.learning_loop(agent_steps=1, repeats=1, same=tiny, log=lambda _: None)
+    assert set(out["tasks"]) == {tasks.training_task(s).name for s in learning_loop.TASKS}
+    for row in out["tasks"].values():
+        lean, sb3 = row["lean_ppo"], row["sb3_ppo"]
+        assert lean["config"]["minibatch_size"] == 40 and lean["agent_steps"] >= 8
+        assert sb3["config"]["batch_size"] == 40
+        assert row["vs_sb3"] == lean["agent_steps_per_s"] / sb3["agent_steps_per_s"]
+        assert 0 < lean["env_share"] and 0 < lean["learner_share"] and lean["env_share"] + lean["learner_share"] < 1
+    names = [t["name"] for t in out["targets"]]
+    assert len(names) == 3 and sum("env share" in n for n in names) == 1
+    assert "learning_loop" in perf.EXTRA_SECTIONS and perf.REGISTRY["learning_loop"] is learning_loop.run

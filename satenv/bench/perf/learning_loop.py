@@ -18,17 +18,24 @@ import os
 import time
 from typing import Any
 
-from .learning import FAST_CONFIGS, _row, end_to_end
+from .learning import _row, end_to_end
 
 TASKS = ("platoon-pereira2023", "cluster-li2022")
 """The systems whose training task (``satenv.tasks.training_task``) the section trains on."""
 SAME: dict[str, Any] = {"num_envs": 64, "n_steps": 32, "minibatch_size": 4096, "n_epochs": 2, "net_arch": (64, 64),
                         "torch_threads": 1}
-"""The lean learner's settings matching SB3's fast configuration (:data:`FAST_CONFIGS` ``sb3_ppo``)."""
+"""The lean learner's settings; SB3 PPO gets the same (:func:`sb3_config`: its fast configuration,
+``satenv.bench.perf.learning.FAST_CONFIGS["sb3_ppo"]``)."""
 LEAN_VS_SB3_TARGET = 4.0
 """Lean PPO at least 4x SB3 PPO's agent-steps/s, updates included, same network and batch."""
 ENV_SHARE_TARGET = 0.30
 """The env at least 30 % of a lean iteration on the platoon."""
+
+
+def sb3_config(same: dict[str, Any]) -> dict[str, Any]:
+    """SB3 PPO's config fields (``satenv.training.config.TrainConfig``) for the lean settings ``same``."""
+    return {"num_envs": same["num_envs"], "n_steps": same["n_steps"], "batch_size": same["minibatch_size"],
+            "n_epochs": same["n_epochs"], "net_arch": tuple(same["net_arch"]), "torch_threads": same["torch_threads"]}
 
 
 def lean_row(task: str, agent_steps: int, config: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -75,28 +82,30 @@ def env_alone(task: str, num_envs: int, min_time: float = 0.5) -> float:
 
 
 def learning_loop(agent_steps: int = 65536, repeats: int = 2, systems: tuple[str, ...] = TASKS,
-                  log: Any = print) -> dict[str, Any]:
+                  same: dict[str, Any] = SAME, log: Any = print) -> dict[str, Any]:
     """The section: per training task, lean PPO and SB3 PPO rows (best of ``repeats``
-    interleaved runs of about ``agent_steps`` each), ``vs_sb3`` and the targets."""
+    interleaved runs of about ``agent_steps`` each, both with the settings ``same``), ``vs_sb3``
+    and the targets."""
     from satenv import tasks
 
-    out: dict[str, Any] = {"same_config": {"lean_ppo": {k: list(v) if isinstance(v, tuple) else v for k, v in SAME.items()},
-                                           "sb3_ppo": FAST_CONFIGS["sb3_ppo"]},
+    sb3 = sb3_config(same)
+    out: dict[str, Any] = {"same_config": {"lean_ppo": {k: list(v) if isinstance(v, tuple) else v for k, v in same.items()},
+                                           "sb3_ppo": {**sb3, "net_arch": list(sb3["net_arch"])}},
                            "load_average_at_start": _load(), "tasks": {}, "targets": [],
                            "benchmarl_mappo": {"skipped": "its runner trains on an env id's defaults, not on "
                                                           "a task; measured by the learning section"}}
     first = tasks.training_task(systems[0]).name
-    lean_row(first, 1)                                   # warm-up: torch's one-time costs
-    end_to_end("sb3_ppo", first, 64)
+    lean_row(first, 1, same)                             # warm-up: torch's one-time costs
+    end_to_end("sb3_ppo", first, 64, sb3)
     for system in systems:
         task = tasks.training_task(system).name
-        lean, sb3 = [], []
+        lean, ref = [], []
         for _ in range(repeats):
-            lean.append(lean_row(task, agent_steps))
-            sb3.append(end_to_end("sb3_ppo", task, agent_steps))
-        best = {"lean_ppo": max(lean, key=_rate), "sb3_ppo": max(sb3, key=_rate)}
+            lean.append(lean_row(task, agent_steps, same))
+            ref.append(end_to_end("sb3_ppo", task, agent_steps, sb3))
+        best = {"lean_ppo": max(lean, key=_rate), "sb3_ppo": max(ref, key=_rate)}
         row: dict[str, Any] = {"system": system, **best,
-                               "env_alone_agent_steps_per_s": env_alone(task, SAME["num_envs"])}
+                               "env_alone_agent_steps_per_s": env_alone(task, same["num_envs"])}
         if "skipped" not in best["sb3_ppo"]:
             row["vs_sb3"] = _rate(best["lean_ppo"]) / _rate(best["sb3_ppo"])
             out["targets"].append({"name": f"(g) lean PPO / SB3 PPO agent-steps/s, {task}", "value": row["vs_sb3"],
