@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from satenv.bench.scoreboard import SCENARIOS, ScoreboardError, aggregate, rank
+from satenv.bench.scoreboard import TASKS, ScoreboardError, aggregate, rank
 from satenv.bench.scoreboard.board import reaggregate
 from satenv.bench.scoreboard.headline import (
     FIGURE,
@@ -14,7 +14,8 @@ from satenv.bench.scoreboard.headline import (
     headline_section,
     is_learned,
 )
-from satenv.bench.scoreboard.registry import SYSTEMS, discover_trained_policies
+from satenv.bench.scoreboard.headline import paper_systems
+from satenv.bench.scoreboard.registry import discover_trained_policies
 
 SCEN = "cluster-case1-random"
 
@@ -37,10 +38,10 @@ def _rows(records, systems=None):
 
 
 def test_systems_name_registered_scenarios_ranked_for_a_shipped_policy():
-    ranked = {s for spec in discover_trained_policies().values() for s in spec.scenarios or ()}
-    for system, scenarios in SYSTEMS.items():
-        assert scenarios and set(scenarios) <= set(SCENARIOS), system
-        assert scenarios[0] in ranked, f"{system}: no shipped policy is ranked on {scenarios[0]}"
+    ranked = {s for spec in discover_trained_policies().values() for s in spec.tasks or ()}
+    for system, names in paper_systems().items():
+        assert names and set(names) <= set(TASKS), system
+        assert names[0] in ranked, f"{system}: no shipped policy is ranked on {names[0]}"
 
 
 def test_learned_names():
@@ -56,7 +57,7 @@ def test_best_of_each_kind_by_the_board_ranking():
     records += [_ep("trained:a+shield", s, rmse=1.8) for s in range(4)]
     records += [_ep("trained:b", s, success=s == 0, rmse=0.1) for s in range(4)]  # lowest RMSE, worse success
     (row,) = _rows(records)
-    assert (row["system"], row["scenario"]) == ("cluster", SCEN)
+    assert (row["system"], row["task"]) == ("cluster", SCEN)
     assert row["scripted"]["policy"] == "tube_rdmpc" and row["learned"]["policy"] == "trained:a"
     assert row["scripted"]["success"] == 1.0 and row["scripted"]["episodes"] == 4
     assert row["ratios"] == {"matched_seeds": 4, "rmse_ratio": pytest.approx(0.75), "delta_v_ratio": 1.0}
@@ -91,7 +92,7 @@ def test_no_matched_seed_no_ratio_and_missing_kind():
     line = headline_section([row])[-4]
     assert line.endswith("| – | – | 0 |"), line
     (only,) = _rows([_ep("dmpc", s, scenario="cluster-case1") for s in range(2)])  # fallback scenario
-    assert only["scenario"] == "cluster-case1" and only["learned"] is None
+    assert only["task"] == "cluster-case1" and only["learned"] is None
     assert only["ratios"]["matched_seeds"] == 0
     assert _rows([_ep("dmpc", 0, scenario="platoon-PLF-cw")]) == []            # system not on the board
 
@@ -134,7 +135,7 @@ def test_reaggregate_writes_the_summary_at_the_top(tmp_path):
         ("tube_rdmpc", 0), ("tube_rdmpc", 1), ("trained:x", 0), ("trained:x", 1)]
     assert board.headline[0]["ratios"]["rmse_ratio"] == 1.0
     assert FIGURE not in md and not (tmp_path / "plots").exists()
-    assert json.loads((tmp_path / "scoreboard.json").read_text())["headline"][0]["scenario"] == SCEN
+    assert json.loads((tmp_path / "scoreboard.json").read_text())["headline"][0]["task"] == SCEN
     (tmp_path / "scoreboard.json").unlink()
     with pytest.raises(ScoreboardError, match="scoreboard.json"):
         reaggregate(tmp_path)
@@ -198,9 +199,9 @@ def test_an_episode_behind_the_filter_records_its_share_of_agent_steps():
     import numpy as np
 
     import satenv
-    from satenv.bench.scoreboard.specs import episode_metrics
     from satenv.rollout import rollout
     from satenv.safety import shield
+    from satenv.scoring import episode_record
 
     class FullThrust:
         def reset(self, seed=None):
@@ -211,8 +212,8 @@ def test_an_episode_behind_the_filter_records_its_share_of_agent_steps():
 
     env = satenv.platoon_v0(preset="pereira2022", randomize=True, max_steps=6)
     traj = rollout(env, shield(FullThrust(), env), seed=0)
-    rec = episode_metrics(traj, SCENARIOS["platoon-pereira2022-random"])
+    rec = episode_record(traj, 0, len(env.possible_agents))
     assert rec["interventions_per_agent_step"] == pytest.approx(
-        rec["interventions"] / (traj.steps * len(env.possible_agents)))
-    plain = episode_metrics(rollout(env, FullThrust(), seed=0), SCENARIOS["platoon-pereira2022-random"])
-    assert plain["interventions"] is None and plain["interventions_per_agent_step"] is None
+        rec["safety_interventions"] / (traj.steps * len(env.possible_agents)))
+    plain = episode_record(rollout(env, FullThrust(), seed=0), 0, len(env.possible_agents))
+    assert "safety_interventions" not in plain and "interventions_per_agent_step" not in plain

@@ -312,15 +312,15 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     collision in the chain formation voids it everywhere."""
     baselines = pytest.importorskip("baselines")
     pytest.importorskip("daqp")
-    from satenv.bench.scoreboard import Task, run_episode
-    from satenv.bench.scoreboard.registry import POLICIES, SCENARIOS
+    from satenv.bench.scoreboard import Job, run_episode
+    from satenv.bench.scoreboard.registry import POLICIES, TASKS
     from satenv.training.evaluate import evaluate
 
-    spec = SCENARIOS["platoon-PLF-cw"]
+    spec = TASKS["platoon-PLF-cw"]
     env = spec.make()
     traj = rollout(env, baselines.DMPC(env), seed=0)
     summary = metrics.summary(traj)
-    record = run_episode(Task(spec, POLICIES["dmpc"], 0))
+    record = run_episode(Job(spec, POLICIES["dmpc"], 0))
     env2 = spec.make()
     evaluated = evaluate(env2, baselines.DMPC(env2), [0])["episodes"][0]
     assert summary["collisions"] > 0 and summary["final_error_m"] <= 1.0
@@ -328,7 +328,7 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     assert record["collisions"] == summary["collisions"] == evaluated["collisions"]
 
     from satenv.baselines.base import ZeroPolicy
-    from satenv.bench.scoreboard import ScenarioSpec
+    from satenv.bench.scoreboard import TaskSpec
 
     x0 = [[0.0, -8.0 * (k + 1), 0.0, 0, 0, 0] for k in range(4)]
     x0[1][1] = -9.0                      # 1 m from follower 1: a collision at reset
@@ -337,7 +337,7 @@ def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
                   "initial_state": x0, "success_tol": 100.0, "collision_voids_success": voids}
         env = satenv.make("platoon_v0", **kwargs)
         summary = metrics.summary(rollout(env, ZeroPolicy(env), seed=0))
-        record = run_episode(Task(ScenarioSpec("chain", "platoon_v0", kwargs), POLICIES["zero"], 0))
+        record = run_episode(Job(TaskSpec("chain", "platoon_v0", kwargs), POLICIES["zero"], 0))
         assert summary["collisions"] > 0 and record["collisions"] == summary["collisions"]
         assert summary["success"] is record["success"] is (not voids)
 

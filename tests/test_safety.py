@@ -172,7 +172,8 @@ def test_make_and_make_vec_with_safety_filter_report_and_penalise():
     env.reset(seed=0)
     _, rewards, _, _, infos = env.step({a: np.array([0.0, 1.0, 0.0]) for a in env.agents})
     assert {"safety_intervened", "safety_delta", "safety_infeasible", "safety_active"} <= set(infos["follower_1"])
-    assert isinstance(env, satenv.envs.platoon_v0.PlatoonEnv)
+    assert isinstance(env, safety.wrapper.SafetyFilterWrapper) and type(env).metadata["name"] == "platoon_v0"
+    assert isinstance(env.unwrapped, satenv.envs.platoon_v0.PlatoonEnv) and env.core is env.unwrapped.core
     plain = satenv.make("platoon_v0")
     plain.reset(seed=0)
     _, ref, _, _, _ = plain.step({a: np.array([0.0, 1.0, 0.0]) for a in plain.agents})
@@ -235,7 +236,7 @@ def test_scoreboard_ranks_a_policy_beside_its_shielded_twin(tmp_path):
                            seeds="0", plots=False, progress=False)
     agg = board.aggregates["platoon-chain-cw"]
     assert set(agg) == {"random", "random+shield"}
-    assert agg["random+shield"]["interventions"]["n"] == 1 and agg["random"]["interventions"]["n"] == 0
+    assert agg["random+shield"]["safety_interventions"]["n"] == 1 and agg["random"]["safety_interventions"]["n"] == 0
     assert agg["random+shield"]["collisions"]["mean"] == 0
     assert "interventions" in board.markdown and "mean ‖Δu‖" in board.markdown
 

@@ -115,3 +115,33 @@ def test_perturbation_entries_puts_the_first_n_entries_under_every_perturbation(
         with pytest.raises(SystemExit):
             safety_alone.main(entries + base + ["--perturbation-entries", n])
         assert "--perturbation-entries" in capsys.readouterr().err
+
+
+def test_both_ways_is_built_with_load_only_and_the_board_uses_it():
+    """satenv.training.both_ways: the network alone and as shipped; the board's trained: entries
+    name it and keep the fingerprints of logs written when they called load directly."""
+    from satenv import tasks, training
+    from satenv.bench.scoreboard.registry import discover_trained_policies
+    from satenv.bench.scoreboard.specs import LEARNED_TARGET, _fingerprint, _content_hash
+    from satenv.safety import Shield
+    from satenv.training import both_ways
+
+    env = tasks.training_task("platoon-pereira2023").make_env()
+    filtered = training.POLICIES_DIR / "platoon_tplf_ppo_shield"
+    assert both_ways.ships_filtered(filtered)
+    assert isinstance(both_ways.policy(filtered, env), Shield)
+    assert not isinstance(both_ways.policy(filtered, env, both_ways.NETWORK_ALONE), Shield)
+    with pytest.raises(ValueError, match="variant"):
+        both_ways.policy(filtered, env, "shielded")
+    plain = training.POLICIES_DIR / "platoon_tplf_ppo"
+    eps = both_ways.evaluate(plain, env, [900_000, 900_001], shipped_seeds=1)
+    assert eps[both_ways.AS_SHIPPED] == eps[both_ways.NETWORK_ALONE][:1]        # shipped without it: run once
+    specs = discover_trained_policies()
+    for name, variant, kwargs in (("trained:platoon_tplf_ppo_shield", both_ways.AS_SHIPPED, {}),
+                                  ("trained:platoon_tplf_ppo_shield:network", both_ways.NETWORK_ALONE,
+                                   {"shielded": False})):
+        spec = specs[name]
+        assert (spec.target, dict(spec.kwargs)) == (LEARNED_TARGET, {"variant": variant})
+        assert spec.fingerprint() == _fingerprint({"targets": ["satenv.training:load"], "kwargs": kwargs,
+                                                   "checkpoint": _content_hash(filtered)})
+        assert isinstance(spec.make(env), Shield) == (variant == both_ways.AS_SHIPPED)

@@ -18,7 +18,7 @@ from satenv.bench.scoreboard import (
     POLICIES,
     TIMING_FIELDS,
     PolicySpec,
-    ScenarioSpec,
+    TaskSpec,
     ScoreboardError,
     ScoreboardWarning,
     Unavailable,
@@ -35,7 +35,7 @@ from satenv.bench.scoreboard import (
 
 TESTS = Path(__file__).resolve().parent
 # a cheap scenario: the default platoon, 20 steps
-TOY = {"toy": ScenarioSpec("toy", "platoon_v0", {"max_steps": 20}, "4 followers, 20 steps")}
+TOY = {"toy": TaskSpec("toy", "platoon_v0", {"max_steps": 20}, "4 followers, 20 steps")}
 TWO = {k: POLICIES[k] for k in ("zero", "random")}
 
 
@@ -55,7 +55,7 @@ class WrongObsPolicy:
 
 
 def _board(out, **kw):
-    kw.setdefault("scenario_registry", TOY)
+    kw.setdefault("task_registry", TOY)
     kw.setdefault("policy_registry", TWO)
     kw.setdefault("progress", False)
     kw.setdefault("plots", False)
@@ -74,7 +74,9 @@ def test_end_to_end_files_and_schema(tmp_path):
     assert len(lines) == 4
     for line in lines:
         rec = json.loads(line)
-        assert {"scenario", "policy", "seed", "env", "error", "wall_s", *METRICS} <= set(rec)
+        filter_only = {"safety_interventions", "interventions_per_agent_step", "safety_mean_du", "safety_infeasible"}
+        assert {"scenario", "policy", "seed", "env", "error", "wall_s", *METRICS} - filter_only <= set(rec)
+        assert not filter_only & set(rec)            # the one record: the filter's fields only behind it
         assert rec["env"] == "platoon_v0" and rec["error"] is None and rec["steps"] == 20
     data = json.loads((tmp_path / "scoreboard.json").read_text())
     assert set(data) == {"header", "ranking", "aggregates", "summary", "episodes"}
@@ -169,7 +171,7 @@ def test_ray_backend_runs_locally(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"policies": "zero,zeroo"}, "unknown policy 'zeroo'"),
-    ({"scenarios": "toy,platoon-XYZ"}, "unknown scenario 'platoon-XYZ'"),
+    ({"scenarios": "toy,platoon-XYZ"}, "unknown task 'platoon-XYZ'"),
     ({"checkpoints": ["/nonexistent/policy"]}, "no such file"),
     ({"policy_registry": {"wrong": PolicySpec("wrong", "test_scoreboard:WrongObsPolicy", learned=True)},
       "policies": "wrong", "scenarios": "toy"}, r"expects observations of shape \(5,\)"),
@@ -196,7 +198,7 @@ def test_unreadable_checkpoint_is_a_clear_error(tmp_path):
 
 def test_cli_errors_and_list(capsys):
     assert main(["--scenarios", "no-such-scenario", "--no-progress"]) == 2
-    assert "unknown scenario 'no-such-scenario'" in capsys.readouterr().err
+    assert "unknown task 'no-such-scenario'" in capsys.readouterr().err
     assert main(["--list"]) == 0
     assert "platoon-PLF-cw" in capsys.readouterr().out
 
@@ -206,9 +208,9 @@ def test_platoon_with_dmpc_through_the_board(tmp_path):
         POLICIES["dmpc"].check_available()
     except Unavailable as why:
         pytest.skip(str(why))
-    scen = registry.SCENARIOS["platoon-PLF-cw"]
-    short = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "max_steps": 100})}
-    board = _board(tmp_path, seeds="0", scenario_registry=short,
+    scen = registry.TASKS["platoon-PLF-cw"]
+    short = {"platoon-short": TaskSpec("platoon-short", scen.env_id, {**scen.kwargs, "max_steps": 100})}
+    board = _board(tmp_path, seeds="0", task_registry=short,
                    policy_registry={k: POLICIES[k] for k in ("zero", "dmpc")})
     assert board.ranking["platoon-short"] == ["dmpc", "zero"]   # closer to the formation than coasting
     assert all(r["error"] is None for r in board.records)
@@ -227,13 +229,13 @@ def test_only_a_missing_optional_dependency_makes_an_entry_unavailable(tmp_path,
         specs.resolve("satenv.envs.not_landed_yet_xyz:parallel_env")
     assert specs.resolve("satenv.baselines.base:ZeroPolicy") is POLICIES["zero"].factory()
     with pytest.raises(ScoreboardError, match="env_id must be one of"):
-        ScenarioSpec("x", "no_such_env_v0")
+        TaskSpec("x", "no_such_env_v0")
     with pytest.raises(ScoreboardError, match="'module:attribute'"):
         PolicySpec("x", ("satenv.baselines:DMPC",))
 
 
 def test_policy_fits_by_env_id():
-    envs = {i: specs.ScenarioSpec("s", i).make() for i in ("platoon_v0", "cluster_v0")}
+    envs = {i: specs.TaskSpec("s", i).make() for i in ("platoon_v0", "cluster_v0")}
     fits = {(name, i) for name, spec in POLICIES.items() for i, env in envs.items()
             if specs.policy_fits(spec, env)}
     assert fits == {("zero", "platoon_v0"), ("zero", "cluster_v0"), ("random", "platoon_v0"),
@@ -333,11 +335,11 @@ def test_scenario_seed_caps(tmp_path):
 def test_board_presets_name_registered_entries():
     for preset in (registry.QUICK, registry.FULL):
         for name in preset.get("scenarios", []):
-            assert name in registry.SCENARIOS, name
+            assert name in registry.TASKS, name
         for name in preset.get("policies", []):
             assert name in registry.POLICIES or name.startswith("trained:"), name
         for name in preset["scenario_seeds"]:
-            assert name in registry.SCENARIOS, name
+            assert name in registry.TASKS, name
 
 
 def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
@@ -352,15 +354,15 @@ def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
                            "--env-id", "platoon_v0", "--env-kwargs", '{"randomize": true}', "--out-dir", str(run)],
                           capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    scen = registry.SCENARIOS["platoon-random-cw"]
-    reg = {"platoon-short": ScenarioSpec("platoon-short", scen.env_id, {**scen.kwargs, "max_steps": 20}),
-           "platoon-2022": ScenarioSpec("platoon-2022", scen.env_id, {"preset": "pereira2022"})}  # 2 followers
-    board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero",
+    scen = registry.TASKS["platoon-random-cw"]
+    reg = {"platoon-short": TaskSpec("platoon-short", scen.env_id, {**scen.kwargs, "max_steps": 20}),
+           "platoon-2022": TaskSpec("platoon-2022", scen.env_id, {"preset": "pereira2022"})}  # 2 followers
+    board = _board(tmp_path / "ok", seeds="0", task_registry=reg, policies="zero",
                    scenarios="platoon-short", checkpoints=[str(run / "final")])
     assert {r["policy"] for r in board.records} == {"zero", "user:run"}   # named after the run folder
     assert all(r["error"] is None for r in board.records)
-    with pytest.raises(ScoreboardError, match=r"user:run cannot run on scenario platoon-2022.*\(36,\)"):
-        _board(tmp_path / "bad", seeds="0", scenario_registry=reg, policies="zero",
+    with pytest.raises(ScoreboardError, match=r"user:run cannot run on task platoon-2022.*\(36,\)"):
+        _board(tmp_path / "bad", seeds="0", task_registry=reg, policies="zero",
                scenarios="platoon-2022", checkpoints=[str(run / "final")])
     assert not (tmp_path / "bad" / EPISODES_FILE).exists()
 
@@ -386,14 +388,14 @@ def test_two_run_folders_get_two_names_and_a_clash_is_an_error(tmp_path):
     pytest.importorskip("stable_baselines3")
     a = _shipped_copy(tmp_path / "runs" / "a" / "final")
     b = _shipped_copy(tmp_path / "runs" / "b" / "final")
-    scen = registry.SCENARIOS["platoon-tplf30-random-cw"]
-    reg = {"short": ScenarioSpec("short", scen.env_id, {**scen.kwargs, "max_steps": 10})}
-    board = _board(tmp_path / "ok", seeds="0", scenario_registry=reg, policies="zero", checkpoints=[a, b])
+    scen = registry.TASKS["platoon-tplf30-random-cw"]
+    reg = {"short": TaskSpec("short", scen.env_id, {**scen.kwargs, "max_steps": 10})}
+    board = _board(tmp_path / "ok", seeds="0", task_registry=reg, policies="zero", checkpoints=[a, b])
     assert {r["policy"] for r in board.records} == {"zero", "user:a", "user:b"}
     assert all(r["error"] is None for r in board.records)
     c = _shipped_copy(tmp_path / "other" / "a" / "final")
     with pytest.raises(ScoreboardError, match="both named 'user:a'.*rename"):
-        _board(tmp_path / "clash", seeds="0", scenario_registry=reg, policies="zero", checkpoints=[a, c])
+        _board(tmp_path / "clash", seeds="0", task_registry=reg, policies="zero", checkpoints=[a, c])
 
 
 def test_resume_quarantines_torn_and_corrupt_lines(tmp_path):
@@ -448,7 +450,7 @@ class DiesOnSeed1(SlowPolicy):
 def test_a_worker_that_dies_costs_only_its_episode(tmp_path):
     pols = {"dies": PolicySpec("dies", "test_scoreboard:DiesOnSeed1", dry_run=False)}
     board = _board(tmp_path, seeds="0-3", workers=2, policy_registry=pols,
-                   scenario_registry={"toy": ScenarioSpec("toy", "platoon_v0", {"max_steps": 5})})
+                   task_registry={"toy": TaskSpec("toy", "platoon_v0", {"max_steps": 5})})
     errors = {r["seed"]: r["error"] for r in board.records}
     assert sorted(errors) == [0, 1, 2, 3]
     assert errors[1].startswith("WorkerDied") and [errors[s] for s in (0, 2, 3)] == [None] * 3
@@ -460,8 +462,8 @@ def test_a_worker_killed_once_is_retried(tmp_path, monkeypatch):
     # the workers import this module afresh: the marker goes through the environment
     monkeypatch.setenv("SCOREBOARD_TEST_ONCE", str(marker))
     pols = {"once": PolicySpec("once", "test_scoreboard:DiesOnceViaEnv", dry_run=False)}
-    scen = {"toy": ScenarioSpec("toy", "platoon_v0", {"max_steps": 5})}
-    board = _board(tmp_path / "run", seeds="0-3", workers=2, policy_registry=pols, scenario_registry=scen)
+    scen = {"toy": TaskSpec("toy", "platoon_v0", {"max_steps": 5})}
+    board = _board(tmp_path / "run", seeds="0-3", workers=2, policy_registry=pols, task_registry=scen)
     assert marker.exists()                                          # a worker did die
     assert all(r["error"] is None for r in board.records) and len(board.records) == 4
 
@@ -500,10 +502,10 @@ def test_workers_die_with_a_killed_parent(tmp_path):
     script = textwrap.dedent(f"""
         import sys
         sys.path.insert(0, {str(TESTS)!r})
-        from test_scoreboard import _board, PolicySpec, ScenarioSpec
+        from test_scoreboard import _board, PolicySpec, TaskSpec
         _board({str(tmp_path / "run")!r}, seeds="0-9", workers=2,
                policy_registry={{"slow": PolicySpec("slow", "test_scoreboard:SlowPolicy", dry_run=False)}},
-               scenario_registry={{"toy": ScenarioSpec("toy", "platoon_v0", {{"max_steps": 200}})}})
+               task_registry={{"toy": TaskSpec("toy", "platoon_v0", {{"max_steps": 200}})}})
     """)
     env = dict(os.environ, SCOREBOARD_TEST_STARTED=str(started))
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=TESTS.parent, env=env,
@@ -541,8 +543,8 @@ def test_perturbed_scenarios_run_and_fill_the_robustness_table(tmp_path):
 
     name = "platoon-pereira2022-random"
     task = tasks.get(name)
-    reg = {name: ScenarioSpec(name, task.env_id, {**task.env_kwargs, "max_steps": 5})}
-    board = _board(tmp_path / "b", seeds="900000-900001", scenario_registry=reg, policies="zero",
+    reg = {name: TaskSpec(name, task.env_id, {**task.env_kwargs, "max_steps": 5})}
+    board = _board(tmp_path / "b", seeds="900000-900001", task_registry=reg, policies="zero",
                    scenarios=f"{name},{name}@nav-*,{name}@thrust-80")
     table = robustness(board)[name]["zero"]
     assert set(table) == {"nominal", "nav-0.1m", "nav-1m", "thrust-80"}

@@ -35,9 +35,9 @@ SKIP = {"platoon-swarm256-ring-cw": "256 followers: the pairwise rows of 100 cop
 def _extra_scenarios() -> dict[str, Any]:
     """Scenarios beside the scoreboard's: formation_v0 with a separation to keep (its presets have
     ``collision_distance = 0``: no separation constraint at all)."""
-    from satenv.bench.scoreboard.specs import ScenarioSpec
+    from satenv.bench.scoreboard.specs import TaskSpec
 
-    return {"formation-kannan2022-position-random-sep5": ScenarioSpec(
+    return {"formation-kannan2022-position-random-sep5": TaskSpec(
         "formation-kannan2022-position-random-sep5", "formation_v0",
         {"preset": "kannan2022-position", "randomize": True, "collision_distance": 5.0},
         "kannan2022 §5.1, randomised starts, collision_distance = 5 m")}
@@ -82,10 +82,10 @@ def random_policy(scenario: Any, seeds: int, filtered: bool, base: int = HELD_OU
 
 def random_benchmark(seeds: int = 100, names: list[str] | None = None, log=print) -> dict[str, Any]:
     """:func:`random_policy` filtered and unfiltered on every scoreboard scenario (or ``names``)."""
-    from satenv.bench.scoreboard.registry import SCENARIOS
+    from satenv.bench.scoreboard.registry import TASKS
 
     out: dict[str, Any] = {}
-    for name, spec in {**SCENARIOS, **_extra_scenarios()}.items():
+    for name, spec in {**TASKS, **_extra_scenarios()}.items():
         if names is not None and name not in names:
             continue
         if name in SKIP:
@@ -134,14 +134,13 @@ def _learned_pair(name: str, scen: str, seeds: int, out_dir: str) -> dict[str, A
     board = run_scoreboard(f"{out_dir}/{name.split(':')[1]}", scenarios=scen, policies=f"{name},{name}+shield",
                            seeds=f"{HELD_OUT}-{HELD_OUT + seeds - 1}", plots=False, progress=False, overwrite=True)
     agg = board.aggregates[scen]
+    names = {"interventions": "safety_interventions", "mean_du": "safety_mean_du", "infeasible_steps": "safety_infeasible"}
     out = {}
     for pol in agg:
-        recs = [r for r in board.records if r["policy"] == pol]
         out["filtered" if pol.endswith("+shield") else "unfiltered"] = {
-            **{m: agg[pol][m]["mean"] for m in ("success", "collisions", "violations", "interventions",
-                                                "mean_du", "infeasible_steps", "min_separation_m")},
-            "collision_episodes": sum(1 for r in recs if r["collisions"]),
-            "violation_episodes": sum(1 for r in recs if r["violations"])}
+            **{m: agg[pol][names.get(m, m)]["mean"] for m in ("success", "collisions", "violations", "interventions",
+                                                              "mean_du", "infeasible_steps", "min_separation_m")},
+            "collision_episodes": agg[pol]["collision_episodes"], "violation_episodes": agg[pol]["violation_episodes"]}
     return out
 
 

@@ -23,7 +23,7 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
                  policies: tuple[str, ...] | None = None) -> dict:
     """Median / p95 wall time of ``act()`` (all agents) and of the solver's own ``solve_ms`` /
     ``qp_ms`` entries, over the first decisions of one episode (seed 0)."""
-    from satenv.bench.scoreboard.registry import POLICIES, SCENARIOS
+    from satenv.bench.scoreboard.registry import POLICIES, TASKS
     from satenv.bench.scoreboard.specs import Unavailable
 
     out: dict[str, Any] = {}
@@ -32,7 +32,7 @@ def solver_times(max_decisions_scale: float = 1.0, max_seconds: float = 60.0,
             continue
         key = f"{pol_name}@{scen_name}"
         try:
-            env = SCENARIOS[scen_name].make()
+            env = TASKS[scen_name].make()
             policy = POLICIES[pol_name].make(env)
         except Unavailable as why:
             out[key] = {"skipped": str(why)}
@@ -71,9 +71,9 @@ FAST_SOLVER_TARGETS_MS = {"tube_rdmpc@cluster-case1": 5.0, "nmpc@servicing-perei
 def _record(scen_name: str, make: Callable, hook: str, decisions: int) -> tuple[Any, list[tuple]]:
     """Run ``make(env)`` (the ipopt reference) for ``decisions`` and record the arguments of every
     call of its solve method ``hook`` (``"nlp.solve"`` or ``"_run_nlp"``)."""
-    from satenv.bench.scoreboard.registry import SCENARIOS
+    from satenv.bench.scoreboard.registry import TASKS
 
-    env = SCENARIOS[scen_name].make()
+    env = TASKS[scen_name].make()
     ref = make(env)
     owner_path, name = hook.rsplit(".", 1) if "." in hook else ("", hook)
     owner = ref if not owner_path else getattr(ref, owner_path)

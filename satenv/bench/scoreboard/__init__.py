@@ -1,4 +1,4 @@
-"""The satenv scoreboard: every policy on every scenario over seeds, ranked on the papers' metrics.
+"""The satenv scoreboard: every policy on every task over seeds, ranked on the papers' metrics.
 
 Usage::
 
@@ -11,28 +11,28 @@ Usage::
 
 The package, one job per module:
 
-* :mod:`~satenv.bench.scoreboard.specs` — :class:`ScenarioSpec` (``satenv.make(env_id, **kwargs)``),
-  :class:`PolicySpec`, and the two rules: :func:`policy_fits` (which policy runs on which env)
-  and :func:`episode_metrics` (how an episode is scored, success included);
-* :mod:`~satenv.bench.scoreboard.registry` — the tables ``SCENARIOS``, ``POLICIES``, ``QUICK``,
+* :mod:`~satenv.bench.scoreboard.specs` — :class:`TaskSpec` (a task of :mod:`satenv.tasks`:
+  ``satenv.make(env_id, **kwargs)``), :class:`PolicySpec`, and the rule :func:`policy_fits` (which
+  policy runs on which env); an episode is scored by :func:`satenv.scoring.episode_record`;
+* :mod:`~satenv.bench.scoreboard.registry` — the tables ``TASKS``, ``POLICIES``, ``QUICK``,
   ``FULL``, shipped trained policies and ``--policy`` folders (``runs/a/final`` -> ``user:a``);
 * :mod:`~satenv.bench.scoreboard.plan` — selection (names or globs), seeds, preflight: every
-  (scenario, policy) pair is built once (cheap or learned policies act once) before any episode
+  (task, policy) pair is built once (cheap or learned policies act once) before any episode
   runs, so bad input fails fast with a :class:`ScoreboardError`;
-* :mod:`~satenv.bench.scoreboard.runner` — one episode, and the JSONL log ``OUT/episodes.jsonl``:
+* :mod:`~satenv.bench.scoreboard.runner` — one episode (a :class:`Job`), and the JSONL log ``OUT/episodes.jsonl``:
   one line per finished episode, appended and ``fsync``-ed; ``--resume`` skips the keys already
   done, and moves a torn or corrupt line to ``episodes.jsonl.corrupt`` with a warning;
 * :mod:`~satenv.bench.scoreboard.backends` — serial, a spawn process pool (``--workers K``; workers
   die with the board, a dead worker costs only its episode) or Ray (``--backend ray``): they
   only change *where* episodes run, so records equal a serial run's except the measured times
   (:data:`TIMING_FIELDS`);
-* :mod:`~satenv.bench.scoreboard.report` — aggregation (mean +- 95 % CI half-width over seeds:
-  Student t for metrics, Wilson for the success rate), ranking (safety first: success rate desc, collision episodes asc, violation episodes asc, RMSE asc,
+* :mod:`~satenv.bench.scoreboard.report` — aggregation (the counts of :func:`satenv.scoring.aggregate`;
+  mean and 95 % interval over seeds: percentile bootstrap for metrics, Wilson for the success rate), ranking (safety first: success rate desc, collision episodes asc, violation episodes asc, RMSE asc,
   delta-v asc) and the outputs in ``OUT`` (default ``results/scoreboard``,
   ``results/scoreboard/quick`` with ``--quick``): ``scoreboard.md``, ``scoreboard.json``,
   ``scoreboard.csv``, ``episodes.csv``, ``plots/<metric>.png``, ``plots/trajectories/*.png``;
 * :mod:`~satenv.bench.scoreboard.headline` — the summary at the top of ``scoreboard.md``: per system
-  of the papers (``registry.SYSTEMS``), the best scripted and the best learned policy side by
+  of the papers (:data:`satenv.tasks.SYSTEMS`), the best scripted and the best learned policy side by
   side, ratios on matched completed episodes, and ``plots/headline.png``;
 * :mod:`~satenv.bench.scoreboard.board` — :func:`run_scoreboard`, the steps above in order, and
   :func:`reaggregate` (re-write a board's files from its ``episodes.jsonl``, running nothing);
@@ -50,11 +50,10 @@ _EXPORTS = {
     "board": ("reaggregate", "run_scoreboard"),
     "cli": ("build_parser", "main"),
     "plan": ("parse_seeds",),
-    "registry": ("FULL", "POLICIES", "QUICK", "SCENARIOS", "discover_trained_policies", "user_policy_name"),
+    "registry": ("FULL", "POLICIES", "QUICK", "TASKS", "discover_trained_policies", "user_policy_name"),
     "report": ("KEY", "METRICS", "TIMING_FIELDS", "Board", "aggregate", "rank"),
-    "runner": ("EPISODES_FILE", "ScoreboardWarning", "Task", "read_episodes", "run_episode"),
-    "specs": ("PolicySpec", "ScenarioSpec", "ScoreboardError", "Unavailable", "episode_metrics",
-              "policy_fits"),
+    "runner": ("EPISODES_FILE", "Job", "ScoreboardWarning", "read_episodes", "run_episode"),
+    "specs": ("PolicySpec", "ScoreboardError", "TaskSpec", "Unavailable", "policy_fits"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

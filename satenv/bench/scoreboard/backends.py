@@ -25,7 +25,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from satenv.bench._env import single_thread_blas
-from satenv.bench.scoreboard.runner import Task, error_record, run_episode
+from satenv.bench.scoreboard.runner import Job, error_record, run_episode
 from satenv.bench.scoreboard.specs import ScoreboardError
 
 __all__ = ["iter_pool", "iter_ray", "iter_serial", "stream", "worker_init"]
@@ -33,15 +33,15 @@ __all__ = ["iter_pool", "iter_ray", "iter_serial", "stream", "worker_init"]
 PARENT_POLL_S = 0.5
 Record = dict[str, Any]
 Run = Callable[[Any], Record]
-"""What a backend runs on each task (default :func:`~satenv.bench.scoreboard.runner.run_episode`;
+"""What a backend runs on each job (default :func:`~satenv.bench.scoreboard.runner.run_episode`;
 another grid passes its own picklable top-level function, e.g. ``satenv.bench.learning``'s)."""
 Lost = Callable[[Any, str], Record]
-"""The record of a task whose worker died (default :func:`~satenv.bench.scoreboard.runner.error_record`)."""
+"""The record of a job whose worker died (default :func:`~satenv.bench.scoreboard.runner.error_record`)."""
 
 
-def iter_serial(tasks: list[Task], run: Run = run_episode) -> Iterator[Record]:
-    for task in tasks:
-        yield run(task)
+def iter_serial(jobs: list[Job], run: Run = run_episode) -> Iterator[Record]:
+    for job in jobs:
+        yield run(job)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -85,15 +85,15 @@ def _new_pool(workers: int) -> ProcessPoolExecutor:
 class _Pool:
     """A process pool with at most ``workers`` episodes in flight, rebuilt when a worker dies."""
 
-    def __init__(self, tasks: list[Task], workers: int, run: Run = run_episode, lost: Lost = error_record) -> None:
+    def __init__(self, jobs: list[Job], workers: int, run: Run = run_episode, lost: Lost = error_record) -> None:
         self.workers, self.run, self.lost = workers, run, lost
-        self.pending: deque[Task] = deque(tasks)
-        self.suspects: deque[Task] = deque()      # in flight when a worker died: rerun alone
-        self.inflight: dict[Future, tuple[Task, bool]] = {}
+        self.pending: deque[Job] = deque(jobs)
+        self.suspects: deque[Job] = deque()      # in flight when a worker died: rerun alone
+        self.inflight: dict[Future, tuple[Job, bool]] = {}
         self.pool = _new_pool(workers)
 
-    def _submit(self, queue: deque[Task], alone: bool) -> bool:
-        """Start the next task of ``queue``; False (task kept) if the pool broke meanwhile."""
+    def _submit(self, queue: deque[Job], alone: bool) -> bool:
+        """Start the next job of ``queue``; False (job kept) if the pool broke meanwhile."""
         try:
             fut = self.pool.submit(self.run, queue[0])
         except BrokenProcessPool:   # a worker died after the last collect: rebuild first
@@ -118,25 +118,25 @@ class _Pool:
         done, _ = wait(self.inflight, return_when=FIRST_COMPLETED)
         broken = False
         for fut in done:
-            task, alone = self.inflight.pop(fut)
+            job, alone = self.inflight.pop(fut)
             try:
                 yield fut.result()
             except BrokenProcessPool:
                 broken = True
-                yield from self._lost(task, alone)
+                yield from self._lost(job, alone)
         if broken:
             yield from self._rebuild()
 
-    def _lost(self, task: Task, alone: bool) -> Iterator[Record]:
+    def _lost(self, job: Job, alone: bool) -> Iterator[Record]:
         if alone:   # died again, running alone: this episode kills its worker
-            yield self.lost(task, "WorkerDied: the worker process running this episode died "
+            yield self.lost(job, "WorkerDied: the worker process running this episode died "
                                      "(killed, or crashed in native code) twice, the second time alone")
         else:
-            self.suspects.append(task)
+            self.suspects.append(job)
 
     def _rebuild(self) -> Iterator[Record]:
-        for task, alone in list(self.inflight.values()):
-            yield from self._lost(task, alone)
+        for job, alone in list(self.inflight.values()):
+            yield from self._lost(job, alone)
         self.inflight.clear()
         self.pool.shutdown(wait=True, cancel_futures=True)
         self.pool = _new_pool(self.workers)
@@ -145,10 +145,10 @@ class _Pool:
         self.pool.shutdown(wait=True, cancel_futures=True)
 
 
-def iter_pool(tasks: list[Task], workers: int, run: Run = run_episode, lost: Lost = error_record
+def iter_pool(jobs: list[Job], workers: int, run: Run = run_episode, lost: Lost = error_record
               ) -> Iterator[Record]:
-    """Records of ``tasks`` run on ``workers`` spawn processes (see the module docstring)."""
-    pool = _Pool(tasks, workers, run, lost)
+    """Records of ``jobs`` run on ``workers`` spawn processes (see the module docstring)."""
+    pool = _Pool(jobs, workers, run, lost)
     try:
         while pool.pending or pool.suspects or pool.inflight:
             pool.fill()
@@ -175,11 +175,11 @@ def _ray_init(workers: int, address: str | None):
     return ray
 
 
-def iter_ray(tasks: list[Task], workers: int, address: str | None, run: Run = run_episode) -> Iterator[Record]:
-    """Records of ``tasks`` run as Ray tasks (a local Ray, or the cluster at ``address``)."""
+def iter_ray(jobs: list[Job], workers: int, address: str | None, run: Run = run_episode) -> Iterator[Record]:
+    """Records of ``jobs`` run as Ray tasks (a local Ray, or the cluster at ``address``)."""
     ray = _ray_init(workers, address)
     remote = ray.remote(num_cpus=1)(run)
-    pending = [remote.remote(t) for t in tasks]
+    pending = [remote.remote(t) for t in jobs]
     try:
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
@@ -189,12 +189,12 @@ def iter_ray(tasks: list[Task], workers: int, address: str | None, run: Run = ru
             ray.cancel(ref)
 
 
-def stream(tasks: list[Task], backend: str, workers: int, ray_address: str | None, run: Run = run_episode,
+def stream(jobs: list[Job], backend: str, workers: int, ray_address: str | None, run: Run = run_episode,
            lost: Lost = error_record) -> Iterator[Record]:
-    """The records of ``tasks`` from the chosen backend (``run`` on each task; ``lost`` for a task
+    """The records of ``jobs`` from the chosen backend (``run`` on each job; ``lost`` for a job
     whose worker died twice)."""
     if backend == "ray":
-        return iter_ray(tasks, workers, ray_address, run)
-    if workers > 1 and len(tasks) > 1:
-        return iter_pool(tasks, workers, run, lost)
-    return iter_serial(tasks, run)
+        return iter_ray(jobs, workers, ray_address, run)
+    if workers > 1 and len(jobs) > 1:
+        return iter_pool(jobs, workers, run, lost)
+    return iter_serial(jobs, run)

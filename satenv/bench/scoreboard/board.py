@@ -23,7 +23,7 @@ from satenv.bench.scoreboard.plan import (
 from satenv.bench.scoreboard.registry import (
     POLICIES,
     QUICK,
-    SCENARIOS,
+    TASKS,
     discover_trained_policies,
     user_policies,
 )
@@ -39,8 +39,8 @@ from satenv.bench.scoreboard.report import (
     summarize,
     write_outputs,
 )
-from satenv.bench.scoreboard.runner import EPISODES_FILE, EpisodeLog, Task, read_episodes
-from satenv.bench.scoreboard.specs import PolicySpec, ScenarioSpec, ScoreboardError
+from satenv.bench.scoreboard.runner import EPISODES_FILE, EpisodeLog, Job, read_episodes
+from satenv.bench.scoreboard.specs import PolicySpec, ScoreboardError, TaskSpec
 
 __all__ = ["reaggregate", "run_scoreboard"]
 
@@ -57,12 +57,12 @@ def _check_options(workers: int, backend: str, resume: bool, overwrite: bool) ->
         raise ScoreboardError("--resume and --overwrite contradict each other: pick one")
 
 
-def _registries(scenario_registry: Mapping[str, ScenarioSpec] | None,
+def _registries(task_registry: Mapping[str, TaskSpec] | None,
                 policy_registry: Mapping[str, PolicySpec] | None
-                ) -> tuple[dict[str, ScenarioSpec], dict[str, PolicySpec]]:
-    scen_reg = dict(SCENARIOS if scenario_registry is None else scenario_registry)
+                ) -> tuple[dict[str, TaskSpec], dict[str, PolicySpec]]:
+    task_reg = dict(TASKS if task_registry is None else task_registry)
     pol_reg = dict(POLICIES if policy_registry is None else policy_registry)
-    for reg in (scen_reg, pol_reg):
+    for reg in (task_reg, pol_reg):
         for key, spec in reg.items():
             if key != spec.name:
                 raise ScoreboardError(f"registry entry {key!r} holds a spec named {spec.name!r}: "
@@ -70,7 +70,7 @@ def _registries(scenario_registry: Mapping[str, ScenarioSpec] | None,
     if policy_registry is None:
         for name, spec in discover_trained_policies().items():
             pol_reg.setdefault(name, spec)
-    return scen_reg, pol_reg
+    return task_reg, pol_reg
 
 
 def _user_specs(paths: list[str], pol_reg: Mapping[str, PolicySpec]) -> list[PolicySpec]:
@@ -81,22 +81,23 @@ def _user_specs(paths: list[str], pol_reg: Mapping[str, PolicySpec]) -> list[Pol
     return user_policies([p for p in paths if Path(p).resolve() not in shipped], pol_reg) + same
 
 
-def _selections(scenarios, policies, quick: bool, user: list[PolicySpec], scen_reg, pol_reg,
+def _selections(scenarios, policies, quick: bool, user: list[PolicySpec], task_reg, pol_reg,
                 notes: list[str]) -> tuple[Selection, Selection]:
-    req_scen, req_pol = split_names(scenarios), split_names(policies)
+    """The selected tasks (``scenarios``: the ``--scenarios`` names or globs) and policies."""
+    req_task, req_pol = split_names(scenarios), split_names(policies)
     if quick:
-        req_scen = req_scen if req_scen is not None else list(QUICK["scenarios"])
+        req_task = req_task if req_task is not None else list(QUICK["scenarios"])
         req_pol = req_pol if req_pol is not None else list(QUICK["policies"])
     if req_pol is not None and user:
         req_pol = req_pol + [s.name for s in user if s.name not in req_pol]
-    scen = select(req_scen, scen_reg, "scenario", notes, strict=not quick or scenarios is not None)
+    task = select(req_task, task_reg, "task", notes, strict=not quick or scenarios is not None)
     pol = select(req_pol, pol_reg, "policy", notes, strict=not quick or policies is not None)
     pol.explicit |= {spec.name for spec in user}
-    for kind, sel in (("scenario", scen), ("policy", pol)):
+    for kind, sel in (("task", task), ("policy", pol)):
         if not sel.names:
             raise ScoreboardError(f"no {kind} to run: none of the selected {kind}s is available "
                                   f"({'; '.join(notes) or 'empty selection'})")
-    return scen, pol
+    return task, pol
 
 
 def _check_log_free(log_path: Path, resume: bool, overwrite: bool) -> None:
@@ -120,10 +121,10 @@ def _resumed(log_path: Path, plan: Plan, fps: dict[str, str]) -> dict[Key, Recor
         key = (rec["scenario"], rec["policy"], rec["seed"])
         if key not in planned:
             continue
-        for kind, fp in (("scenario", "scenario_fp"), ("policy", "policy_fp")):
-            if rec.get(fp) != fps[rec[kind]]:
+        for kind, field, fp in (("task", "scenario", "scenario_fp"), ("policy", "policy", "policy_fp")):
+            if rec.get(fp) != fps[rec[field]]:
                 raise ScoreboardError(f"{log_path} holds episodes of a different definition of {kind} "
-                                      f"{rec[kind]!r} (fingerprint {rec.get(fp)} != {fps[rec[kind]]}): "
+                                      f"{rec[field]!r} (fingerprint {rec.get(fp)} != {fps[rec[field]]}): "
                                       "pass --overwrite or choose another --out")
         done[key] = rec
     return done
@@ -133,17 +134,17 @@ def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
 
 
-def trajectory_path(out: Path, scen: str, pol: str, seed: int) -> Path:
-    return out / "trajectories" / f"{_safe(scen)}__{_safe(pol)}__seed{seed}.npz"
+def trajectory_path(out: Path, task: str, pol: str, seed: int) -> Path:
+    return out / "trajectories" / f"{_safe(task)}__{_safe(pol)}__seed{seed}.npz"
 
 
-def _tasks(plan: Plan, done: Mapping[Key, Record], scen_reg, pol_reg, out: Path, plots: bool) -> list[Task]:
-    return [Task(scen_reg[s], pol_reg[p], seed,
-                 str(trajectory_path(out, s, p, seed)) if plots and plan.is_example((s, p, seed)) else None)
+def _jobs(plan: Plan, done: Mapping[Key, Record], task_reg, pol_reg, out: Path, plots: bool) -> list[Job]:
+    return [Job(task_reg[s], pol_reg[p], seed,
+                str(trajectory_path(out, s, p, seed)) if plots and plan.is_example((s, p, seed)) else None)
             for s, p, seed in plan.keys if (s, p, seed) not in done]
 
 
-def _header(plan: Plan, scen_reg, pol_reg, pol_names: list[str], notes: list[str], done: int,
+def _header(plan: Plan, task_reg, pol_reg, pol_names: list[str], notes: list[str], done: int,
             quick: bool, backend: str, workers: int, argv: list[str] | None) -> dict[str, Any]:
     return {
         "title": "satenv scoreboard" + (" (quick)" if quick else ""),
@@ -152,8 +153,8 @@ def _header(plan: Plan, scen_reg, pol_reg, pol_names: list[str], notes: list[str
         "command": "python -m satenv.bench.scoreboard " + " ".join(argv if argv is not None else []),
         "machine": machine(), "backend": backend, "workers": workers, "seeds": plan.seeds,
         "scenario_seeds": plan.caps, "env_versions": sorted(set(plan.env_ids.values())),
-        "scenarios": {n: {"env": env, "kwargs": dict(scen_reg[n].kwargs),
-                          "description": scen_reg[n].description, **scen_reg[n].success_rule()}
+        "scenarios": {n: {"env": env, "kwargs": dict(task_reg[n].kwargs),
+                          "description": task_reg[n].description, **task_reg[n].success_rule()}
                       for n, env in plan.env_ids.items()},
         "policies": {n: {"description": pol_reg[n].description,
                          **({"checkpoint": pol_reg[n].checkpoint} if pol_reg[n].checkpoint else {})}
@@ -189,11 +190,11 @@ def _run(records: Iterator[Record], log_path: Path, done: dict[Key, Record], tot
 
 
 def _finish(out: Path, header: dict[str, Any], records: list[Record], notes: list[str], plots: bool) -> Board:
-    """Aggregate, rank and write ``records`` (in plan order: scenarios in that order)."""
+    """Aggregate, rank and write ``records`` (in plan order: tasks in that order)."""
     agg = aggregate(records)
     agg = {s: agg[s] for s in dict.fromkeys(r["scenario"] for r in records)}
     board = Board(out, header, records, agg, {s: rank(agg[s]) for s in agg}, notes)
-    board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg  # nominal scenarios only
+    board.summary = summarize(records, {s: header["scenarios"][s]["env"] for s in agg  # nominal tasks only
                                         if PERTURBATION_SEP not in s})
     board.headline = headline(records, board.ranking)
     board.markdown = render_markdown(board, plots=plots)
@@ -201,20 +202,24 @@ def _finish(out: Path, header: dict[str, Any], records: list[Record], notes: lis
     return board
 
 
-def _with_intervention_rates(records: list[Record], scenarios: Mapping[str, Any]) -> list[Record]:
-    """``records`` with ``interventions_per_agent_step`` where an older record has the filter's
-    ``interventions`` but not their share: ``interventions / (steps x agents)`` (the filter decides
-    once per step for every agent), the agents counted on the scenario's env (header kwargs)."""
+def _with_filter_counts(records: list[Record], tasks: Mapping[str, Any]) -> list[Record]:
+    """``records`` (read through :func:`satenv.scoring.upgrade_record`) with the filter's decision
+    counts of the one record where an older record has its ``safety_interventions`` but not them:
+    ``safety_steps`` = ``steps`` (the filter decides once per step for every agent),
+    ``safety_agent_steps`` = steps x agents (counted on the task's env: header kwargs) and
+    ``interventions_per_agent_step`` their ratio."""
     import satenv
 
     agents: dict[str, int] = {}
     out = []
     for rec in records:
-        if rec.get("interventions") is not None and "interventions_per_agent_step" not in rec and rec.get("steps"):
-            scen = scenarios[rec["scenario"]]
+        if rec.get("safety_interventions") is not None and "safety_agent_steps" not in rec and rec.get("steps"):
+            task = tasks[rec["scenario"]]
             if rec["scenario"] not in agents:
-                agents[rec["scenario"]] = len(satenv.make(scen["env"], **scen["kwargs"]).possible_agents)
-            rec = {**rec, "interventions_per_agent_step": rec["interventions"] / (rec["steps"] * agents[rec["scenario"]])}
+                agents[rec["scenario"]] = len(satenv.make(task["env"], **task["kwargs"]).possible_agents)
+            agent_steps = int(rec["steps"]) * agents[rec["scenario"]]
+            rec = {**rec, "safety_steps": int(rec["steps"]), "safety_agent_steps": agent_steps,
+                   "interventions_per_agent_step": rec["safety_interventions"] / agent_steps}
         out.append(rec)
     return out
 
@@ -230,14 +235,14 @@ def reaggregate(out: str | Path, plots: bool = True) -> Board:
     except (OSError, ValueError, KeyError) as exc:
         raise ScoreboardError(f"{out}/scoreboard.json: no board header to re-aggregate with ({exc}); "
                               "finish the run first (--resume)") from None
-    scen, pol = list(header["scenarios"]), list(header["policies"])
+    names, pol = list(header["scenarios"]), list(header["policies"])
 
     def order(r: Record) -> tuple:
-        return scen.index(r["scenario"]), pol.index(r["policy"]) if r["policy"] in pol else len(pol), \
+        return names.index(r["scenario"]), pol.index(r["policy"]) if r["policy"] in pol else len(pol), \
             r["policy"], r["seed"]
 
-    records = sorted((r for r in read_episodes(out / EPISODES_FILE) if r["scenario"] in scen), key=order)
-    records = _with_intervention_rates(records, header["scenarios"])
+    records = sorted((r for r in read_episodes(out / EPISODES_FILE) if r["scenario"] in names), key=order)
+    records = _with_filter_counts(records, header["scenarios"])
     header["ranking"] = RANKING       # re-ranked by the current rule
     return _finish(out, header, records, list(header.get("notes", [])), plots)
 
@@ -248,7 +253,7 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
                    scenario_seeds: dict[str, list[int]] | None = None, workers: int = 1,
                    backend: str = "process", ray_address: str | None = None, resume: bool = False,
                    overwrite: bool = False, plots: bool = True, progress: bool = True,
-                   scenario_registry: Mapping[str, ScenarioSpec] | None = None,
+                   task_registry: Mapping[str, TaskSpec] | None = None,
                    policy_registry: Mapping[str, PolicySpec] | None = None,
                    on_record: Callable[[Record], None] | None = None,
                    on_plan: Callable[[Plan, Mapping[Key, Record]], None] | None = None,
@@ -257,32 +262,33 @@ def run_scoreboard(out: str | Path = "results/scoreboard", *, scenarios: str | l
 
     ``seeds`` default to the board's (``FULL`` or ``QUICK``); ``scenario_seeds`` caps the seeds of
     expensive scenarios (``{name: seeds}``, intersected with ``seeds``), by default the board's
-    caps unless ``seeds`` were given; ``scenario_registry`` / ``policy_registry`` replace the
+    caps unless ``seeds`` were given; ``task_registry`` / ``policy_registry`` replace the
     registry's dicts (tests, plugins); ``on_plan(plan, done)`` is called once the plan is made
     (``done``: the records already in the log), before any episode runs; ``on_record`` is called
     after each record is written.
+    ``scenarios`` and ``scenario_seeds`` name tasks (the command line's ``--scenarios``).
     """
     _check_options(workers, backend, resume, overwrite)
     seed_list, caps = board_seeds(seeds, quick, scenario_seeds)
-    scen_reg, pol_reg = _registries(scenario_registry, policy_registry)
+    task_reg, pol_reg = _registries(task_registry, policy_registry)
     user = _user_specs(list(checkpoints), pol_reg)
     pol_reg.update({spec.name: spec for spec in user})
     notes: list[str] = []
-    scen_sel, pol_sel = _selections(scenarios, policies, quick, user, scen_reg, pol_reg, notes)
+    task_sel, pol_sel = _selections(scenarios, policies, quick, user, task_reg, pol_reg, notes)
     out = Path(out)
     _check_log_free(out / EPISODES_FILE, resume, overwrite)
-    plan = make_plan(scen_reg, pol_reg, scen_sel, pol_sel, seed_list, caps, notes)
+    plan = make_plan(task_reg, pol_reg, task_sel, pol_sel, seed_list, caps, notes)
     _prepare_out(out, overwrite)
-    fps = {n: scen_reg[n].fingerprint() for n in scen_sel.names} | {n: pol_reg[n].fingerprint()
+    fps = {n: task_reg[n].fingerprint() for n in task_sel.names} | {n: pol_reg[n].fingerprint()
                                                                    for n in pol_sel.names}
     done = _resumed(out / EPISODES_FILE, plan, fps)
-    tasks = _tasks(plan, done, scen_reg, pol_reg, out, plots)
-    header = _header(plan, scen_reg, pol_reg, pol_sel.names, notes, len(done), quick, backend, workers, argv)
+    jobs = _jobs(plan, done, task_reg, pol_reg, out, plots)
+    header = _header(plan, task_reg, pol_reg, pol_sel.names, notes, len(done), quick, backend, workers, argv)
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     if on_plan is not None:
         on_plan(plan, done)
-    _run(stream(tasks, backend, workers, ray_address), out / EPISODES_FILE, done, len(plan.keys),
+    _run(stream(jobs, backend, workers, ray_address), out / EPISODES_FILE, done, len(plan.keys),
          progress, on_record)
     records = [done[k] for k in plan.keys if k in done]       # plan order: registry order, then seed
     return _finish(out, header, records, notes, plots)

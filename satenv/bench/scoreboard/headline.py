@@ -1,8 +1,8 @@
-"""The board's headline: per system of the papers (:data:`~satenv.bench.scoreboard.registry.SYSTEMS`),
+"""The board's headline: per system of the papers (:data:`satenv.tasks.SYSTEMS`),
 the best scripted and the best learned policy side by side, as a table at the top of
 ``scoreboard.md`` and one figure, ``plots/headline.png``.
 
-On each system's scenario (the first of its scenarios on the board: the one its learned policies
+On each system's task (the first of its tasks on the board: the one its learned policies
 are ranked on), the best of each kind by the board's own safety-first ranking (success rate desc,
 collision episodes asc, violation episodes asc, RMSE asc, delta-v asc); learned means a ``trained:`` or ``user:`` policy (with or without the safety filter),
 scripted everything else. The RMSE and delta-v ratios (learned / scripted, ratio of the means)
@@ -25,7 +25,8 @@ from satenv.metrics import matched_ratios
 from satenv.scoring import aggregate
 from satenv.scoring import wilson as _wilson  # the board's success-rate interval
 
-__all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned"]
+__all__ = ["FIGURE", "LEARNED_PREFIXES", "headline", "headline_figure", "headline_section", "is_learned",
+           "paper_systems"]
 
 LEARNED_PREFIXES = ("trained:", "user:")
 """Names of learned policies: shipped (``trained:<folder>``) and user checkpoints (``user:<run>``)."""
@@ -40,17 +41,14 @@ def is_learned(policy: str) -> bool:
 
 
 def _policy_stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
-    """The headline's numbers of one policy: :func:`satenv.scoring.aggregate` of its records."""
+    """The headline's numbers of one policy: :func:`satenv.scoring.aggregate` of its records,
+    under the headline's names (the interval also on one episode)."""
     agg = aggregate(recs)
     lo, hi = agg["success_ci95"] or _wilson(agg["successes"], agg["episodes"])[1:]
-    filtered = [r for r in recs if r.get("interventions_per_agent_step") is not None and r.get("steps")]
     return {"episodes": agg["episodes"], "successes": agg["successes"],
             "success": agg["success_rate"], "success_ci95": [lo, hi],
             "collision_episodes": agg["collision_episodes"], "violation_episodes": agg["violation_episodes"],
-            "errors": agg["errors"],
-            # behind the filter: its interventions over every agent-step of the episodes (the same agents in each)
-            "interventions_per_agent_step": (sum(r["interventions_per_agent_step"] * r["steps"] for r in filtered)
-                                             / sum(r["steps"] for r in filtered)) if filtered else None}
+            "errors": agg["errors"], "interventions_per_agent_step": agg.get("interventions_per_agent_step")}
 
 
 def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> dict[str, Any]:
@@ -65,28 +63,37 @@ def _ratios(learned: list[dict[str, Any]], scripted: list[dict[str, Any]]) -> di
     return out
 
 
+def paper_systems() -> dict[str, tuple[str, ...]]:
+    """``{label: (training task, paper task)}`` of :data:`satenv.tasks.SYSTEMS`: each system is
+    shown on the first of its tasks that is on the board (first: its training task, the one its
+    learned policies are ranked on; then its paper task)."""
+    from satenv import tasks
+
+    return {s.label: (s.training_task, s.paper_task) for s in tasks.SYSTEMS.values()}
+
+
 def headline(records: Iterable[dict[str, Any]], ranking: Mapping[str, list[str]],
              systems: Mapping[str, tuple[str, ...]] | None = None) -> list[dict[str, Any]]:
-    """One row per system with a scenario on the board: ``system``, ``scenario``, ``scripted`` and
+    """One row per system (:func:`paper_systems` unless given) with a task on the board: ``system``,
+    ``task``, ``scripted`` and
     ``learned`` (``{"policy", "episodes", "successes", "success", "success_ci95",
-    "collision_episodes", "violation_episodes", "errors"}`` or ``None`` when the scenario has no policy of that kind; a
+    "collision_episodes", "violation_episodes", "errors"}`` or ``None`` when the task has no policy of that kind; a
     best learned ``<name>+shield`` also holds ``unfiltered``, the same of ``<name>`` when it ran, and a
     best learned that ships with its filter the same of ``<name>:network``)
     and ``ratios``
     (``matched_seeds``, ``rmse_ratio``, ``delta_v_ratio``; ``None`` when not computable)."""
-    if systems is None:
-        from satenv.bench.scoreboard.registry import SYSTEMS as systems
+    systems = paper_systems() if systems is None else systems
     by_pair: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for rec in records:
         by_pair.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
     rows = []
-    for system, scenarios in systems.items():
-        scen = next((s for s in scenarios if s in ranking), None)
+    for system, names in systems.items():
+        scen = next((s for s in names if s in ranking), None)
         if scen is None:
             continue
         best = {kind: next((p for p in ranking[scen] if is_learned(p) == (kind == "learned")), None)
                 for kind in ("scripted", "learned")}
-        row: dict[str, Any] = {"system": system, "scenario": scen}
+        row: dict[str, Any] = {"system": system, "task": scen}
         for kind, pol in best.items():
             row[kind] = None if pol is None else {"policy": pol, **_policy_stats(by_pair[(scen, pol)])}
         net = (best["learned"] or "").removesuffix(SHIELD_SUFFIX)
@@ -126,7 +133,7 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
     if not rows:
         return []
     lines = [f"## {HEADING}", "",
-             "Per system of the papers, on the scenario its learned policies are ranked on, the best "
+             "Per system of the papers, on the task its learned policies are ranked on, the best "
              "scripted and the best learned policy by this board's safety-first ranking (success rate, "
              "then collision episodes, then violation episodes, then RMSE, then Δv), so the best learned "
              "policy is the best *safe* one among equally successful ones. Collision episodes, violation episodes: episodes with at least one collision, with at least "
@@ -136,13 +143,13 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
              "early cannot improve a ratio; `matched`: how many seeds; – when none. A learned policy "
              "behind the safety filter has its network alone beside it and the share of its agent-steps "
              "the filter changed (interventions / agent-step; — without the filter).", "",
-             "| system | scenario | best scripted | success | collision episodes | violation episodes | best learned | "
+             "| system | task | best scripted | success | collision episodes | violation episodes | best learned | "
              "success | collision episodes | violation episodes | interventions / agent-step | RMSE ratio | Δv ratio "
              "| matched |",
              "|---|---|---|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|"]
     for row in rows:
         r = row["ratios"]
-        cells = [row["system"], f"`{row['scenario']}`", *_who(row["scripted"]), *_who(row["learned"]),
+        cells = [row["system"], f"`{row['task']}`", *_who(row["scripted"]), *_who(row["learned"]),
                  _interventions(row["learned"]), _ratio(r["rmse_ratio"]), _ratio(r["delta_v_ratio"]),
                  str(r["matched_seeds"])]
         lines.append("| " + " | ".join(cells) + " |")
@@ -174,7 +181,7 @@ def headline_figure(rows: list[dict[str, Any]], path: Path) -> Path:
             share = 100 * e["collision_episodes"] / e["episodes"]
             axes[1].barh(y, share, 0.4, color=f"C{j}", label=label)
             axes[1].text(share + 1, y, f"{e['collision_episodes']}/{e['episodes']}", va="center", fontsize=7)
-    axes[0].set_yticks(range(len(rows)), [f"{r['system']}\n{r['scenario']}" for r in rows], fontsize=8)
+    axes[0].set_yticks(range(len(rows)), [f"{r['system']}\n{r['task']}" for r in rows], fontsize=8)
     axes[0].invert_yaxis()
     for ax, label in ((axes[0], "success rate [% of episodes] (95 % Wilson interval)"),
                       (axes[1], "collision episodes [% of episodes]")):

@@ -1,5 +1,5 @@
-"""Which episodes a board runs: selection of scenarios x policies (names or globs), seeds, and the
-preflight that builds every (scenario, policy) pair once before any episode runs.
+"""Which episodes a board runs: selection of tasks x policies (names or globs), seeds, and the
+preflight that builds every (task, policy) pair once before any episode runs.
 
 A name the user typed must exist and be runnable, and a pair the user named on both sides must
 work (else :class:`ScoreboardError`); entries selected by default or by a glob that are not
@@ -21,8 +21,8 @@ from satenv.bench.scoreboard.specs import (
     NETWORK_SUFFIX,
     SHIELD_SUFFIX,
     PolicySpec,
-    ScenarioSpec,
     ScoreboardError,
+    TaskSpec,
     Unavailable,
     policy_fits,
     shielded,
@@ -54,7 +54,8 @@ def parse_seeds(text: str) -> list[int]:
 
 def board_seeds(seeds: list[int] | str | None, quick: bool,
                 scenario_seeds: Mapping[str, list[int]] | None) -> tuple[list[int], dict[str, list[int]]]:
-    """The board's seeds and per-scenario seed caps (the preset's unless ``seeds`` are given)."""
+    """The board's seeds and per-task seed caps ``scenario_seeds`` (the preset's unless ``seeds``
+    are given)."""
     preset = QUICK if quick else FULL
     user_seeds = seeds is not None
     seeds = preset["seeds"] if seeds is None else seeds
@@ -111,7 +112,7 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
     for pat in requested if requested is not None else ["*"]:
         if pat.endswith(SHIELD_SUFFIX) and kind == "policy":
             _add_shielded(pat[:-len(SHIELD_SUFFIX)], registry)
-        if PERTURBATION_SEP in pat and kind == "scenario":
+        if PERTURBATION_SEP in pat and kind == "task":
             _add_perturbed(pat, registry)
         matches = [n for n in registry if fnmatch.fnmatchcase(n, pat)]
         if not matches and kind == "policy" and pat.endswith(SHIELD_SUFFIX) \
@@ -129,13 +130,13 @@ def select(requested: list[str] | None, registry: Mapping[str, Any], kind: str, 
 
 
 PERTURBATION_SEP = "@"
-"""``<scenario>@<perturbation>``: a scenario under a named perturbation (:mod:`satenv.perturbations`)."""
+"""``<task>@<perturbation>``: a task under a named perturbation (:mod:`satenv.perturbations`)."""
 
 
 def _add_perturbed(pattern: str, registry: Any) -> None:
-    """Register ``<scenario>@<perturbation>`` for every scenario matching the part before ``@``
-    and every perturbation matching the part after it that the scenario's task lists
-    (``Task.perturbations``; a scenario that is no task takes none)."""
+    """Register ``<task>@<perturbation>`` for every task matching the part before ``@`` and every
+    perturbation matching the part after it that the task lists (``satenv.tasks.Task.perturbations``;
+    a board entry that is no registered task takes none)."""
     from satenv import tasks
 
     base, _, pert = pattern.partition(PERTURBATION_SEP)
@@ -200,36 +201,36 @@ def _try_pair(pol: PolicySpec, env, seed: int) -> str | None:
         return f"{type(exc).__name__}: {exc}"
 
 
-def _build_env(scen: ScenarioSpec):
+def _build_env(task: TaskSpec):
     try:
-        return scen.make()
+        return task.make()
     except Exception as exc:
-        raise ScoreboardError(f"scenario {scen.name}: building the env satenv.make({scen.env_id!r}, "
-                              f"**{dict(scen.kwargs)}) failed: {type(exc).__name__}: {exc}") from exc
+        raise ScoreboardError(f"task {task.name}: building the env satenv.make({task.env_id!r}, "
+                              f"**{dict(task.kwargs)}) failed: {type(exc).__name__}: {exc}") from exc
 
 
-def preflight(scenarios: list[ScenarioSpec], policies: list[PolicySpec], seed: int,
+def preflight(tasks: list[TaskSpec], policies: list[PolicySpec], seed: int,
               strict: Callable[[str, str], bool], notes: list[str]
               ) -> tuple[list[tuple[str, str]], dict[str, str]]:
-    """Build every fitting (scenario, policy) pair once, before any episode runs.
+    """Build every fitting (task, policy) pair once, before any episode runs.
 
-    A failing pair raises :class:`ScoreboardError` when ``strict(scenario, policy)`` (the user
-    named both), else it is skipped with a note. Returns the runnable pairs and each scenario's
+    A failing pair raises :class:`ScoreboardError` when ``strict(task, policy)`` (the user
+    named both), else it is skipped with a note. Returns the runnable pairs and each task's
     env id.
     """
     pairs, env_ids = [], {}
-    for scen in scenarios:
-        env = _build_env(scen)
-        env_ids[scen.name] = env.metadata.get("name", type(env).__name__)
-        for pol in (p for p in policies if p.ranked_on(scen.name) and policy_fits(p, env)):
+    for task in tasks:
+        env = _build_env(task)
+        env_ids[task.name] = env.metadata.get("name", type(env).__name__)
+        for pol in (p for p in policies if p.ranked_on(task.name) and policy_fits(p, env)):
             why = _try_pair(pol, env, seed)
             if why is None:
-                pairs.append((scen.name, pol.name))
-            elif strict(scen.name, pol.name):
-                raise ScoreboardError(f"policy {pol.name} cannot run on scenario {scen.name}: {why}. "
-                                      "Choose compatible scenarios with --scenarios.")
+                pairs.append((task.name, pol.name))
+            elif strict(task.name, pol.name):
+                raise ScoreboardError(f"policy {pol.name} cannot run on task {task.name}: {why}. "
+                                      "Choose compatible tasks with --scenarios.")
             else:
-                notes.append(f"policy {pol.name} on {scen.name}: skipped ({why})")
+                notes.append(f"policy {pol.name} on {task.name}: skipped ({why})")
         env.close()
     return pairs, env_ids
 
@@ -243,8 +244,8 @@ class Plan:
     seeds: list[int]
     caps: dict[str, list[int]]
 
-    def seeds_of(self, scenario: str) -> list[int]:
-        return self.caps.get(scenario, self.seeds)
+    def seeds_of(self, task: str) -> list[int]:
+        return self.caps.get(task, self.seeds)
 
     @property
     def keys(self) -> list[Key]:
@@ -269,30 +270,30 @@ def _unpaired_notes(plan: Plan, policies: Mapping[str, PolicySpec], names: list[
     for name in names:
         if not any(p == name for _, p in plan.pairs) and not any(f"policy {name} on" in n for n in notes):
             fits = ", ".join(policies[name].env_ids or _supported_envs(policies[name]))
-            notes.append(f"policy {name}: fits none of the selected scenarios (it controls {fits})")
+            notes.append(f"policy {name}: fits none of the selected tasks (it controls {fits})")
 
 
-def check_explicit(plan: Plan, scenarios: Selection, policies: Selection, notes: list[str]) -> None:
-    """A scenario or policy the user named must have something to run with."""
-    for kind, sel, idx in (("policy", policies, 1), ("scenario", scenarios, 0)):
+def check_explicit(plan: Plan, tasks: Selection, policies: Selection, notes: list[str]) -> None:
+    """A task or policy the user named must have something to run with."""
+    for kind, sel, idx in (("policy", policies, 1), ("task", tasks, 0)):
         for name in sorted(sel.explicit):
             if not any(pair[idx] == name for pair in plan.pairs):
                 raise ScoreboardError(f"{kind} {name} has nothing to run with the selected "
-                                      f"{'scenarios' if idx else 'policies'}: "
+                                      f"{'tasks' if idx else 'policies'}: "
                                       + "; ".join(n for n in notes if name in n)
                                       + " (see --list for which policy fits where)")
 
 
-def make_plan(scen_reg: Mapping[str, ScenarioSpec], pol_reg: Mapping[str, PolicySpec],
-              scenarios: Selection, policies: Selection, seeds: list[int],
+def make_plan(task_reg: Mapping[str, TaskSpec], pol_reg: Mapping[str, PolicySpec],
+              tasks: Selection, policies: Selection, seeds: list[int],
               caps: dict[str, list[int]], notes: list[str]) -> Plan:
     """Preflight the selection and return the plan (errors as :func:`preflight`)."""
-    pairs, env_ids = preflight([scen_reg[n] for n in scenarios.names], [pol_reg[n] for n in policies.names],
-                               seeds[0], lambda s, p: s in scenarios.explicit and p in policies.explicit,
+    pairs, env_ids = preflight([task_reg[n] for n in tasks.names], [pol_reg[n] for n in policies.names],
+                               seeds[0], lambda s, p: s in tasks.explicit and p in policies.explicit,
                                notes)
     if not pairs:
-        raise ScoreboardError("no (scenario, policy) pair applies: " + "; ".join(notes))
+        raise ScoreboardError("no (task, policy) pair applies: " + "; ".join(notes))
     plan = Plan(pairs, env_ids, seeds, {n: v for n, v in caps.items() if n in env_ids})
     _unpaired_notes(plan, pol_reg, policies.names, notes)
-    check_explicit(plan, scenarios, policies, notes)
+    check_explicit(plan, tasks, policies, notes)
     return plan

@@ -1,7 +1,7 @@
-"""The scoreboard's tables: every scenario and scripted policy by name, the ``--quick`` and full
+"""The scoreboard's tables: every task and scripted policy by name, the ``--quick`` and full
 boards, shipped trained policies (``satenv/training/policies/*``) and user checkpoints (``--policy``).
 
-The scenarios are the tasks of :mod:`satenv.tasks` (add a task there); adding a baseline is one
+The board's tasks are those of :mod:`satenv.tasks` (add a task there); adding a baseline is one
 entry here::
 
     POLICIES["apf"] = PolicySpec("apf", "satenv.baselines:APF", baseline="apf")  # where: APF.supports(env)
@@ -14,21 +14,20 @@ from pathlib import Path
 from typing import Any
 
 from satenv import tasks
-from satenv.bench.scoreboard.specs import NETWORK_SUFFIX, PolicySpec, ScenarioSpec, ScoreboardError
+from satenv.bench.scoreboard.specs import LEARNED_TARGET, NETWORK_SUFFIX, PolicySpec, ScoreboardError, TaskSpec
+from satenv.training.both_ways import AS_SHIPPED, NETWORK_ALONE
 
-__all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "SCENARIOS", "SYSTEMS", "discover_trained_policies", "user_policy",
-           "user_policy_name"]
+__all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "SCENARIOS", "TASKS", "discover_trained_policies",
+           "user_policy", "user_policy_name"]
 
 SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
 
-SCENARIOS: dict[str, ScenarioSpec] = {t.name: ScenarioSpec(t.name, t.env_id, dict(t.env_kwargs), t.description)
-                                       for t in tasks.TASKS.values()}
-"""Every scenario of the scoreboard by name: the tasks of :mod:`satenv.tasks` (one registry)."""
+TASKS: dict[str, TaskSpec] = {t.name: TaskSpec(t.name, t.env_id, dict(t.env_kwargs), t.description)
+                              for t in tasks.TASKS.values()}
+"""Every task of the scoreboard by name: the tasks of :mod:`satenv.tasks` (one registry)."""
 
-SYSTEMS: dict[str, tuple[str, ...]] = {s.label: (s.training_task, s.paper_task) for s in tasks.SYSTEMS.values()}
-"""The papers' systems of the board's summary (:mod:`satenv.bench.scoreboard.headline`), from
-:data:`satenv.tasks.SYSTEMS`: each is shown on the first of its scenarios that is on the board
-(first: its training task, the one its learned policies are ranked on; then its paper task)."""
+SCENARIOS = TASKS
+"""The same table under the name the command line's ``--scenarios`` / ``--list`` reads."""
 
 POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
     PolicySpec("zero", "satenv.baselines.base:ZeroPolicy", baseline="zero", description="no thrust (coasting)"),
@@ -69,7 +68,7 @@ FULL: dict[str, Any] = {
         ("cluster-swarm10", 3), ("cluster-swarm20", 3), ("cluster-swarm40", 3),
         ("servicing-pereira2022-random", 3))},
 }
-"""The full (published) board: every scenario x fitting policy x these test seeds (a deterministic
+"""The full (published) board: every task x fitting policy x these test seeds (a deterministic
 task runs one)."""
 
 DETERMINISTIC_SEEDS = {name: [t.seeds("test")[0]] for name, t in tasks.TASKS.items() if not t.randomized}
@@ -95,8 +94,8 @@ def _env_ids(meta: dict[str, Any]) -> tuple[str, ...] | None:
     return (env_id,) if isinstance(env_id, str) and env_id else None
 
 
-def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
-    """The scenario patterns of a policy folder's optional ``scoreboard.json``."""
+def _folder_tasks(path: Path) -> tuple[str, ...] | None:
+    """The task patterns of a policy folder's optional ``scoreboard.json`` (its key ``"scenarios"``)."""
     from satenv.training.trust import (
         read_json,  # a folder's files are untrusted: no links, sizes capped
     )
@@ -111,16 +110,17 @@ def _folder_scenarios(path: Path) -> tuple[str, ...] | None:
                               f"unreadable file ({exc})") from None
 
 
-def _learned(name: str, path: Path, description: str, scenarios: tuple[str, ...] | None,
-             meta: dict[str, Any] | None = None, **kwargs: Any) -> PolicySpec:
-    return PolicySpec(name, "satenv.training:load", kwargs, env_ids=_env_ids(_folder_env(path) if meta is None else meta),
-                      scenarios=scenarios, checkpoint=str(path), learned=True, requires=("torch",),
-                      description=description)
+def _learned(name: str, path: Path, description: str, ranked: tuple[str, ...] | None,
+             meta: dict[str, Any] | None = None, variant: str = AS_SHIPPED) -> PolicySpec:
+    """A policy folder, one of its two ways (:func:`satenv.training.both_ways.policy`)."""
+    return PolicySpec(name, LEARNED_TARGET, {"variant": variant},
+                      env_ids=_env_ids(_folder_env(path) if meta is None else meta), tasks=ranked,
+                      checkpoint=str(path), learned=True, requires=("torch",), description=description)
 
 
 def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, PolicySpec]:
     """One ``trained:<name>`` entry per shipped artefact folder under ``satenv/training/policies/``; it
-    fits the env it was trained on (``env.json``'s ``env_id``) and is ranked on the scenarios of
+    fits the env it was trained on (``env.json``'s ``env_id``) and is ranked on the tasks of
     its optional ``scoreboard.json``. A folder that ships behind the safety filter also gets
     ``trained:<name>:network``, its network alone (:data:`~satenv.bench.scoreboard.specs.NETWORK_SUFFIX`)."""
     if not root.is_dir():
@@ -128,12 +128,12 @@ def discover_trained_policies(root: Path = SHIPPED_POLICY_DIR) -> dict[str, Poli
     folders = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
     out = {}
     for p in folders:
-        name, scen, meta = f"trained:{p.name}", _folder_scenarios(p), _folder_env(p)
-        out[name] = _learned(name, p, f"shipped trained policy {p.name}", scen, meta)
+        name, ranked, meta = f"trained:{p.name}", _folder_tasks(p), _folder_env(p)
+        out[name] = _learned(name, p, f"shipped trained policy {p.name}", ranked, meta)
         if meta.get("safety_filter") is not None:    # ships behind the filter: its network alone too
             out[name + NETWORK_SUFFIX] = _learned(name + NETWORK_SUFFIX, p, f"the network of {p.name} alone, "
-                                                  "without the safety filter it ships with", scen, meta,
-                                                  shielded=False)
+                                                  "without the safety filter it ships with", ranked, meta,
+                                                  variant=NETWORK_ALONE)
     return out
 
 
@@ -165,7 +165,7 @@ def _load_or_raise(path: str) -> None:
 
 def user_policy(path: str) -> PolicySpec:
     """The spec of a ``--policy`` folder, after checking that it exists and loads; it runs on
-    every selected scenario of its env (``--scenarios`` chooses; its ``scoreboard.json`` does not)."""
+    every selected task of its env (``--scenarios`` chooses; its ``scoreboard.json`` does not)."""
     p = Path(path)
     if not p.exists():
         raise ScoreboardError(f"--policy {path}: no such file or directory; pass the path of a "

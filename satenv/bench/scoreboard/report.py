@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from satenv import scoring
 from satenv.scoring import rank_key
 from satenv.scoring import wilson as _wilson  # the success rate's interval: one home
 from satenv.tasks import CONTROLLERS
@@ -39,13 +40,13 @@ KEY = ("scenario", "policy", "seed")
 METRICS: tuple[str, ...] = (
     "success", "rmse", "rmsee", "foe", "final_error_m", "delta_v", "time_to_converge_s",
     "min_separation_m", "collisions", "violations", "safety_cost", "fallbacks",
-    "compute_ms_per_decision", "episode_return", "steps", "interventions", "interventions_per_agent_step",
-    "mean_du", "infeasible_steps",
+    "compute_ms_per_decision", "episode_return", "steps", "safety_interventions", "interventions_per_agent_step",
+    "safety_mean_du", "safety_infeasible",
 )
-"""Aggregated per (scenario, policy): ``satenv.metrics.summary`` plus ``episode_return``, and for
-a shielded policy the safety filter's ``interventions``, ``interventions_per_agent_step``,
-``mean_du``, ``infeasible_steps`` (:func:`satenv.bench.scoreboard.specs.episode_metrics`)."""
-TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "wall_s")
+"""Aggregated per (task, policy), fields of the one episode record (:func:`satenv.scoring.episode_record`):
+``satenv.metrics.summary`` plus ``episode_return``, and for a shielded policy the safety filter's
+``safety_interventions``, ``interventions_per_agent_step``, ``safety_mean_du``, ``safety_infeasible``."""
+TIMING_FIELDS: tuple[str, ...] = ("compute_ms_per_decision", "compute_ms_per_agent", "wall_s")
 """Measured wall times: the only record fields that differ between two runs of the same key."""
 
 _TABLE = [  # (metric, column header) of the markdown table
@@ -54,9 +55,10 @@ _TABLE = [  # (metric, column header) of the markdown table
     ("min_separation_m", "min sep [m]"), ("collisions", "collision flags"), ("violations", "violations"),
     ("safety_cost", "cost"), ("fallbacks", "fallbacks"), ("compute_ms_per_decision", "ms/decision"),
 ]
-_SHIELD_TABLE = [("interventions", "interventions"), ("interventions_per_agent_step", "interventions / agent-step"),
-                 ("mean_du", "mean ‖Δu‖"), ("infeasible_steps", "infeasible")]
-"""Columns of a scenario with a shielded policy (``+shield``): per episode, agent-steps (and
+_SHIELD_TABLE = [("safety_interventions", "interventions"),
+                 ("interventions_per_agent_step", "interventions / agent-step"),
+                 ("safety_mean_du", "mean ‖Δu‖"), ("safety_infeasible", "infeasible")]
+"""Columns of a task with a shielded policy (``+shield``): per episode, agent-steps (and
 their share of the episode's agent-steps)."""
 PAPER_CONTROLLER = CONTROLLERS
 """The controller each env's paper proposes (:data:`satenv.tasks.CONTROLLERS`): the reference
@@ -120,9 +122,10 @@ def _bootstrap_interval(values: np.ndarray) -> tuple[float, float, float]:
 
 
 def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
-    """``{scenario: {policy: {"n", "errors", "collision_episodes", "violation_episodes", metric:
+    """``{task: {policy: {"n", "errors", "collision_episodes", "violation_episodes", metric:
     {"mean", "ci95": [lo, hi], "n"}}}}`` (module docstring: Wilson for the success rate, percentile
-    bootstrap for the rest; episodes with at least one collision, with at least one violation).
+    bootstrap for the rest). The counts are :func:`satenv.scoring.aggregate`'s (the one rule:
+    episodes with at least one collision, with at least one violation, each counted once).
 
     Errored episodes count as failures in the success rate and are left out of the other
     metrics; ``None`` (e.g. no convergence) values are left out of that metric's mean.
@@ -131,21 +134,22 @@ def aggregate(records: Iterable[dict[str, Any]]) -> dict[str, dict[str, dict[str
     for rec in records:
         groups.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
     out: dict[str, dict[str, dict[str, Any]]] = {}
-    for (scen, pol), recs in sorted(groups.items()):
+    for (task, pol), recs in sorted(groups.items()):
         ok = [r for r in recs if r.get("error") is None]
-        entry: dict[str, Any] = {"n": len(recs), "errors": len(recs) - len(ok),
-                                 "collision_episodes": sum(bool(r.get("collisions")) for r in ok),
-                                 "violation_episodes": sum(bool(r.get("violations")) for r in ok)}
+        counts = scoring.aggregate(recs)
+        entry: dict[str, Any] = {"n": counts["episodes"], "errors": counts["errors"],
+                                 "collision_episodes": counts["collision_episodes"],
+                                 "violation_episodes": counts["violation_episodes"]}
         for m in METRICS:
             if m == "success":
-                mean, lo, hi = _wilson(sum(bool(r.get("success")) for r in recs), len(recs))
-                n = len(recs)
+                mean, lo, hi = _wilson(counts["successes"], counts["episodes"])
+                n = counts["episodes"]
             else:
                 vals = np.array([float(r[m]) for r in ok if r.get(m) is not None], dtype=float)
                 n = int(vals.size)
                 mean, lo, hi = _bootstrap_interval(vals) if n else (math.nan, math.nan, math.nan)
             entry[m] = {"mean": mean, "ci95": [lo, hi], "n": n}
-        out.setdefault(scen, {})[pol] = entry
+        out.setdefault(task, {})[pol] = entry
     return jsonable(out)
 
 
@@ -301,7 +305,7 @@ def _scenario_section(board: Board, scen: str) -> list[str]:
             + (" and no collision" if info.get("collision_free_success", True) else ""))
     desc = info.get("description", "")
     lines = [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
-    table = _TABLE + (_SHIELD_TABLE if any(e.get("interventions", {}).get("n")
+    table = _TABLE + (_SHIELD_TABLE if any(e.get("safety_interventions", {}).get("n")
                                            for e in board.aggregates[scen].values()) else [])
     cols = ["#", "policy", "n"] + [c for _, c in table] + ["errors"]
     lines.append("| " + " | ".join(cols) + " |")
@@ -339,22 +343,24 @@ def _summary_section(summary: dict[str, Any]) -> list[str]:
 
 
 def robustness(board: Board) -> dict[str, dict[str, dict[str, dict[str, Any]]]]:
-    """``{scenario: {policy: {perturbation: {"n", "successes", "collision_episodes",
-    "violation_episodes"}}}}`` of the board's ``<scenario>@<perturbation>`` scenarios, with the
-    nominal scenario as perturbation ``"nominal"`` when it is on the board."""
+    """``{task: {policy: {perturbation: {"n", "successes", "collision_episodes",
+    "violation_episodes"}}}}`` (:func:`satenv.scoring.aggregate`'s counts) of the board's
+    ``<task>@<perturbation>`` entries, with the nominal task as perturbation ``"nominal"`` when it
+    is on the board."""
     perturbed = {s.partition("@")[0] for s in board.aggregates if "@" in s}
-    out: dict[str, dict[str, dict[str, dict[str, Any]]]] = {}
+    groups: dict[str, dict[str, dict[str, list[dict[str, Any]]]]] = {}
     for rec in board.records:
         base, _, pert = rec["scenario"].partition("@")
-        if base not in perturbed:
-            continue
-        cell = out.setdefault(base, {}).setdefault(rec["policy"], {}).setdefault(
-            pert or "nominal", {"n": 0, "successes": 0, "collision_episodes": 0, "violation_episodes": 0})
-        cell["n"] += 1
-        cell["successes"] += bool(rec.get("success"))
-        cell["collision_episodes"] += bool(rec.get("collisions"))
-        cell["violation_episodes"] += bool(rec.get("violations"))
-    return out
+        if base in perturbed:
+            groups.setdefault(base, {}).setdefault(rec["policy"], {}).setdefault(pert or "nominal", []).append(rec)
+
+    def cell(recs: list[dict[str, Any]]) -> dict[str, Any]:
+        agg = scoring.aggregate(recs)
+        return {"n": agg["episodes"], "successes": agg["successes"], "collision_episodes": agg["collision_episodes"],
+                "violation_episodes": agg["violation_episodes"]}
+
+    return {base: {pol: {pert: cell(recs) for pert, recs in perts.items()} for pol, perts in pols.items()}
+            for base, pols in groups.items()}
 
 
 def _robustness_section(board: Board) -> list[str]:

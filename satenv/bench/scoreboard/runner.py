@@ -1,10 +1,12 @@
 """One episode and the episode log.
 
-Every episode is a ``(scenario, policy, seed)`` key: the env is reset with ``seed`` and the policy
-with ``reset(seed)``; its metrics (:func:`~satenv.bench.scoreboard.specs.episode_metrics` plus
-``episode_return`` and ``wall_s``) go as one JSON line to ``OUT/episodes.jsonl``, appended and
-flushed (``fsync``) as soon as the episode finishes. Reading the log back keeps every good line;
-a torn or corrupt line is moved to ``episodes.jsonl.corrupt`` with a warning.
+Every episode is a :class:`Job`, keyed ``(task, policy, seed)`` (the log's fields ``scenario``,
+``policy``, ``seed``: :data:`~satenv.bench.scoreboard.report.KEY`): the env is reset with ``seed``
+and the policy with ``reset(seed)``; its record (:func:`satenv.scoring.episode_record` plus
+``env`` and ``wall_s``) goes as one JSON line to ``OUT/episodes.jsonl``, appended and flushed
+(``fsync``) as soon as the episode finishes. Reading the log back keeps every good line (older
+records through :func:`satenv.scoring.upgrade_record`); a torn or corrupt line is moved to
+``episodes.jsonl.corrupt`` with a warning.
 """
 
 from __future__ import annotations
@@ -18,12 +20,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from satenv.bench.scoreboard.report import KEY, jsonable
-from satenv.bench.scoreboard.specs import PolicySpec, ScenarioSpec, episode_metrics
+from satenv.bench.scoreboard.specs import PolicySpec, TaskSpec
+from satenv.scoring import episode_record, upgrade_record
 
-__all__ = ["EPISODES_FILE", "EpisodeLog", "ScoreboardWarning", "Task", "error_record", "read_episodes",
+__all__ = ["EPISODES_FILE", "EpisodeLog", "Job", "ScoreboardWarning", "error_record", "read_episodes",
            "run_episode"]
 
 EPISODES_FILE = "episodes.jsonl"
@@ -35,50 +36,49 @@ class ScoreboardWarning(UserWarning):
 
 
 @dataclass(frozen=True)
-class Task:
-    """One episode to run: ``rollout(scenario.make(), policy.make(env), seed=seed)``."""
+class Job:
+    """One episode to run: ``rollout(task.make(), policy.make(env), seed=seed)``."""
 
-    scenario: ScenarioSpec
+    task: TaskSpec
     policy: PolicySpec
     seed: int
     trajectory_path: str | None = None  # save the Trajectory (.npz) here (example episodes)
 
     @property
     def key(self) -> tuple[str, str, int]:
-        return (self.scenario.name, self.policy.name, self.seed)
+        return (self.task.name, self.policy.name, self.seed)
 
 
-def _base_record(task: Task) -> dict[str, Any]:
-    return {"scenario": task.scenario.name, "policy": task.policy.name, "seed": int(task.seed),
-            "scenario_fp": task.scenario.fingerprint(), "policy_fp": task.policy.fingerprint()}
+def _base_record(job: Job) -> dict[str, Any]:
+    return {"scenario": job.task.name, "policy": job.policy.name, "seed": int(job.seed),
+            "scenario_fp": job.task.fingerprint(), "policy_fp": job.policy.fingerprint()}
 
 
-def error_record(task: Task, error: str, wall_s: float = 0.0) -> dict[str, Any]:
+def error_record(job: Job, error: str, wall_s: float = 0.0) -> dict[str, Any]:
     """The record of an episode that failed outside the episode itself (e.g. its worker died)."""
-    return jsonable({**_base_record(task), "error": error, "success": False, "wall_s": wall_s})
+    return jsonable({**_base_record(job), "error": error, "success": False, "wall_s": wall_s})
 
 
-def _play(task: Task, env, record: dict[str, Any]) -> None:
+def _play(job: Job, env, record: dict[str, Any]) -> None:
     from satenv.rollout import rollout
 
     record["env"] = env.metadata.get("name", type(env).__name__)
-    traj = rollout(env, task.policy.make(env), seed=int(task.seed))
-    record.update(episode_metrics(traj, task.scenario))
-    record["episode_return"] = float(np.mean(np.sum(traj.rewards, axis=0))) if traj.steps else 0.0
+    traj = rollout(env, job.policy.make(env), seed=int(job.seed))
+    record.update(episode_record(traj, job.seed, len(env.possible_agents)))
     record["error"] = None
-    if task.trajectory_path is not None:
-        Path(task.trajectory_path).parent.mkdir(parents=True, exist_ok=True)
-        traj.save(task.trajectory_path)
+    if job.trajectory_path is not None:
+        Path(job.trajectory_path).parent.mkdir(parents=True, exist_ok=True)
+        traj.save(job.trajectory_path)
 
 
-def run_episode(task: Task) -> dict[str, Any]:
+def run_episode(job: Job) -> dict[str, Any]:
     """Run one episode and return its JSON record (an exception in it is recorded, not raised)."""
     start = time.perf_counter()
-    record = _base_record(task)
+    record = _base_record(job)
     env = None
     try:
-        env = task.scenario.make()
-        _play(task, env, record)
+        env = job.task.make()
+        _play(job, env, record)
     except Exception as exc:  # a crashing controller is a result of the board, not a crash of it
         record["error"] = f"{type(exc).__name__}: {exc}"
         record["traceback"] = traceback.format_exc(limit=6)
@@ -142,7 +142,7 @@ def read_episodes(path: str | Path, repair: bool = False, key: tuple[str, ...] =
     if bad and repair:
         _quarantine(path, good, bad)
     records, seen = [], set()
-    for rec in (_parse(line, key) for line in good):
+    for rec in (upgrade_record(_parse(line, key)) for line in good):
         k = tuple(rec[name] for name in key)
         if k not in seen:
             seen.add(k)

@@ -1,17 +1,16 @@
-"""What a scoreboard entry is: a named scenario (an env id + kwargs) and a named policy.
+"""What a scoreboard entry is: a task (an env id + kwargs, :mod:`satenv.tasks`) and a named policy.
 
-A scenario spec builds its env with ``satenv.make(env_id, **kwargs)``; a policy spec builds a
-policy with ``factory(env, **kwargs)`` (``factory`` given as ``"module:attribute"``) or, for a
-trained policy folder, with ``satenv.training.load(folder)``. Two rules live here, one function each:
-:func:`policy_fits` (which policy runs on which env) and :func:`episode_metrics` (how one episode
-is scored, success included).
+A task spec builds its env with ``satenv.make(env_id, **kwargs)``; a policy spec builds a
+policy with ``factory(env, **kwargs)`` (``factory`` given as ``"module:attribute"``,
+:func:`satenv.baselines.registry.resolve`) or, for a trained policy folder, one of its two ways
+(:func:`satenv.training.both_ways.policy`). One rule lives here: :func:`policy_fits` (which
+policy runs on which env); an episode is scored by :func:`satenv.scoring.episode_record`.
 """
 
 from __future__ import annotations
 
 import fnmatch
 import hashlib
-import importlib
 import importlib.util
 import inspect
 import json
@@ -20,14 +19,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SHIELD_SUFFIX", "PolicySpec", "ScenarioSpec", "ScoreboardError", "Unavailable", "checkpoint_policy",
-           "episode_metrics", "policy_fits", "resolve", "shielded"]
+from satenv.training.both_ways import NETWORK_ALONE
+
+__all__ = ["LEARNED_TARGET", "SHIELD_SUFFIX", "PolicySpec", "ScoreboardError", "TaskSpec", "Unavailable", "checkpoint_policy",
+           "policy_fits", "resolve", "shielded"]
 
 SHIELD_SUFFIX = "+shield"
 """A policy name ending in this is the policy filtered by :mod:`satenv.safety` (:func:`shielded`)."""
+LEARNED_TARGET = "satenv.training.both_ways:policy"
+"""How the board builds a policy folder: one of its two ways (``variant`` in its kwargs)."""
 NETWORK_SUFFIX = ":network"
 """A shipped policy that ships behind its safety filter, named with this suffix, is its network alone
-(``satenv.training.load(folder, env=env, shielded=False)``): the unfiltered numbers beside the shipped ones."""
+(``satenv.training.both_ways.policy(folder, env, "network alone")``): the unfiltered numbers beside the
+shipped ones."""
 
 
 class ScoreboardError(ValueError):
@@ -45,14 +49,17 @@ def _check_requires(requires: tuple[str, ...]) -> None:
 
 
 def resolve(target: str, requires: tuple[str, ...] = ()) -> Callable[..., Any]:
-    """The object named by ``"module:attribute"``; :class:`Unavailable` if a ``requires`` module
-    (optional third-party dependency) is missing. Any other import error propagates."""
+    """The object named by ``"module:attribute"`` (:func:`satenv.baselines.registry.resolve`);
+    :class:`Unavailable` if a ``requires`` module (optional third-party dependency) is missing, a
+    :class:`ScoreboardError` if the module has no such attribute. Any other import error propagates."""
+    from satenv.baselines.registry import ResolveError
+    from satenv.baselines.registry import resolve as resolve_target
+
     _check_requires(requires)
-    module, _, attr = target.partition(":")
-    obj = getattr(importlib.import_module(module), attr, None)
-    if obj is None:
-        raise ScoreboardError(f"{target!r}: module {module} has no attribute {attr!r}")
-    return obj
+    try:
+        return resolve_target(target)
+    except ResolveError as err:
+        raise ScoreboardError(str(err)) from None
 
 
 def _fingerprint(payload: Mapping[str, Any]) -> str:
@@ -68,17 +75,17 @@ def _env_ids() -> tuple[str, ...]:
 
 
 @dataclass(frozen=True)
-class ScenarioSpec:
-    """A named env configuration: ``satenv.make(env_id, **kwargs)``.
+class TaskSpec:
+    """A task of the board: ``satenv.make(env_id, **kwargs)``, named.
 
     Args:
-        name: scoreboard name, e.g. ``"platoon-PLF-cw"``.
+        name: the task's name, e.g. ``"platoon-PLF-cw"`` (:mod:`satenv.tasks`).
         env_id: a ``satenv.make`` id, e.g. ``"platoon_v0"``.
         kwargs: keyword arguments of the env.
         description: one line for the scoreboard header.
         requires: optional third-party modules the env needs.
         perturbation: a name of :data:`satenv.perturbations.PERTURBATIONS` the env runs under
-            (``<task>@<perturbation>`` scenarios of the robustness table).
+            (``<task>@<perturbation>`` entries of the robustness table).
 
     Success is the env scenario's own rule (``success_tol``, ``collision_voids_success``;
     :func:`satenv.metrics.success`), set through ``kwargs`` like any scenario field.
@@ -93,9 +100,9 @@ class ScenarioSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
-            raise ScoreboardError(f"scenario name must be a non-empty string, got {self.name!r}")
+            raise ScoreboardError(f"task name must be a non-empty string, got {self.name!r}")
         if self.env_id not in _env_ids():
-            raise ScoreboardError(f"scenario {self.name}: env_id must be one of {list(_env_ids())}, "
+            raise ScoreboardError(f"task {self.name}: env_id must be one of {list(_env_ids())}, "
                                   f"got {self.env_id!r}")
 
     def check_available(self) -> None:
@@ -141,14 +148,14 @@ class PolicySpec:
 
     Args:
         name: scoreboard name, e.g. ``"dmpc"``.
-        target: ``"module:attribute"`` of the policy class / factory (``"satenv.training:load"`` for a
-            checkpoint).
+        target: ``"module:attribute"`` of the policy class / factory
+            (``"satenv.training.both_ways:policy"`` for a policy folder).
         kwargs: keyword arguments after ``env``.
         env_ids: the env ids the policy controls (``None``: any env); a learned policy's comes
             from its folder's ``env.json``.
-        scenarios: ``fnmatch`` patterns of the scoreboard scenarios the policy is ranked on
-            (``None``: every scenario it fits); a policy folder may ask for this in its
-            ``scoreboard.json`` (``{"scenarios": [...]}``), e.g. only the scenario it was trained for.
+        tasks: ``fnmatch`` patterns of the board's tasks the policy is ranked on (``None``: every
+            task it fits); a policy folder may ask for this in its ``scoreboard.json``
+            (``{"scenarios": [...]}``), e.g. only the task it was trained for.
         description: one line for the scoreboard header.
         checkpoint: path of a trained policy folder.
         requires: optional third-party modules (e.g. the QP solver).
@@ -164,7 +171,7 @@ class PolicySpec:
     target: str
     kwargs: Mapping[str, Any] = field(default_factory=dict)
     env_ids: tuple[str, ...] | None = None
-    scenarios: tuple[str, ...] | None = None
+    tasks: tuple[str, ...] | None = None
     description: str = ""
     checkpoint: str | None = None
     requires: tuple[str, ...] = ()
@@ -179,17 +186,17 @@ class PolicySpec:
         if not isinstance(self.target, str) or ":" not in self.target:
             raise ScoreboardError(f"policy {self.name}: target must be a 'module:attribute' string, "
                                   f"got {self.target!r}")
-        for attr in ("env_ids", "scenarios"):
+        for attr in ("env_ids", "tasks"):
             value = getattr(self, attr)
             if value is not None and (isinstance(value, str) or not value):
                 raise ScoreboardError(f"policy {self.name}: {attr} must be a non-empty tuple of "
                                       f"strings or None, got {value!r}")
 
-    def ranked_on(self, scenario: str) -> bool:
-        """Whether the board runs this policy on the scenario named ``scenario`` (if it fits); a
-        perturbed scenario ``<task>@<perturbation>`` counts as its task."""
-        base = scenario.partition("@")[0]
-        return self.scenarios is None or any(fnmatch.fnmatchcase(base, p) for p in self.scenarios)
+    def ranked_on(self, task: str) -> bool:
+        """Whether the board runs this policy on the task named ``task`` (if it fits); a
+        perturbed task ``<task>@<perturbation>`` counts as its task."""
+        base = task.partition("@")[0]
+        return self.tasks is None or any(fnmatch.fnmatchcase(base, p) for p in self.tasks)
 
     def factory(self) -> Callable[..., Any]:
         return resolve(self.target, self.requires)
@@ -212,6 +219,10 @@ class PolicySpec:
 
     def fingerprint(self) -> str:
         payload: dict[str, Any] = {"targets": [self.target], "kwargs": dict(self.kwargs)}
+        if self.target == LEARNED_TARGET:  # the format of logs written when folders loaded through
+            # satenv.training.load(folder, env=env, shielded=...) directly: the same definition, still resumable
+            alone = self.kwargs.get("variant") == NETWORK_ALONE
+            payload = {"targets": ["satenv.training:load"], "kwargs": {"shielded": False} if alone else {}}
         if self.checkpoint is not None:
             payload["checkpoint"] = _content_hash(Path(self.checkpoint))
         if self.shield:
@@ -240,25 +251,6 @@ def policy_fits(spec: PolicySpec, env) -> bool:
         from satenv import baselines
         return bool(baselines.get(spec.baseline).supports(env))
     return spec.env_ids is None or env.metadata.get("name") in spec.env_ids
-
-
-def episode_metrics(traj, scenario: ScenarioSpec) -> dict[str, Any]:
-    """The metrics of one episode: ``satenv.metrics.summary``, whose success is the env
-    scenario's own rule (the same answer as ``metrics.summary`` and the training evaluation),
-    and for a shielded policy the filter's: ``interventions`` (agent-steps it changed),
-    ``interventions_per_agent_step`` (the same over the agent-steps it decided), ``mean_du`` (mean
-    ``|du|`` of those changes; ``None`` without any) and ``infeasible_steps`` (agent-steps it
-    applied the backup); ``None`` for a policy without the filter."""
-    from satenv import metrics
-
-    out = metrics.summary(traj)
-    info = traj.policy_info
-    n = int(info["safety_interventions"]) if "safety_steps" in info else None
-    agent_steps = int(info["safety_steps"]) * len(traj.agents) if n is not None else 0
-    out.update(interventions=n, interventions_per_agent_step=n / agent_steps if agent_steps else None,
-               mean_du=float(info["safety_delta"]) / n if n else None,
-               infeasible_steps=int(info["safety_infeasible"]) if n is not None else None)
-    return out
 
 
 def _content_hash(path: Path) -> str:
