@@ -1,8 +1,8 @@
 """One evaluation of a policy on a run's test seeds: episode records and the curve point.
 
-Each episode is :func:`satenv.scoring.episode_record` of a :func:`satenv.rollout.rollout` (the
-board's rule) plus ``episode_return`` (the env's reward summed over the episode, mean over agents,
-as the scoreboard logs it); only the fields the results use are kept (:data:`EPISODE_FIELDS`).
+Each episode is :func:`satenv.scoring.episode_record` of a :func:`satenv.rollout.rollout` (the one
+record the board logs too, ``episode_return`` included); only the fields the results use are kept
+(:data:`EPISODE_FIELDS`).
 A run trained with the filter is evaluated as trained: behind :func:`satenv.safety.shield` (the
 filter's default options), which also counts its interventions.
 """
@@ -50,7 +50,6 @@ def evaluate_policy(make_env: Callable[[], Any], make_policy: Callable[[Any], An
         for seed in seeds:
             traj = rollout(env, policy, seed=int(seed))
             rec = scoring.episode_record(traj, int(seed), len(env.possible_agents))
-            rec["episode_return"] = float(np.mean(np.sum(traj.rewards, axis=0))) if traj.steps else 0.0
             out.append({k: _clean(rec[k]) for k in EPISODE_FIELDS if k in rec})
     finally:
         env.close()

@@ -72,10 +72,10 @@ def _test_block(episodes: list[dict[str, Any]], ref: list[dict[str, Any]] | None
 
 
 def _point(rec: dict[str, Any]) -> list[Any]:
-    eps = rec["episodes"]
-    return [int(rec["agent_steps"]), _round(float(np.mean([bool(e["success"]) for e in eps]))),
-            _round(float(np.mean([e["episode_return"] for e in eps])), 3),
-            int(sum(bool(e["collisions"]) for e in eps))]
+    """A curve point (``grid.curve_fields``): the :func:`satenv.scoring.aggregate` of one checkpoint."""
+    agg = scoring.aggregate(rec["episodes"])
+    return [int(rec["agent_steps"]), _round(agg["success_rate"]), _round(agg["episode_return"], 3),
+            int(agg["collision_episodes"])]
 
 
 def run_key(rec: dict[str, Any]) -> tuple[Any, ...]:
