@@ -128,9 +128,9 @@ def new_parser(prog: str | None = None, description: str | None = None, epilog: 
                **kwargs: Any) -> argparse.ArgumentParser:
     """An argparse parser in the project's style: no abbreviated flags, descriptions as written
     (reST stripped)."""
+    kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
     return argparse.ArgumentParser(prog=prog, description=plain(description) or None,
-                                   epilog=plain(epilog) or None, allow_abbrev=False,
-                                   formatter_class=argparse.RawDescriptionHelpFormatter, **kwargs)
+                                   epilog=plain(epilog) or None, allow_abbrev=False, **kwargs)
 
 
 def flag_name(cls: type, f: Field) -> str:

@@ -1,5 +1,5 @@
 """The import direction of the design, floor by floor: the core (``satenv``) -> ``satenv.baselines``
--> ``satenv.training`` -> ``satenv.bench``, never upward, and no cycle between modules (imports inside functions included: a lazy import
+-> ``satenv.training`` -> ``satenv.bench`` -> ``satenv.cli`` (the ``satenv`` command), never upward, and no cycle between modules (imports inside functions included: a lazy import
 hides a cycle, it does not remove it)."""
 
 from __future__ import annotations
@@ -11,12 +11,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FLOORS = ("satenv", "satenv.baselines", "satenv.training", "satenv.bench")
+FLOORS = ("satenv", "satenv.baselines", "satenv.training", "satenv.bench", "satenv.cli")
 """The floors, lowest first; a module belongs to the highest floor its name starts with."""
+ENTRY_POINTS = {"satenv.__main__": "satenv.cli"}
+"""Modules on a floor their name does not say: ``python -m satenv`` is the ``satenv`` command."""
 
 
 def floor(module: str) -> int:
     """The floor of a module (an index into :data:`FLOORS`)."""
+    module = ENTRY_POINTS.get(module, module)
     return max(i for i, f in enumerate(FLOORS) if module == f or module.startswith(f + "."))
 
 
@@ -117,4 +120,5 @@ def test_every_floor_is_scanned(level):
 
 def test_the_floors_are_told_apart():
     assert [floor(m) for m in ("satenv.tasks", "satenv.baselines.dmpc", "satenv.training", "satenv.bench.perf",
-                               "satenv.benchmark")] == [0, 1, 2, 3, 0]
+                               "satenv.benchmark", "satenv.cli", "satenv.cliargs", "satenv.__main__")] == [
+        0, 1, 2, 3, 0, 4, 0, 4]

@@ -1,8 +1,8 @@
 """Train a satenv env with BenchMARL (MAPPO, IPPO, MASAC, ISAC, MADDPG, IDDPG) and export the actor.
 
-    python -m satenv.training.benchmarl_train --algo mappo --env-id platoon_v0 \\
+    satenv train-marl --algo mappo --env-id platoon_v0 \\
         --env-kwargs '{"randomize": true}' --budget 12000000 --out-dir runs/platoon_mappo
-    python -m satenv.bench.scoreboard --policy runs/platoon_mappo/final      # rank it
+    satenv board --policy runs/platoon_mappo/final      # rank it
 
 Needs the ``marl`` extra (``pip install -c constraints.txt -e ".[marl]"``). The env is the native
 TorchRL env (:mod:`satenv.torchrl`, batched numpy core) as the BenchMARL task
@@ -15,7 +15,7 @@ actor shared by every agent (``share_policy_params``).
 ``final/``: the exported policy (the safe format of :mod:`satenv.training.policy`: ``policy.json``,
 ``weights.pt``, ``obs_norm.json`` (identity: BenchMARL does not normalise), ``env.json``,
 ``config.json``, ``manifest.json``, ``eval.json`` on ``--test-seeds`` beside the baselines), so
-``satenv.training.load(DIR/final)`` and ``satenv.bench.scoreboard --policy DIR/final`` take it; and ``benchmarl/``:
+``satenv.training.load(DIR/final)`` and ``satenv board --policy DIR/final`` take it; and ``benchmarl/``:
 BenchMARL's experiment folder (CSV logs under ``scalars/``, checkpoints every
 ``--checkpoint-every`` frames and at the end; those are BenchMARL's own pickled files, for
 resuming with BenchMARL, not for sharing).
@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from satenv.cliargs import Arg
-from satenv.training.config import RunConfig, check_int, check_number, parse_args
+from satenv.training.config import RunConfig, announce, check_int, check_number, parse_args
 
 __all__ = ["BenchMARLConfig", "run", "main", "export_actor", "ALGORITHMS"]
 
@@ -40,7 +40,7 @@ ALGORITHMS = ("mappo", "ippo", "masac", "isac", "maddpg", "iddpg")
 
 @dataclass(frozen=True)
 class BenchMARLConfig(RunConfig):
-    """One BenchMARL run (``python -m satenv.training.benchmarl_train``; frames are env steps of one copy)."""
+    """One BenchMARL run (``satenv train-marl``; frames are env steps of one copy)."""
 
     algorithm: Annotated[Literal["mappo", "ippo", "masac", "isac", "maddpg", "iddpg"],
                          Arg(name="algo")] = "mappo"
@@ -68,7 +68,7 @@ class BenchMARLConfig(RunConfig):
     out_dir: str = "runs/benchmarl"
     """Run folder: ``config.json``, ``benchmarl/`` (BenchMARL's own), ``final/`` (the policy with ``eval.json``)."""
     init_actor: str = ""
-    """Start the actor from this policy folder (``python -m satenv.training.imitate --squash true``, same
+    """Start the actor from this policy folder (``satenv imitate --squash true``, same
     ``--net-arch``) instead of at random."""
     init_std: float = 0.2
     """The seeded actor's initial action standard deviation."""
@@ -171,7 +171,7 @@ def export_actor(policy: Any, obs_dim: int, act_dim: int, n_agents: int):
 
 def seed_actor(policy: Any, folder: str, init_std: float, n_agents: int) -> None:
     """Start a BenchMARL policy from the shipped-format policy in ``folder`` (e.g. a DAgger run of
-    :mod:`satenv.training.imitate` with ``squash=True``): its layers, with the observation normaliser
+    ``satenv imitate --squash true``): its layers, with the observation normaliser
     folded into the first one (``W / s``, ``b - W m / s``; the normaliser's clip is dropped), as
     the action location, and a constant standard deviation ``init_std`` (the scale rows zeroed,
     their bias set through BenchMARL's ``biased_softplus_1.0`` mapping). Checked: the BenchMARL
@@ -190,7 +190,7 @@ def seed_actor(policy: Any, folder: str, init_std: float, n_agents: int) -> None
     spec, norm = seed.actor.spec, seed.normalizer
     if not spec["squash"] or spec["activation"] != "tanh" or seed.features is not None or seed.action_map is not None:
         raise ValueError(f"init_actor {folder!r}: needs a tanh MLP with squash=True and no feature/action maps, "
-                         f"got {spec} (train it with python -m satenv.training.imitate --squash true)")
+                         f"got {spec} (train it with satenv imitate --squash true)")
     mlps = [m for m in policy.modules() if isinstance(m, Mlp)]
     params = mlps[0].mlp.params.flatten_keys(".")
     indices = sorted({int(k.split(".")[0]) for k in params.keys()})
@@ -247,6 +247,8 @@ def run(cfg: BenchMARLConfig) -> Path:
               f"agent-steps), frames_per_batch {cfg.frames_per_batch} -> {planned.frames_per_batch} (whole "
               "batches of whole env steps)", file=sys.stderr)
         cfg = planned
+    announce(cfg, f"BenchMARL {cfg.algorithm.upper()}, {cfg.max_frames} frames ({cfg.max_frames * len(env.possible_agents)} "
+             f"agent-steps) in batches of {cfg.frames_per_batch}", tensorboard=False)
     experiment = build_experiment(cfg)
     (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     if cfg.init_actor:
@@ -266,7 +268,7 @@ def run(cfg: BenchMARLConfig) -> Path:
 
 def main(argv: list[str] | None = None) -> Path:
     try:
-        cfg, _ = parse_args(argv, cls=BenchMARLConfig, prog="python -m satenv.training.benchmarl_train",
+        cfg, _ = parse_args(argv, cls=BenchMARLConfig, prog="satenv train-marl",
                             description=__doc__.split("\n\n")[0])
         import benchmarl  # noqa: F401
     except ImportError as err:
@@ -278,7 +280,7 @@ def main(argv: list[str] | None = None) -> Path:
         final = run(cfg)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
-    print(f"exported the trained actor to {final} (satenv.training.load / satenv.bench.scoreboard --policy)")
+    print(f"exported the trained actor to {final} (satenv.training.load / satenv board --policy)")
     return final
 
 

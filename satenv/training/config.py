@@ -1,7 +1,7 @@
 """Run configs of every training CLI and their one command-line grammar.
 
-Each CLI (``satenv.training.train``, ``satenv.training.imitate``, ``satenv.training.benchmarl_train``,
-``satenv.training.rllib_train``) is a frozen, validated dataclass whose fields are its flags: the
+Each trainer (``satenv train``, ``satenv train-marl``, ``satenv train-rllib``; ``satenv imitate``
+and ``satenv ppo`` share :class:`RunConfig`) is a frozen, validated dataclass whose fields are its flags: the
 shared ones (:class:`RunConfig`: ``--env-id``, ``--env-kwargs``, ``--lr``, ``--eval-seeds``,
 ``--test-seeds``, ``--out-dir``, ...) have the same name, type and meaning everywhere. The
 command line is parsed by argparse through :mod:`satenv.cliargs` (:func:`parse_args`), so
@@ -33,7 +33,7 @@ from satenv.cliargs import (
 )
 from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
-__all__ = ["BUDGET_FLAG", "RunConfig", "TrainConfig", "canonical_flags", "parse_args", "parse_bool", "parse_seeds",
+__all__ = ["BUDGET_FLAG", "RunConfig", "announce", "TrainConfig", "canonical_flags", "parse_args", "parse_bool", "parse_seeds",
            "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
@@ -116,7 +116,7 @@ class RunConfig:
     nmpc, tube_rdmpc, cgmres run only when named)."""
     out_dir: str = "runs/train"
     """Run folder: ``config.json`` (replayable, the budget actually run), ``final/`` (the policy
-    with ``eval.json``; what ``satenv.training.load`` and ``satenv.bench.scoreboard --policy`` take)."""
+    with ``eval.json``; what ``satenv.training.load`` and ``satenv board --policy`` take)."""
     torch_threads: int = 1
     """``torch.set_num_threads``."""
     progress: Flag = True
@@ -172,7 +172,7 @@ class RunConfig:
 
 @dataclass(frozen=True)
 class TrainConfig(RunConfig):
-    """One stable-baselines3 run (``python -m satenv.training.train``). Timesteps count agent-steps
+    """One stable-baselines3 run (``satenv train``). Timesteps count agent-steps
     (SB3 rows: ``num_envs * n_agents`` per env step)."""
 
     algo: Literal["ppo", "sac"] = "ppo"
@@ -241,7 +241,7 @@ class TrainConfig(RunConfig):
     """Save model + normalisation every this many agent-steps (0: never)."""
     init_actor: str = ""
     """PPO: start the actor and the observation normaliser from this policy folder (e.g. a DAgger
-    network of ``satenv.training.imitate`` / ``satenv.training.recipes.dagger``: its hidden sizes, activation and
+    network of ``satenv imitate``: its hidden sizes, activation and
     ``tanh`` output; ``--net-arch`` and the observation features must match it; no terminal
     feedback) instead of at random (``satenv.training.train.seed_actor``)."""
 
@@ -277,6 +277,26 @@ class TrainConfig(RunConfig):
         ActionMap(self.action_power)
         RewardShaping.from_dict(self.reward_shaping)
         ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims, self.obs_drop_dims)
+
+
+def announce(cfg: RunConfig, budget: str, *, tensorboard: bool = True, periodic: str = "") -> str:
+    """What a run is about to do, printed (stderr) before it starts and returned: its budget, its
+    evaluations, that the final evaluation takes time and how to shrink it, where it writes and
+    how to watch it."""
+    import sys
+
+    from satenv.training.evaluate import AUTO
+
+    named = ", ".join("zero and the cheap controllers" if b == AUTO else b for b in cfg.eval_baselines)
+    text = (f"training on {cfg.task or cfg.env_id}: {budget}"
+            + (f"; {periodic}" if periodic else "")
+            + f".\nThe final evaluation then runs {len(cfg.test_seeds)} held-out episodes of the policy and of "
+            f"each baseline ({named}) and can take longer than a small run's training (--test-seeds 900000-900004 "
+            "and --eval-baselines zero shrink it; the baselines are cached for the next run).\n"
+            f"Writes to {cfg.out_dir}/ (config.json, final/ with eval.json)"
+            + (f"; watch it with: tensorboard --logdir {cfg.out_dir}/tb" if tensorboard else ""))
+    print(text, file=sys.stderr, flush=True)
+    return text
 
 
 def round_timesteps(cfg: TrainConfig, n_agents: int) -> int:

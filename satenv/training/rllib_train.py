@@ -1,18 +1,18 @@
 """Train a satenv scenario with Ray RLlib: multi-agent PPO, one policy shared by every agent.
 
-    python -m satenv.training.rllib_train --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
+    satenv train-rllib --env-id platoon_v0 --env-kwargs '{"randomize": true}' \\
         --budget 800000 --num-env-runners 2 --out-dir runs/rllib_platoon
-    python -m satenv.bench.scoreboard --policy runs/rllib_platoon/final      # rank it
+    satenv board --policy runs/rllib_platoon/final      # rank it
     # on an existing Ray cluster (started with `ray start --head` on the head node and
     # `ray start --address=<head>:6379` on the workers):
-    python -m satenv.training.rllib_train --address <head>:6379 --num-env-runners 32 ...
+    satenv train-rllib --address <head>:6379 --num-env-runners 32 ...
 
 The env goes through RLlib's PettingZoo wrapper (``ParallelPettingZooEnv``); every agent maps to
 the policy ``"shared"``. Without ``--address`` Ray starts locally (``num_cpus`` = ``--num-cpus``).
 ``--budget`` counts agent-steps, as for every trainer: ``ceil(budget / (train_batch_size *
 agents))`` iterations (``--iterations``, the old flag, gives them directly).
 RLlib runs are only reproducible with a fixed ``PYTHONHASHSEED`` (set it before starting
-Python, e.g. ``PYTHONHASHSEED=0 python -m satenv.training.rllib_train ...``).
+Python, e.g. ``PYTHONHASHSEED=0 satenv train-rllib ...``).
 
 Needs the optional extra (``pip install -c constraints.txt -e ".[rllib]"``: ray[rllib], torch,
 tensorboard; stable-baselines3 is not imported on this path). Without it, :func:`main` exits
@@ -24,7 +24,7 @@ losses per iteration), ``progress.json`` (per iteration: env steps, mean episode
 time), ``config.json`` (these arguments) and ``final/``: the trained actor exported to the safe
 policy format of :mod:`satenv.training.policy` (``policy.json``, ``weights.pt``, ``obs_norm.json``
 (identity), ``env.json``, ``manifest.json``, ``eval.json`` on ``--test-seeds`` beside the
-baselines), so ``satenv.training.load(out_dir/final)`` and ``satenv.bench.scoreboard --policy
+baselines), so ``satenv.training.load(out_dir/final)`` and ``satenv board --policy
 out_dir/final`` take it.
 """
 
@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from satenv.training.config import RunConfig, check_int, check_number, parse_args
+from satenv.training.config import RunConfig, announce, check_int, check_number, parse_args
 
 __all__ = ["RLlibConfig", "run", "main", "require_ray"]
 
@@ -61,7 +61,7 @@ def require_ray():
 
 @dataclass(frozen=True)
 class RLlibConfig(RunConfig):
-    """One RLlib run (``python -m satenv.training.rllib_train``)."""
+    """One RLlib run (``satenv train-rllib``)."""
 
     budget: int | None = None
     """The budget: agent-steps to train for; runs ``ceil(budget / (train_batch_size * agents))``
@@ -154,6 +154,7 @@ def run(cfg: RLlibConfig, *, verbose: bool = True) -> list[dict[str, Any]]:
         print(f"budget {cfg.budget} agent-steps -> {planned.iterations} iterations of "
               f"{cfg.train_batch_size} env steps", file=sys.stderr)
         cfg = planned
+    announce(cfg, f"RLlib PPO, {cfg.iterations} iterations of {cfg.train_batch_size} env steps")
     (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     started = False
     if not ray.is_initialized():
@@ -250,7 +251,7 @@ def _float(v: Any) -> float | None:
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     try:
-        cfg, _ = parse_args(argv, cls=RLlibConfig, prog="python -m satenv.training.rllib_train",
+        cfg, _ = parse_args(argv, cls=RLlibConfig, prog="satenv train-rllib",
                             description=__doc__.split("\n\n")[0])
         return run(cfg)
     except (RayNotInstalledError, ValueError) as err:

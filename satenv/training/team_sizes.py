@@ -19,7 +19,6 @@ rewritten after every (task, variant) so an interrupted run keeps what it finish
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 import warnings
@@ -100,9 +99,10 @@ def table(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
+    from satenv.cliargs import new_parser
     from satenv.tasks import parse_seeds
 
-    parser = argparse.ArgumentParser(prog="python -m satenv.training.team_sizes", description=__doc__.split("\n\n")[0])
+    parser = new_parser(prog="satenv team-sizes", description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", required=True, help="policy folder")
     parser.add_argument("--tasks", default=",".join(DEFAULT_TASKS), help="comma-separated satenv.tasks names")
     parser.add_argument("--seeds", default="900000-900019", help="test seeds, A-B or a list")

@@ -1,8 +1,8 @@
 """Train a shared policy for a satenv scenario with stable-baselines3 (PPO or SAC).
 
-    python -m satenv.training.train --task platoon-pereira2022-random \\
+    satenv train --task platoon-pereira2022-random \\
         --algo ppo --budget 2000000 --num-envs 32 --out-dir runs/platoon_ppo
-    python -m satenv.training.train --out-dir runs/platoon_ppo --resume [--budget 3000000]
+    satenv train --out-dir runs/platoon_ppo --resume [--budget 3000000]
     tensorboard --logdir runs/platoon_ppo/tb
 
 Every agent of every env copy is one row of the SB3 batch (``satenv.training.vec_env.SatVecEnv``,
@@ -37,7 +37,13 @@ from typing import Any
 import numpy as np
 
 from satenv.training import runfolder
-from satenv.training.config import TrainConfig, parse_args, planned_timesteps, round_timesteps
+from satenv.training.config import (
+    TrainConfig,
+    announce,
+    parse_args,
+    planned_timesteps,
+    round_timesteps,
+)
 from satenv.training.envs import make_env, policy_env_meta
 from satenv.training.evaluate import (
     cached_baselines,
@@ -519,6 +525,10 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
         print(f"total_timesteps {cfg.total_timesteps} -> {target}: whole collection rounds of "
               f"{round_timesteps(cfg, len(env.possible_agents))} agent-steps", file=sys.stderr)
         cfg = cfg.replace(total_timesteps=target)
+    announce(cfg, f"{cfg.algo.upper()}, {target} agent-steps ({cfg.num_envs} copies x {len(env.possible_agents)} "
+             f"agents per env step)" + (f", {model.num_timesteps} already done" if ckpt else ""),
+             periodic=(f"an evaluation on {len(cfg.eval_seeds)} seeds every {cfg.eval_every} agent-steps"
+                       if cfg.eval_every else "no periodic evaluation"))
     runfolder.write_json(out / "config.json", cfg.to_json(), indent=2)
     remaining = target - model.num_timesteps
     t0 = time.perf_counter()
@@ -590,7 +600,7 @@ def _cached_baselines(path: Path, eval_env, cfg: TrainConfig, seeds) -> dict[str
 # --------------------------------------------------------------------------- CLI
 def main(argv: list[str] | None = None) -> Path:
     try:
-        cfg, opts = parse_args(argv, resume=True, prog="python -m satenv.training.train",
+        cfg, opts = parse_args(argv, resume=True, prog="satenv train",
                                description=__doc__.split("\n\n")[0])
         return train(cfg, resume=opts.resume)
     except ValueError as err:

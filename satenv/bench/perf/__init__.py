@@ -252,7 +252,9 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
 def main(argv: list[str] | None = None) -> dict:
     """The command line; sets one BLAS thread (``satenv.bench._env.single_thread_blas``) first."""
     single_thread_blas()
-    parser = argparse.ArgumentParser(prog="python -m satenv.bench.perf", description=__doc__,
+    from satenv.cliargs import new_parser
+
+    parser = new_parser(prog="satenv perf", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="perf.json", help="output JSON file")
     parser.add_argument("--batches", default=DEFAULT_BATCHES, help="comma-separated batch sizes")

@@ -14,7 +14,6 @@ ratios on *matched, completed* episodes, decision time).
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
@@ -116,7 +115,9 @@ def table(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    from satenv.cliargs import new_parser
+
+    p = new_parser(prog="satenv heldout", description=__doc__.split("\n\n")[0])
     p.add_argument("--system", required=True, help=f"a paper system: {', '.join(tasks.SYSTEMS)}")
     p.add_argument("--policy", type=Path, required=True)
     p.add_argument("--seeds", default=None, help="seeds of the training task (default: its first 50 test seeds)")
