@@ -38,6 +38,32 @@ def test_registry_names_and_supporting_envs():
             assert env_id in cls.env_ids or not cls.supports(env)
 
 
+def test_every_controller_and_expert_the_task_registry_names_resolves():
+    """satenv.tasks names controllers and experts; satenv.baselines.registry defines every one."""
+    from satenv import tasks
+    from satenv.baselines import registry
+
+    names = {t.controller for t in tasks.TASKS.values()} | {s.controller for s in tasks.SYSTEMS.values()}
+    assert names and names <= set(registry.BASELINES)
+    for name in names:
+        assert callable(getattr(registry.get(name), "supports", None)), name
+    experts = {s.expert for s in tasks.SYSTEMS.values()}
+    assert experts and all(isinstance(registry.get_expert(name), type) for name in experts)
+    with pytest.raises(BaselineError, match="unknown expert"):
+        registry.get_expert("no_such_expert")
+
+
+def test_one_resolver_of_module_attribute_strings():
+    from satenv.baselines.registry import ResolveError, resolve
+
+    assert resolve("satenv.baselines.base:ZeroPolicy") is baselines.ZeroPolicy
+    for bad in ("satenv.baselines.base", "satenv.baselines.base:NoSuchThing", ":x", 3):
+        with pytest.raises(ResolveError):
+            resolve(bad)
+    with pytest.raises(ModuleNotFoundError):
+        resolve("no_such_module_anywhere:x")
+
+
 def test_cheap_table_matches_the_classes_and_imports_no_solver():
     assert {n for n in baselines.BASELINES if baselines.get(n).cheap} == baselines.registry.CHEAP
     code = ("import sys, satenv\nfrom satenv import baselines\n"

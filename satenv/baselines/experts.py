@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from satenv.baselines import registry
 from satenv.baselines.base import new_info, record_fallback
 from satenv.baselines.dmpc import ConvexStepDMPC, DMPCConfig, QPSolver
 from satenv.perturbations import nominal
@@ -245,18 +246,8 @@ class ReplanningTubeRDMPC:
         return actions
 
 
-EXPERTS: dict[str, str] = {"joint_platoon_mpc": "satenv.baselines.experts:JointPlatoonMPC",
-                           "replanning_tube_rdmpc": "satenv.baselines.experts:ReplanningTubeRDMPC"}
-"""The stateless experts of this module by registry name; every other expert name is a scripted
-baseline (``satenv.baselines.make``). :data:`satenv.tasks.SYSTEMS` names each system's expert."""
+EXPERTS = registry.EXPERTS
+"""The stateless experts by name: :data:`satenv.baselines.registry.EXPERTS` (the one controller registry)."""
 
-
-def make(name: str, env: Any, **options: Any) -> Any:
-    """The expert called ``name`` (:data:`EXPERTS`, else ``satenv.baselines.make(name, ...)``) for ``env``."""
-    if name in EXPERTS:
-        import importlib
-
-        module, _, attr = EXPERTS[name].partition(":")
-        return getattr(importlib.import_module(module), attr)(env, **options)
-    from satenv import baselines
-    return baselines.make(name, env, **options)
+make = registry.make_expert
+"""The expert called ``name`` for ``env``: :func:`satenv.baselines.registry.make_expert`."""

@@ -1,9 +1,13 @@
-"""The one table of scripted baselines: name -> ``"module:Class"`` (imported lazily).
+"""The one controller registry: scripted baselines and imitation experts, name -> ``"module:Class"``
+(imported lazily), and the one resolver of ``"module:attribute"`` strings (:func:`resolve`).
 
-``satenv.baselines.make(name, env, **options)`` builds one, ``satenv.baselines.get(name)`` returns its class,
-``satenv.baselines.supporting(env)`` lists the names whose class can control ``env`` (each class's
-``supports(env)``: by ``env.metadata["name"]`` and scenario properties). The scoreboard
-(``benchmarks.registry``) and the training evaluation (``satenv.training.evaluate``) ask this table.
+``satenv.baselines.make(name, env, **options)`` builds a baseline, ``satenv.baselines.get(name)``
+returns its class, ``satenv.baselines.supporting(env)`` lists the names whose class can control
+``env`` (each class's ``supports(env)``: by ``env.metadata["name"]`` and scenario properties).
+:func:`make_expert` builds an expert for imitation: a stateless one of :data:`EXPERTS`, else a
+baseline. Every controller and expert name of :mod:`satenv.tasks` is a name of this registry. The
+scoreboard (``satenv.bench.scoreboard.registry``), the training evaluation
+(``satenv.training.evaluate``) and imitation ask this table.
 
 A module is imported only when its class is needed: ``supporting(env, cheap=True)`` imports the
 cheap baselines alone (:data:`CHEAP`), so it works without the ``mpc`` extra's solvers (casadi,
@@ -17,7 +21,8 @@ from typing import Any
 
 from satenv.baselines.base import BaselineError, is_satenv_env
 
-__all__ = ["BASELINES", "CHEAP", "WRAPPERS", "get", "make", "supporting"]
+__all__ = ["BASELINES", "CHEAP", "EXPERTS", "WRAPPERS", "ResolveError", "get", "get_expert", "make", "make_expert",
+           "resolve", "supporting"]
 
 BASELINES: dict[str, str] = {
     "zero": "satenv.baselines.base:ZeroPolicy",
@@ -38,6 +43,29 @@ WRAPPERS: dict[str, str] = {"shield": "satenv.baselines.shield:Shield"}
 """Policy wrappers by name: ``make(name, env, policy=...)`` wraps another policy (not baselines on
 their own: :func:`supporting` never lists them)."""
 
+EXPERTS: dict[str, str] = {"joint_platoon_mpc": "satenv.baselines.experts:JointPlatoonMPC",
+                           "replanning_tube_rdmpc": "satenv.baselines.experts:ReplanningTubeRDMPC"}
+"""The stateless experts for imitation (:mod:`satenv.baselines.experts`) by name; every other
+expert name is a baseline of :data:`BASELINES`. :data:`satenv.tasks.SYSTEMS` names each system's expert."""
+
+
+class ResolveError(BaselineError):
+    """A ``"module:attribute"`` string that names nothing."""
+
+
+def resolve(target: str) -> Any:
+    """The object named by ``"module:attribute"`` (the one resolver of such strings: the registries
+    here, the scoreboard's policy targets, the training envs' ids). A malformed string or a module
+    without that attribute is a :class:`ResolveError`; an import error of the module propagates
+    (a missing optional dependency stays a ``ModuleNotFoundError``)."""
+    module, sep, attr = target.partition(":") if isinstance(target, str) else ("", "", "")
+    if not (module and sep and attr):
+        raise ResolveError(f"expected a 'module:attribute' string, got {target!r}")
+    obj = getattr(importlib.import_module(module), attr, None)
+    if obj is None:
+        raise ResolveError(f"{target!r}: module {module} has no attribute {attr!r}")
+    return obj
+
 
 def get(name: str) -> type:
     """The class registered as ``name`` (imports its module on first use)."""
@@ -45,13 +73,28 @@ def get(name: str) -> type:
     if not isinstance(name, str) or name not in table:
         raise BaselineError(f"unknown baseline {name!r}; expected one of {sorted(BASELINES)} "
                             f"(or a wrapper: {sorted(WRAPPERS)})")
-    module, _, attr = table[name].partition(":")
-    return getattr(importlib.import_module(module), attr)
+    return resolve(table[name])
 
 
 def make(name: str, env: Any, **options: Any) -> Any:
     """``get(name)(env, **options)``: a baseline policy for ``env``."""
     return get(name)(env, **options)
+
+
+def get_expert(name: str) -> type:
+    """The class of the expert called ``name``: a stateless expert of :data:`EXPERTS`, else the
+    baseline (:func:`get`)."""
+    if isinstance(name, str) and name in EXPERTS:
+        return resolve(EXPERTS[name])
+    if not isinstance(name, str) or name not in BASELINES:
+        raise BaselineError(f"unknown expert {name!r}; expected one of {sorted(EXPERTS)} or a baseline "
+                            f"{sorted(BASELINES)}")
+    return get(name)
+
+
+def make_expert(name: str, env: Any, **options: Any) -> Any:
+    """``get_expert(name)(env, **options)``: the expert called ``name`` for ``env``."""
+    return get_expert(name)(env, **options)
 
 
 def supporting(env: Any, *, cheap: bool = False) -> list[str]:

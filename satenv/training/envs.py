@@ -6,7 +6,6 @@
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from satenv.envs.base import SatenvError, SatParallelEnv
@@ -25,15 +24,15 @@ def make_env(env_id: str, **kwargs: Any) -> SatParallelEnv:
             raise SatenvError(f"unknown env id {env_id!r}: use one of {list(satenv.ENV_IDS)} or "
                               "'package.module:callable'")
         return satenv.make(env_id, **kwargs)
-    module_name, _, attr = env_id.partition(":")
+    from satenv.baselines.registry import ResolveError, resolve
+
     try:
-        module = importlib.import_module(module_name)
+        factory = resolve(env_id)
     except ModuleNotFoundError as err:
-        raise SatenvError(f"unknown env id {env_id!r}: cannot import {module_name!r} ({err}); use a "
+        raise SatenvError(f"unknown env id {env_id!r}: cannot import {env_id.partition(':')[0]!r} ({err}); use a "
                           "satenv env id such as 'platoon_v0' or 'package.module:callable'") from None
-    factory = getattr(module, attr, None)
-    if factory is None:
-        raise SatenvError(f"unknown env id {env_id!r}: {module_name!r} has no attribute {attr!r}")
+    except ResolveError as err:
+        raise SatenvError(f"unknown env id {env_id!r}: {err}") from None
     env = factory(**kwargs)
     if not isinstance(env, SatParallelEnv):
         raise SatenvError(f"env id {env_id!r} built a {type(env).__name__}; expected a "
