@@ -32,8 +32,8 @@ Each system has a **ladder** (:func:`ladder`, :data:`LADDERS`): registered tasks
 ending at its training task. A rung changes only what makes the task hard (where the starts are
 drawn, the success tolerance), never the physics; ``docs/tasks.md`` tabulates them.
 
-The registry imports no baseline: controllers and experts are names that ``satenv.baselines.make`` and
-``satenv.baselines.experts.make`` resolve.
+The registry imports no baseline: controllers and experts are names of the one controller registry,
+``satenv.baselines.registry`` (``make`` and ``make_expert`` resolve them; a test checks every one does).
 """
 
 from __future__ import annotations
@@ -131,7 +131,7 @@ task on that env, the reference of the board's normalised score."""
 
 @dataclass(frozen=True)
 class System:
-    """A paper system: its label, its expert for imitation (a ``satenv.baselines.experts`` registry name)
+    """A paper system: its label, its expert for imitation (a ``satenv.baselines.registry`` expert name)
     and its training and paper tasks; its controller is its env's (:data:`CONTROLLERS`)."""
 
     name: str
@@ -227,7 +227,7 @@ class Task:
 
     @property
     def expert(self) -> str | None:
-        """The system's expert for imitation (a ``satenv.baselines.experts`` registry name)."""
+        """The system's expert for imitation (a ``satenv.baselines.registry`` expert name)."""
         return SYSTEMS[self.system].expert if self.system else None
 
     def seeds(self, split: str, n: int | None = None) -> tuple[int, ...]:
