@@ -22,9 +22,10 @@ __all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "SCENARIOS", "TAS
 
 SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
 
-TASKS: dict[str, TaskSpec] = {t.name: TaskSpec(t.name, t.env_id, dict(t.env_kwargs), t.description)
+TASKS: dict[str, TaskSpec] = {t.name: TaskSpec(t.name, t.env_id, dict(t.paper_env_kwargs), t.description)
                               for t in tasks.TASKS.values()}
-"""Every task of the scoreboard by name: the tasks of :mod:`satenv.tasks` (one registry)."""
+"""Every task of the scoreboard by name: the tasks of :mod:`satenv.tasks` (one registry), each with
+the paper's cost (``Task.paper_env_kwargs``: a training task's training reward left out)."""
 
 SCENARIOS = TASKS
 """The same table under the name the command line's ``--scenarios`` / ``--list`` reads."""
