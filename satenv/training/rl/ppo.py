@@ -355,13 +355,9 @@ CHECKPOINT_ARRAYS = "env_state.npz"
 CHECKPOINT_JSON = "state.json"
 
 
-REWARD_MEMORY = ("phi", "collided")
-"""The training reward's per-copy memory (``satenv.rewards.RewardState``) a checkpoint keeps."""
-
-
 def _env_state(vec: Any) -> dict[str, np.ndarray]:
     """The batched env's episodes in flight (the SB3 adapter's record of them, one home) and the
-    training reward's memory of them."""
+    training reward's memory of them (every array of ``satenv.rewards.RewardState``)."""
     from types import SimpleNamespace
 
     from satenv.training.vec_env import SatVecEnv
@@ -369,7 +365,7 @@ def _env_state(vec: Any) -> dict[str, np.ndarray]:
     state = SatVecEnv.get_state(SimpleNamespace(vec=vec, core=vec.core, n_copies=vec.num_envs))
     memory = getattr(vec, "reward_state", None)
     if memory is not None:
-        state.update({f"reward.{k}": getattr(memory, k).copy() for k in REWARD_MEMORY})
+        state.update({f"reward.{k}": v.copy() for k, v in vars(memory).items() if isinstance(v, np.ndarray)})
     return state
 
 
@@ -381,8 +377,7 @@ def _set_env_state(vec: Any, state: dict[str, np.ndarray]) -> None:
     SatVecEnv.set_state(SimpleNamespace(vec=vec, core=vec.core, n_copies=vec.num_envs), state)
     memory = getattr(vec, "reward_state", None)
     if memory is not None:
-        for k in REWARD_MEMORY:
-            old = getattr(memory, k)
+        for k, old in [(k, v) for k, v in vars(memory).items() if isinstance(v, np.ndarray)]:
             new = np.asarray(state[f"reward.{k}"], dtype=old.dtype)
             if new.shape != old.shape:
                 raise ValueError(f"env state: reward.{k} has shape {new.shape}, this env's is {old.shape}")
