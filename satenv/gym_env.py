@@ -61,7 +61,7 @@ class CentralisedEnv(gym.Env):
             env = make(env, render_mode=render_mode, **env_kwargs)
         elif env_kwargs:
             raise SatenvError(f"env_kwargs {sorted(env_kwargs)} given with an env instance; pass an env id instead")
-        if not isinstance(env, SatParallelEnv):
+        if not isinstance(getattr(env, "unwrapped", env), SatParallelEnv):   # a wrapper (satenv.safety) too
             raise SatenvError(f"CentralisedEnv needs a satenv SatParallelEnv or an env id, got {type(env).__name__}")
         self.env = env
         self.render_mode = env.render_mode

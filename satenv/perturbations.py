@@ -22,7 +22,9 @@ physics of the next step.
 navigation perturbations declare a bound: the radius that holds a 3-axis Gaussian error of the
 declared sigma with probability :data:`NAV_BOUND_PROBABILITY` per draw. The truth changes
 (thrust, disturbance, model, inertia) declare nothing: they are what a planner does not know, and
-the board measures how it copes.
+the board measures how it copes. A filter built into the truth env (``safety_filter=True`` in the
+task's env kwargs) runs inside its step: it reads the truth and models the scenario it was built
+with.
 """
 
 from __future__ import annotations
@@ -252,7 +254,16 @@ def declared_bounds(env: Any) -> UncertaintyBounds:
     return p.bounds if isinstance(p, Perturbation) else UncertaintyBounds()
 
 
-@functools.cache
 def _wrapper_class(env_class: type) -> type:
     """:class:`PerturbedEnv` with the env class's ``metadata`` (what the baselines check)."""
-    return type(f"Perturbed{env_class.__name__}", (PerturbedEnv,), {"metadata": env_class.metadata})
+    return wrapper_class(PerturbedEnv, env_class)
+
+
+@functools.cache
+def wrapper_class(wrapper: type, env_class: type) -> type:
+    """``wrapper`` (a PettingZoo ``BaseParallelWrapper``) with ``env_class``'s class-level
+    ``metadata``: the baselines read ``type(env).metadata["name"]``, which a wrapper's
+    ``__getattr__`` cannot forward. The subclass pickles by its base's ``__reduce__``."""
+    prefix = wrapper.__name__.removesuffix("Env").removesuffix("Wrapper")
+    return type(f"{prefix}{env_class.__name__}", (wrapper,), {"metadata": env_class.metadata,
+                                                               "__module__": wrapper.__module__})

@@ -121,7 +121,7 @@ class SatVectorEnv:
 
     def __init__(self, env: SatParallelEnv, num_envs: int, *, seed: int | None = None,
                  autoreset: bool = True, safety_filter: Any = None) -> None:
-        if not isinstance(env, SatParallelEnv):
+        if not isinstance(getattr(env, "unwrapped", env), SatParallelEnv):   # a wrapper (satenv.safety) too
             raise SatenvTypeError(f"SatVectorEnv needs a satenv env (satenv.make(...)), got {type(env).__name__}")
         num_envs = integer(num_envs, "num_envs", minimum=1, maximum=MAX_COPIES,
                            why="MAX_COPIES: the batch is allocated at once")

@@ -1,64 +1,68 @@
-"""An env whose ``step`` filters the actions first (``safety_filter=True`` on ``satenv.make``)."""
+"""An env whose ``step`` filters the actions first (``safety_filter=True`` on ``satenv.make``).
+
+:class:`SafetyFilterWrapper` is a PettingZoo ``BaseParallelWrapper``, as Gymnasium modifies an
+env: it delegates everything to the env it wraps (``unwrapped`` gives that env) and only filters
+the actions in :meth:`~SafetyFilterWrapper.step`. Code that asks for a satenv env with
+``isinstance`` reads ``env.unwrapped`` (``satenv.vector.SatVectorEnv``, ``satenv.gym_env``); the
+baselines read the class-level ``metadata`` of ``type(env)``, which
+:func:`satenv.perturbations.wrapper_class` gives the wrapper per env class.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
+from pettingzoo.utils.wrappers import BaseParallelWrapper
+
+from satenv.perturbations import UncertaintyBounds, wrapper_class
 from satenv.safety.config import SafetyConfig, SafetyTypeError
 from satenv.safety.core import SafetyFilter
 
+__all__ = ["SafetyFilterWrapper", "filtered_env", "safety_config"]
 
-# ---------------------------------------------------------------------------------------------
-# filtered envs (safety_filter=True on satenv.make / make_vec / satenv.torchrl.make_env)
-# ---------------------------------------------------------------------------------------------
-def _filtered_class(cls: type) -> type:
-    """The subclass of a satenv env class whose ``step`` filters the actions first: per-agent
-    infos get the record (``safety_*``), rewards ``- penalty * |du|``."""
 
-    def step(self, actions):
-        if not self.agents:
-            return cls.step(self, actions)
-        safe, rec = self.safety.filter(self._action_array(actions))
-        obs, rewards, terms, truncs, infos = cls.step(self, dict(zip(self.possible_agents, safe, strict=True)))
+class SafetyFilterWrapper(BaseParallelWrapper):
+    """``env`` with its actions filtered at every ``step`` by :attr:`safety` (a
+    :class:`SafetyFilter`): per-agent infos get the record (``safety_*``), rewards
+    ``- penalty * |du|``. Build it with :func:`filtered_env`."""
+
+    def __init__(self, env: Any, config: SafetyConfig | None = None, *,
+                 bounds: UncertaintyBounds | None = None, **options: Any) -> None:
+        super().__init__(env)
+        self.safety = SafetyFilter(env, config, bounds=bounds, **options)
+        self.metadata = env.metadata
+
+    def step(self, actions: dict[str, Any]):
+        env = self.env
+        if not env.agents:
+            return env.step(actions)
+        safe, rec = self.safety.filter(env._action_array(actions))
+        obs, rewards, terms, truncs, infos = env.step(dict(zip(env.possible_agents, safe, strict=True)))
         pen = self.safety.config.penalty
         extra = {k: v[0].tolist() for k, v in rec.infos().items()}
-        for i, agent in enumerate(self.possible_agents):
+        for i, agent in enumerate(env.possible_agents):
             infos[agent].update({k: v[i] for k, v in extra.items()})
             if pen:
                 rewards[agent] -= pen * extra["safety_delta"][i]
         return obs, rewards, terms, truncs, infos
 
-    if cls not in _FILTERED:
-        _FILTERED[cls] = type(f"Filtered{cls.__name__}", (cls,), {"step": step, "__doc__": cls.__doc__,
-                                                                  "__module__": __name__})
-    return _FILTERED[cls]
+    def __reduce__(self):
+        return filtered_env, (self.env, self.safety.config), {"_bounds": self.safety.model.bounds}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        if state.get("_bounds") != self.safety.model.bounds:
+            self.safety = SafetyFilter(self.env, self.safety.config, bounds=state["_bounds"])
+
+    def __repr__(self) -> str:
+        return f"SafetyFilterWrapper<{self.env!r}>"
 
 
-_FILTERED: dict[type, type] = {}
-
-
-def __getattr__(name: str) -> type:
-    """``satenv.safety.Filtered<EnvClass>`` (the class :func:`filtered_env` gives an env), so that a
-    filtered env pickles by reference (e.g. into a Gymnasium ``AsyncVectorEnv`` worker)."""
-    if name.startswith("Filtered"):
-        import importlib
-
-        import satenv
-
-        for env_id in satenv.ENV_IDS:
-            cls = getattr(importlib.import_module(f"satenv.envs.{env_id}"), name[len("Filtered"):], None)
-            if isinstance(cls, type):
-                return _filtered_class(cls)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def filtered_env(env: Any, config: SafetyConfig | None = None, **options: Any) -> Any:
-    """``env`` (a ``satenv.make`` env) with its actions filtered at every ``step`` (the same
-    object, its class a filtered subclass: every attribute and check of the env still holds)."""
-    filt = SafetyFilter(env, config, **options)
-    env.__class__ = _filtered_class(type(env))
-    env.safety = filt
-    return env
+def filtered_env(env: Any, config: SafetyConfig | None = None, *, bounds: UncertaintyBounds | None = None,
+                 **options: Any) -> SafetyFilterWrapper:
+    """``env`` (a ``satenv.make`` env) wrapped so that its actions are filtered at every ``step``
+    (:class:`SafetyFilterWrapper`; ``config``, ``bounds`` and ``options`` as for
+    :class:`SafetyFilter`)."""
+    return wrapper_class(SafetyFilterWrapper, type(env))(env, config, bounds=bounds, **options)
 
 
 def safety_config(value: Any) -> SafetyConfig:

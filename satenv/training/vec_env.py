@@ -53,7 +53,7 @@ class SatVecEnv(VecEnv):
                  obs_fn: Callable[[np.ndarray], np.ndarray] | None = None,
                  action_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         template = env() if callable(env) and not isinstance(env, SatParallelEnv) else env
-        if not isinstance(template, SatParallelEnv):
+        if not isinstance(getattr(template, "unwrapped", template), SatParallelEnv):
             raise SatenvError(f"SatVecEnv needs a satenv SatParallelEnv (or a callable returning one), "
                               f"got {type(template).__name__}")
         if isinstance(n_copies, bool) or not isinstance(n_copies, (int, np.integer)) or n_copies < 1:
