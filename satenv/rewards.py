@@ -9,23 +9,28 @@ position part of ``tracking_error``, the quantity :func:`satenv.metrics.success`
     r_i = phi(d_i') - phi(d_i)                       progress (potential-based, telescopes)
         + IN_TOLERANCE_BONUS / H  [d_i' <= tol]      bonus inside the success tolerance
         + SUCCESS_BONUS           [the team succeeds at the last step]
-        - PENALTY [collision_i] - PENALTY [violation_i] - PENALTY [agent i left the region]
+        - PENALTY [agent i's first collision]  - PENALTY [its first hard-bound violation]
+        - PENALTY [agent i left the region]
 
 with the potential ``phi(d) = -log(1 + d / tol) / log(1 + reach / tol)`` in ``[-1, 0]`` inside
 the region (``reach = 2 max_distance``, the farthest a target can be from an agent still in the
 region) and ``H`` the horizon (``max_steps``). The sizes are derived, not tuned:
 
-* without succeeding an agent earns at most :data:`EARNABLE` (the potential's span, 1, plus the
-  whole in-tolerance bonus), over a whole episode or over any rest of one;
-* :data:`SUCCESS_BONUS` exceeds that by a further potential span, so a successful episode without
-  collisions or violations out-scores every failing one, whatever either's start;
-* :data:`PENALTY` exceeds everything an agent could still gain (``EARNABLE + SUCCESS_BONUS``), so
-  a collision, a violation of a hard bound or leaving the region never pays.
+* without the success bonus an agent gains at most :data:`EARNABLE` (the potential's span, 1,
+  plus the whole in-tolerance bonus), over a whole episode or over any rest of one;
+* :data:`PENALTY` exceeds that: from any state, a collision, a violation or leaving the region
+  costs more than all the progress and bonus the agent could still collect (and a collision that
+  voids success, or leaving, which ends the episode, also forfeits the success bonus);
+* :data:`SUCCESS_BONUS` exceeds ``EARNABLE + PENALTY`` plus the potential left inside the
+  tolerance, so every successful episode, even one whose agents each paid a violation penalty,
+  out-scores every failing one, whatever either's start.
 
-Collisions cost without ending the episode where the task does not end it; termination stays the
-env's. ``safety_cost`` (per agent and step, 1.0 on a collision or a hard-bound violation, else
-0.0; Safety-Gymnasium's convention) is in the infos under either reward, beside the env's own
-``cost``; a task's ``cost_budget`` bounds its sum over an episode.
+Each kind of penalty is charged once per agent and episode (at its first event), which keeps that
+ordering exact; every step of a collision or violation is counted in ``safety_cost`` (per agent
+and step, 1.0 on a collision or a hard-bound violation, else 0.0; Safety-Gymnasium's convention),
+the constrained-RL signal, in the infos under either reward beside the env's own ``cost``; a
+task's ``cost_budget`` bounds its sum over an episode. Collisions cost without ending the episode
+where the task does not end it; termination stays the env's.
 """
 
 from __future__ import annotations
@@ -38,8 +43,8 @@ import numpy as np
 
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["EARNABLE", "IN_TOLERANCE_BONUS", "PENALTY", "POTENTIAL_SPAN", "REWARDS", "SUCCESS_BONUS",
-           "RewardState", "TrainingReward", "check_reward", "potential", "safety_cost", "target_distance",
+__all__ = ["EARNABLE", "IN_TOLERANCE_BONUS", "KINDS", "PENALTY", "POTENTIAL_SPAN", "REWARDS", "SUCCESS_BONUS",
+           "RewardState", "TrainingReward", "check_reward", "events", "potential", "safety_cost", "target_distance",
            "training_rewards", "with_safety_cost"]
 
 REWARDS = ("paper", "training")
@@ -51,12 +56,15 @@ IN_TOLERANCE_BONUS = 1.0
 """The most the in-tolerance bonus pays an agent over an episode (``1 / H`` per step inside)."""
 EARNABLE = POTENTIAL_SPAN + IN_TOLERANCE_BONUS
 """The most an agent can gain, over an episode or any rest of one, without the success bonus."""
-SUCCESS_BONUS = EARNABLE + POTENTIAL_SPAN
+PENALTY = EARNABLE + POTENTIAL_SPAN
+"""Per agent, once per episode for each of its first collision, first hard-bound violation and
+leaving the region: more than all the progress and bonus the agent could still gain."""
+SUCCESS_BONUS = EARNABLE + PENALTY + POTENTIAL_SPAN
 """Paid to every agent at the last step of a successful episode: more than a failing agent can
-earn plus the potential still left inside the tolerance (``|phi(tol)| < POTENTIAL_SPAN``)."""
-PENALTY = EARNABLE + SUCCESS_BONUS + POTENTIAL_SPAN
-"""Per agent and event (collision, hard-bound violation, leaving the region): more than all an
-agent could still gain."""
+earn, plus a violation penalty, plus the potential still left inside the tolerance
+(``|phi(tol)| < POTENTIAL_SPAN``)."""
+KINDS = ("collision", "violation", "left_region")
+"""The penalised events, each charged once per agent and episode."""
 
 
 def check_reward(reward: Any) -> str:
@@ -104,46 +112,54 @@ def safety_cost(info: dict[str, np.ndarray]) -> np.ndarray:
     return (np.asarray(info["collision"], dtype=bool) | (np.asarray(info["violations"]) > 0)).astype(np.float64)
 
 
-def training_rewards(spec: TrainingReward, phi_before: np.ndarray, info: dict[str, np.ndarray],
-                     terminated: np.ndarray, collided: np.ndarray, final: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """The training rewards ``(B, M)`` of one step and the new potentials ``(B, M)``.
+def events(spec: TrainingReward, info: dict[str, np.ndarray]) -> np.ndarray:
+    """``(B, M, 3)`` bool: the agents' collision, hard-bound violation and leaving the region
+    (:data:`KINDS`) in a step."""
+    pos = info["state"][..., :3]
+    left = np.einsum("...i,...i->...", pos, pos) > spec.max_distance ** 2
+    return np.stack([np.asarray(info["collision"], dtype=bool), np.asarray(info["violations"]) > 0, left], axis=-1)
+
+
+def training_rewards(spec: TrainingReward, phi_before: np.ndarray, charged: np.ndarray,
+                     info: dict[str, np.ndarray], terminated: np.ndarray, final: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The training rewards ``(B, M)`` of one step, the new potentials ``(B, M)`` and the new
+    ``charged`` ``(B, M, 3)`` (which :data:`KINDS` each agent has paid for this episode).
 
     ``phi_before`` the potentials before the step, ``info`` the step's info arrays, ``terminated``
-    ``(B,)``, ``collided`` ``(B,)`` whether the episode has had a collision (this step included),
-    ``final`` ``(B,)`` whether this is the episode's last step by the horizon."""
+    ``(B,)``, ``final`` ``(B,)`` whether this is the episode's last step by the horizon."""
     dist = target_distance(info)
     phi = potential(dist, spec)
     inside = dist <= spec.tol
+    now = charged | events(spec, info)
     rewards = phi - phi_before
     rewards += inside * (IN_TOLERANCE_BONUS / spec.horizon)
+    collided = now[..., 0].any(axis=-1)
     success = final & ~terminated & inside.all(axis=-1) & ~(spec.voids & collided)
     rewards += success[:, None] * SUCCESS_BONUS
-    pos = info["state"][..., :3]
-    left = np.einsum("...i,...i->...", pos, pos) > spec.max_distance ** 2
-    rewards -= PENALTY * (np.asarray(info["collision"], dtype=np.float64) + (np.asarray(info["violations"]) > 0) + left)
-    return rewards, phi
+    rewards -= PENALTY * (now & ~charged).sum(axis=-1)
+    return rewards, phi, now
 
 
 class RewardState:
     """The per-copy memory of the training reward for ``B`` copies: the agents' potentials and
-    whether each episode has had a collision (what :func:`training_rewards` needs)."""
+    which penalties each has paid this episode (what :func:`training_rewards` needs)."""
 
     def __init__(self, spec: TrainingReward, batch: int, n_agents: int) -> None:
         self.spec = spec
         self.phi = np.zeros((batch, n_agents))
-        self.collided = np.zeros(batch, dtype=bool)
+        self.charged = np.zeros((batch, n_agents, len(KINDS)), dtype=bool)
 
     def reset(self, info: dict[str, np.ndarray], idx: np.ndarray | None = None) -> None:
         """Start the episodes of copies ``idx`` (all when ``None``) from their reset infos."""
         sel = slice(None) if idx is None else idx
         self.phi[sel] = potential(target_distance(info), self.spec)
-        self.collided[sel] = False
+        self.charged[sel] = False
 
     def step(self, info: dict[str, np.ndarray], terminated: np.ndarray, final: np.ndarray) -> np.ndarray:
         """The rewards ``(B, M)`` of a step of every copy (``final``: truncated by the horizon)."""
-        self.collided |= np.asarray(info["collision"], dtype=bool).any(axis=-1)
-        rewards, self.phi = training_rewards(self.spec, self.phi, info, terminated, self.collided, final)
+        rewards, self.phi, self.charged = training_rewards(self.spec, self.phi, self.charged, info,
+                                                           terminated, final)
         return rewards
 
 

@@ -18,8 +18,10 @@ Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelE
   observations, states and rewards; a non-finite value raises ``SatenvError`` naming the copy,
   the agent, the step and the quantity, and ends that copy's episode (``reset()`` or
   ``reset(indices=[b])`` starts a new one);
-* ``rewards`` (float64, the PettingZoo env's values), ``terminations``, ``truncations`` (bool)
-  are ``(B, M)``; termination is team-wide (a
+* ``rewards`` (float64, the PettingZoo env's values: the paper's cost, or with
+  ``reward="training"`` the training reward of :mod:`satenv.rewards`, computed for the whole
+  batch at once), ``terminations``, ``truncations`` (bool) are ``(B, M)``; ``infos["safety_cost"]``
+  ``(B, M)`` is 1.0 where an agent collides or violates a hard bound in the step; termination is team-wide (a
   collision or leaving the allowed region ends the copy for every agent), truncation is the step
   limit ``scenario.max_steps`` (never both);
 * **auto-reset, same step**: a copy that ends is reset inside the same ``step``. The returned

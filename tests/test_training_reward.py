@@ -1,8 +1,9 @@
 """The training reward (satenv.rewards), the safety cost and the ladders (satenv.tasks).
 
-Seeds: every check below runs on the tasks' test seeds (900000 on); the reward's constants are
-derived from the task (satenv.rewards), never fitted to an episode, and the rungs were chosen
-before any episode on them was run.
+Seeds: the reward's checks run on the test seeds from the 100th on (900100...: a band nobody
+looked at while the reward was designed on validation seeds); the rungs' checks on the first
+test seeds (the rungs were chosen before any episode on them was run). The reward's constants
+are derived from the task (satenv.rewards), never fitted to an episode.
 """
 
 from __future__ import annotations
@@ -21,9 +22,11 @@ from satenv.vector import SatVectorEnv
 TRAINING = [s.training_task for s in tasks.SYSTEMS.values()]
 RUNGS = [name for system in tasks.SYSTEMS for name in tasks.ladder(system)]
 CHEAP_CONTROLLER = {"platoon-tplf30-random-cw": 5, "platoon-pereira2022-random": 2,
-                    "formation-kannan2022-position-random": 2, "formation-kannan2022-collision-random": 2}
+                    "formation-kannan2022-position-random": 1, "formation-kannan2022-collision-random": 1}
 """Training tasks whose reference controller runs in seconds an episode: how many test seeds the
 default run gives it (the cluster's tube-RDMPC and the servicing NMPC take minutes: slow test)."""
+REWARD_SEEDS_FROM = 100
+"""Where in the test band the reward's checks take their seeds."""
 TRIVIAL_RATE = 0.10
 """A rung is trivial when zero thrust or a uniform random policy succeeds on this share of seeds."""
 
@@ -65,6 +68,12 @@ def exploit(name: str, vec: SatVectorEnv, info: dict[str, np.ndarray], rng: np.r
     dist = np.where(np.eye(pos.shape[1], dtype=bool), np.inf, np.linalg.norm(rel, axis=-1))
     j = dist.argmin(axis=-1)
     return _translation(vec, _unit(np.take_along_axis(rel, j[..., None, None], axis=2)[:, :, 0]))
+
+
+def reward_seeds(task: tasks.Task, n: int) -> range:
+    """``n`` consecutive test seeds of the band the reward's checks use."""
+    start = task.seeds("test")[REWARD_SEEDS_FROM]
+    return range(start, start + n)
 
 
 def scripted(task: tasks.Task, policy: str, seeds: range, **overrides) -> tuple[np.ndarray, np.ndarray]:
@@ -113,25 +122,28 @@ def test_scripted_matches_the_pettingzoo_env():
 # ----------------------------------------------------------------------------- structure
 @pytest.mark.parametrize("name", TRAINING)
 def test_penalties_exceed_every_remaining_gain(name):
-    """Per state of the region: a penalty is more than the rest of the potential, the whole
-    in-tolerance bonus and the success bonus together; the success bonus is more than a failing
-    agent can earn plus the potential left inside the tolerance."""
+    """Per state of the region: a penalty is more than the rest of the potential and the whole
+    in-tolerance bonus together; the success bonus is more than a failing agent can earn plus a
+    penalty plus the potential left inside the tolerance."""
     spec = rewards.TrainingReward.of(tasks.get(name).make_env().scenario)
     dist = np.concatenate([np.linspace(0.0, spec.reach, 100_001), np.geomspace(1e-9, spec.reach, 1001)])
     phi = rewards.potential(dist, spec)
     assert phi.max() <= 0.0 and phi.min() >= -rewards.POTENTIAL_SPAN
-    remaining = -phi + rewards.IN_TOLERANCE_BONUS + rewards.SUCCESS_BONUS
+    remaining = -phi + rewards.IN_TOLERANCE_BONUS
     assert rewards.PENALTY > remaining.max()
     earn = (phi.max() - phi.min()) + rewards.IN_TOLERANCE_BONUS
-    assert rewards.SUCCESS_BONUS > earn - rewards.potential(np.array(spec.tol), spec)
+    assert rewards.SUCCESS_BONUS > earn + rewards.PENALTY - rewards.potential(np.array(spec.tol), spec)
 
 
-def _safe_success_floor(task: tasks.Task) -> float:
-    """The least team return of a successful episode without collision or violation: each agent
-    ends within the tolerance (potential >= phi(tol)) and gets the success bonus."""
+def _success_floor(task: tasks.Task) -> float:
+    """The least team return of any successful episode of a task where a collision voids success:
+    each agent ends within the tolerance (potential >= phi(tol)), gets the success bonus and has
+    paid at most a violation penalty."""
     env = task.make_env()
     spec = rewards.TrainingReward.of(env.scenario)
-    per_agent = rewards.SUCCESS_BONUS + float(rewards.potential(np.array(spec.tol), spec)) + 1.0 / spec.horizon
+    assert spec.voids
+    per_agent = (rewards.SUCCESS_BONUS - rewards.PENALTY + float(rewards.potential(np.array(spec.tol), spec))
+                 + 1.0 / spec.horizon)
     return len(env.possible_agents) * per_agent
 
 
@@ -139,24 +151,25 @@ EXPLOITS = ("zero", "flee", "ram", "random")
 
 
 @pytest.mark.parametrize("name", TRAINING)
-def test_exploits_score_below_any_safe_success(name):
-    """On 20 test seeds, every scripted exploit's team return is below the least return of any
-    successful episode that stays safe."""
+def test_exploits_score_below_any_success(name):
+    """On 20 test seeds, every scripted exploit's team return is below the least return any
+    successful episode can have."""
     task = tasks.get(name)
-    seeds = range(task.seeds("test")[0], task.seeds("test")[0] + 20)
-    floor = _safe_success_floor(task)
+    seeds = reward_seeds(task, 20)
+    floor = _success_floor(task)
     for policy in EXPLOITS:
         returns, success = scripted(task, policy, seeds)
         assert not success.any(), policy
         assert returns.max() < floor, (policy, returns.max(), floor)
 
 
-def _controller_episodes(task: tasks.Task, n: int) -> tuple[np.ndarray, np.ndarray]:
+def controller_episodes(task: tasks.Task, seeds: range) -> tuple[np.ndarray, np.ndarray]:
+    """Team returns and successes of the task's reference controller on ``seeds``."""
     from satenv.baselines import make
     from satenv.rollout import rollout
 
     out = []
-    for seed in task.seeds("test", n):
+    for seed in seeds:
         env = task.make_env()
         traj = rollout(env, make(task.controller, env), seed=seed)
         out.append((traj.rewards.sum(), metrics.success(traj)))
@@ -166,10 +179,10 @@ def _controller_episodes(task: tasks.Task, n: int) -> tuple[np.ndarray, np.ndarr
 
 def _check_exploits_below_controller(name: str, n: int) -> None:
     task = tasks.get(name)
-    returns, success = _controller_episodes(task, n)
+    returns, success = controller_episodes(task, reward_seeds(task, n))
     assert success.any(), f"{name}: the controller succeeded on none of {n} test seeds"
     best_success = returns[success].min()
-    seeds = range(task.seeds("test")[0], task.seeds("test")[0] + 20)
+    seeds = reward_seeds(task, 20)
     for policy in EXPLOITS:
         exploit_returns, _ = scripted(task, policy, seeds)
         assert exploit_returns.max() < best_success, (policy, exploit_returns.max(), best_success)
@@ -335,4 +348,29 @@ def test_rewards_are_finite_and_bounded_per_step():
     for _ in range(60):
         _, rew, *_ = vec.step(rng.uniform(-1, 1, vec.action_shape))
         assert np.isfinite(rew).all() and (np.abs(rew) <= bound).all()
-    assert math.isclose(rewards.SUCCESS_BONUS, rewards.EARNABLE + rewards.POTENTIAL_SPAN)
+    assert math.isclose(rewards.SUCCESS_BONUS, rewards.EARNABLE + rewards.PENALTY + rewards.POTENTIAL_SPAN)
+
+
+def test_each_penalty_once_per_agent_and_episode():
+    """A collision lasting several steps costs its agent one penalty; a new episode charges again."""
+    spec = rewards.TrainingReward(1.0, 200.0, 100.0, 10, True)
+    state = rewards.RewardState(spec, 1, 2)
+    info = {"tracking_error": np.full((1, 2, 6), 5.0), "state": np.zeros((1, 2, 6)),
+            "collision": np.array([[True, False]]), "violations": np.array([[0, 0]])}
+    state.reset(info)
+    no = np.zeros(1, dtype=bool)
+    first, second = state.step(info, no, no), state.step(info, no, no)
+    np.testing.assert_allclose(first, [[-rewards.PENALTY, 0.0]])
+    np.testing.assert_allclose(second, [[0.0, 0.0]])
+    state.reset(info)
+    np.testing.assert_allclose(state.step(info, no, no), [[-rewards.PENALTY, 0.0]])
+
+
+def test_docs_tabulate_every_ladder():
+    """docs/tasks.md names every rung of every ladder, in the ladder's order."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "tasks.md").read_text(encoding="utf-8")
+    for system in tasks.SYSTEMS:
+        where = [text.find(f"`{name}`") for name in tasks.ladder(system)]
+        assert -1 not in where and where == sorted(where), (system, where)

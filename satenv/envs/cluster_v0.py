@@ -75,6 +75,12 @@ Reward (per satellite)
 ``r_i = -||q_i - q_id|| / reward_distance_scale - reward_control_weight (||a_i|| / u_max)^2
 - collision_penalty * collision_i`` after the step, ``a_i`` the mean applied acceleration.
 
+``reward="training"`` (the default of a training task's env, :mod:`satenv.tasks`) replaces this
+with the training reward of :mod:`satenv.rewards` (progress toward the target, a bonus inside the
+success tolerance, a success bonus, penalties for collision, violation and leaving the region);
+``reward="paper"`` (the default) keeps it. Under either, the infos carry ``safety_cost`` (1.0 on
+a collision or a hard-bound violation of the agent in the step, else 0.0).
+
 Termination / truncation
 ------------------------
 Terminated (all agents) when a safety distance is violated at any physics step (only if

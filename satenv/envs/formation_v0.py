@@ -66,6 +66,12 @@ Reward (per agent, the normalised stage cost of eq. 33/34)
 (followers: ``offset_weight`` on y) and ``cut_i`` = 1 when agent i is outside the largest
 connected component of the proximity graph (ties: the component of the lowest index).
 
+``reward="training"`` (the default of a training task's env, :mod:`satenv.tasks`) replaces this
+with the training reward of :mod:`satenv.rewards` (progress toward the target, a bonus inside the
+success tolerance, a success bonus, penalties for collision, violation and leaving the region);
+``reward="paper"`` (the default) keeps it. Under either, the infos carry ``safety_cost`` (1.0 on
+a collision or a hard-bound violation of the agent in the step, else 0.0).
+
 Termination / truncation
 ------------------------
 Terminated (all agents) when a spacecraft leaves the ball of radius ``max_distance`` around the

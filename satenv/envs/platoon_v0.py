@@ -54,6 +54,12 @@ Reward (per follower, mirrors the paper's stage cost eq. 14)
 - violation_penalty * violations_f`` with ``e = E_f - E_f*`` after the step, ``u`` the applied
 acceleration, ``Q = diag(state_weight)``, ``W = diag(input_weight)``.
 
+``reward="training"`` (the default of a training task's env, :mod:`satenv.tasks`) replaces this
+with the training reward of :mod:`satenv.rewards` (progress toward the target, a bonus inside the
+success tolerance, a success bonus, penalties for collision, violation and leaving the region);
+``reward="paper"`` (the default) keeps it. Under either, the infos carry ``safety_cost`` (1.0 on
+a collision or a hard-bound violation of the agent in the step, else 0.0).
+
 Termination / truncation
 ------------------------
 Terminated (all agents) when two bodies collide (distance < r_i + r_j, the leader included,

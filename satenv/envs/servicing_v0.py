@@ -72,6 +72,12 @@ Reward (per spacecraft, the stage cost of eq. 39 after the step)
 ``l = e_p^T Q_p e_p + e_v^T Q_v e_v + [1 - eta_tilde, eps_tilde]^T Q_q [.] + e_w^T Q_w e_w
 + u^T H u`` with the §5.2 weights (``position_weight`` …, ``input_weight``).
 
+``reward="training"`` (the default of a training task's env, :mod:`satenv.tasks`) replaces this
+with the training reward of :mod:`satenv.rewards` (progress toward the target, a bonus inside the
+success tolerance, a success bonus, penalties for collision, violation and leaving the region);
+``reward="paper"`` (the default) keeps it. Under either, the infos carry ``safety_cost`` (1.0 on
+a collision or a hard-bound violation of the agent in the step, else 0.0).
+
 Termination / truncation
 ------------------------
 Terminated (all agents) on a collision — a spacecraft inside the keep-out sphere
