@@ -310,7 +310,7 @@ def test_platoon_derives_whether_a_collision_voids_success():
 def test_same_episode_same_answer_in_metrics_scoreboard_and_evaluation():
     """The DMPC reaches the Table I formation (bodies overlap there): success everywhere; a
     collision in the chain formation voids it everywhere."""
-    baselines = pytest.importorskip("baselines")
+    baselines = pytest.importorskip("satenv.baselines")
     pytest.importorskip("daqp")
     from satenv.bench.scoreboard import Job, run_episode
     from satenv.bench.scoreboard.registry import POLICIES, TASKS

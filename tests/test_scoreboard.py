@@ -186,7 +186,7 @@ def test_bad_input_fails_before_any_episode(tmp_path, kwargs, match):
 
 
 def test_unreadable_checkpoint_is_a_clear_error(tmp_path):
-    training = pytest.importorskip("training")
+    training = pytest.importorskip("satenv.training")
     if not callable(getattr(training, "load", None)):
         pytest.skip("satenv.training.load not available")
     bad = tmp_path / "ckpt"
@@ -344,7 +344,7 @@ def test_board_presets_name_registered_entries():
 
 def test_user_checkpoint_runs_and_mismatch_is_rejected(tmp_path):
     pytest.importorskip("stable_baselines3")
-    training = pytest.importorskip("training")
+    training = pytest.importorskip("satenv.training")
     if not callable(getattr(training, "load", None)):
         pytest.skip("satenv.training.load not available")
     run = tmp_path / "run"
