@@ -173,7 +173,7 @@ def claims_table(claims: Any) -> str:
 def reproduction(paper: str, page_src: str) -> str:
     base = DOCS / "assets" / "reproductions"
     json_path = base / f"{paper}.json"
-    command = f"python -m satenv.bench.reproduce {paper} --out {paper}.json --plots figs/"
+    command = f"satenv reproduce {paper} --out {paper}.json --plots figs/"
     if not json_path.exists():
         return (f"!!! note \"Not generated yet\"\n    `{json_path.relative_to(ROOT)}` is not in this "
                 f"checkout: run `python docs/gen_reproductions.py --only {paper}` (or `{command}`).")
