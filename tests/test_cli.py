@@ -132,6 +132,16 @@ def test_the_board_plan_line_states_size_time_and_swarms():
     assert "planning 1 episodes" in plan_line(keys[:1], {}, 1, {}) and "about" not in plan_line(keys[:1], {}, 1, {})
 
 
+def test_a_default_policy_run_leaves_the_swarms_out_as_a_default_selection():
+    from satenv.bench.scoreboard.cli import SWARM_MARK, without_swarms
+    from satenv.bench.scoreboard.plan import select
+    from satenv.bench.scoreboard.registry import TASKS
+
+    sel = select(without_swarms().split(","), TASKS, "task", [], strict=True)
+    assert sel.names == [n for n in TASKS if SWARM_MARK not in n] and len(sel.names) < len(TASKS)
+    assert not sel.explicit                 # unavailable or unfitting tasks are skipped, not errors
+
+
 @pytest.mark.parametrize("systems", [",", "nope", "platoon-pereira2023,nope"])
 def test_datasets_systems_must_name_systems(systems, capsys, tmp_path):
     from satenv.bench.learning.datasets import main

@@ -108,6 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def without_swarms() -> str:
+    """``--scenarios`` of a default ``--policy`` run: every task but the swarms, each as a one-name
+    glob (``[p]latoon-PLF-cw``) so that the selection keeps a default run's rules (a task that
+    cannot run here or that no policy fits is skipped with a note, not an error)."""
+    return ",".join(f"[{n[0]}]{n[1:]}" for n in TASKS if SWARM_MARK not in n)
+
+
 def _measured_rate(path: Path = PUBLISHED_EPISODES) -> dict[tuple[str, str], float]:
     """Mean wall seconds of an episode per (task, policy) of the published board (empty without it)."""
     from satenv.bench.scoreboard.runner import read_episodes
@@ -186,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     out = str(args.out or ("results/scoreboard/quick" if args.quick else "results/scoreboard"))
     scenarios = args.scenarios
     if args.policy and scenarios is None and not args.quick:
-        scenarios = ",".join(n for n in TASKS if SWARM_MARK not in n)
+        scenarios = without_swarms()
         print(f"note: --policy without --scenarios: the '{SWARM_MARK}' tasks are left out "
               "(--scenarios '*' runs them too)", file=sys.stderr)
     rate = _measured_rate()
