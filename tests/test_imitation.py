@@ -140,6 +140,9 @@ def test_every_saved_dagger_config_parses(tmp_path):
         else:
             assert cfg.net_arch == tuple(saved["net_arch"]) and not cfg.safe, path
             assert cfg.lr == saved.get("lr", saved.get("learning_rate")), path
+    for path in sorted(runs.glob("*/config.json")):      # every committed run replays (--config)
+        _, cfg, _ = parse(["--config", str(path), "--out-dir", str(tmp_path / "none")])
+        assert cfg.rounds >= 0, path
     for name, task in (("cluster_case1_dagger", "cluster-case1-random"),
                        ("servicing_pereira2022_dagger", "servicing-pereira2022-random")):
         run = tmp_path / name
@@ -285,3 +288,25 @@ def test_dagger_run_saves_every_round_and_resumes(tmp_path):
     assert [h["round"] for h in hist] == [0, 1, 2] and hist[-1]["labels"] == 4 * 6 * 2
     assert len(list((tmp_path / "labels").glob("round_*.npz"))) == 3
     assert all(h["paper"]["episodes"] == 1 for h in hist)     # the system's paper start, evaluated every round
+
+
+def test_every_imitate_command_in_the_docs_parses():
+    """The ``satenv imitate`` examples of README.md, docs/ and the policies' and studies' READMEs use
+    valid flags and values (parsed, nothing run)."""
+    import re
+    import shlex
+    from pathlib import Path
+
+    root = Path(__file__).parents[1]
+    pages = [root / "README.md", *root.glob("docs/**/*.md"), *root.glob("satenv/training/policies/*/README.md"),
+             *root.glob("studies/runs/*/README.md")]
+    found = 0
+    for page in pages:
+        text = page.read_text().replace("\\\n", " ")
+        for m in re.finditer(r"satenv imitate\b([^\n#`|]*)", text):
+            argv = shlex.split(m.group(1))
+            if not argv or "..." in argv or argv == ["--help"] or any("$" in a for a in argv):   # a shell variable
+                continue
+            parse(argv)
+            found += 1
+    assert found >= 6

@@ -277,7 +277,7 @@ def upgrade(data: dict[str, Any]) -> dict[str, Any]:
     Unknown keys stay (:func:`satenv.training.config.config_from_json` names them)."""
     if isinstance(data.get("safe_dagger"), dict):
         return _upgrade_safe(data["safe_dagger"])
-    if "warm_start" in data and "w_bar" in data and "fly" not in data and "beta" not in data:
+    if "warm_start" in data and "system" in data and "w_bar" in data:       # the earlier safe config, flat
         return _upgrade_safe(data)
     return _upgrade_dagger(data)
 
