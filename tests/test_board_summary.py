@@ -13,8 +13,8 @@ from satenv.bench.scoreboard.headline import (
     headline_figure,
     headline_section,
     is_learned,
+    paper_systems,
 )
-from satenv.bench.scoreboard.headline import paper_systems
 from satenv.bench.scoreboard.registry import discover_trained_policies
 
 SCEN = "cluster-case1-random"

@@ -122,7 +122,7 @@ def test_both_ways_is_built_with_load_only_and_the_board_uses_it():
     name it and keep the fingerprints of logs written when they called load directly."""
     from satenv import tasks, training
     from satenv.bench.scoreboard.registry import discover_trained_policies
-    from satenv.bench.scoreboard.specs import LEARNED_TARGET, _fingerprint, _content_hash
+    from satenv.bench.scoreboard.specs import LEARNED_TARGET, _content_hash, _fingerprint
     from satenv.safety import Shield
     from satenv.training import both_ways
 

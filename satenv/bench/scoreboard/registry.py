@@ -14,7 +14,13 @@ from pathlib import Path
 from typing import Any
 
 from satenv import tasks
-from satenv.bench.scoreboard.specs import LEARNED_TARGET, NETWORK_SUFFIX, PolicySpec, ScoreboardError, TaskSpec
+from satenv.bench.scoreboard.specs import (
+    LEARNED_TARGET,
+    NETWORK_SUFFIX,
+    PolicySpec,
+    ScoreboardError,
+    TaskSpec,
+)
 from satenv.training.both_ways import AS_SHIPPED, NETWORK_ALONE
 
 __all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "SCENARIOS", "TASKS", "discover_trained_policies",
