@@ -68,6 +68,7 @@ from typing import Any
 
 import numpy as np
 
+from satenv.baselines._qp import QP_INFINITY, QP_ROW_TOL, BufferedFunction, DenseQP
 from satenv.baselines.base import (
     JIT_OPTIONS,
     MAX_HORIZON,
@@ -94,7 +95,7 @@ from satenv.perturbations import nominal
 
 __all__ = ["NMPC", "NMPCConfig", "attitude_reference_sym", "build_model", "quaternion_cost_terms"]
 
-_SOLVERS = ("ipopt", "ipopt-jit", "fatrop")
+_SOLVERS = ("ipopt", "ipopt-jit", "fatrop", "rti")
 QUATERNION_ERRORS = ("sign-free", "signed")
 """``NMPCConfig.quaternion_error`` choices: ours (``1 - |eta~|``) and eq. 39 as printed (``1 - eta~``)."""
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level", "success"}
@@ -341,7 +342,7 @@ class NMPC(Baseline):
         self.agents = list(env.possible_agents)
         self.m = len(self.agents)
         self.N = cfg.horizon
-        self.solver = cfg.solver
+        self.solver = "ipopt" if cfg.solver == "rti" else cfg.solver     # the NLP's solver
         self.order = cfg.order
         self.initial_guess = cfg.initial_guess
         self.preview = cfg.preview
@@ -375,9 +376,6 @@ class NMPC(Baseline):
         x_init = sym.sym("x_init", nx)
         p_d = sym.sym("p_d", 3, n_h)
         others = sym.sym("others", 3, n_h * max(m - 1, 0))
-        qp, qv = ca.DM(sc.position_weight), ca.DM(sc.velocity_weight)
-        qq, qw, hh = ca.DM(sc.quaternion_weight), ca.DM(sc.omega_weight), ca.DM(sc.input_weight)
-        v_d = ca.DM(sc.desired_velocity)
 
         def path(x, k):   # constraints on x_k, k = 1..N
             p = x[0:3]
@@ -393,12 +391,9 @@ class NMPC(Baseline):
         path_lb = [self.keepout**2] + [self.separation**2] * (m - 1)
         for k in range(n_h):
             x, u = xs[k], us[k]
-            q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])   # eq. 43-49
-            ep, ev, ew = x[0:3] - p_d[:, k], x[3:6] - v_d, x[10:13] - w_d
-            qe = quaternion_cost_terms(x[6:10], q_d, self.signed_quaternion_error)
-            cost += (ca.dot(qp, ep**2) + ca.dot(qv, ev**2) + ca.dot(qq, qe**2)
-                     + ca.dot(qw, ew**2) + ca.dot(hh, u**2))
-            res += [ca.sqrt(qp) * ep, ca.sqrt(qv) * ev, ca.sqrt(qq) * qe, ca.sqrt(qw) * ew, ca.sqrt(hh) * u]
+            stage_cost, stage_res = self._stage_terms(x, u, p_d[:, k])
+            cost += stage_cost
+            res.append(stage_res)
             g.append(xs[k + 1] - self._F(x, u))           # dynamics first in each stage (fatrop)
             lbg += [0.0] * nx
             ubg += [0.0] * nx
@@ -411,12 +406,9 @@ class NMPC(Baseline):
                 lbg += path_lb
                 ubg += [np.inf] * n_path
         if self.terminal_attitude_weight > 0:           # terminal attitude cost (ours; not in eq. 39)
-            x = xs[n_h]
-            q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])
-            qe, ew = quaternion_cost_terms(x[6:10], q_d, self.signed_quaternion_error), x[10:13] - w_d
-            cost += self.terminal_attitude_weight * (ca.dot(qq, qe**2) + ca.dot(qw, ew**2))
-            c = float(np.sqrt(self.terminal_attitude_weight))
-            res += [c * ca.sqrt(qq) * qe, c * ca.sqrt(qw) * ew]
+            terminal_cost, terminal_res = self._terminal_terms(xs[n_h])
+            cost += terminal_cost
+            res.append(terminal_res)
         g += path(xs[n_h], n_h)
         lbg += path_lb
         ubg += [np.inf] * n_path
@@ -480,9 +472,40 @@ class NMPC(Baseline):
         if self.hessian == "gauss-newton":
             opts["hess_lag"] = self._gauss_newton_hessian(nlp, ca.vertcat(*res))
         opts.update(extra)
-        key = ("nmpc", repr(sc), repr(dataclasses.replace(self.cfg, seed=None)), m)
+        key = ("nmpc", repr(sc), repr(dataclasses.replace(self.cfg, seed=None, solver=self.solver)), m)
         self._nlp = nlpsol_cached(key, lambda: ca.nlpsol("servicing_nmpc", self.solver.removesuffix("-jit"),
                                                          nlp, opts))
+        if self.cfg.solver == "rti":
+            self._rti = [BufferedFunction(f) for f in nlpsol_cached(("nmpc-rti", *key[1:]), self._rti_functions)]
+            self._qp = DenseQP()
+
+    def _stage_terms(self, x: Any, u: Any, p_d: Any) -> tuple[Any, Any]:
+        """Stage cost of eq. 39 at ``(x_k, u_k)`` for the waypoint ``p_d`` and its sqrt-weighted
+        residuals (cost = ``|res|^2``, 19 rows: position, velocity, quaternion, rate, input)."""
+        import casadi as ca
+
+        sc = self.scenario
+        qp, qv = ca.DM(sc.position_weight), ca.DM(sc.velocity_weight)
+        qq, qw, hh = ca.DM(sc.quaternion_weight), ca.DM(sc.omega_weight), ca.DM(sc.input_weight)
+        q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])   # eq. 43-49
+        ep, ev, ew = x[0:3] - p_d, x[3:6] - ca.DM(sc.desired_velocity), x[10:13] - w_d
+        qe = quaternion_cost_terms(x[6:10], q_d, self.signed_quaternion_error)
+        cost = (ca.dot(qp, ep**2) + ca.dot(qv, ev**2) + ca.dot(qq, qe**2)
+                + ca.dot(qw, ew**2) + ca.dot(hh, u**2))
+        res = ca.vertcat(ca.sqrt(qp) * ep, ca.sqrt(qv) * ev, ca.sqrt(qq) * qe, ca.sqrt(qw) * ew, ca.sqrt(hh) * u)
+        return cost, res
+
+    def _terminal_terms(self, x: Any) -> tuple[Any, Any]:
+        """The terminal attitude cost at ``x_N`` (ours) and its residuals (7 rows)."""
+        import casadi as ca
+
+        sc = self.scenario
+        qq, qw = ca.DM(sc.quaternion_weight), ca.DM(sc.omega_weight)
+        q_d, w_d = attitude_reference_sym(sc, x[0:3], x[3:6], x[6:10])
+        qe, ew = quaternion_cost_terms(x[6:10], q_d, self.signed_quaternion_error), x[10:13] - w_d
+        cost = self.terminal_attitude_weight * (ca.dot(qq, qe**2) + ca.dot(qw, ew**2))
+        c = float(np.sqrt(self.terminal_attitude_weight))
+        return cost, ca.vertcat(c * ca.sqrt(qq) * qe, c * ca.sqrt(qw) * ew)
 
     def _gauss_newton_hessian(self, nlp: dict, res: Any) -> Any:
         """``hess_lag`` for ipopt: ``lam_f 2 J^T J`` (``J`` the Jacobian of the cost residuals, cost
@@ -499,10 +522,107 @@ class NMPC(Baseline):
         return ca.Function("nlp_hess_l", [w, nlp["p"], lam_f, lam_g], [ca.triu(h)],
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
+    def _rti_functions(self) -> tuple[Any, Any]:
+        """The linearisation of one RTI step: ``stage(x, u, p_d)`` mapped over the N stages, each
+        column ``[F, vec dF/dx, vec dF/du, res, vec dres/dx, vec dres/du]``, and ``terminal(x_N)``
+        ``[res_N, vec dres_N/dx]`` (the terminal attitude residuals; empty without them)."""
+        import casadi as ca
+
+        x, u, p_d = ca.SX.sym("x", 13), ca.SX.sym("u", 6), ca.SX.sym("p_d", 3)
+        x_next = self._F(x, u)
+        res = self._stage_terms(x, u, p_d)[1]
+        stage = ca.Function("nmpc_rti_stage", [x, u, p_d], [ca.densify(ca.vertcat(
+            x_next, ca.vec(ca.jacobian(x_next, x)), ca.vec(ca.jacobian(x_next, u)),
+            res, ca.vec(ca.jacobian(res, x)), ca.vec(ca.jacobian(res, u))))])
+        res_n = self._terminal_terms(x)[1] if self.terminal_attitude_weight > 0 else ca.SX(0, 1)
+        terminal = ca.Function("nmpc_rti_terminal", [x], [ca.densify(ca.vertcat(res_n, ca.vec(ca.jacobian(res_n, x))))])
+        return stage.map(self.N), terminal
+
+    def _rti_qp(self, x0: np.ndarray, xg: np.ndarray, ug: np.ndarray, goal_path: np.ndarray,
+                others: list[np.ndarray]) -> tuple[np.ndarray, ...]:
+        """The condensed QP of one RTI step about the guess ``(xg, ug)`` (module docstring):
+        ``(H, f, A, lo, hi, lb, ub, Phi, phi)`` over the input steps ``du`` (6N), with the state
+        steps ``dx_k = Phi_k du + phi_k``."""
+        n_h, nx, nu = self.N, 13, 6
+        stage, terminal = self._rti
+        out = stage(xg[:-1].T, ug.T, goal_path.T)[0].T                     # (N, rows)
+        sizes = np.cumsum([0, nx, nx * nx, nx * nu, 19, 19 * nx, 19 * nu])
+        part = [out[:, a:b] for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+        a_k = part[1].reshape(n_h, nx, nx).transpose(0, 2, 1)             # column-major vec
+        b_k = part[2].reshape(n_h, nu, nx).transpose(0, 2, 1)
+        jrx = part[4].reshape(n_h, nx, 19).transpose(0, 2, 1)
+        jru = part[5].reshape(n_h, nu, 19).transpose(0, 2, 1)
+        defect = part[0] - xg[1:]                                         # F(x_k, u_k) - x_{k+1}
+        phi_m = np.zeros((n_h + 1, nx, nu * n_h))
+        phi = np.zeros((n_h + 1, nx))
+        for k in range(n_h):
+            cols = slice(0, nu * k)
+            phi_m[k + 1, :, cols] = a_k[k] @ phi_m[k, :, cols]
+            phi_m[k + 1, :, nu * k:nu * (k + 1)] = b_k[k]
+            phi[k + 1] = a_k[k] @ phi[k] + defect[k]
+        m_rows = jrx @ phi_m[:n_h]                                          # (N, 19, 6N)
+        for k in range(n_h):
+            m_rows[k, :, nu * k:nu * (k + 1)] += jru[k]
+        r0 = part[3] + np.einsum("kij,kj->ki", jrx, phi[:n_h])
+        m_all, r_all = m_rows.reshape(-1, nu * n_h), r0.ravel()
+        term = terminal(xg[-1])[0].ravel()
+        if term.size:
+            n_t = term.size // (1 + nx)
+            j_n = term[n_t:].reshape(nx, n_t).T
+            m_all = np.vstack([m_all, j_n @ phi_m[n_h]])
+            r_all = np.concatenate([r_all, term[:n_t] + j_n @ phi[n_h]])
+        hess = 2.0 * m_all.T @ m_all
+        grad = 2.0 * m_all.T @ r_all
+        # velocity and rate bounds on x_1..x_N, then the keep-out and collision rows linearised
+        # at the guess's positions (tangent half-spaces: inside the true feasible set)
+        idx = np.array([3, 4, 5, 10, 11, 12])
+        lim = np.r_[[self.v_lim] * 3, [self.w_lim] * 3]
+        rows = [phi_m[1:, idx].reshape(-1, nu * n_h)]
+        base = (xg[1:, idx] + phi[1:, idx]).ravel()
+        lo, hi = [-np.tile(lim, n_h) - base], [np.tile(lim, n_h) - base]
+        centres = [np.zeros((n_h, 3))] + list(others)
+        radii = [self.keepout] + [self.separation] * len(others)
+        for c, r in zip(centres, radii, strict=True):
+            d = xg[1:, :3] - c
+            rows.append(2.0 * np.einsum("ki,kic->kc", d, phi_m[1:, :3]))
+            lo.append(r**2 - np.sum(d * d, axis=1) - 2.0 * np.sum(d * phi[1:, :3], axis=1))
+            hi.append(np.full(n_h, QP_INFINITY))
+        u_box = np.tile(self.u_max, n_h)
+        return (hess, grad, np.vstack(rows), np.concatenate(lo), np.concatenate(hi),
+                -u_box - ug.ravel(), u_box - ug.ravel(), phi_m, phi)
+
+    def _rti_step(self, i: int, x0: np.ndarray, goal_path: np.ndarray,
+                  others: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+        """One RTI decision of spacecraft ``i``: the QP about its shifted previous plan, solved by
+        DAQP through :func:`guarded_solve`; the new plan, or ``None`` when the QP failed."""
+        w0, _ = self._initial_guess(i, x0, goal_path[0])
+        xg, ug = w0[self._x_idx], w0[self._u_idx]
+        t0 = time.perf_counter()
+        h, f, a, lo, hi, lb, ub, phi_m, phi = self._rti_qp(x0, xg, ug, goal_path, others)
+        du = guarded_solve(self.info, lambda: self._qp.solve(h, f, a, lo, hi, lb, ub, owner=i),
+                           shape=(f.size,), lower=lb, upper=ub, fallback=False, tol=QP_ROW_TOL,
+                           violation=lambda d: row_violation(a @ d, lo, hi), violation_tol=QP_ROW_TOL,
+                           time_limit=self.cfg.solve_time_limit)
+        self.info["qp_ms"].append((time.perf_counter() - t0) * 1e3)
+        if du is None:
+            self.info["rti_fallbacks"] += 1
+            return None
+        us = ug + du.reshape(self.N, 6)
+        xs = xg + phi_m @ du + phi
+        xs[0] = x0
+        self._plans[i] = {"x": xs, "u": us, "t0": self._step, "duals": None}
+        self._last_goal[i] = goal_path[0].copy()
+        return us[0], xs[:, :3]
+
+    def _cold(self, i: int, goal: np.ndarray) -> bool:
+        """No plan to warm-start from: the first decision, or a new waypoint with the arc guess."""
+        changed = self._last_goal[i] is None or not np.allclose(self._last_goal[i], goal)
+        return self._plans[i] is None or (changed and self.initial_guess == "arc")
+
     # ------------------------------------------------------------------ policy API
     def reset(self, seed: int | None = None) -> None:
         self.info = new_info(solve_ms=[], agent_solve_ms=[], iterations=[], statuses=Counter(),
-                             fallback_steps=[])
+                             fallback_steps=[], qp_ms=[], rti_steps=0, rti_fallbacks=0, nlp_solves=0)
         self._plans: list[dict[str, Any] | None] = [None] * self.m
         self._last_goal: list[np.ndarray | None] = [None] * self.m
         self._step = 0
@@ -574,14 +694,14 @@ class NMPC(Baseline):
 
     def _initial_guess(self, i: int, x0: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, dict]:
         plan = self._plans[i]
-        changed = self._last_goal[i] is None or not np.allclose(self._last_goal[i], goal)
-        if plan is not None and not (changed and self.initial_guess == "arc"):
+        if not self._cold(i, goal):
             age = self._step - plan["t0"]
             idx = np.minimum(np.arange(self.N + 1) + age, self.N)
             xg = plan["x"][idx].copy()
             ug = plan["u"][np.minimum(np.arange(self.N) + age, self.N - 1)].copy()
             xg[0] = x0
-            return self._pack(xg, ug), self._shift_duals(plan["duals"], age)
+            duals = self._shift_duals(plan["duals"], age) if plan["duals"] is not None else {}
+            return self._pack(xg, ug), duals
         if self.initial_guess == "arc":
             xg = self._arc_guess(x0, goal)
         else:
@@ -610,6 +730,16 @@ class NMPC(Baseline):
 
     def _solve_agent(self, i: int, x0: np.ndarray, goal_path: np.ndarray,
                      others: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+        if self.cfg.solver == "rti" and not self._cold(i, goal_path[0]):
+            t0 = time.perf_counter()
+            step = self._rti_step(i, x0, goal_path, others)
+            if step is not None:
+                self.info["rti_steps"] += 1
+                self.info["agent_solve_ms"].append((time.perf_counter() - t0) * 1e3)
+                self.info["iterations"].append(1)
+                self.info["statuses"]["rti"] += 1
+                return step
+        self.info["nlp_solves"] += 1
         w0, duals = self._initial_guess(i, x0, goal_path[0])
         oth = np.concatenate(others, axis=0).T if others else np.zeros((3, 0))
         params = np.concatenate([x0, goal_path.T.ravel(order="F"), oth.ravel(order="F")])

@@ -92,6 +92,7 @@ from typing import Any
 
 import numpy as np
 
+from satenv.baselines._qp import QP_INFINITY, QP_ROW_TOL, BufferedFunction, DenseQP, linearisation
 from satenv.baselines.base import (
     JIT_OPTIONS,
     MAX_HORIZON,
@@ -121,7 +122,13 @@ _FAR = 1.0e5  # [m] position of an unused neighbour slot (its constraints are in
 _SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed problem only)
 _TERMINAL_SLACK_WEIGHT = 1.0e8  # L1 weight of the terminal / speed slack (relaxed problem only)
 NLP_CONSTRAINT_TOL = 1e-2       # largest accepted row violation (ipopt's acceptable_constr_viol_tol)
-SOLVERS = ("ipopt-jit", "ipopt")
+SOLVERS = ("ipopt-jit", "ipopt", "rti")
+BALL_CUT_ROUNDS = 3
+"""QPs of one ``solver="rti"`` step at most: the first, then with tangent cuts of the thrust ball
+added where the point left it."""
+BALL_TOL = 0.02
+"""Relative overshoot of the thrust ball accepted without a cut (the point is then scaled onto it;
+the NLP's rows are checked at the scaled point)."""
 MAX_WORKERS = 16
 WARM_DUAL_OPTIONS = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                      "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6}
@@ -311,6 +318,8 @@ class _NominalNLP:
         self.cal_a, self.cal_b = prediction_matrices(a, b, horizon)
         self.n_w = 5 * horizon + 1
         self.sigma = cfg.sigma
+        self._qp = DenseQP()
+        self._buffers: dict[tuple, BufferedFunction] = {}
         self._fixed = 15 + 3 * (horizon + 2)          # parameter entries that are not per slot
         self._per_slot = 3 * (horizon + 1) + 6
 
@@ -327,7 +336,7 @@ class _NominalNLP:
         max_iter = cfg.max_iter if relaxed else (cfg.exact_max_iter or cfg.max_iter)
         args = (cfg, *self._constants, k, *self._radii)
         copy = 0 if relaxed else copy
-        return nlpsol_cached(("tube_rdmpc", *args, max_iter, copy), lambda: self._build(*args, max_iter))
+        return nlpsol_cached(("tube_rdmpc", *args, max_iter, copy), lambda: self._build(*args, max_iter=max_iter))
 
     def prepare(self, slots: list[int] | None = None, copies: int = 1) -> None:
         """Build (compile, for ``ipopt-jit``) the solvers of these slot counts (all when None) and
@@ -335,6 +344,9 @@ class _NominalNLP:
         for k in sorted(set(self.slot_sizes if slots is None else slots)):
             for copy in range(copies):
                 self._built(k, False, copy)
+                if self.cfg.solver == "rti":
+                    self._buffered("lin", k, copy)
+                    self._buffered("rows", k, copy)
             self._built(k, True, 0)
 
     def solver_for(self, k: int, copy: int = 0, relaxed: bool = False) -> Any:
@@ -352,11 +364,10 @@ class _NominalNLP:
         return self.solver_for(self.K)
 
     @staticmethod
-    def _build(cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int, u_nom: float,
-               mass: float, r_pair: float, r_obs: float, r_tgt: float,
-               max_iter: int) -> tuple[Any, np.ndarray, np.ndarray]:
-        """The CasADi solver (ipopt with iteration limit ``max_iter``; its functions compiled for
-        ``solver="ipopt-jit"``) and the row bounds ``(lbg, ubg)``."""
+    def _problem(cfg: TubeRDMPCConfig, n: float, dt: float, horizon: int, k_slots: int, u_nom: float,
+                 mass: float, r_pair: float, r_obs: float, r_tgt: float) -> tuple[dict, list, list]:
+        """The CasADi NLP ``{"x", "p", "f", "g"}`` with ``k_slots`` neighbour slots and its row
+        bounds ``(lbg, ubg)``."""
         import casadi as ca
 
         a, b = cw_matrices(n, dt)
@@ -446,7 +457,15 @@ class _NominalNLP:
 
         w = ca.vertcat(v, lam, s, s_t)
         p = ca.vertcat(x0, qd, qn, dn, pn, qo, po, qr)
-        nlp = {"x": w, "p": p, "f": cost, "g": ca.vertcat(*g)}
+        return {"x": w, "p": p, "f": cost, "g": ca.vertcat(*g)}, lbg, ubg
+
+    @staticmethod
+    def _build(cfg: TubeRDMPCConfig, *args: Any, max_iter: int) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The CasADi solver of :meth:`_problem` (ipopt with iteration limit ``max_iter``; its
+        functions compiled for ``solver="ipopt-jit"``) and the row bounds ``(lbg, ubg)``."""
+        import casadi as ca
+
+        nlp, lbg, ubg = _NominalNLP._problem(cfg, *args)
         opts = {
             "print_time": False,
             "ipopt.print_level": 0,
@@ -462,6 +481,91 @@ class _NominalNLP:
         }
         return (ca.nlpsol("tube_rdmpc", "ipopt", nlp, opts), np.array(lbg, dtype=float),
                 np.array(ubg, dtype=float))
+
+    def _linearised(self, k: int) -> Any:
+        """``(w, p) -> (H_f, grad f, g, J_g)`` of the exact NLP with ``k`` slots (built once)."""
+        args = (self.cfg, *self._constants, k, *self._radii)
+
+        def build() -> Any:
+            nlp = self._problem(*args)[0]
+            return linearisation(nlp["x"], nlp["p"], nlp["f"], nlp["g"], "tube_rdmpc_rti")
+
+        return nlpsol_cached(("tube_rdmpc-rti", *args), build)
+
+    def _buffered(self, kind: str, k: int, copy: int) -> BufferedFunction:
+        """Worker ``copy``'s buffered :meth:`_linearised` (``"lin"``) or :meth:`rows` (``"rows"``)."""
+        key = (kind, k, copy)
+        if key not in self._buffers:
+            self._buffers[key] = BufferedFunction(self._linearised(k) if kind == "lin" else self.rows(k))
+        return self._buffers[key]
+
+    def qp_step(self, info: dict[str, Any], params: np.ndarray, w0: np.ndarray, owner: int,
+                copy: int = 0) -> np.ndarray | None:
+        """One sequential-convexification step of the exact NLP about ``w0`` (the shifted previous
+        plan): every row linearised at ``w0`` (the collision and keep-out rows become tangent
+        half-spaces inside their feasible sets), the thrust ball ``|v_m| <= 1`` replaced by its
+        tangent plane at ``w0``'s direction plus cuts where the QP's point leaves the ball
+        (:data:`BALL_CUT_ROUNDS`), the slacks fixed at 0; one DAQP solve per round through
+        :func:`satenv.baselines.base.guarded_solve`. The new point, or ``None`` when a QP failed
+        or the NLP's own rows are violated by more than ``NLP_CONSTRAINT_TOL`` at it."""
+        N, k = self.N, self.slots(params)
+        n_q = 4 * N                                   # v (3N), lambda (N); the slacks stay 0
+        lbx, ubx = self.bounds(relaxed=False)
+        w0 = np.clip(w0, lbx, ubx)
+        lbg, ubg = self.row_bounds(k)
+        hess, grad, g, jac = self._buffered("lin", k, copy)(w0, params)
+        g = g.ravel()
+        v0 = w0[:3 * N].reshape(N, 3)
+        norm0 = np.linalg.norm(v0, axis=1, keepdims=True)
+        cuts = [np.where(norm0 > 1e-6, v0 / np.maximum(norm0, 1e-12), 0.0)]   # tangent planes at w0
+        rows = np.arange(N, g.size)                   # every row but the thrust ball
+        a_base = jac[rows, :n_q]
+        lo_base, hi_base = lbg[rows] - g[rows], ubg[rows] - g[rows]
+        lb, ub = lbx[:n_q] - w0[:n_q], ubx[:n_q] - w0[:n_q]
+        h, f = hess[:n_q, :n_q], grad.ravel()[:n_q]
+        for _ in range(BALL_CUT_ROUNDS):
+            cut_a = np.zeros((N * len(cuts), n_q))
+            cut_hi = np.empty(N * len(cuts))
+            for c, dirs in enumerate(cuts):           # d' (v0_m + dv_m) <= 1
+                r = c * N + np.arange(N)
+                cut_a[r[:, None], 3 * np.arange(N)[:, None] + np.arange(3)] = dirs
+                cut_hi[r] = 1.0 - np.sum(dirs * v0, axis=1)
+            a = np.vstack([a_base, cut_a])
+            lo = np.concatenate([lo_base, np.full(cut_hi.size, -QP_INFINITY)])
+            hi = np.concatenate([hi_base, cut_hi])
+            d = guarded_solve(info, lambda a=a, lo=lo, hi=hi: self._qp.solve(h, f, a, lo, hi, lb, ub, owner=(owner, len(cuts))),
+                              shape=(n_q,), lower=lb, upper=ub, fallback=False, tol=QP_ROW_TOL,
+                              violation=lambda d, a=a, lo=lo, hi=hi: row_violation(a @ d, lo, hi),
+                              violation_tol=QP_ROW_TOL, time_limit=self.cfg.solve_time_limit)
+            if d is None:
+                return None
+            v = (v0 + d[:3 * N].reshape(N, 3))
+            norm = np.linalg.norm(v, axis=1, keepdims=True)
+            if norm.max() <= 1.0 + BALL_TOL:
+                break
+            cuts.append(np.where(norm > 1.0 + BALL_TOL, v / norm, 0.0))
+        w = w0.copy()
+        w[:n_q] += d
+        w[:3 * N] = (v / np.maximum(norm, 1.0)).ravel()          # onto the ball
+        g_new = self._buffered("rows", k, copy)(w, params)[0].ravel()
+        if row_violation(g_new, lbg, ubg) > NLP_CONSTRAINT_TOL:
+            info["solver_failures"] = info.get("solver_failures", 0) + 1
+            info["solver_status"] = (f"qp step violates the NLP rows by {row_violation(g_new, lbg, ubg):.3g} "
+                                     f"> {NLP_CONSTRAINT_TOL}")
+            return None
+        return w
+
+    def rows(self, k: int) -> Any:
+        """``(w, p) -> g`` of the NLP with ``k`` slots (built once)."""
+        args = (self.cfg, *self._constants, k, *self._radii)
+
+        def build() -> Any:
+            import casadi as ca
+
+            nlp = self._problem(*args)[0]
+            return ca.Function("tube_rdmpc_rows", [nlp["x"], nlp["p"]], [nlp["g"]])
+
+        return nlpsol_cached(("tube_rdmpc-rows", *args), build)
 
     def bounds(self, relaxed: bool) -> tuple[np.ndarray, np.ndarray]:
         N = self.N
@@ -582,7 +686,7 @@ class TubeRDMPC(Baseline):
         self.tube.nominal = None
         self.tube.eps, self.tube.kappa, self.tube.u_total = [], [], []
         self.info = new_info(relaxed=0, solve_ms=[], tube_error_max_m=0.0,
-                             tube_bound_m=self.eps_bar, resyncs=0, solves=0)
+                             tube_bound_m=self.eps_bar, resyncs=0, solves=0, qp_steps=0, rti_fallbacks=0)
         self.tube.stats = self.info
 
     def reset(self, seed: int | None = None) -> None:
@@ -700,10 +804,18 @@ class TubeRDMPC(Baseline):
         def solve(i: int, copy: int) -> tuple[np.ndarray | None, dict[str, Any], float]:
             local: dict[str, Any] = {}
             start = time.perf_counter()
+            if rti:
+                w = self.nlp.qp_step(local, params_all[i], self.warm[i], owner=i, copy=copy)
+                if w is not None:
+                    local["qp_steps"] = 1
+                    return w, local, (time.perf_counter() - start) * 1e3
+                local["rti_fallbacks"] = 1
+                self.duals[i].clear()                # the ipopt fallback starts from no multipliers
             duals = self.duals[i] if self.cfg.warm_duals else None
             w = self.nlp.solve(local, params_all[i], self.warm[i], relaxed=False, duals=duals, copy=copy)
             return w, local, (time.perf_counter() - start) * 1e3
 
+        rti = self.cfg.solver == "rti" and self.plans is not None    # cold: ipopt
         workers = min(self.cfg.workers, self.m)
         self.nlp.prepare([self.nlp.slots(p) for p in params_all], workers)   # builds: not in threads
         if workers == 1:
@@ -720,6 +832,8 @@ class TubeRDMPC(Baseline):
         for _, local, ms in results:
             self.info["solver_status"] = local["solver_status"]
             self.info["solver_failures"] = self.info.get("solver_failures", 0) + local.get("solver_failures", 0)
+            for key in ("qp_steps", "rti_fallbacks"):
+                self.info[key] += local.get(key, 0)
             self.info["solve_ms"].append(ms)
             self.info["solves"] += 1
         return [w for w, _, _ in results]

@@ -15,7 +15,7 @@ import os
 import time
 from typing import Any
 
-LABEL_TARGETS: dict[str, float] = {"servicing-pereira2022": 100.0, "cluster-li2022": 50.0}
+LABEL_TARGETS: dict[str, float] = {"servicing-pereira2022": 100.0, "cluster-li2022": 200.0}
 """DAgger expert labels per second on two cores (``>=``)."""
 
 DECISIONS = {"servicing-pereira2022": 40, "cluster-li2022": 12}
@@ -77,3 +77,85 @@ def run(o, log) -> dict[str, Any]:
             f"(x{row['parallel_speedup']:.2f}; load {row['load_average_at_start']})")
     out["targets"] = targets
     return out
+
+
+FAST_MODES: dict[str, dict[str, Any]] = {"nmpc": {"solver": "rti"}, "tube_rdmpc": {"solver": "rti"},
+                                         "replanning_tube_rdmpc": {"solver": "rti"}}
+"""The one-QP-per-decision options of each expert / baseline (``solver="rti"``), against ipopt."""
+REFERENCE_MODE: dict[str, Any] = {"solver": "ipopt"}
+CLOSED_LOOP_CASES: tuple[tuple[str, str, str, int], ...] = (
+    # (controller, task, seed split, seeds)
+    ("nmpc", "servicing-pereira2022", "test", 1),
+    ("nmpc", "servicing-pereira2022-random", "train", 3),
+    ("tube_rdmpc", "cluster-case1", "test", 1),
+    ("replanning_tube_rdmpc", "cluster-case1-random", "train", 3),
+)
+"""The reproduction's problems the fast modes are checked on: the paper task (its one scenario)
+and the first training seeds of the system's training task (the states DAgger labels)."""
+CLOSED_LOOP_TOLERANCE = 0.02
+"""The fast mode's closed-loop cost (RMSE, final error, delta-v) within 2 % of ipopt's, and the
+same successes."""
+DECISION_TARGETS_MS = {"nmpc": 5.0, "tube_rdmpc": 2.0}
+"""ms per agent decision of the fast modes (``<=``), medians along the closed loop."""
+
+
+def closed_loop_episode(controller: str, task: str, seed: int, options: dict[str, Any],
+                        max_steps: int | None = None) -> dict[str, Any]:
+    """One episode of ``controller`` (a :func:`satenv.baselines.experts.make` name) with ``options`` on
+    ``task`` from ``seed``: the board's metrics (:func:`satenv.metrics.summary`) plus the median
+    ms per agent solve and the solver counters of the policy's ``info``."""
+    import numpy as np
+
+    from satenv import metrics, tasks
+    from satenv.baselines.experts import make
+    from satenv.rollout import rollout
+
+    env = tasks.get(task).make_env()
+    policy = make(controller, env, **options)
+    traj = rollout(env, policy, seed=seed, max_steps=max_steps)
+    row = {k: v for k, v in metrics.summary(traj).items() if k != "terminated"}
+    info = policy.info
+    solves = info.get("agent_solve_ms", info.get("solve_ms", []))
+    row["solve_ms_median"] = float(np.median(solves)) if len(solves) else None
+    row["act_ms_per_agent_median"] = float(np.median(traj.compute_time)) * 1e3 / len(env.possible_agents)
+    for key in ("rti_steps", "qp_steps", "rti_fallbacks", "nlp_solves", "relaxed", "solver_failures"):
+        if key in info:
+            row[key] = int(info[key])
+    env.close()
+    return row
+
+
+def closed_loop_vs_ipopt(cases=CLOSED_LOOP_CASES, max_steps: int | None = None, cache: dict | None = None,
+                         log=print) -> dict[str, Any]:
+    """Every case of :data:`CLOSED_LOOP_CASES` flown with ipopt and with the fast mode: each
+    episode's metrics, and per case whether the fast mode keeps the successes and its RMSE,
+    final error and delta-v within :data:`CLOSED_LOOP_TOLERANCE` of ipopt's (means over seeds).
+    ``cache`` (a dict, e.g. loaded from JSON) holds finished episodes by key and is filled in."""
+    from satenv import tasks
+
+    cache = {} if cache is None else cache
+    out: dict[str, Any] = {}
+    for controller, task, split, n in cases:
+        rows: dict[str, list] = {"ipopt": [], "fast": []}
+        for seed in tasks.get(task).seeds(split, n):
+            for mode, options in (("ipopt", REFERENCE_MODE), ("fast", FAST_MODES[controller])):
+                key = f"{controller}|{task}|{seed}|{mode}|{max_steps}"
+                if key not in cache:
+                    cache[key] = closed_loop_episode(controller, task, seed, options, max_steps)
+                    log(f"closed loop {key}: {cache[key]}")
+                rows[mode].append(cache[key])
+        out[f"{controller}@{task}"] = _compare(rows)
+    return out
+
+
+def _compare(rows: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    import numpy as np
+
+    res: dict[str, Any] = {"episodes": rows, "successes": {m: int(sum(r["success"] for r in rows[m])) for m in rows}}
+    within = res["successes"]["fast"] >= res["successes"]["ipopt"]
+    for metric in ("rmse", "final_error_m", "delta_v"):
+        ref, fast = (float(np.mean([r[metric] for r in rows[m]])) for m in ("ipopt", "fast"))
+        res[f"{metric}_ratio"] = fast / ref if ref > 0 else (1.0 if fast == 0 else float("inf"))
+        within = within and res[f"{metric}_ratio"] <= 1.0 + CLOSED_LOOP_TOLERANCE
+    res["within_tolerance"] = bool(within)
+    return res

@@ -1,0 +1,74 @@
+"""satenv.baselines.NMPC with solver="rti": one condensed QP per decision about the shifted plan."""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("casadi")
+pytest.importorskip("daqp")
+
+from satenv.baselines.base import BaselineError  # noqa: E402
+from satenv.baselines.nmpc import NMPC, NMPCConfig  # noqa: E402
+from satenv.envs.servicing_v0 import parallel_env, unpack_global_state  # noqa: E402
+
+HORIZON = 10   # a short horizon keeps the default suite fast; the §5.2 N = 30 runs in the perf module
+
+
+def fly(pol, env, steps):
+    obs, _ = env.reset(seed=0)
+    pol.reset(seed=0)
+    for _ in range(steps):
+        act = pol.act(obs)
+        assert all(np.all(np.abs(a) <= 1.0) and np.isfinite(a).all() for a in act.values())
+        obs, *_ = env.step(act)
+    return obs
+
+
+def test_rti_solves_one_qp_per_warm_decision_and_keeps_the_constraints():
+    env = parallel_env()
+    pol = NMPC(env, solver="rti", horizon=HORIZON)
+    fly(pol, env, 6)
+    info = pol.info
+    assert info["nlp_solves"] == pol.m                     # the first decision: cold, ipopt
+    assert info["rti_steps"] == 5 * pol.m and info["rti_fallbacks"] == 0 and info["fallbacks"] == 0
+    for plan in pol._plans:                                  # the QP's plan: inputs, bounds, keep-out
+        assert np.all(np.abs(plan["u"]) <= pol.u_max * (1 + 1e-6))
+        assert np.all(np.abs(plan["x"][1:, 3:6]) <= pol.v_lim * (1 + 1e-6))
+        assert np.all(np.linalg.norm(plan["x"][1:, :3], axis=1) >= pol.keepout - 1e-6)
+
+
+def test_rti_step_at_the_nlp_optimum_stays_there():
+    """At the NLP's KKT point the Gauss-Newton QP's step is zero: the linearisation, the condensing
+    and the rows are those of the NLP (a wrong Jacobian or sign would move the point)."""
+    env = parallel_env()
+    ref = NMPC(env, solver="ipopt", horizon=HORIZON, tol=1e-10, max_iter=500)
+    rti = NMPC(env, solver="rti", horizon=HORIZON)
+    fly(ref, env, 3)
+    x, goals, t = unpack_global_state(env.state(), ref.m)
+    ref._step = rti._step = int(round(t / env.scenario.dt))
+    others = [np.tile(x[1, :3], (HORIZON, 1))]
+    u0, _ = ref._solve_agent(0, x[0], np.tile(goals[0], (HORIZON, 1)), others)
+    assert ref.info["solver_status"] == "Solve_Succeeded"
+    rti._plans[0] = {**ref._plans[0], "duals": None}
+    rti._last_goal[0] = goals[0].copy()
+    u_rti, _ = rti._solve_agent(0, x[0], np.tile(goals[0], (HORIZON, 1)), others)
+    assert rti.info["rti_steps"] == 1
+    np.testing.assert_allclose(u_rti, u0, atol=1e-4 * float(np.max(ref.u_max)))
+
+
+def test_a_failed_qp_falls_back_to_ipopt_and_is_flagged(monkeypatch):
+    env = parallel_env()
+    pol = NMPC(env, solver="rti", horizon=HORIZON)
+    obs = fly(pol, env, 1)
+    monkeypatch.setattr(pol._qp, "solve", lambda *a, **k: (None, False, "forced failure"))
+    act = pol.act(obs)
+    assert all(np.isfinite(a).all() for a in act.values())
+    info = pol.info
+    assert info["rti_fallbacks"] == pol.m and info["solver_failures"] >= pol.m
+    assert info["nlp_solves"] == 2 * pol.m and info["fallbacks"] == 0    # ipopt took over
+
+
+def test_rti_option_is_validated_and_shares_the_ipopt_nlp():
+    with pytest.raises(BaselineError, match="solver"):
+        NMPCConfig(solver="qp")
+    env = parallel_env()
+    assert NMPC(env, solver="rti", horizon=HORIZON)._nlp is NMPC(env, solver="ipopt", horizon=HORIZON)._nlp
