@@ -217,7 +217,7 @@ def test_platoon_with_dmpc_through_the_board(tmp_path):
     summary = board.summary["policies"]                          # across scenarios: 0 = zero, 1 = dmpc
     assert summary["zero"]["iqm"] == 0.0 and summary["dmpc"]["iqm"] == 1.0
     assert summary["zero"]["p_improvement"] == 0.0 and summary["dmpc"]["p_improvement"] is None
-    assert "## Across scenarios" in board.markdown and "| dmpc | 1 | 1 | 1.00 [1.00, 1.00] | – |" in board.markdown
+    assert "## Across tasks" in board.markdown and "| dmpc | 1 | 1 | 1.00 [1.00, 1.00] | – |" in board.markdown
 
 
 def test_only_a_missing_optional_dependency_makes_an_entry_unavailable(tmp_path, monkeypatch):

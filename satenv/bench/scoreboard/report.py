@@ -1,11 +1,11 @@
 """Scoreboard results: the header, aggregation (mean and 95 % CI), ranking, the aggregates across
-scenarios, and the written outputs (``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``,
+tasks, and the written outputs (``scoreboard.md``, ``scoreboard.json``, ``scoreboard.csv``,
 ``episodes.csv``, ``plots/``).
 
 Intervals respect each metric's range: the success rate's is the Wilson score interval
 (``scipy.stats.binomtest``), every other metric's a percentile bootstrap of the mean over seeds
 (as ``scipy.stats.bootstrap(method="percentile")``), so it stays inside the observed values (a separation is never
-negative). Across scenarios (:func:`summarize`, after rliable, Agarwal et al. 2021): the
+negative). Across tasks (:func:`summarize`, after rliable, Agarwal et al. 2021): the
 interquartile mean of a normalised score and the probability of improvement over the paper's
 controller, with stratified bootstrap confidence intervals.
 
@@ -91,7 +91,7 @@ def jsonable(value: Any) -> Any:
 @dataclass
 class Board:
     """A finished board (:func:`satenv.bench.scoreboard.run_scoreboard`): header, records in plan
-    order, aggregates and ranking per scenario, notes and the markdown table."""
+    order, aggregates and ranking per task, notes and the markdown table."""
 
     out: Path
     header: dict[str, Any]
@@ -110,7 +110,7 @@ class Board:
 def _bootstrap_interval(values: np.ndarray) -> tuple[float, float, float]:
     """Mean and percentile-bootstrap 95 % interval of the mean (inside the observed range); the
     percentile method of ``scipy.stats.bootstrap``, vectorised over the resamples (a board has
-    thousands of (scenario, policy, metric) cells) and seeded, so a board is reproducible."""
+    thousands of (task, policy, metric) cells) and seeded, so a board is reproducible."""
     mean = float(values.mean())
     if values.size < 2:
         return mean, math.nan, math.nan
@@ -159,7 +159,7 @@ RANKING = ("success rate (desc), then collision episodes (asc), then violation e
 
 
 def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
-    """Policies of one scenario, best first, safety first (:func:`satenv.scoring.rank_key`):
+    """Policies of one task, best first, safety first (:func:`satenv.scoring.rank_key`):
     success rate, then collision episodes, then violation episodes, then RMSE, then delta-v."""
     def key(item):
         pol, e = item
@@ -171,20 +171,20 @@ def rank(agg: dict[str, dict[str, Any]]) -> list[str]:
 
 
 # ----------------------------------------------------------------------------------------------
-# Across scenarios (rliable-style).
+# Across tasks (rliable-style).
 # ----------------------------------------------------------------------------------------------
 def summarize(records: Iterable[dict[str, Any]], envs: dict[str, str], metric: str = "rmse",
               resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> dict[str, Any]:
-    """Aggregates of every policy across the scenarios (after rliable, Agarwal et al. 2021).
+    """Aggregates of every policy across the tasks (after rliable, Agarwal et al. 2021).
 
-    The normalised score of an episode on a scenario is ``(m0 - m) / (m0 - m1)`` of its ``metric``
+    The normalised score of an episode on a task is ``(m0 - m) / (m0 - m1)`` of its ``metric``
     (lower is better: RMSE by default), with ``m0`` the mean of :data:`FLOOR` (no thrust) and
-    ``m1`` the mean of the env's paper controller (:data:`PAPER_CONTROLLER`) on that scenario:
-    0 = no thrust, 1 = the paper's controller; an errored episode scores 0. A scenario without
-    both references is left out (``skipped``). Per policy, over the scenarios it ran on:
+    ``m1`` the mean of the env's paper controller (:data:`PAPER_CONTROLLER`) on that task:
+    0 = no thrust, 1 = the paper's controller; an errored episode scores 0. A task without
+    both references is left out (``skipped``). Per policy, over the tasks it ran on (``tasks``):
     ``iqm`` (interquartile mean of the pooled episode scores) and ``p_improvement`` (the mean over
-    scenarios of P(score > the paper controller's score), ties count half), each with a 95 %
-    stratified bootstrap interval (episodes resampled within each scenario).
+    tasks of P(score > the paper controller's score), ties count half), each with a 95 %
+    stratified bootstrap interval (episodes resampled within each task). ``envs``: each task's env id.
     """
     from scipy import stats
 
@@ -192,23 +192,23 @@ def summarize(records: Iterable[dict[str, Any]], envs: dict[str, str], metric: s
     for rec in records:
         groups.setdefault((rec["scenario"], rec["policy"]), []).append(rec)
 
-    def values(scen: str, pol: str) -> np.ndarray:
+    def values(task: str, pol: str) -> np.ndarray:
         return np.array([float(r[metric]) if r.get("error") is None and r.get(metric) is not None else np.nan
-                         for r in groups.get((scen, pol), [])])
+                         for r in groups.get((task, pol), [])])
 
     scores: dict[str, dict[str, np.ndarray]] = {}
     refs: dict[str, str] = {}
     skipped: dict[str, str] = {}
-    for scen, env in envs.items():
+    for task, env in envs.items():
         ref = PAPER_CONTROLLER.get(env)
-        m0, m1 = np.nanmean(values(scen, FLOOR)) if (scen, FLOOR) in groups else np.nan, \
-            np.nanmean(values(scen, ref)) if (scen, ref) in groups else np.nan
+        m0, m1 = np.nanmean(values(task, FLOOR)) if (task, FLOOR) in groups else np.nan, \
+            np.nanmean(values(task, ref)) if (task, ref) in groups else np.nan
         if not (np.isfinite(m0) and np.isfinite(m1)) or m0 == m1:
-            skipped[scen] = f"needs {FLOOR} and the paper's controller {ref} on it, with different {metric}"
+            skipped[task] = f"needs {FLOOR} and the paper's controller {ref} on it, with different {metric}"
             continue
-        refs[scen] = ref
-        scores[scen] = {pol: np.nan_to_num((m0 - values(scen, pol)) / (m0 - m1), nan=0.0)
-                        for (sc, pol) in groups if sc == scen}
+        refs[task] = ref
+        scores[task] = {pol: np.nan_to_num((m0 - values(task, pol)) / (m0 - m1), nan=0.0)
+                        for (sc, pol) in groups if sc == task}
     rng = np.random.default_rng(seed)
     out: dict[str, Any] = {}
     for pol in sorted({p for per in scores.values() for p in per}):
@@ -217,7 +217,7 @@ def summarize(records: Iterable[dict[str, Any]], envs: dict[str, str], metric: s
                 for s in tasks]
         pooled = np.concatenate([scores[s][pol] for s in tasks])
         iqm_boot = stats.trim_mean(np.concatenate(boot, axis=1), 0.25, axis=1)
-        entry = {"scenarios": len(tasks), "episodes": int(pooled.size),
+        entry = {"tasks": len(tasks), "episodes": int(pooled.size),
                  "iqm": float(stats.trim_mean(pooled, 0.25)),
                  "iqm_ci95": [float(q) for q in np.percentile(iqm_boot, [2.5, 97.5])],
                  "p_improvement": None, "p_improvement_ci95": [None, None]}
@@ -279,7 +279,7 @@ def _preamble(h: dict[str, Any]) -> list[str]:
              f"machine: {m['cpu']}, {m['cpus']} CPUs, {m['platform']}, Python {m['python']}, "
              f"numpy {m['numpy']}", ""]
     if h.get("scenario_seeds"):
-        lines += ["Fewer seeds for the expensive scenarios: "
+        lines += ["Fewer seeds for the expensive tasks: "
                   + ", ".join(f"{n}: {v}" for n, v in h["scenario_seeds"].items()), ""]
     return lines + [
         f"Ranked by {RANKING}. Cells: mean over seeds [95 % interval]: success rate with the "
@@ -299,19 +299,19 @@ def _preamble(h: dict[str, Any]) -> list[str]:
         "agent-steps it applied its backup action.", ""]
 
 
-def _scenario_section(board: Board, scen: str) -> list[str]:
-    info = board.header["scenarios"].get(scen, {})
+def _task_section(board: Board, task: str) -> list[str]:
+    info = board.header["scenarios"].get(task, {})
     rule = (f"success: every agent within {info.get('success_tol_m', '?')} m of its target at the end"
             + (" and no collision" if info.get("collision_free_success", True) else ""))
     desc = info.get("description", "")
-    lines = [f"## {scen} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
+    lines = [f"## {task} ({info.get('env', '?')})", "", (f"{desc}. " if desc else "") + f"{rule}.", ""]
     table = _TABLE + (_SHIELD_TABLE if any(e.get("safety_interventions", {}).get("n")
-                                           for e in board.aggregates[scen].values()) else [])
+                                           for e in board.aggregates[task].values()) else [])
     cols = ["#", "policy", "n"] + [c for _, c in table] + ["errors"]
     lines.append("| " + " | ".join(cols) + " |")
     lines.append("|" + "|".join("---" if i < 2 else "--:" for i in range(len(cols))) + "|")
-    for i, pol in enumerate(board.ranking[scen], 1):
-        e = board.aggregates[scen][pol]
+    for i, pol in enumerate(board.ranking[task], 1):
+        e = board.aggregates[task][pol]
         row = [str(i), pol, str(e["n"])] + [_cell(e[mname], mname) for mname, _ in table] + [str(e["errors"])]
         lines.append("| " + " | ".join(row) + " |")
     return lines + [""]
@@ -321,21 +321,21 @@ def _summary_section(summary: dict[str, Any]) -> list[str]:
     if not summary.get("policies"):
         return []
     refs = ", ".join(f"{s}: {r}" for s, r in summary["reference"].items())
-    lines = ["## Across scenarios", "",
+    lines = ["## Across tasks", "",
              f"Normalised score per episode: 0 = {summary['floor']} (no thrust), 1 = the env's paper "
              f"controller, on mean {summary['metric'].upper()} (errored episodes score 0); IQM: "
              "interquartile mean of the pooled episode scores; P(improvement): probability that an "
-             "episode scores higher than the paper controller's on the same scenario, averaged over "
-             "scenarios (ties half). [95 % stratified bootstrap intervals.] After rliable (Agarwal et "
+             "episode scores higher than the paper controller's on the same task, averaged over "
+             "tasks (ties half). [95 % stratified bootstrap intervals.] After rliable (Agarwal et "
              f"al., NeurIPS 2021). Paper controllers: {refs}.", "",
-             "| policy | scenarios | episodes | IQM normalised score | P(improvement over the paper's controller) |",
+             "| policy | tasks | episodes | IQM normalised score | P(improvement over the paper's controller) |",
              "|---|--:|--:|--:|--:|"]
     order = sorted(summary["policies"].items(), key=lambda kv: -kv[1]["iqm"])
     for pol, e in order:
         lo, hi = e["iqm_ci95"]
         poi = "–" if e["p_improvement"] is None else \
             f"{e['p_improvement']:.2f} [{e['p_improvement_ci95'][0]:.2f}, {e['p_improvement_ci95'][1]:.2f}]"
-        lines.append(f"| {pol} | {e['scenarios']} | {e['episodes']} | {e['iqm']:.2f} [{lo:.2f}, {hi:.2f}] | {poi} |")
+        lines.append(f"| {pol} | {e['tasks']} | {e['episodes']} | {e['iqm']:.2f} [{lo:.2f}, {hi:.2f}] | {poi} |")
     if summary["skipped"]:
         lines += ["", "Left out of these aggregates: " + "; ".join(f"{s} ({why})" for s, why in summary["skipped"].items())
                   + "."]
@@ -386,15 +386,15 @@ def _robustness_section(board: Board) -> list[str]:
 
 def render_markdown(board: Board, plots: bool = True) -> str:
     """``scoreboard.md``: header, the headline (``plots``: with its figure), the aggregates across
-    scenarios, one ranked table per scenario, notes."""
+    tasks, one ranked table per task, notes."""
     from satenv.bench.scoreboard.headline import headline_section
 
     lines = _preamble(board.header)
     lines += headline_section(board.headline, figure=plots)
     lines += _summary_section(board.summary)
     lines += _robustness_section(board)
-    for scen in board.aggregates:
-        lines += _scenario_section(board, scen)
+    for task in board.aggregates:
+        lines += _task_section(board, task)
     if board.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in board.notes] + [""]
     return "\n".join(lines)
@@ -414,10 +414,10 @@ def _write_csv(board: Board) -> None:
         w = csv.writer(fh)
         w.writerow(["scenario", "rank", "policy", "n", "errors"]
                    + [f"{m}_{s}" for m in METRICS for s in ("mean", "ci95_lo", "ci95_hi", "n")])
-        for scen, order in board.ranking.items():
+        for task, order in board.ranking.items():
             for i, pol in enumerate(order, 1):
-                e = board.aggregates[scen][pol]
-                w.writerow([scen, i, pol, e["n"], e["errors"]]
+                e = board.aggregates[task][pol]
+                w.writerow([task, i, pol, e["n"], e["errors"]]
                            + [v for m in METRICS for v in (e[m]["mean"], *e[m]["ci95"], e[m]["n"])])
 
 
@@ -462,11 +462,11 @@ def policy_colors(names: Iterable[str]) -> dict[str, Any]:
     return {n: palette[j % len(palette)] for j, n in enumerate(sorted(set(names)))}
 
 
-def _bar_rows(board: Board, scen: str, metric: str) -> list[tuple[str, float, float, float]]:
-    """``(policy, mean, minus, plus)`` of ``scen`` in ranked order, policies without a value left out."""
+def _bar_rows(board: Board, task: str, metric: str) -> list[tuple[str, float, float, float]]:
+    """``(policy, mean, minus, plus)`` of ``task`` in ranked order, policies without a value left out."""
     rows = []
-    for pol in board.ranking[scen]:
-        stat = board.aggregates[scen][pol][metric]
+    for pol in board.ranking[task]:
+        stat = board.aggregates[task][pol][metric]
         mean, (lo, hi) = stat["mean"], stat["ci95"]
         if mean is None or not math.isfinite(mean):
             continue
@@ -476,12 +476,12 @@ def _bar_rows(board: Board, scen: str, metric: str) -> list[tuple[str, float, fl
 
 
 def _metric_figure(board: Board, metric: str, path: Path, colors: dict[str, Any]) -> Path | None:
-    """One panel per scenario with a value (own x scale), one horizontal bar per policy in ranked
-    order, named on the axis and coloured as in every other panel; ``None`` when no scenario has a
+    """One panel per task with a value (own x scale), one horizontal bar per policy in ranked
+    order, named on the axis and coloured as in every other panel; ``None`` when no task has a
     value (no empty figure is written)."""
     from satenv.render import new_figure
 
-    panels = [(scen, rows) for scen in board.aggregates if (rows := _bar_rows(board, scen, metric))]
+    panels = [(task, rows) for task in board.aggregates if (rows := _bar_rows(board, task, metric))]
     if not panels:
         path.unlink(missing_ok=True)
         return None
@@ -490,7 +490,7 @@ def _metric_figure(board: Board, metric: str, path: Path, colors: dict[str, Any]
     heights = [max(len(r) for _, r in panels[i * ncols:(i + 1) * ncols]) for i in range(nrows)]
     fig = new_figure((6.4 * ncols, sum(0.22 * h + 0.9 for h in heights) + 0.6), 90, layout="constrained")
     grid = fig.add_gridspec(nrows, ncols, height_ratios=[0.22 * h + 0.9 for h in heights])
-    for k, (scen, rows) in enumerate(panels):
+    for k, (task, rows) in enumerate(panels):
         ax = fig.add_subplot(grid[k // ncols, k % ncols])
         names = [r[0] for r in rows]
         bars = ax.barh(range(len(rows)), [r[1] for r in rows], xerr=[[r[2] for r in rows], [r[3] for r in rows]],
@@ -503,7 +503,7 @@ def _metric_figure(board: Board, metric: str, path: Path, colors: dict[str, Any]
         ax.invert_yaxis()
         ax.set_xlabel(_PLOT_LABELS.get(metric, metric), fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
-        ax.set_title(scen, fontsize=9)
+        ax.set_title(task, fontsize=9)
     fig.suptitle(f"{_PLOT_LABELS.get(metric, metric)}: mean over seeds, 95 % interval", fontsize=10)
     fig.savefig(path)
     return path
@@ -515,13 +515,13 @@ def _trajectory_plots(board: Board, pdir: Path) -> list[Path]:
 
     written = []
     for npz in sorted((board.out / "trajectories").glob("*.npz")):
-        scen, pol, seed = npz.stem.split("__")
+        task, pol, seed = npz.stem.split("__")
         try:
             traj = Trajectory.load(npz)
         except (OSError, ValueError, KeyError):
             continue
         written.append(plot_trajectory(traj, pdir / "trajectories" / f"{npz.stem}.png",
-                                       title=f"{scen} · {pol} · {seed}"))
+                                       title=f"{task} · {pol} · {seed}"))
     return written
 
 
@@ -563,7 +563,7 @@ def _summary_figure(summary: dict[str, Any], path: Path, colors: dict[str, Any])
         ax.set_xlabel(label, fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
         ax.set_yticks(range(len(names)), names, fontsize=7)
-    fig.suptitle(f"across {len(summary['reference'])} scenarios (95 % stratified bootstrap intervals)", fontsize=10)
+    fig.suptitle(f"across {len(summary['reference'])} tasks (95 % stratified bootstrap intervals)", fontsize=10)
     fig.savefig(path)
     return path
 
