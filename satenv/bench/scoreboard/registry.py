@@ -23,7 +23,7 @@ from satenv.bench.scoreboard.specs import (
 )
 from satenv.training.both_ways import AS_SHIPPED, NETWORK_ALONE
 
-__all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "SCENARIOS", "TASKS", "discover_trained_policies",
+__all__ = ["DETERMINISTIC_SEEDS", "FULL", "POLICIES", "QUICK", "TASKS", "discover_trained_policies",
            "user_policy", "user_policy_name"]
 
 SHIPPED_POLICY_DIR = Path(__file__).resolve().parents[2] / "training" / "policies"
@@ -32,9 +32,6 @@ TASKS: dict[str, TaskSpec] = {t.name: TaskSpec(t.name, t.env_id, dict(t.paper_en
                               for t in tasks.TASKS.values()}
 """Every task of the scoreboard by name: the tasks of :mod:`satenv.tasks` (one registry), each with
 the paper's cost (``Task.paper_env_kwargs``: a training task's training reward left out)."""
-
-SCENARIOS = TASKS
-"""The same table under the name the command line's ``--scenarios`` / ``--list`` reads."""
 
 POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
     PolicySpec("zero", "satenv.baselines.base:ZeroPolicy", baseline="zero", description="no thrust (coasting)"),
