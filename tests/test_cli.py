@@ -71,7 +71,7 @@ def test_imitate_falls_back_while_the_new_engine_is_missing(monkeypatch):
     assert cli.resolve("imitate") is train.main
 
 
-NOT_YET_PLAIN = {"ppo", "imitate"}
+NOT_YET_PLAIN = {"ppo"}
 """Commands whose parser is built outside ``satenv.cliargs.new_parser`` and still shows raw reST."""
 
 
