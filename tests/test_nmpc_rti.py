@@ -72,3 +72,16 @@ def test_rti_option_is_validated_and_shares_the_ipopt_nlp():
         NMPCConfig(solver="qp")
     env = parallel_env()
     assert NMPC(env, solver="rti", horizon=HORIZON)._nlp is NMPC(env, solver="ipopt", horizon=HORIZON)._nlp
+
+
+def test_closed_loop_check_needs_the_same_successes_and_every_metric_within_two_percent():
+    from satenv.bench.perf.experts import _compare
+
+    def row(success, rmse, final, dv):
+        return {"success": success, "rmse": rmse, "final_error_m": final, "delta_v": dv}
+
+    ref = [row(True, 10.0, 0.1, 100.0)]
+    assert _compare({"ipopt": ref, "fast": [row(True, 10.19, 0.1, 90.0)]})["within_tolerance"]
+    assert not _compare({"ipopt": ref, "fast": [row(True, 10.21, 0.1, 90.0)]})["within_tolerance"]
+    assert not _compare({"ipopt": ref, "fast": [row(True, 10.0, 0.103, 100.0)]})["within_tolerance"]
+    assert not _compare({"ipopt": ref, "fast": [row(False, 9.0, 0.05, 90.0)]})["within_tolerance"]

@@ -78,7 +78,22 @@ swarm solves 5-16-slot NLPs instead of 63). Warm-started per satellite from its 
 solution and (``warm_duals``, default) its previous multipliers: about 6 ipopt iterations instead
 of 13, the same optimum (objective within 1e-10 relative on recorded li2022 problems;
 ``tests/test_fast_solvers.py``). ``solver="ipopt-jit"`` compiles its functions with gcc.
-``exact_max_iter`` caps the exact NLP's iterations (the relaxed one keeps ``max_iter``).
+``exact_max_iter`` caps the exact NLP's iterations (the relaxed one keeps ``max_iter``). li2022
+names no solver; ipopt (every NLP solved to convergence) is the reference and the reproduction's
+(``satenv/bench/reproductions/li2022.py``).
+
+Sequential convexification (``solver="rti"``): one QP per satellite and decision about its previous
+plan shifted by one step (:meth:`_NominalNLP.qp_step`). Every row of the exact NLP is linearised
+there (collision, obstacle and target keep-outs become tangent half-spaces, inside their feasible
+sets; the Lyapunov, terminal and braking rows their first-order models), the cost keeps its exact
+(constant) Hessian, the slacks stay at zero, and the thrust ball ``|v_m| <= 1`` becomes its tangent
+plane at the plan's direction plus cuts where the QP's point leaves it by more than ``BALL_TOL``
+(at most ``BALL_CUT_ROUNDS`` QPs; the point is then scaled onto the ball). DAQP solves it in one
+workspace per satellite. The point is used only if the exact NLP's own rows hold at it to
+``NLP_CONSTRAINT_TOL``; otherwise, or when the QP fails, the exact ipopt NLP solves the decision
+(``info["rti_fallbacks"]``, ``info["solver_failures"]``), then the relaxed NLP and the shifted plan as
+before. The first decision after a reset is an ipopt solve. ``info["qp_steps"]`` counts the QP
+decisions. At the exact NLP's optimum the step is zero (``tests/test_tube_rdmpc_rti.py``).
 """
 
 from __future__ import annotations
@@ -163,13 +178,15 @@ class TubeRDMPCConfig:
         workers: threads that solve the satellites' exact NLPs of one decision in parallel (they
             are independent: each plans against the others' previous plans), each with its own
             solver copy (``ipopt-jit`` compiles one per thread); the same points as ``workers=1``.
-        solver: ``"ipopt"`` (default, the reference) or ``"ipopt-jit"``: the same NLP and ipopt
+        solver: ``"ipopt"`` (default, the reference), ``"ipopt-jit"`` or ``"rti"``. ``"ipopt-jit"``: the same NLP and ipopt
             options on gcc-compiled problem functions (the same iterates to round-off), compiled
             once per process and config (about 20-50 s of gcc on 2 cores). Not the default: with
             ``warm_duals`` (the default, most of the fast path's gain) it saves only ~10 % a solve
             (10.7 against 11.9 ms on recorded li2022 problems, ``satenv.bench.perf --sections
             fast_solvers``), so its 28 s compile pays back after ~2e4 solves, about ten li2022
             episodes in one process.
+            ``"rti"``: one DAQP QP per satellite and decision, the NLP linearised about the shifted
+            previous plan (module docstring), ipopt for the first decision and as the fallback.
         solve_time_limit: wall-time limit [s] of one NLP solve (None: none); a solve over it is a
             flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard (the
             median solve is 10-30 ms); ipopt's own ``max_wall_time`` is set to it.
