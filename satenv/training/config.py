@@ -89,7 +89,7 @@ class RunConfig:
     task: str | None = None
     """A task of ``satenv.tasks`` (e.g. ``cluster-case1-random``): its env id and kwargs
     (``env_kwargs`` given are applied on top). Without ``--task`` and ``--env-id``:
-    :data:`DEFAULT_TASK`."""
+    ``platoon-pereira2022-random`` (:data:`DEFAULT_TASK`)."""
     env_id: str | None = None
     """satenv env name (``platoon_v0``, ``cluster_v0``, ``servicing_v0``, ``formation_v0``) or
     ``package.module:callable`` (default: the task's)."""
