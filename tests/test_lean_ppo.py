@@ -134,23 +134,27 @@ def test_untrained_mean_is_near_zero_thrust(tmp_path):
 
 
 # ------------------------------------------------------------------------------------ slow
-SB3_MATCH_BUDGET = 2_000_000
+SB3_MATCH_BUDGET = 3_000_000
 """Agent-steps per run of the slow comparison (the same for both learners)."""
+SB3_MATCH_TASK = "platoon-tplf30-rung1-near"
+"""The first rung of the TPLF platoon's ladder (``tasks.ladder("platoon-pereira2023")[0]``), on its
+training reward: the rung where PPO is expected to reach success."""
 SB3_MATCH_SEEDS = (0, 1, 2)
 SB3_MATCH_TEST_SEEDS = tuple(range(900000, 900020))
 
 
 @pytest.mark.slow
 def test_lean_ppo_matches_sb3_ppo_on_the_platoon(tmp_path):
-    """Same task, budget, seeds, network, batch and discount: the lean learner's mean test success
+    """Same task (the platoon ladder's first rung), budget, seeds, network, batch and discount: the lean learner's mean test success
     is within the seeds' spread of SB3 PPO's (the larger of the two standard deviations, and at
     least one test episode's worth)."""
     from satenv.training.config import TrainConfig
     from satenv.training.train import train as sb3_train
 
-    shared = {"task": TASK, "test_seeds": SB3_MATCH_TEST_SEEDS, "eval_baselines": ("zero",), "workers": 1,
+    assert tasks.ladder("platoon-pereira2023")[0] == SB3_MATCH_TASK
+    shared = {"task": SB3_MATCH_TASK, "test_seeds": SB3_MATCH_TEST_SEEDS, "eval_baselines": ("zero",), "workers": 1,
               "progress": False, "net_arch": (64, 64), "lr": 3e-4}
-    gamma = ppo.horizon_gamma(tasks.get(TASK).make_env().scenario.max_steps, 3.0)
+    gamma = ppo.horizon_gamma(tasks.get(SB3_MATCH_TASK).make_env().scenario.max_steps, 3.0)
     lean, sb3 = [], []
     for seed in SB3_MATCH_SEEDS:
         f = ppo.train(ppo.LeanConfig(**shared, seed=seed, budget=SB3_MATCH_BUDGET, num_envs=64, n_steps=32,
@@ -165,4 +169,4 @@ def test_lean_ppo_matches_sb3_ppo_on_the_platoon(tmp_path):
     print(json.dumps(report))
     s_lean, s_sb3 = np.array(report["lean"]["success_rate"]), np.array(report["sb3"]["success_rate"])
     spread = max(s_lean.std(), s_sb3.std(), 1 / len(SB3_MATCH_TEST_SEEDS))
-    assert abs(s_lean.mean() - s_sb3.mean()) <= spread, report
+    assert abs(s_lean.mean() - s_sb3.mean()) <= spread + 1e-12, report   # 1e-12: float rounding of k / 20
