@@ -527,6 +527,24 @@ def _probe_seconds(run: Run, steps: int = 4) -> tuple[float, float]:
     return step_s, (time.perf_counter() - t0) / 3
 
 
+class _NoBoard:
+    def add_scalar(self, *args: Any) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _tensorboard(folder: Path, step: int) -> Any:
+    """A TensorBoard writer of ``folder`` from ``step`` on (a no-op one, with a note, without tensorboard)."""
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError as err:
+        print(f"TensorBoard logs off ({err}); progress.jsonl has the same rows", file=sys.stderr)
+        return _NoBoard()
+    return SummaryWriter(str(folder), purge_step=step or None)
+
+
 def plan(cfg: LeanConfig, n_agents: int, done: int = 0) -> tuple[int, int]:
     """``(agent-steps per iteration, iterations)`` to reach the budget from ``done``."""
     per = cfg.num_envs * n_agents * cfg.n_steps
@@ -568,9 +586,7 @@ def train(cfg: LeanConfig, resume: bool = False) -> Path:
           f"({cfg.num_envs} copies x {vec.n_agents} agents x {cfg.n_steps} steps), {updates} gradient steps "
           f"each; gamma {gamma:.4f}; expected {eta / 60:.1f} min at the measured "
           f"{per_iter / (cfg.n_steps * step_s + updates * update_s):,.0f} agent-steps/s", file=sys.stderr)
-    from torch.utils.tensorboard import SummaryWriter
-
-    writer = SummaryWriter(str(out / "tb"), purge_step=run.steps or None)
+    writer = _tensorboard(out / "tb", run.steps)
     log_path = out / "progress.jsonl"
     if log_path.is_file():   # keep the lines up to the checkpoint resumed from
         kept = [ln for ln in log_path.read_text().splitlines() if ln and json.loads(ln)["agent_steps"] <= run.steps]
