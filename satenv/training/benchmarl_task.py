@@ -74,8 +74,12 @@ class SatenvClass(TaskClass):
         return env.group_map
 
     def observation_spec(self, env: EnvBase) -> Composite:
+        """The agents' observations alone: the per-agent ``safety_cost`` and filter entries beside
+        them are not inputs of the networks."""
         spec = env.full_observation_spec_unbatched.clone()
         del spec["state"]
+        for key in [k for k in spec["agents"].keys() if k != "observation"]:
+            del spec["agents", key]
         return spec
 
     def state_spec(self, env: EnvBase) -> Composite | None:
