@@ -56,7 +56,8 @@ def reproduce(paper: str) -> int:
            "--out", str(OUT / f"{paper}.json"), "--plots", str(plots)]
     start = time.perf_counter()
     out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
-    if out.returncode not in (0, 1) or not (OUT / f"{paper}.json").exists():
+    wrote = any(line.startswith("wrote ") for line in out.stdout.splitlines())
+    if out.returncode not in (0, 1) or not wrote:      # status 1 is also a crash's: the result must be written
         sys.stderr.write(out.stdout + out.stderr)
         raise SystemExit(f"{' '.join(cmd[1:])} failed with status {out.returncode}")
     table = "\n".join(line for line in out.stdout.splitlines() if not line.startswith("wrote "))
@@ -86,7 +87,7 @@ def render(result: dict) -> str:
     n = count(result.get("claims", []))
     verdict = "all met" if result.get("pass") else "**not all met**"
     parts = [f"**Verdict:** the paper-valued claims of our run: {n['gating_met']} of {n['gating']} met ({verdict}). "
-             f"All rows (our run, as published, ablations): {n['met']} met, {n['not met']} not met, "
+             f"All rows (our run, as published, ablations, other readings, comparisons with our own designs): {n['met']} met, {n['not met']} not met, "
              f"{n['paper gives no value']} where the paper gives no value (reported, never counted as met). "
              "A claim's rule comes from the paper's sentence it quotes: a value is judged as a +-10 % band "
              "around it, a stated limit or fact as stated."]

@@ -113,7 +113,8 @@ relaxed NLP keeps 150): no exact solve that succeeded took over 50 in these epis
 rows are those of the default 150, while the failing solves stop sooner."""
 RUN_TIME = ("about 50-60 min by default at a load of 4-8 on 2 cores (case 1: ours 4 min, as published 13 min, "
             "ablation 2-6 min per run; case 2 likewise); --case 1 --no-ablation: about 20 min; "
-            "--variant ours --no-ablation: about 4 min per case")
+            "--variant ours --no-ablation: about 4 min per case; each adds our run under the β reading "
+            "(about as long as ours; --no-readings skips it)")
 
 SOURCES = {
     "s43": "The convergence time of the distributed RDMPC controller is 1000 s, while the control accuracy "

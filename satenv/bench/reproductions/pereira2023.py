@@ -206,7 +206,7 @@ def _per_topology(traj, policy) -> dict[str, Any]:
         "not_converged": int(policy.info["not_converged"]),
         "mean_jacobi_iterations": float(np.mean(policy.info["iterations"])),
         "max_jacobi_iterations": int(np.max(policy.info["iterations"])),
-        "jacobi_iteration_cap": int(policy.max_iterations),
+        "jacobi_iteration_cap": int(policy.cfg.max_iterations),
         "median_qp_ms": float(np.median(qp_ms)) if qp_ms.size else 0.0,
         "median_decision_ms": float(np.median(policy.info["solve_ms"])),
         "steps": traj.steps,
