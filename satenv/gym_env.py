@@ -44,17 +44,18 @@ class CentralisedEnv(gym.Env):
     Args:
         env: a :class:`~satenv.envs.base.SatParallelEnv` instance, or an env id (``"platoon_v0"``,
             one of ``satenv.ENV_IDS``) built with ``satenv.make(env, **env_kwargs)``.
-        reward: ``"sum"`` (default) or ``"mean"`` of the agents' rewards.
+        team_reward: ``"sum"`` (default) or ``"mean"`` of the agents' rewards (the agents' own
+            reward is the env's ``reward=`` keyword, ``"paper"`` or ``"training"``: an env kwarg).
         render_mode: passed to the env when ``env`` is an id.
         env_kwargs: keyword arguments of the env when ``env`` is an id.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
-    def __init__(self, env: SatParallelEnv | str = "platoon_v0", *, reward: str = "sum",
+    def __init__(self, env: SatParallelEnv | str = "platoon_v0", *, team_reward: str = "sum",
                  render_mode: str | None = None, **env_kwargs: Any) -> None:
-        if reward not in ("sum", "mean"):
-            raise SatenvError(f"reward must be 'sum' or 'mean', got {reward!r}")
+        if team_reward not in ("sum", "mean"):
+            raise SatenvError(f"team_reward must be 'sum' or 'mean', got {team_reward!r:.40}")
         if isinstance(env, str):
             from satenv import make
 
@@ -67,7 +68,7 @@ class CentralisedEnv(gym.Env):
         self.render_mode = env.render_mode
         self.metadata = {**self.metadata, "render_fps": env.metadata["render_fps"]}
         self.agents = list(env.possible_agents)
-        self._reduce = np.sum if reward == "sum" else np.mean
+        self._reduce = np.sum if team_reward == "sum" else np.mean
         o = env.observation_space(self.agents[0])
         a = env.action_space(self.agents[0])
         m = len(self.agents)

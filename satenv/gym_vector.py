@@ -44,7 +44,8 @@ class CentralisedVectorEnv(VectorEnv):
     Args:
         env: a satenv env id (one of ``satenv.ENV_IDS``).
         num_envs: copies in the batched core (>= 1).
-        reward: ``"sum"`` (default) or ``"mean"`` of the agents' rewards.
+        team_reward: ``"sum"`` (default) or ``"mean"`` of the agents' rewards (the agents' own
+            reward is the env's ``reward=`` keyword, ``"paper"`` or ``"training"``: an env kwarg).
         max_episode_steps: episode length cap (module docstring); ``None``: the scenario's.
         render_mode: must be ``None`` (render one copy with the PettingZoo env instead).
         env_kwargs: keyword arguments of the env, as for ``satenv.make``.
@@ -52,14 +53,14 @@ class CentralisedVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, env: str = "platoon_v0", num_envs: int = 1, *, reward: str = "sum",
+    def __init__(self, env: str = "platoon_v0", num_envs: int = 1, *, team_reward: str = "sum",
                  max_episode_steps: int | None = None, render_mode: str | None = None,
                  **env_kwargs: Any) -> None:
         import satenv
         from satenv.vector import SatVectorEnv
 
-        if reward not in ("sum", "mean"):
-            raise SatenvError(f"reward must be 'sum' or 'mean', got {reward!r}")
+        if team_reward not in ("sum", "mean"):
+            raise SatenvError(f"team_reward must be 'sum' or 'mean', got {team_reward!r:.40}")
         if render_mode is not None:
             raise SatenvError(f"render_mode={render_mode!r}: the vector env does not render; render one "
                               "copy with satenv.make(env_id, render_mode=...) or gymnasium.make")
@@ -69,7 +70,7 @@ class CentralisedVectorEnv(VectorEnv):
         self.vec = SatVectorEnv(template, num_envs)
         self.num_envs = self.vec.num_envs
         self.render_mode = None
-        self._reduce = np.sum if reward == "sum" else np.mean
+        self._reduce = np.sum if team_reward == "sum" else np.mean
         m = self.vec.n_agents
         od, ad = self.vec.single_observation_space.shape[0], self.vec.single_action_space.shape[0]
         self._act_shape = (self.num_envs, m, ad)
