@@ -263,7 +263,7 @@ def _wrapper_class(env_class: type) -> type:
 def wrapper_class(wrapper: type, env_class: type) -> type:
     """``wrapper`` (a PettingZoo ``BaseParallelWrapper``) with ``env_class``'s class-level
     ``metadata``: the baselines read ``type(env).metadata["name"]``, which a wrapper's
-    ``__getattr__`` cannot forward. The subclass pickles by its base's ``__reduce__``."""
+    ``__getattr__`` cannot forward."""
     prefix = wrapper.__name__.removesuffix("Env").removesuffix("Wrapper")
     return type(f"{prefix}{env_class.__name__}", (wrapper,), {"metadata": env_class.metadata,
                                                                "__module__": wrapper.__module__})

@@ -173,7 +173,7 @@ def test_make_and_make_vec_with_safety_filter_report_and_penalise():
     _, rewards, _, _, infos = env.step({a: np.array([0.0, 1.0, 0.0]) for a in env.agents})
     assert {"safety_intervened", "safety_delta", "safety_infeasible", "safety_active"} <= set(infos["follower_1"])
     assert isinstance(env, safety.wrapper.SafetyFilterWrapper) and type(env).metadata["name"] == "platoon_v0"
-    assert isinstance(env.unwrapped, satenv.envs.platoon_v0.PlatoonEnv) and env.core is env.unwrapped.core
+    assert type(env.unwrapped) is satenv.envs.platoon_v0.PlatoonEnv and env.core is env.unwrapped.core   # no class swap
     assert baselines.make("dmpc", env).env is env        # the baselines read type(env).metadata
     plain = satenv.make("platoon_v0")
     plain.reset(seed=0)

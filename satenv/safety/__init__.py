@@ -8,6 +8,18 @@ did. One core, three ways to use it::
     policy = shield(policy, env)                         # a policy wrapper (same reset / act / info)
     env = satenv.make("cluster_v0", safety_filter=True)  # or make_vec / satenv.torchrl.make_env
 
+The package: :mod:`~satenv.safety.config` (settings, record, errors), :mod:`~satenv.safety.model`
+(the per-scenario model), :mod:`~satenv.safety.rows` (the rows below), :mod:`~satenv.safety.margins`
+(their tightening by declared bounds), :mod:`~satenv.safety.core` (the batched QP and
+:class:`SafetyFilter`), :mod:`~satenv.safety.shield` (the policy wrapper) and
+:mod:`~satenv.safety.wrapper` (the env wrapper ``safety_filter=True`` builds).
+
+**Planners never see the truth.** The model is the task's nominal env's
+(:func:`satenv.perturbations.nominal`), whatever perturbation the env flies under; the state is the
+one the env holds when the policy acts (under navigation error: the estimate). What the filter
+cannot see, the env declares (:func:`satenv.perturbations.declared_bounds`), and
+:mod:`satenv.safety.margins` tightens every row by it (derived margins, none tuned).
+
 **Constraints** (from the scenario's own fields; each agent's state ``x_i = [p_i, v_i]`` in LVLH):
 
 * spheres ``||p_i - p_j|| >= D`` between agents (each takes half), and between an agent and a
@@ -58,8 +70,8 @@ backup action — maximum braking: the action in the box that maximises the smal
 (or, if that solve fails too, full thrust along the row the proposal breaks most) — and the
 ``infeasible`` flag; never an exception, never a NaN.
 
-Guarantee (for the CW double-integrator model, the scenario's disturbance bound and states whose
-rows are feasible): separation and half-space gaps stay >= 0 at every decision and the pair stays
+Guarantee (for the CW double-integrator model, the scenario's disturbance bound, errors within the
+declared bounds and states whose rows are feasible): separation and half-space gaps stay >= 0 at every decision and the pair stays
 brakeable; the velocity boxes hold at the next decision. Not guaranteed: infeasible starts (a
 start inside the margin with closing speed), model mismatch (J2, drag, nonlinear terms beyond the
 drift bound), dips between decisions larger than the margin, constraints of other agents' QPs

@@ -46,13 +46,6 @@ class SafetyFilterWrapper(BaseParallelWrapper):
                 rewards[agent] -= pen * extra["safety_delta"][i]
         return obs, rewards, terms, truncs, infos
 
-    def __reduce__(self):
-        return filtered_env, (self.env, self.safety.config), {"_bounds": self.safety.model.bounds}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        if state.get("_bounds") != self.safety.model.bounds:
-            self.safety = SafetyFilter(self.env, self.safety.config, bounds=state["_bounds"])
-
     def __repr__(self) -> str:
         return f"SafetyFilterWrapper<{self.env!r}>"
 
