@@ -258,12 +258,13 @@ def test_hostile_run_folders_are_refused_before_anything_is_read(tmp_path, capsy
         assert err.startswith("satenv imitate: error:") and "Traceback" not in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("flag,value,expected", [("--seed", "null", "--seed: expected an integer"),
-                                                  ("--epochs", "-1", "epochs must be an int >= 1"),
-                                                  ("--batch-size", "[]", "--batch-size: expected an integer"),
-                                                  ("--expert-options", "{x", "expected a JSON object"),
-                                                  ("--beta", "x", "--beta: expected a number"),
-                                                  ("--squash", "maybe", "expected true or false")])
+@pytest.mark.parametrize("flag,value,expected", [("--seed", "null", "--seed 'null': expected an int"),
+                                                  ("--epochs", "-1", "--epochs must be an int >= 1, got -1"),
+                                                  ("--batch-size", "[]", "--batch-size '[]': expected an int"),
+                                                  ("--expert-options", "{x", "--expert-options '{x': expected a JSON"),
+                                                  ("--beta", "x", "--beta 'x': expected a number"),
+                                                  ("--squash", "maybe", "--squash 'maybe': expected true or false"),
+                                                  ("--fly", "nope", "--fly: invalid choice: 'nope'")])
 def test_a_bad_flag_value_is_one_clear_error(flag, value, expected, tmp_path, capsys):
     assert main(["--task", "platoon-pereira2022-random", "--out-dir", str(tmp_path / "r"), flag, value]) == 2
     err = capsys.readouterr().err

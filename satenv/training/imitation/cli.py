@@ -16,15 +16,12 @@ warm start) on ``--validate-seeds`` validation seeds (``--shield-seeds`` of them
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
+import os
 import sys
 import typing
 from pathlib import Path
-from typing import Any
 
 from satenv import tasks
-from satenv.training.config import config_from_json
 from satenv.training.imitation.config import ImitationConfig, from_json, system_defaults
 
 __all__ = ["build_parser", "main", "parse"]
@@ -33,59 +30,6 @@ PROG = "satenv imitate"
 ALIASES = {"--run-dir": "--out-dir", "--val-seeds": "--eval-seeds", "--learning-rate": "--lr",
            "--val-shield-seeds": "--shield-seeds"}
 """Flags of earlier commands -> the flag they mean."""
-SEED_FIELDS = ("eval_seeds", "test_seeds")
-
-
-def _value(name: str, hint: Any) -> Any:
-    """The argparse ``type`` of a config field: a parser raising ``ArgumentTypeError`` with the
-    field, the value and what is expected."""
-    bare = typing.get_args(hint)[0] if typing.get_origin(hint) is typing.Annotated else hint
-    origin, args = typing.get_origin(bare), typing.get_args(bare)
-
-    def parse(text: str) -> Any:
-        try:
-            return convert(text)
-        except (ValueError, TypeError) as err:
-            raise argparse.ArgumentTypeError(f"{err}") from None
-
-    def convert(text: str) -> Any:
-        if name in SEED_FIELDS:
-            return tasks.parse_seeds(text)
-        if bare is bool:
-            if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                raise ValueError(f"expected true or false, got {text!r:.40}")
-            return text.lower() in ("true", "1", "yes")
-        if bare is int:
-            return _int(text)
-        if bare is float:
-            try:
-                return float(text)
-            except ValueError:
-                raise ValueError(f"expected a number, got {text!r:.40}") from None
-        if origin is tuple:
-            items = [t for t in text.replace(",", " ").split() if t]
-            if args and args[0] is int:
-                return tuple(_int(t) for t in items)
-            return tuple(items)
-        if origin is dict or bare is dict:
-            try:
-                value = json.loads(text)
-            except json.JSONDecodeError as err:
-                raise ValueError(f"expected a JSON object, got {text!r:.60} ({err.msg})") from None
-            if not isinstance(value, dict):
-                raise ValueError(f"expected a JSON object, got {text!r:.60}")
-            return value
-        return None if text.lower() in ("none", "null") and type(None) in args else text
-
-    parse.__name__ = "a " + (getattr(bare, "__name__", None) or "value")
-    return parse
-
-
-def _int(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise ValueError(f"expected an integer, got {text!r:.40}") from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -96,10 +40,11 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Every :class:`ImitationConfig` field as ``--field-name`` (given flags only), and the run options."""
-    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0], allow_abbrev=False,
-                                epilog="\n\n".join(__doc__.split("\n\n")[1:]),
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    """The run options and every :class:`ImitationConfig` field as a flag (:mod:`satenv.cliargs`)."""
+    from satenv.cliargs import add_config_flags, plain
+
+    p = _Parser(prog=PROG, description=plain(__doc__.split("\n\n")[0]), allow_abbrev=False,
+                epilog=plain("\n\n".join(__doc__.split("\n\n")[1:])), formatter_class=argparse.RawDescriptionHelpFormatter)
     run = p.add_argument_group("run")
     run.add_argument("--config", type=Path, help="replay a saved config.json (any release's)")
     run.add_argument("--system", help="a satenv.tasks system: its training task and hyper-parameters")
@@ -110,45 +55,36 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--ship-filter", action="store_true", help="the shipped folder names the safety filter")
     run.add_argument("--validate-round", type=int, help="score this round (-1: the warm start), then stop")
     run.add_argument("--validate-seeds", type=int, default=100, help="validation seeds of --validate-round")
-    hints = typing.get_type_hints(ImitationConfig, include_extras=True)
-    fields = p.add_argument_group("config fields (ImitationConfig)")
-    for f in dataclasses.fields(ImitationConfig):
-        choices = typing.get_args(hints[f.name]) if typing.get_origin(hints[f.name]) is typing.Literal else None
-        fields.add_argument("--" + f.name.replace("_", "-"), dest=f.name, default=argparse.SUPPRESS,
-                            type=_value(f.name, hints[f.name]) if choices is None else str, choices=choices,
-                            metavar=f.name.upper(), help=_help(f))
+    add_config_flags(p, ImitationConfig, title="config fields (ImitationConfig)")
     return p
-
-
-def _help(f: dataclasses.Field) -> str:
-    default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
-    return f"(default: {default!r})".replace("%", "%%")
 
 
 def parse(argv: list[str] | None = None) -> tuple[argparse.Namespace, ImitationConfig | None, bool]:
     """``(options, config, resume)`` of a command line: the config is ``--config``'s, else the run
     folder's ``config.json`` (then ``resume``), else the task's system defaults, with the given
     flags on top; ``None`` for ``--ship``."""
+    from satenv.cliargs import config_from_args
+
     args = [ALIASES.get(a.partition("=")[0], a.partition("=")[0]) + a.partition("=")[1] + a.partition("=")[2]
             for a in (sys.argv[1:] if argv is None else argv)]
-    ns = build_parser().parse_args(args)
-    given = {f.name: getattr(ns, f.name) for f in dataclasses.fields(ImitationConfig) if hasattr(ns, f.name)}
-    out = Path(given.get("out_dir", ImitationConfig.out_dir))
+    parser = build_parser()
+    ns = parser.parse_args(args)
+    out = Path(getattr(ns, "out_dir", ImitationConfig.out_dir))
     if ns.ship is not None:
         return ns, None, True
     saved = out / "config.json"
-    resume = ns.config is None and saved.is_file()
+    resume = ns.config is None and os.path.lexists(saved)
     if ns.resume and not resume:
         raise ValueError(f"--resume: {saved} is missing (a run folder's config.json)")
-    if ns.system is not None:
+    if ns.system is not None and not hasattr(ns, "task"):
         from satenv.training.recipes import system_name
 
-        given.setdefault("task", tasks.training_task(system_name(ns.system)).name)
+        ns.task = tasks.training_task(system_name(ns.system)).name
     if ns.config is not None or resume:
-        base = _saved(ns.config if ns.config is not None else saved, ns.allow_code_env_id).to_json()
+        base = _saved(ns.config if ns.config is not None else saved, ns.allow_code_env_id)
     else:
-        base = _fresh_base(given)
-    return ns, config_from_json({**base, **given}, ImitationConfig), resume
+        base = _fresh_base(getattr(ns, "task", None), hasattr(ns, "env_id"))
+    return ns, config_from_args(parser, ImitationConfig, ns, base), resume
 
 
 def _saved(path: Path, allow_code: bool) -> ImitationConfig:
@@ -163,15 +99,15 @@ def _saved(path: Path, allow_code: bool) -> ImitationConfig:
     return from_json(data)
 
 
-def _fresh_base(given: dict[str, Any]) -> dict[str, Any]:
-    """A new run's base: the system's hyper-parameters of the task (none for an env id without
-    a task, or a task of no system)."""
+def _fresh_base(task_name: str | None, env_id_given: bool) -> ImitationConfig | None:
+    """A new run's base: the task's system hyper-parameters (``None``, the field defaults, for an
+    env id without a task and for a task of no system)."""
     from satenv.training.config import DEFAULT_TASK
 
-    if given.get("task") is None and "env_id" in given:
-        return {}
-    task = tasks.get(given.get("task") or DEFAULT_TASK)
-    return {"task": task.name, **system_defaults(task.system)} if task.system else {}
+    if task_name is None and env_id_given:
+        return None
+    task = tasks.get(task_name or DEFAULT_TASK)
+    return ImitationConfig(task=task.name, **system_defaults(task.system)) if task.system else None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -187,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
 def _act(ns: argparse.Namespace, cfg: ImitationConfig | None, resume: bool) -> int:
     from satenv.training.imitation import ship
 
-    out = Path(vars(ns).get("out_dir", ImitationConfig.out_dir))
+    out = Path(getattr(ns, "out_dir", ImitationConfig.out_dir))
     if ns.ship is not None:
         k = ship.choose(ship.recorded(out)) if ns.ship_round is None else ns.ship_round
         print(f"shipped round {k} to {ship.ship(out, k, ns.ship, with_filter=ns.ship_filter)}")
@@ -206,8 +142,12 @@ def _act(ns: argparse.Namespace, cfg: ImitationConfig | None, resume: bool) -> i
         return 0
     from satenv.training.imitation.rounds import run
 
-    print(f"{'resuming' if resume else 'starting'} {PROG} in {out}: {cfg.rounds} rounds on "
-          f"{cfg.task or cfg.env_id} (expert {cfg.expert or cfg.label}, fly {cfg.fly})", flush=True)
+    episodes = (cfg.round0_episodes + max(0, cfg.rounds - 1) * cfg.episodes_per_round) if cfg.rounds else 0
+    print(f"{'resuming' if resume else 'starting'} {PROG} in {out}: {cfg.rounds} rounds on {cfg.task or cfg.env_id} "
+          f"(expert {cfg.expert or cfg.label}, fly {cfg.fly}): {episodes} labelled episodes in all, "
+          f"{len(cfg.eval_seeds)} validation episodes a round"
+          + (f", then final/ on {len(cfg.test_seeds)} test seeds" if cfg.final_eval else "")
+          + "; the expert's solver sets the pace (minutes an episode for the NMPC and tube-RDMPC)", flush=True)
     run(cfg, out, resume=True)
     return 0
 

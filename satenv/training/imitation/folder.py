@@ -22,7 +22,7 @@ import numpy as np
 from satenv.training.runfolder import RunFolderError
 from satenv.training.trust import UntrustedDataError, member, npz_headers, read_json
 
-__all__ = ["MAX_HISTORY_BYTES", "MAX_LABEL_BYTES", "check_folder", "label_path", "read_history",
+__all__ = ["MAX_HISTORY_BYTES", "MAX_LABEL_BYTES", "MAX_PICTURE_BYTES", "check_folder", "label_path", "read_history",
            "read_labels", "read_run_json", "round_folder", "save_labels"]
 
 MAX_HISTORY_BYTES = 64 * 2**20
@@ -30,6 +30,8 @@ MAX_HISTORY_BYTES = 64 * 2**20
 MAX_LABEL_BYTES = 2**28
 """Cap on one label file, on disk and as its arrays declare them (256 MiB; a round of the largest
 system writes a few MiB)."""
+MAX_PICTURE_BYTES = 16 * 2**20
+"""Cap on the learning curve copied into a policy folder."""
 MAX_LABEL_ARRAYS = 32
 """Cap on the arrays of one label file (a round's rows have at most 14 columns)."""
 

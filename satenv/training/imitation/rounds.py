@@ -13,13 +13,14 @@ the minibatch order) comes from ``(seed, k)`` alone and the network is read back
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from satenv import scoring, tasks
+from satenv import tasks
 from satenv.training.imitation import setup
 from satenv.training.imitation.config import ImitationConfig
 from satenv.training.imitation.folder import (
@@ -30,16 +31,12 @@ from satenv.training.imitation.folder import (
     round_folder,
 )
 from satenv.training.imitation.plot import total_loss
+from satenv.training.imitation.setup import score
 
-__all__ = ["RECIPE", "finish", "run", "score"]
+__all__ = ["RECIPE", "finish", "run"]
 
 RECIPE = "satenv.training.imitation"
 """The ``recipe`` a run's policy folders name."""
-
-
-def score(env: Any, policy: Any, seeds: Any) -> dict[str, Any]:
-    """:func:`satenv.scoring.aggregate` of ``policy``'s episodes on ``seeds``."""
-    return scoring.aggregate(scoring.run_episodes(env, policy, seeds))
 
 
 def round_seeds(seed: int, k: int) -> tuple[np.random.Generator, Any]:
@@ -347,9 +344,11 @@ def finish(cfg: ImitationConfig, run_dir: Path, net: setup.Network, history: lis
     save_artifacts(staged, net.policy, env_meta={**net.meta, "rounds": len(history)}, config=net.config,
                    evaluation=summary, source=f"imitation of '{cfg.expert or cfg.label}' ({RECIPE}, "
                    f"{len(history)} rounds)")
-    curve = run_dir / "learning_curve.png"
-    if curve.is_file() and not curve.is_symlink():
-        (staged / "learning_curve.png").write_bytes(curve.read_bytes())
+    if os.path.lexists(run_dir / "learning_curve.png"):
+        from satenv.training.imitation.folder import MAX_PICTURE_BYTES
+        from satenv.training.trust import read_member
+
+        (staged / "learning_curve.png").write_bytes(bytes(read_member(run_dir, "learning_curve.png", MAX_PICTURE_BYTES)))
     runfolder.replace_folder(staged, final)
     print(f"final policy after {len(history)} rounds on {len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
     return final

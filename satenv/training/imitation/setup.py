@@ -8,7 +8,7 @@ from typing import Any, NamedTuple
 
 from satenv import tasks
 
-__all__ = ["Envs", "Network", "cold_network", "make_envs", "make_expert", "paper_task", "warm_network",
+__all__ = ["Envs", "Network", "cold_network", "make_envs", "make_expert", "paper_task", "score", "warm_network",
            "warm_start_filter"]
 
 
@@ -31,6 +31,13 @@ class Network(NamedTuple):
     meta: dict[str, Any]
     config: dict[str, Any]
     shipped_filter: Any
+
+
+def score(env: Any, policy: Any, seeds: Any) -> dict[str, Any]:
+    """:func:`satenv.scoring.aggregate` of ``policy``'s episodes on ``seeds``."""
+    from satenv.scoring import aggregate, run_episodes
+
+    return aggregate(run_episodes(env, policy, seeds))
 
 
 def paper_task(task: str | None, system: str | None) -> Any:

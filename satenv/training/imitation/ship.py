@@ -15,6 +15,7 @@ from typing import Any
 
 from satenv.training.imitation.folder import (
     MAX_HISTORY_BYTES,
+    MAX_PICTURE_BYTES,
     check_folder,
     read_history,
     read_run_json,
@@ -23,10 +24,6 @@ from satenv.training.imitation.folder import (
 from satenv.training.runfolder import RunFolderError
 
 __all__ = ["choose", "selection_key", "ship", "validate_round"]
-
-MAX_PICTURE_BYTES = 16 * 2**20
-"""Cap on the learning curve copied into a shipped folder."""
-
 
 def _scores(entry: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """A history entry's validation of the network alone and behind the filter."""
@@ -67,7 +64,8 @@ def ship(run_dir: Path, k: int, dest: Path, *, with_filter: bool = False) -> Pat
     )
     from satenv.training.trust import MAX_JSON_BYTES, read_member
 
-    src = check_folder(round_folder(check_folder(Path(run_dir)), k), "round folder")
+    check_folder(check_folder(Path(run_dir)) / "rounds", "rounds folder")
+    src = check_folder(round_folder(Path(run_dir), k), "round folder")
     if not src.is_dir():
         raise RunFolderError(f"ship: {src} is not a round folder of the run")
     if os.path.lexists(dest):
@@ -108,12 +106,13 @@ def validate_round(run_dir: Path, k: int, env: Any, warm_start: str | None, seed
     behind the filter, written to ``<run>/validation/round_NNNN_<alone>_<filtered>.json``."""
     from satenv.safety import shield
     from satenv.training import runfolder
-    from satenv.training.imitation.rounds import score
+    from satenv.training.imitation.setup import score
     from satenv.training.policy import load
 
     run_dir = check_folder(Path(run_dir))
     if k == -1 and warm_start is None:
         raise RunFolderError("validate_round: round -1 is the warm start, and the run has none")
+    check_folder(run_dir / "rounds", "rounds folder")
     folder = check_folder(Path(warm_start) if k == -1 else round_folder(run_dir, k), "round folder")
     if not folder.is_dir():
         raise RunFolderError(f"validate_round: round {k} has no folder {folder}")
