@@ -311,3 +311,25 @@ def test_every_imitate_command_in_the_docs_parses():
             parse(argv)
             found += 1
     assert found >= 6
+
+
+def test_every_flag_refuses_bad_values_naming_the_flag():
+    """Values of the wrong kind or range for every config flag: each is refused with the flag (or
+    its field) named, or is a value the field takes (a path, a name, a count)."""
+    import dataclasses
+
+    from satenv.cliargs import flag_name
+
+    takes_any_text = {"--out-dir", "--prior-labels", "--warm-start"}      # paths, checked when the run reads them
+    for f in dataclasses.fields(ImitationConfig):
+        flag = flag_name(ImitationConfig, f)
+        for token in ("null", "[]", "{x", "nan", "-1", "1e999", "true"):
+            try:
+                parse(["--task", "platoon-pereira2022-random", "--out-dir", "unused-run", flag, token])
+            except ValueError as err:
+                assert flag in str(err) or f.name in str(err), (flag, token, str(err))
+                continue
+            flags = {f.name: f for f in dataclasses.fields(ImitationConfig)}
+            valid = (token == "true" and isinstance(flags[f.name].default, bool)
+                     or (flag, token) == ("--clip-obs", "1e999"))             # no clip
+            assert flag in takes_any_text or valid, (flag, token)

@@ -163,6 +163,10 @@ class ImitationConfig(RunConfig):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         self._check_choices()
         self._check_safe()
+        if not self.set_encoder or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.set_encoder):
+            raise ValueError(f"set_encoder must be a non-empty tuple of positive ints (e.g. 64,64), got {self.set_encoder!r:.60}")
+        object.__setattr__(self, "set_encoder", tuple(self.set_encoder))
+        self._check_baselines()
         object.__setattr__(self, "obs_drop_dims", tuple(self.obs_drop_dims))
         object.__setattr__(self, "prior_labels", tuple(self.prior_labels))
         from satenv.training.shaping import ObsFeatures
@@ -196,6 +200,14 @@ class ImitationConfig(RunConfig):
                 SafetyConfig.from_options(**self.label_filter)
             except (TypeError, ValueError) as err:
                 raise ValueError(f"label_filter: {err}") from None
+
+    def _check_baselines(self) -> None:
+        from satenv.baselines.registry import BASELINES
+
+        wrong = [b for b in self.eval_baselines if b not in BASELINES and b != "auto"]
+        if wrong:
+            raise ValueError(f"eval_baselines must be names of satenv.baselines.BASELINES {sorted(BASELINES)} or "
+                             f"'auto', got {wrong[:3]!r:.80}")
 
     def _resolve_expert(self) -> None:
         from satenv.baselines.experts import EXPERTS
