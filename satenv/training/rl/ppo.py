@@ -107,6 +107,12 @@ class LeanConfig(RunConfig):
     """Clip of the normalised observations and rewards."""
     checkpoint_every: int = 500_000
     """Agent-steps between checkpoints (0: only at the end)."""
+    lagrangian: bool = False
+    """PPO-Lagrangian on the ``safety_cost`` info (:mod:`satenv.training.rl.lagrangian`)."""
+    lagrange_lr: float = 0.05
+    """Its dual step size."""
+    cost_budget: float | None = None
+    """Its episode safety-cost budget per agent; ``None``: the task's ``cost_budget``."""
     out_dir: str = "runs/lean_ppo"
 
     def __post_init__(self) -> None:
@@ -125,7 +131,7 @@ class LeanConfig(RunConfig):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v < math.inf:
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-        for name in ("norm_obs", "norm_reward"):
+        for name in ("norm_obs", "norm_reward", "lagrangian"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
 
@@ -192,6 +198,22 @@ class Run:
         self.obs, _ = vec.reset(seed=cfg.seed)
         self.episode = {"ret": np.zeros(cfg.num_envs), "len": np.zeros(cfg.num_envs, dtype=np.int64),
                         "collided": np.zeros(cfg.num_envs, dtype=bool)}
+        self.dual = _dual(cfg)
+        if self.dual is not None:
+            self.episode["cost"] = np.zeros(cfg.num_envs)
+
+
+def _dual(cfg: LeanConfig) -> Any:
+    """The Lagrange multiplier of a ``lagrangian`` run (``None`` otherwise)."""
+    from satenv import tasks
+    from satenv.training.rl.lagrangian import Lagrange
+
+    if not cfg.lagrangian:
+        return None
+    budget = cfg.cost_budget if cfg.cost_budget is not None else (tasks.get(cfg.task).cost_budget if cfg.task else None)
+    if budget is None:
+        raise ValueError(f"lagrangian: task {cfg.task!r} sets no cost_budget; give cost_budget")
+    return Lagrange(budget, cfg.lagrange_lr)
 
 
 # --------------------------------------------------------------------------- 4. the rollout
@@ -222,7 +244,7 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
     dones = np.empty((T, B), dtype=bool)
     boot: list[tuple[int, np.ndarray, np.ndarray]] = []   # (t, truncated copies, their critic input)
     states = np.empty((T, B, run.state_dim)) if run.central else None
-    finished: dict[str, list[float]] = {"return": [], "success": [], "length": []}
+    finished: dict[str, list[float]] = {"return": [], "success": [], "length": [], "cost": []}
     std = run.net.log_std.detach().exp()                  # (K, A)
     log_norm = (run.net.log_std.detach().sum(-1) + 0.5 * run.act_dim * math.log(2 * math.pi))   # (K,)
     obs = run.obs
@@ -254,6 +276,9 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
             run.norm.ret.update(run.norm.returns)
             run.norm.returns[done] = 0.0
             rew = np.clip(rew / np.sqrt(run.norm.ret.var + 1e-8), -cfg.clip_obs, cfg.clip_obs)
+        if run.dual is not None:
+            ep["cost"] += np.asarray(info["safety_cost"]).mean(1)
+            rew = run.dual.penalise(rew, info["safety_cost"])
         rewards[t], dones[t] = rew, done
         if done.any():
             idx = np.flatnonzero(done)
@@ -265,6 +290,9 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
             voided = ep["collided"][idx] & bool(scenario.collision_voids_success)
             finished["return"] += ep["ret"][idx].tolist()
             finished["length"] += ep["len"][idx].tolist()
+            if run.dual is not None:
+                finished["cost"] += ep["cost"][idx].tolist()
+                ep["cost"][idx] = 0.0
             finished["success"] += ((err <= scenario.success_tol) & ~voided).astype(float).tolist()
             ep["ret"][idx], ep["len"][idx], ep["collided"][idx] = 0.0, 0, False
             t3 = time.perf_counter()
@@ -404,7 +432,8 @@ def save_checkpoint(run: Run, out: Path) -> Path:
                    **{f"episode.{k}": v for k, v in run.episode.items()}})
     np.savez(tmp / CHECKPOINT_ARRAYS, **arrays)
     (tmp / CHECKPOINT_JSON).write_text(json.dumps({"steps": run.steps, "adam_steps": steps,
-                                                   "norm": run.norm.to_json()}) + "\n")
+                                                   "norm": run.norm.to_json(),
+                                                   "lam": run.dual.lam if run.dual else None}) + "\n")
     return runfolder.replace_folder(tmp, folder)
 
 
@@ -441,6 +470,8 @@ def load_checkpoint(run: Run, folder: Path) -> None:
         run.episode = {k: data[f"episode.{k}"].copy() for k in run.episode}
         run.norm.load_json(meta["norm"])
         run.steps = int(meta["steps"])
+        if run.dual is not None:
+            run.dual.lam = float(meta["lam"])
     except (KeyError, ValueError, RuntimeError, OSError, TypeError) as err:
         raise runfolder.RunFolderError(f"--resume: the checkpoint {folder} is malformed or from another "
                                        f"config ({type(err).__name__}: {str(err)[:160]})") from None
@@ -602,6 +633,9 @@ def train(cfg: LeanConfig, resume: bool = False) -> Path:
         run.steps += per_iter
         wall = time.perf_counter() - t0
         fin = batch["finished"]
+        if run.dual is not None:
+            stats["lagrange_multiplier"] = run.dual.update(fin["cost"])
+            stats["episode_cost"] = float(np.mean(fin["cost"])) if fin["cost"] else None
         row = {"agent_steps": run.steps, "episodes": len(fin["return"]),
                "return": float(np.mean(fin["return"])) if fin["return"] else None,
                "success": float(np.mean(fin["success"])) if fin["success"] else None,
@@ -632,8 +666,11 @@ def parser() -> argparse.ArgumentParser:
     for name, kind in (("num-envs", int), ("n-steps", int), ("minibatch-size", int), ("n-epochs", int),
                        ("budget", int), ("seed", int), ("torch-threads", int), ("checkpoint-every", int),
                        ("lr", float), ("gamma", float), ("gamma-k", float), ("gae-lambda", float),
-                       ("clip-range", float), ("ent-coef", float), ("init-std", float), ("workers", int)):
+                       ("clip-range", float), ("ent-coef", float), ("init-std", float), ("workers", int),
+                       ("lagrange-lr", float), ("cost-budget", float)):
         p.add_argument(f"--{name}", type=kind)
+    p.add_argument("--lagrangian", action="store_true", default=None,
+                   help="PPO-Lagrangian on the safety_cost info at the task's cost_budget")
     p.add_argument("--net-arch", type=lambda s: tuple(int(x) for x in s.split(",")), help="e.g. 64,64")
     p.add_argument("--test-seeds", type=_seeds, help="held-out seeds of eval.json, e.g. 900000-900019")
     p.add_argument("--eval-baselines", type=lambda s: tuple(x for x in s.split(",") if x),
