@@ -16,7 +16,7 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -89,7 +89,7 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
     net = (setup.warm_network(cfg.warm_start, cfg.to_json()) if cfg.warm_start is not None else
            setup.cold_network(envs.collect, {**cfg.to_json(), "out_dir": str(run_dir), "recipe": RECIPE}, meta,
                               cfg.seed))
-    experts = _experts(cfg, envs)
+    experts = _experts(cfg.label, cfg.expert, cfg.expert_options, cfg.warm_start, envs)
     label_config = label_filter_config(cfg.label_filter, net.shipped_filter)
     if cfg.safe:
         check_label_space(cfg.label, cfg.imitation_space, net.policy)
@@ -100,11 +100,17 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
     obs_dim = net.policy.obs_shape[0]
     prior = read_prior(cfg.prior_labels, obs_dim)
     episode = int(history[-1].get("episodes", 0)) if history else 0
+    flights = Flights.of(cfg)
+    norm_mode = _norm_mode(envs.collect) if cfg.safe else False
+    paper_seeds = tasks.paper_task(cfg.system).seeds("validation", 1) if envs.paper_eval is not None else ()
+    shield_seeds = ((cfg.eval_seeds[:cfg.shield_seeds] if cfg.shield_seeds else cfg.eval_seeds)
+                    if cfg.safe or cfg.learner_shield else None)
     t_start = time.perf_counter()
     for k in range(len(history), cfg.rounds):
         rng, generator = round_seeds(cfg.seed, k)
         t0 = time.perf_counter()
-        batch, flown = fly_round(cfg, k, envs, experts, net, label_config, rng, episode, fitted)
+        n_eps = cfg.round0_episodes if k == 0 else cfg.episodes_per_round
+        batch, flown = fly_round(flights, k, n_eps, envs, experts, net, label_config, rng, episode, fitted)
         episode += len(flown)
         _save_labels(run_dir, k, batch)
         collect_s = time.perf_counter() - t0
@@ -114,11 +120,13 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
             net.policy.normalizer = _normalizer(net.policy, seen, cfg.clip_obs, cfg.architecture)
             fitted = True
         t1 = time.perf_counter()
-        loss, n_rows = _fit(cfg, net.policy, data, prior, generator, envs.collect, cold_round0=k == 0 and
-                            cfg.warm_start is None)
+        cold = k == 0 and cfg.warm_start is None                 # a cold network's first fit is longer
+        loss, n_rows = _fit(net.policy, data, prior, generator, safe_loss(cfg) if cfg.safe else None, norm_mode,
+                            lr=cfg.lr, epochs=cfg.epochs * (cfg.round0_epoch_factor if cold else 1),
+                            batch_size=cfg.batch_size, weight_decay=cfg.weight_decay)
         entry = {"task": cfg.task, "system": cfg.system, "round": k, "labels": n_rows, "episodes": episode,
                  "loss": loss, "beta": cfg.beta ** k if not cfg.safe else 0.0, "collect_s": round(collect_s, 1),
-                 "fit_s": round(time.perf_counter() - t1, 1), **validate(cfg, envs, net)}
+                 "fit_s": round(time.perf_counter() - t1, 1), **validate(envs, net, cfg.eval_seeds, paper_seeds, shield_seeds)}
         if cfg.safe:
             steps = sum(s["agent_steps"] for s in flown)
             entry["flown_interventions_per_agent_step"] = sum(s["interventions"] for s in flown) / max(1, steps)
@@ -130,18 +138,18 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
     return finish(cfg, run_dir, net, history, envs.eval)
 
 
-def _experts(cfg: ImitationConfig, envs: setup.Envs) -> dict[int, Any]:
+def _experts(label: str, expert: str | None, options: dict[str, Any], warm_start: str | None,
+             envs: setup.Envs) -> dict[int, Any]:
     """The labeller of each collection env: the expert, the frozen warm start (``label="teacher"``)
     or none (``label="self"``: the network's own action)."""
-    if cfg.label == "self":
+    if label == "self":
         return {}
-    if cfg.label == "teacher":
+    if label == "teacher":
         from satenv.training.policy import load
 
-        teacher = load(check_folder(Path(cfg.warm_start), "warm-start policy folder"), shielded=False)
+        teacher = load(check_folder(Path(warm_start), "warm-start policy folder"), shielded=False)
         return {id(e): teacher for e in (envs.collect, envs.paper) if e is not None}
-    return {id(e): setup.make_expert(cfg.expert, e, cfg.expert_options) for e in (envs.collect, envs.paper)
-            if e is not None}
+    return {id(e): setup.make_expert(expert, e, options) for e in (envs.collect, envs.paper) if e is not None}
 
 
 def label_filter_config(options: dict[str, Any], shipped: Any) -> Any:
@@ -167,32 +175,49 @@ def check_label_space(label: str, imitation_space: str, policy: Any) -> None:
                           "feedback (the teacher's label is a flown action), got 'network'")
 
 
-def fly_round(cfg: ImitationConfig, k: int, envs: setup.Envs, experts: dict[int, Any], net: setup.Network,
-              label_config: Any, rng: np.random.Generator, episode: int,
+class Flights(NamedTuple):
+    """How a round's episodes are flown (the collection fields of :class:`ImitationConfig`)."""
+
+    fly: str
+    train_seed: int
+    paper_start_share: float
+    beta: float
+    noise_share: float
+    noise_std: float
+    learner_shield: bool
+    collect_decisions: int
+    progress: bool
+
+    @classmethod
+    def of(cls, cfg: ImitationConfig) -> Flights:
+        return cls(*(getattr(cfg, name) for name in cls._fields))
+
+
+def fly_round(flights: Flights, k: int, n_episodes: int, envs: setup.Envs, experts: dict[int, Any],
+              net: setup.Network, label_config: Any, rng: np.random.Generator, episode: int,
               fitted: bool) -> tuple[dict[str, np.ndarray], list[dict[str, Any]]]:
-    """Round ``k``'s episodes (seeds ``train_seed + episode ...``), each from the paper start with
-    probability ``paper_start_share``, a cold round 0's with noise with probability ``noise_share``."""
+    """Round ``k``'s ``n_episodes`` (seeds ``train_seed + episode ...``), each from the paper start
+    with probability ``paper_start_share``, a round 0's with noise with probability ``noise_share``."""
     from satenv.safety import shield
     from satenv.training.imitation.collect import collect_episode, episode_flight
 
-    n_eps = cfg.round0_episodes if k == 0 else cfg.episodes_per_round
+    f = flights
     parts, flown = [], []
-    for j in range(n_eps):
-        from_paper = envs.paper is not None and rng.random() < cfg.paper_start_share
+    for j in range(n_episodes):
+        from_paper = envs.paper is not None and rng.random() < f.paper_start_share
         env = envs.paper if from_paper else envs.collect
-        seed = cfg.train_seed + episode + j
-        if cfg.safe:
-            part, stats = collect_episode(env, experts.get(id(env)), net.policy, seed, fly=episode_flight(cfg.fly, j),
+        seed = f.train_seed + episode + j
+        if f.fly != "dagger":
+            part, stats = collect_episode(env, experts.get(id(env)), net.policy, seed, fly=episode_flight(f.fly, j),
                                           filter_config=net.shipped_filter, label_config=label_config,
-                                          max_decisions=cfg.collect_decisions)
+                                          max_decisions=f.collect_decisions)
         else:
-            noise = cfg.noise_std if (k == 0 and rng.random() < cfg.noise_share) else 0.0
-            learner = None if not fitted else (shield(net.policy, env) if cfg.learner_shield else net.policy)
-            part, stats = collect_episode(env, experts[id(env)], learner, seed, beta=cfg.beta ** k, noise=noise,
-                                          rng=rng)
+            noise = f.noise_std if (k == 0 and rng.random() < f.noise_share) else 0.0
+            learner = None if not fitted else (shield(net.policy, env) if f.learner_shield else net.policy)
+            part, stats = collect_episode(env, experts[id(env)], learner, seed, beta=f.beta ** k, noise=noise, rng=rng)
         parts.append(part)
         flown.append({**stats, "paper_start": from_paper})
-        if cfg.progress:
+        if f.progress:
             print(f"  episode {json.dumps(flown[-1])}", flush=True)
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}, flown
 
@@ -209,27 +234,30 @@ def _normalizer(policy: Any, obs: np.ndarray, clip: float, architecture: str) ->
     return ObsNormalizer(fx.mean(0), fx.var(0), clip)
 
 
-def _fit(cfg: ImitationConfig, policy: Any, data: dict[str, np.ndarray], prior: dict[str, np.ndarray] | None,
-         generator: Any, env: Any, cold_round0: bool) -> tuple[Any, int]:
-    """The round's fit (the safe loss, or DAgger's regression on the prior and own labels);
-    returns the loss and the rows fitted on."""
+def _fit(policy: Any, data: dict[str, np.ndarray], prior: dict[str, np.ndarray] | None, generator: Any,
+         loss: Any, norm_mode: bool, *, lr: float, epochs: int, batch_size: int,
+         weight_decay: float) -> tuple[Any, int]:
+    """The round's fit: the safe ``loss`` (a :class:`satenv.training.imitation.fit.SafeLoss`), or
+    without one DAgger's regression on the prior and own labels; the loss and the rows fitted on."""
     from satenv.training.imitation.fit import fit_safe, inputs, regress
 
-    if cfg.safe:
-        from satenv.safety import safety_model
-
-        loss = safe_loss(cfg)
-        norm_mode = safety_model(env).norm_mode if hasattr(env, "core") else False
-        terms = fit_safe(policy, data, loss, lr=cfg.lr, epochs=cfg.epochs, batch_size=cfg.batch_size,
-                         norm_mode=norm_mode, generator=generator, prior=prior)
+    if loss is not None:
+        terms = fit_safe(policy, data, loss, lr=lr, epochs=epochs, batch_size=batch_size, norm_mode=norm_mode,
+                         generator=generator, prior=prior)
         return terms, int(len(data["obs"]))
     x, y = data["obs"], np.clip(data["act"], -1, 1)
     if prior is not None:
         x, y = np.concatenate([prior["obs"], x]), np.concatenate([prior["act"], y])
-    epochs = cfg.epochs * (cfg.round0_epoch_factor if cold_round0 else 1)
-    mse = regress(policy.actor, inputs(policy, x).numpy(), y, lr=cfg.lr, epochs=epochs, batch_size=cfg.batch_size,
-                  generator=generator, weight_decay=cfg.weight_decay)
+    mse = regress(policy.actor, inputs(policy, x).numpy(), y, lr=lr, epochs=epochs, batch_size=batch_size,
+                  generator=generator, weight_decay=weight_decay)
     return mse, int(len(x))
+
+
+def _norm_mode(env: Any) -> bool:
+    """Whether the env's action bound is a norm ball (the barrier's attainable bound), else a box."""
+    from satenv.safety import safety_model
+
+    return safety_model(env).norm_mode if hasattr(env, "core") else False
 
 
 def safe_loss(cfg: ImitationConfig) -> Any:
@@ -240,20 +268,19 @@ def safe_loss(cfg: ImitationConfig) -> Any:
                     cfg.imitation_space, cfg.prior_space)
 
 
-def validate(cfg: ImitationConfig, envs: setup.Envs, net: setup.Network) -> dict[str, Any]:
-    """The network alone on ``eval_seeds`` (``val``) and the paper start (``paper``), and behind
-    the filter it ships with (``shield``, safe variants and ``learner_shield``) on the first
-    ``shield_seeds``."""
+def validate(envs: setup.Envs, net: setup.Network, eval_seeds: tuple[int, ...], paper_seeds: tuple[int, ...],
+             shield_seeds: tuple[int, ...] | None) -> dict[str, Any]:
+    """The network alone on ``eval_seeds`` (``val``) and the paper start's ``paper_seeds``
+    (``paper``), and behind the filter it ships with on ``shield_seeds`` (``shield``; ``None``: not
+    scored)."""
     from satenv.safety import shield
 
     policy = net.policy
-    paper_seeds = tasks.paper_task(cfg.system).seeds("validation", 1) if envs.paper_eval is not None else ()
-    out = {"val": score(envs.eval, policy, cfg.eval_seeds)}
+    out = {"val": score(envs.eval, policy, eval_seeds)}
     if envs.paper_eval is not None:
         out["paper"] = score(envs.paper_eval, policy, paper_seeds)
-    if cfg.safe or cfg.learner_shield:
-        seeds = cfg.eval_seeds[:cfg.shield_seeds] if cfg.shield_seeds else cfg.eval_seeds
-        out["shield"] = {"val": score(envs.eval, shield(policy, envs.eval, net.shipped_filter), seeds)}
+    if shield_seeds is not None:
+        out["shield"] = {"val": score(envs.eval, shield(policy, envs.eval, net.shipped_filter), shield_seeds)}
         if envs.paper_eval is not None:
             out["shield"]["paper"] = score(envs.paper_eval, shield(policy, envs.paper_eval, net.shipped_filter),
                                            paper_seeds)
