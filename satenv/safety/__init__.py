@@ -102,7 +102,7 @@ __all__ = ["CONSTRAINTS", "MIN_MARGIN", "SafetyConfig", "SafetyError", "SafetyFi
            "SafetyTypeError", "SafetyWarning", "Shield", "constraint_rows", "courtesy", "filter_actions",
            "filtered_env", "safety_config", "safety_model", "shield", "solve_qp", "UncertaintyBounds"]
 
-# read by satenv.training.safe_imitation (one step of the filter's own rows)
+# read by satenv.training.imitation.barrier (one step of the filter's own rows)
 from satenv.dynamics import quat_to_matrix as quat_to_matrix  # noqa: E402
 from satenv.safety.core import _effective as _effective  # noqa: E402
 from satenv.safety.rows import _omega_rows as _omega_rows  # noqa: E402
