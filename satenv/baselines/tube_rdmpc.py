@@ -82,18 +82,21 @@ of 13, the same optimum (objective within 1e-10 relative on recorded li2022 prob
 names no solver; ipopt (every NLP solved to convergence) is the reference and the reproduction's
 (``satenv/bench/reproductions/li2022.py``).
 
-Sequential convexification (``solver="rti"``): one QP per satellite and decision about its previous
-plan shifted by one step (:meth:`_NominalNLP.qp_step`). Every row of the exact NLP is linearised
-there (collision, obstacle and target keep-outs become tangent half-spaces, inside their feasible
-sets; the Lyapunov, terminal and braking rows their first-order models), the cost keeps its exact
-(constant) Hessian, the slacks stay at zero, and the thrust ball ``|v_m| <= 1`` becomes its tangent
-plane at the plan's direction plus cuts where the QP's point leaves it by more than ``BALL_TOL``
-(at most ``BALL_CUT_ROUNDS`` QPs; the point is then scaled onto the ball). DAQP solves it in one
-workspace per satellite. The point is used only if the exact NLP's own rows hold at it to
-``NLP_CONSTRAINT_TOL``; otherwise, or when the QP fails, the exact ipopt NLP solves the decision
-(``info["rti_fallbacks"]``, ``info["solver_failures"]``), then the relaxed NLP and the shifted plan as
-before. The first decision after a reset is an ipopt solve. ``info["qp_steps"]`` counts the QP
-decisions. At the exact NLP's optimum the step is zero (``tests/test_tube_rdmpc_rti.py``).
+Sequential convexification (``solver="rti"``): QPs instead of the NLP, about each satellite's
+previous plan shifted by one step (:meth:`_NominalNLP.qp_step`). Every row of the exact NLP is
+linearised there (collision, obstacle and target keep-outs become tangent half-spaces, inside their
+feasible sets; the Lyapunov, terminal and braking rows their first-order models), the cost keeps its
+exact (constant) Hessian and the slacks stay at zero. The convex rows (thrust ball, speed bound)
+also get cutting planes where the QP's point leaves them, and the QP is solved again
+(``CUT_ROUNDS``); the inputs are then scaled onto the ball. The point is used only if the exact
+NLP's own rows hold at it to ``NLP_CONSTRAINT_TOL``; else the QP is re-linearised there
+(``SQP_ITERATIONS`` in all), and if they still do not hold, or a QP fails, the exact ipopt NLP solves
+the decision (``info["rti_fallbacks"]``, ``info["solver_failures"]``), then the relaxed NLP and the
+shifted plan as before. DAQP solves the QPs in one workspace per satellite and row count. The first
+decision after a reset is an ipopt solve; ``info["qp_steps"]`` counts the QP decisions. At the
+exact NLP's optimum the step is zero (``tests/test_tube_rdmpc_rti.py``). On li2022 case 1 the
+nonconvex terminal closing-speed row (``terminal_braking``) is what most often still fails after the
+QPs, about one decision in six in the first 500 s, which ipopt then solves.
 """
 
 from __future__ import annotations
@@ -138,12 +141,14 @@ _SLACK_WEIGHT = 1.0e9           # L1 weight of the collision slacks (relaxed pro
 _TERMINAL_SLACK_WEIGHT = 1.0e8  # L1 weight of the terminal / speed slack (relaxed problem only)
 NLP_CONSTRAINT_TOL = 1e-2       # largest accepted row violation (ipopt's acceptable_constr_viol_tol)
 SOLVERS = ("ipopt-jit", "ipopt", "rti")
-BALL_CUT_ROUNDS = 3
-"""QPs of one ``solver="rti"`` step at most: the first, then with tangent cuts of the thrust ball
-added where the point left it."""
-BALL_TOL = 0.02
-"""Relative overshoot of the thrust ball accepted without a cut (the point is then scaled onto it;
-the NLP's rows are checked at the scaled point)."""
+SQP_ITERATIONS = 3
+"""QPs of one ``solver="rti"`` decision at most (re-linearised at the last point while the exact
+NLP's rows are violated there), before the ipopt fallback."""
+CUT_ROUNDS = 4
+"""QPs of one sequential-convexification step at most: the first, then with cutting planes of the
+convex rows added where the point violated them."""
+CUT_TOL = 1e-3
+"""Violation of a convex row (thrust ball, speed bound) accepted without a cut."""
 MAX_WORKERS = 16
 WARM_DUAL_OPTIONS = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                      "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6}
@@ -518,59 +523,74 @@ class _NominalNLP:
 
     def qp_step(self, info: dict[str, Any], params: np.ndarray, w0: np.ndarray, owner: int,
                 copy: int = 0) -> np.ndarray | None:
-        """One sequential-convexification step of the exact NLP about ``w0`` (the shifted previous
-        plan): every row linearised at ``w0`` (the collision and keep-out rows become tangent
-        half-spaces inside their feasible sets), the thrust ball ``|v_m| <= 1`` replaced by its
-        tangent plane at ``w0``'s direction plus cuts where the QP's point leaves the ball
-        (:data:`BALL_CUT_ROUNDS`), the slacks fixed at 0; one DAQP solve per round through
-        :func:`satenv.baselines.base.guarded_solve`. The new point, or ``None`` when a QP failed
-        or the NLP's own rows are violated by more than ``NLP_CONSTRAINT_TOL`` at it."""
+        """Sequential convexification of the exact NLP from ``w0`` (the shifted previous plan): one
+        QP (:meth:`_qp_once`) about ``w0``, and again about its point while the exact NLP's own rows
+        are violated there by more than ``NLP_CONSTRAINT_TOL`` (at most :data:`SQP_ITERATIONS` QPs
+        in all). The point, or ``None`` when a QP failed or the rows still do not hold (``info``
+        says why)."""
+        k = self.slots(params)
+        lbg, ubg = self.row_bounds(k)
+        lbx, ubx = self.bounds(relaxed=False)
+        w = np.clip(w0, lbx, ubx)
+        for _ in range(SQP_ITERATIONS):
+            w = self._qp_once(info, params, w, owner, copy)
+            if w is None:
+                return None
+            excess = row_violation(self._buffered("rows", k, copy)(w, params)[0].ravel(), lbg, ubg)
+            if excess <= NLP_CONSTRAINT_TOL:
+                return w
+        info["solver_failures"] = info.get("solver_failures", 0) + 1
+        info["solver_status"] = (f"{SQP_ITERATIONS} qp steps leave the NLP rows violated by {excess:.3g} "
+                                 f"> {NLP_CONSTRAINT_TOL}")
+        return None
+
+    def _qp_once(self, info: dict[str, Any], params: np.ndarray, w0: np.ndarray, owner: int,
+                 copy: int) -> np.ndarray | None:
+        """One QP about ``w0``: every row linearised at ``w0`` (the collision and keep-out rows
+        become tangent half-spaces inside their feasible sets), the slacks fixed at 0; the convex
+        rows (thrust ball, speed bound: :meth:`convex_rows`) also get their linearisations at the
+        QP's point where it violates them (cutting planes, valid for a convex row), and the QP is
+        solved again (at most :data:`CUT_ROUNDS` QPs). Each DAQP solve goes through
+        :func:`satenv.baselines.base.guarded_solve`. The new point (its inputs scaled onto the
+        unit ball), or ``None`` when a QP failed."""
         N, k = self.N, self.slots(params)
         n_q = 4 * N                                   # v (3N), lambda (N); the slacks stay 0
+        lin = self._buffered("lin", k, copy)
         lbx, ubx = self.bounds(relaxed=False)
-        w0 = np.clip(w0, lbx, ubx)
         lbg, ubg = self.row_bounds(k)
-        hess, grad, g, jac = self._buffered("lin", k, copy)(w0, params)
+        hess, grad, g, jac = (o.copy() for o in lin(w0, params))
         g = g.ravel()
-        v0 = w0[:3 * N].reshape(N, 3)
-        norm0 = np.linalg.norm(v0, axis=1, keepdims=True)
-        cuts = [np.where(norm0 > 1e-6, v0 / np.maximum(norm0, 1e-12), 0.0)]   # tangent planes at w0
-        rows = np.arange(N, g.size)                   # every row but the thrust ball
-        a_base = jac[rows, :n_q]
-        lo_base, hi_base = lbg[rows] - g[rows], ubg[rows] - g[rows]
-        lb, ub = lbx[:n_q] - w0[:n_q], ubx[:n_q] - w0[:n_q]
         h, f = hess[:n_q, :n_q], grad.ravel()[:n_q]
-        for _ in range(BALL_CUT_ROUNDS):
-            cut_a = np.zeros((N * len(cuts), n_q))
-            cut_hi = np.empty(N * len(cuts))
-            for c, dirs in enumerate(cuts):           # d' (v0_m + dv_m) <= 1
-                r = c * N + np.arange(N)
-                cut_a[r[:, None], 3 * np.arange(N)[:, None] + np.arange(3)] = dirs
-                cut_hi[r] = 1.0 - np.sum(dirs * v0, axis=1)
-            a = np.vstack([a_base, cut_a])
-            lo = np.concatenate([lo_base, np.full(cut_hi.size, -QP_INFINITY)])
-            hi = np.concatenate([hi_base, cut_hi])
-            d = guarded_solve(info, lambda a=a, lo=lo, hi=hi: self._qp.solve(h, f, a, lo, hi, lb, ub, owner=(owner, len(cuts))),
+        lb, ub = lbx[:n_q] - w0[:n_q], ubx[:n_q] - w0[:n_q]
+        a, lo, hi = jac[:, :n_q], lbg - g, ubg - g
+        convex = self.convex_rows(k)
+        for _ in range(CUT_ROUNDS):
+            d = guarded_solve(info, lambda a=a, lo=lo, hi=hi: self._qp.solve(h, f, a, lo, hi, lb, ub, owner=(owner, a.shape[0])),
                               shape=(n_q,), lower=lb, upper=ub, fallback=False, tol=QP_ROW_TOL,
                               violation=lambda d, a=a, lo=lo, hi=hi: row_violation(a @ d, lo, hi),
                               violation_tol=QP_ROW_TOL, time_limit=self.cfg.solve_time_limit)
             if d is None:
                 return None
-            v = (v0 + d[:3 * N].reshape(N, 3))
-            norm = np.linalg.norm(v, axis=1, keepdims=True)
-            if norm.max() <= 1.0 + BALL_TOL:
+            w = w0.copy()
+            w[:n_q] += d
+            _, _, g1, j1 = lin(w, params)
+            cut = convex[g1.ravel()[convex] - ubg[convex] > CUT_TOL]
+            if cut.size == 0:
                 break
-            cuts.append(np.where(norm > 1.0 + BALL_TOL, v / norm, 0.0))
-        w = w0.copy()
-        w[:n_q] += d
-        w[:3 * N] = (v / np.maximum(norm, 1.0)).ravel()          # onto the ball
-        g_new = self._buffered("rows", k, copy)(w, params)[0].ravel()
-        if row_violation(g_new, lbg, ubg) > NLP_CONSTRAINT_TOL:
-            info["solver_failures"] = info.get("solver_failures", 0) + 1
-            info["solver_status"] = (f"qp step violates the NLP rows by {row_violation(g_new, lbg, ubg):.3g} "
-                                     f"> {NLP_CONSTRAINT_TOL}")
-            return None
+            # g1 + J1 (w' - w) <= ub, in the step d' = w' - w0
+            a = np.vstack([a, j1[cut, :n_q]])
+            lo = np.concatenate([lo, np.full(cut.size, -QP_INFINITY)])
+            hi = np.concatenate([hi, ubg[cut] - g1.ravel()[cut] + j1[cut, :n_q] @ d])
+        v = w[:3 * N].reshape(N, 3)
+        w[:3 * N] = (v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1.0)).ravel()   # onto the ball
         return w
+
+    def convex_rows(self, k: int) -> np.ndarray:
+        """Indices of the convex ``<=`` rows of the NLP with ``k`` slots: the thrust ball (the first
+        N rows) and the speed bound (when ``v_max`` is set)."""
+        N = self.N
+        speed = 2 * N + N * (k + 2)                   # after the ball, Lyapunov and keep-out rows
+        return np.r_[np.arange(N), np.arange(speed, speed + N) if self.cfg.v_max is not None else []].astype(int)
 
     def rows(self, k: int) -> Any:
         """``(w, p) -> g`` of the NLP with ``k`` slots (built once)."""
