@@ -43,12 +43,17 @@ parallel (the scoreboard's backends). An episode taken from the cache is replaye
 to recording) and recorded again when it does not replay exactly: the env may have changed since it
 was recorded. (A change of the controller alone, with the env unchanged, is not detected: its
 actions still replay.)
+
+A dataset appears whole or not at all: Minari writes it under a hidden staging root beside the
+datasets (:data:`STAGING`), and the finished folder is swapped in
+(:func:`satenv.training.runfolder.replace_folder`); a kill leaves the previous dataset or the new one.
+A dataset folder without a readable ``metadata.json`` (a kill inside an earlier writer) is named on
+stderr and removed before writing (:func:`remove_incomplete`).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -61,6 +66,7 @@ import gymnasium as gym
 import numpy as np
 
 from satenv import tasks
+from satenv.training import runfolder, trust
 
 __all__ = ["CACHE", "INFO_FIELDS", "SafetyInfos", "dataset_id", "drop_stale", "episode_seed", "inner_loop_name",
            "load_episode", "make_controller", "make_env", "read", "record_episode", "replay", "replays_exactly",
@@ -74,7 +80,12 @@ MANIFEST = Path(__file__).resolve().parent / "datasets.json"
 page's dataset table."""
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "satenv" / "episodes"
 """Where recorded episodes wait until their dataset is written (one ``.npz`` per seed)."""
+MAX_EPISODE_BYTES = 2**30
+"""Cap on one cached episode file (``.npz``): 1 GiB."""
 BUFFER_FIELDS = ("observations", "actions", "rewards", "terminations", "truncations")
+STAGING = ".satenv-staging"
+"""Hidden folder under Minari's root where a dataset is written before it is swapped in (Minari's
+listing skips hidden folders)."""
 GYM_ID = {"platoon_v0": "satenv/Platoon-v0", "cluster_v0": "satenv/Cluster-v0",
           "servicing_v0": "satenv/Servicing-v0", "formation_v0": "satenv/Formation-v0"}
 
@@ -128,7 +139,14 @@ def _inner_loop(env: gym.Env) -> Any:
     return getattr(env.unwrapped.env, "inner_loop", None)
 
 
-def _card(system: str, seeds: list[int], steps: int, inner_loop: str | None = None) -> str:
+def _safety_counts(buffers: list[Any]) -> dict[str, int]:
+    """Episodes with any collision / any hard-bound violation of any agent."""
+    return {"collision_episodes": int(sum(bool(np.any(b.infos["collision"])) for b in buffers)),
+            "violation_episodes": int(sum(bool(np.any(b.infos["violations"])) for b in buffers))}
+
+
+def _card(system: str, seeds: list[int], steps: int, inner_loop: str | None = None,
+          counts: dict[str, int] | None = None) -> str:
     sysdef, task = tasks.system(system), tasks.training_task(system)
     env = task.make_env()
     m = len(env.possible_agents)
@@ -139,6 +157,11 @@ def _card(system: str, seeds: list[int], steps: int, inner_loop: str | None = No
             f"recorded actions are the controller's decision-rate commands without it, so a replay needs the "
             f"controller's inner loop attached (satenv.bench.learning.datasets.replay does), and infos state is "
             f"the flown trajectory. ")
+    safety = ("" if counts is None else
+              f"Safety: {counts['collision_episodes']} of the {len(seeds)} episodes hold a collision and "
+              f"{counts['violation_episodes']} a hard-bound violation (infos collision, violations): "
+              + ("the data is not collision-free; filter those episodes for safe demonstrations. "
+                 if counts["collision_episodes"] else "the data is collision-free. "))
     return (f"satenv {sysdef.label}: the controller {sysdef.controller!r} (satenv.baselines.make) flying the training "
             f"task {task.name!r} ({task.description}) on train seeds {tasks.show_seeds(seeds)} "
             f"({len(seeds)} episodes, {steps} steps, {steps * m} agent-steps). Env: {GYM_ID[task.env_id]} with "
@@ -146,7 +169,7 @@ def _card(system: str, seeds: list[int], steps: int, inner_loop: str | None = No
             f"possible_agents order {list(env.possible_agents)}; observation = the {m} agents' observations "
             f"concatenated ({m} x {o}); action = their normalised actions concatenated ({m} x {a}, in [-1, 1]); "
             f"reward = team sum; infos: per agent {sorted(INFO_FIELDS)} (length {m}), tracking_error ({m}, d), "
-            f"state = env.state() (replay: reset(seed=episode seed) then the actions). {hook}"
+            f"state = env.state() (replay: reset(seed=episode seed) then the actions). {safety}{hook}"
             f"Written by python -m satenv.bench.learning.datasets.")
 
 
@@ -177,22 +200,18 @@ def record_episode(env: gym.Env, controller: Any, seed: int) -> Any:
 
 
 def save_episode(buffer: Any, path: Path) -> Path:
-    """An ``EpisodeBuffer`` as plain arrays in ``path`` (``.npz``; written whole, then renamed)."""
+    """An ``EpisodeBuffer`` as plain arrays in ``path`` (``.npz``; :func:`satenv.training.runfolder.save_with`)."""
     arrays = {k: np.asarray(getattr(buffer, k)) for k in BUFFER_FIELDS}
     arrays.update({f"info.{k}": np.asarray(v) for k, v in buffer.infos.items()})
     arrays["seed"] = np.asarray(buffer.seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    os.replace(tmp, path)
-    return path
+    return runfolder.save_with(path, lambda tmp: np.savez(tmp, **arrays))
 
 
 def load_episode(path: Path) -> Any:
     """The ``EpisodeBuffer`` :func:`save_episode` wrote (no pickle)."""
     from minari.data_collector.episode_buffer import EpisodeBuffer
 
+    trust.stored_zip(path.parent, path.name, MAX_EPISODE_BYTES)   # no link, capped, nothing inflates
     with np.load(path, allow_pickle=False) as z:
         data = {k: list(z[k]) for k in BUFFER_FIELDS}
         infos = {k[5:]: list(z[k]) for k in z.files if k.startswith("info.")}
@@ -226,7 +245,7 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
     storage ``DataCollector`` writes, without its ``jax`` dependency) and return the ``MinariDataset``;
     its entry goes to ``manifest`` when given. Episodes already in ``cache`` are not recorded again;
     ``workers`` > 1 records the others in parallel."""
-    import minari
+    import minari  # noqa: F401  (the datasets extra: checked before any episode is recorded)
 
     from satenv.bench.scoreboard.backends import stream
 
@@ -248,22 +267,82 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
             print(f"{system}: episode {len(seeds) - len(todo) + k + 1}/{len(seeds)} (seed {result['seed']}) at "
                   f"{time.perf_counter() - t0:.0f}s", flush=True)
     buffers = [load_episode(_episode_path(cache, system, s)) for s in seeds]
-    did = dataset_id(system)
-    if did in minari.list_local_datasets():
-        minari.delete_dataset(did)
     steps = sum(len(b.actions) for b in buffers)
+    counts = _safety_counts(buffers)
     env = make_env(system)
-    ds = minari.create_dataset_from_buffers(
-        did, buffers, env=env.unwrapped.spec, eval_env=env.unwrapped.spec, algorithm_name=f"scripted controller {tasks.system(system).controller}",
-        author="satenv", code_permalink="satenv/bench/learning/datasets.py",
-        description=_card(system, seeds, steps, inner_loop_name(system)),
-        data_format="arrow", observation_space=env.observation_space, action_space=env.action_space)
-    env.close()
+    try:
+        ds = _create_whole(dataset_id(system), buffers, env, algorithm_name=f"scripted controller {tasks.system(system).controller}",
+                           author="satenv", code_permalink="satenv/bench/learning/datasets.py",
+                           description=_card(system, seeds, steps, inner_loop_name(system), counts))
+    finally:
+        env.close()
     if manifest is not None:
-        _record(manifest, system, seeds, buffers, time.perf_counter() - t0)
+        _record(manifest, system, seeds, buffers, time.perf_counter() - t0, counts)
     for s in seeds:
         _episode_path(cache, system, s).unlink(missing_ok=True)
     return ds
+
+
+def _root() -> Path:
+    """Minari's dataset folder (``MINARI_DATASETS_PATH``, default ``~/.minari/datasets``)."""
+    from minari.storage.datasets_root_dir import get_dataset_path
+
+    return Path(get_dataset_path())
+
+
+def remove_incomplete(did: str, out: Any = sys.stderr) -> list[Path]:
+    """Remove what a killed write of dataset ``did`` left: a staging copy (:data:`STAGING`), a folder
+    swap half done (:func:`satenv.training.runfolder.recover_folder`) and a dataset folder without a
+    readable ``metadata.json``; each removal is named on ``out``. Returns the folders removed."""
+    import shutil
+
+    from minari.dataset.minari_storage import MinariStorage
+
+    root, removed = _root(), []
+    staged = root / STAGING / did
+    if staged.exists():
+        shutil.rmtree(staged)
+        removed.append(staged)
+    folder = root / did
+    runfolder.recover_folder(folder)
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise DatasetError(f"{folder}: expected the dataset folder of {did}, found a link or a file; remove it")
+    if folder.is_dir():
+        try:
+            complete = MinariStorage.read_raw_metadata(str(folder / "data"))["dataset_id"] == did
+        except Exception:   # noqa: BLE001 - any unreadable metadata is an incomplete folder
+            complete = False
+        if not complete:
+            shutil.rmtree(folder)
+            removed.append(folder)
+    for path in removed:
+        print(f"removed {path}: an incomplete dataset folder left by an interrupted write", file=out, flush=True)
+    return removed
+
+
+def _create_whole(did: str, buffers: list[Any], env: gym.Env, **card: Any) -> Any:
+    """``minari.create_dataset_from_buffers`` into the staging root, then the finished folder swapped
+    in for ``did`` (module docstring); the ``MinariDataset`` in place."""
+    import minari
+    from minari.namespace import create_namespace, list_local_namespaces
+    from minari.utils import parse_dataset_id
+
+    remove_incomplete(did)
+    root = _root()
+    saved = os.environ.get("MINARI_DATASETS_PATH")
+    os.environ["MINARI_DATASETS_PATH"] = str(root / STAGING)
+    try:
+        minari.create_dataset_from_buffers(did, buffers, env=env.unwrapped.spec, eval_env=env.unwrapped.spec,
+                                           data_format="arrow", observation_space=env.observation_space,
+                                           action_space=env.action_space, **card)
+    finally:
+        os.environ["MINARI_DATASETS_PATH"] = str(root) if saved is None else saved
+    (root / did).parent.mkdir(parents=True, exist_ok=True)
+    runfolder.replace_folder(root / STAGING / did, root / did)
+    namespace = parse_dataset_id(did)[0]
+    if namespace is not None and namespace not in list_local_namespaces():
+        create_namespace(namespace)
+    return minari.load_dataset(did)
 
 
 def drop_stale(system: str, seeds: Iterable[int], cache: Path = CACHE) -> list[int]:
@@ -298,19 +377,32 @@ def inner_loop_name(system: str) -> str | None:
     return None if hook is None else type(hook).__name__
 
 
-def _record(manifest: Path, system: str, seeds: list[int], buffers: list[Any], wall_s: float) -> None:
+def _record(manifest: Path, system: str, seeds: list[int], buffers: list[Any], wall_s: float,
+            counts: dict[str, int]) -> None:
     import minari
 
-    entries = json.loads(manifest.read_text()) if manifest.is_file() else {}
+    entries = _read_manifest(manifest)
     m = len(buffers[0].infos["collision"][0])
     steps = sum(len(b.actions) for b in buffers)
     entries[system] = {"dataset_id": dataset_id(system), "task": tasks.training_task(system).name,
                        "controller": tasks.system(system).controller, "train_seeds": tasks.show_seeds(seeds),
                        "episodes": len(buffers), "steps": steps, "agent_steps": steps * m,
-                       "collision_episodes": int(sum(bool(np.any(b.infos["collision"])) for b in buffers)),
-                       "violation_episodes": int(sum(bool(np.any(b.infos["violations"])) for b in buffers)),
-                       "wall_s": round(wall_s, 1), "minari": minari.__version__}
-    manifest.write_text(json.dumps(entries, indent=1, sort_keys=True) + "\n")
+                       **counts, "wall_s": round(wall_s, 1), "minari": minari.__version__}
+    runfolder.write_json(manifest, entries, sort_keys=True)
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    """The manifest's entries (``{}`` when there is none); a link, an oversized or malformed file is a
+    :class:`DatasetError` naming it (read through :func:`satenv.training.trust.read_json`)."""
+    if not os.path.lexists(path):
+        return {}
+    try:
+        entries = trust.read_json(path.parent, path.name)
+    except trust.UntrustedDataError as err:
+        raise DatasetError(f"--manifest: {err}") from None
+    if not isinstance(entries, dict):
+        raise DatasetError(f"--manifest {path}: expected a JSON object of datasets, got {type(entries).__name__}")
+    return entries
 
 
 def read(system: str) -> Any:
@@ -373,8 +465,8 @@ def _systems(text: str) -> list[str]:
 def _estimate(systems: list[str], episodes: int, workers: int) -> str:
     """The expected wall time of writing ``systems`` from the manifest's timed runs."""
     try:
-        timed = json.loads(MANIFEST.read_text())
-    except (OSError, ValueError):
+        timed = _read_manifest(MANIFEST)
+    except DatasetError:
         timed = {}
     per_episode = [timed[s]["wall_s"] / timed[s]["episodes"] for s in systems
                    if isinstance(timed.get(s), dict) and timed[s].get("wall_s") and timed[s].get("episodes")]
