@@ -413,6 +413,7 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     A bad flag or value exits (``SystemExit(2)``) with one ``error:`` line naming the flag; a bad
     ``--config`` file raises ``ValueError``.
     """
+    import os
     import sys
 
     from satenv.training.trust import CODE_FLAG
@@ -431,7 +432,7 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     if resume:
         runs.add_argument("--resume", action="store_true",
                           help="continue the run in --out-dir from its saved config.json and last checkpoint "
-                               "(flags given override it)")
+                               "(flags given override it); a folder with neither starts the run fresh")
     ns = parser.parse_args(argv)
     if ns.config == "":
         parser.error("--config '': expected a FILE (a run's config.json)")
@@ -441,7 +442,10 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     # without a base the field defaults (not a resolved instance: the default task's env must not
     # stick to a run given another --task)
     cfg = config_from_args(parser, cls, ns, base)
-    if opts.resume and base is None:
+    if opts.resume and base is None and not os.path.lexists(f"{cfg.out_dir}/config.json"):
+        print(f"--resume: {cfg.out_dir}/config.json does not exist (no run, or one stopped before writing "
+              "it): starting the run fresh from the flags given", file=sys.stderr, flush=True)
+    elif opts.resume and base is None:
         saved = f"{cfg.out_dir}/config.json"
         try:
             saved_cfg = load_config(saved, cls, allow_code_env_id=opts.allow_code_env_id)

@@ -470,8 +470,10 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
 
     out = Path(cfg.out_dir)
     ckpt = latest_checkpoint(out) if resume else None
-    if resume and ckpt is None:
-        raise ValueError(f"--resume: no checkpoint under {out / 'checkpoints'}; train first without --resume")
+    if resume and ckpt is None:   # stopped before its first checkpoint: nothing to continue from
+        print(f"--resume: no checkpoint under {out / 'checkpoints'}: starting the run fresh", file=sys.stderr,
+              flush=True)
+        resume = False
     if not resume and latest_checkpoint(out) is not None:
         raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
     out.mkdir(parents=True, exist_ok=True)
