@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from satenv.training import both_ways
+from satenv.training import both_ways, runfolder, trust
 from satenv.training.both_ways import NETWORK_ALONE, VARIANTS
 from satenv.training.card import BOTH_WAYS_FILE, INTERVENTIONS_LIMIT, both_ways_file
 
@@ -49,30 +49,28 @@ def _cached(cache_dir: Path, tag: str) -> both_ways.Episodes:
 
 
 def _episodes(env: Any, policy: Any, seeds: list[int], cache: Path) -> list[dict[str, Any]]:
-    """:func:`satenv.scoring.run_episodes`, resumable: records already in ``cache`` (JSON lines,
-    one per seed) are reused, new ones appended as they finish."""
+    """:func:`satenv.scoring.run_episodes`, resumable: records already in ``cache`` (the scoreboard's
+    append-only JSON-lines log, :class:`satenv.bench.scoreboard.runner.EpisodeLog`, one line per seed)
+    are reused, new ones appended as they finish (a line cut by a kill is moved aside and runs again)."""
+    from satenv.bench.scoreboard.report import jsonable
+    from satenv.bench.scoreboard.runner import EpisodeLog, read_episodes
     from satenv.rollout import rollout
     from satenv.scoring import episode_record
 
-    done: dict[int, dict[str, Any]] = {}
-    if cache.is_file():
-        for line in cache.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError:   # a line cut by an interrupted run: that episode runs again
-                continue
-            done[int(rec["seed"])] = rec
+    done = {int(r["seed"]): r for r in read_episodes(cache, repair=True, key=("seed",))}
     cache.parent.mkdir(parents=True, exist_ok=True)
-    with cache.open("a") as fh:
+    log = EpisodeLog(cache)
+    try:
         for s in seeds:
             if s in done:
                 continue
             t0 = time.perf_counter()
             rec = episode_record(rollout(env, policy, seed=int(s)), int(s), len(env.possible_agents))
             rec["wall_s"] = round(time.perf_counter() - t0, 3)
-            done[s] = rec
-            fh.write(json.dumps(rec, default=float) + "\n")
-            fh.flush()
+            done[s] = jsonable(rec)   # as the log holds it (non-finite values as None, as on the scoreboard)
+            log.append(done[s])
+    finally:
+        log.close()
     return [done[s] for s in seeds]
 
 
@@ -169,10 +167,13 @@ def write_folders(result: dict[str, Any], source: Path) -> list[Path]:
     for block in result["entries"]:
         folder = Path(block["policy"])
         path = both_ways_file(folder) or folder / BOTH_WAYS_FILE
-        text = json.dumps(folder_evaluation(block, str(source), result["command"]), indent=1, default=float) + "\n"
-        if path.is_file() and json.loads(path.read_text()) == json.loads(text):
-            continue
-        path.write_text(text)
+        evaluation = json.loads(json.dumps(folder_evaluation(block, str(source), result["command"]), default=float))
+        try:
+            if trust.read_json(path.parent, path.name) == evaluation:
+                continue
+        except trust.UntrustedDataError:   # none yet or unreadable: written anew
+            pass
+        runfolder.write_json(path, evaluation, default=float)
         written.append(path)
     return written
 
@@ -208,7 +209,7 @@ def plot(result: dict[str, Any], path: Path) -> None:
     counts = sorted({e[VARIANTS[0]]["aggregate"]["episodes"] for e in entries})
     fig.suptitle(f"learned policies alone and behind the filter (test seeds; {'/'.join(map(str, counts))} episodes)")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    runfolder.save_with(path, lambda tmp: fig.savefig(tmp, dpi=100))
     plt.close(fig)
 
 
@@ -223,6 +224,8 @@ def _entry(spec: str) -> tuple[str, Path, int | None, int | None]:
         raise argparse.ArgumentTypeError(f"expected system=policy-folder[@episodes[:filtered]], got {spec!r}")
     if system not in tasks.SYSTEMS:
         raise argparse.ArgumentTypeError(f"{spec!r}: system {system!r} is not one of {sorted(tasks.SYSTEMS)}")
+    if Path(folder).is_symlink():
+        raise argparse.ArgumentTypeError(f"{spec!r}: {folder!r} is a symbolic link; pass the policy folder itself")
     if not (Path(folder) / "manifest.json").is_file():
         raise argparse.ArgumentTypeError(f"{spec!r}: {folder!r} is not a policy folder (no manifest.json)")
     return system, Path(folder), int(count) if at else None, int(nf) if colon else None
@@ -263,9 +266,13 @@ def main(argv: list[str] | None = None) -> None:
     p = build_parser()
     ns = p.parse_args(argv)
     if ns.folders_from is not None:
-        if not ns.folders_from.is_file():
-            p.error(f"--folders-from {str(ns.folders_from)!r}: expected a safety_alone.json file")
-        for path in write_folders(json.loads(ns.folders_from.read_text()), ns.folders_from):
+        try:
+            earlier = trust.read_json(ns.folders_from.parent, ns.folders_from.name)
+        except trust.UntrustedDataError as err:
+            p.error(f"--folders-from: {err}; expected a safety_alone.json file")
+        if not (isinstance(earlier, dict) and isinstance(earlier.get("entries"), list)):
+            p.error(f"--folders-from {str(ns.folders_from)!r}: expected a safety_alone.json file (its 'entries')")
+        for path in write_folders(earlier, ns.folders_from):
             print("wrote", path)
         return
     if not ns.entry or ns.out is None:
@@ -295,7 +302,7 @@ def main(argv: list[str] | None = None) -> None:
         k = ns.perturbation_entries
         for (s, f, _, _), block in zip(entries[:k], result["entries"][:k], strict=True):
             block["perturbations"] = evaluate_perturbed(s, f, ns.perturbation_seeds, n_controller, ns.out / "cache")
-    (ns.out / "safety_alone.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
+    runfolder.write_json(ns.out / "safety_alone.json", result, default=float)
     print(f"plotting {ns.out / 'safety_alone.png'}", file=sys.stderr, flush=True)
     plot(result, ns.out / "safety_alone.png")
     if ns.write_folders:

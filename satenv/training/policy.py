@@ -432,11 +432,15 @@ class ShippedFilterError(PolicyLoadError):
 def policy_folder(path: str | PathLike) -> Path:
     """The artefact folder ``path`` names: ``path`` itself, or its ``final/`` when ``path`` is a
     run folder (no network of its own — ``policy.json``, weights, ``model.zip`` — and a
-    ``final/`` folder inside; a run folder's ``config.json`` is its own). A path the OS cannot
-    look up (too long, a loop, no permission) is a :class:`PolicyLoadError`."""
+    ``final/`` folder inside; a run folder's ``config.json`` is its own). A symbolic link is followed
+    only to a sibling folder (``runs/latest -> runs/x``); one out of its folder is refused. A path
+    the OS cannot look up (too long, a loop, no permission) is a :class:`PolicyLoadError`."""
     root = Path(path)
     shown = f"{str(path)!r:.200}"
     try:
+        if root.is_symlink() and root.resolve().parent != root.parent.resolve():
+            raise PolicyLoadError(f"learned policy path {shown} is a symbolic link out of its folder; a link is "
+                                  "followed only to a sibling (runs/latest -> runs/x): pass the folder it points to")
         if not root.is_dir():
             raise PolicyLoadError(f"learned policy path {shown} is not a directory; expected an artefact "
                                   f"folder with {list(POLICY_FILES)} (e.g. runs/<run>/final or "

@@ -128,17 +128,24 @@ def _quarantine(path: Path, good: list[bytes], bad: list[tuple[int, bytes]]) -> 
                   "again", ScoreboardWarning, stacklevel=3)
 
 
+MAX_LOG_BYTES = 2**30
+"""Cap on an episode log read back: 1 GiB (the published board's is under 1 MiB)."""
+
+
 def read_episodes(path: str | Path, repair: bool = False, key: tuple[str, ...] = KEY) -> list[dict[str, Any]]:
     """Records of ``episodes.jsonl`` (first occurrence per ``key``, the board's ``KEY`` by default;
-    another log of this format passes its own); torn or corrupt lines are skipped.
+    another log of this format passes its own); torn or corrupt lines are skipped. The log must be a
+    regular file of at most :data:`MAX_LOG_BYTES` (a link is refused: :func:`satenv.training.trust.read_member`).
 
     With ``repair`` those lines are moved to ``episodes.jsonl.corrupt`` (with a warning) and the
     log keeps every good line, so that appending to it continues a clean file.
     """
+    from satenv.training.trust import read_member
+
     path = Path(path)
-    if not path.exists():
+    if not os.path.lexists(path):
         return []
-    good, bad = _split_log(path.read_bytes(), key)
+    good, bad = _split_log(bytes(read_member(path.parent, path.name, MAX_LOG_BYTES)), key)
     if bad and repair:
         _quarantine(path, good, bad)
     records, seen = [], set()
