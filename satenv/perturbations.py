@@ -42,8 +42,8 @@ from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["NAV_BOUND_PROBABILITY", "PERTURBATIONS", "Perturbation", "PerturbedEnv", "UncertaintyBounds",
-           "declared_bounds", "get", "make_env", "names", "nominal", "perturbed"]
+__all__ = ["NAV_BOUND_PROBABILITY", "PERTURBATIONS", "Perturbation", "PerturbationMismatchError", "PerturbedEnv",
+           "UncertaintyBounds", "declared_bounds", "get", "make_env", "names", "nominal", "perturbed"]
 
 NAV_SEED_KEY = 0x6E6176
 """Mixed with the episode seed to seed the navigation error (independent of the env's own draws)."""
@@ -156,6 +156,10 @@ def names() -> tuple[str, ...]:
     return tuple(PERTURBATIONS)
 
 
+class PerturbationMismatchError(SatenvError):
+    """A perturbation that does not apply to an env (its scenario lacks the field it changes)."""
+
+
 def get(name: str) -> Perturbation:
     if not isinstance(name, str) or name not in PERTURBATIONS:
         raise SatenvError(f"unknown perturbation {name!r:.80}; expected one of {list(PERTURBATIONS)}")
@@ -226,8 +230,13 @@ class PerturbedEnv(BaseParallelWrapper):
 
 def make_env(task: Any, perturbation: str | None, **overrides: Any) -> Any:
     """The task's env under the named perturbation (``None``: the nominal env), with
-    ``overrides`` applied to both the nominal and the truth scenario."""
-    return perturbed(lambda **kw: task.make_env(**{**overrides, **kw}), perturbation)
+    ``overrides`` applied to both the nominal and the truth scenario; a perturbation that does not
+    apply to the task's env is a :class:`satenv.errors.SatenvError` naming the task's perturbations."""
+    try:
+        return perturbed(lambda **kw: task.make_env(**{**overrides, **kw}), perturbation)
+    except PerturbationMismatchError as err:
+        raise PerturbationMismatchError(f"task {task.name!r}: {err}; its perturbations are "
+                                        f"{list(task.perturbations)}") from None
 
 
 def perturbed(build: Callable[..., Any], perturbation: str | None) -> Any:
@@ -237,7 +246,12 @@ def perturbed(build: Callable[..., Any], perturbation: str | None) -> Any:
     if perturbation is None:
         return nominal
     p = get(perturbation)
-    truth = build(**p.truth(nominal.scenario))
+    try:
+        changes = p.truth(nominal.scenario)
+    except AttributeError as err:   # the scenario has no such field: another system's perturbation
+        raise PerturbationMismatchError(f"perturbation {perturbation!r} does not apply to this env (its "
+                                        f"{type(nominal.scenario).__name__} has no {err.name!r})") from None
+    truth = build(**changes)
     return _wrapper_class(type(truth))(truth, p, nominal)
 
 

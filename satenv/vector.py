@@ -186,6 +186,9 @@ class SatVectorEnv:
         if idx.size and idx.dtype.kind not in "biu":  # e.g. [0.5] must not become copy 0
             raise SatenvTypeError(f"reset(indices=...) must be int copy indices or a bool mask of shape "
                                   f"({self.num_envs},), got {type(indices).__name__} of dtype {idx.dtype}")
+        if idx.ndim > 1:
+            raise SatenvError(f"reset(indices=...) must be a flat list of copy indices or a ({self.num_envs},) "
+                              f"bool mask, got an array of shape {idx.shape}")
         if self._rngs is None:
             return self.reset()
         if idx.dtype == bool:

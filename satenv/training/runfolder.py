@@ -121,16 +121,19 @@ def write_json(path: str | Path, data: Any, *, indent: int | None = 1, **dumps: 
 
 
 def read_json(path: str | Path, what: str) -> Any:
-    """The JSON in ``path``; a torn or malformed file is a :class:`RunFolderError` naming it and
-    ``what`` it should hold (never a raw ``JSONDecodeError``)."""
+    """The JSON in ``path``, a regular file of at most :data:`satenv.training.trust.MAX_JSON_BYTES`
+    (a link or a bigger file is refused before reading: :func:`satenv.training.trust.read_json`);
+    a missing, torn or malformed file is a :class:`RunFolderError` naming it and ``what`` it should
+    hold (never a raw ``JSONDecodeError``)."""
+    from satenv.training import trust
+
     path = Path(path)
+    if not os.path.lexists(path):
+        raise RunFolderError(f"{path}: missing; expected {what}")
     try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise RunFolderError(f"{path}: missing; expected {what}") from None
-    except (OSError, UnicodeDecodeError, ValueError) as err:
-        raise RunFolderError(f"{path}: not valid JSON ({type(err).__name__}: {str(err)[:80]}); "
-                             f"expected {what}") from None
+        return trust.read_json(path.parent, path.name)
+    except trust.UntrustedDataError as err:
+        raise RunFolderError(f"{err}; expected {what}") from None
 
 
 def staging(folder: str | Path) -> Path:
