@@ -133,9 +133,11 @@ def test_every_saved_dagger_config_parses(tmp_path):
         assert not resume, path
         if "safe_dagger" in saved:                     # a safe variant: its own fields, from its warm start
             safe = saved["safe_dagger"]
-            assert cfg.warm_start == safe["warm_start"] and cfg.lr == safe["learning_rate"], path
+            assert cfg.warm_start.endswith(safe["warm_start"]) and cfg.lr == safe["learning_rate"], path
+            assert (root.parents[1] / cfg.warm_start / "weights.safetensors").is_file(), path   # the moved folder
             assert (cfg.fly, cfg.label) == (safe.get("fly", "filtered"), safe["label"]) and cfg.safe, path
             assert len(cfg.eval_seeds) == safe["val_seeds"] and cfg.rounds == safe["rounds"], path
+            assert cfg.round0_episodes == cfg.episodes_per_round == safe["episodes_per_round"], path
             assert cfg.label_filter == safe.get("label_filter", {}), path
         else:
             assert cfg.net_arch == tuple(saved["net_arch"]) and not cfg.safe, path
@@ -333,3 +335,20 @@ def test_every_flag_refuses_bad_values_naming_the_flag():
             valid = (token == "true" and isinstance(flags[f.name].default, bool)
                      or (flag, token) == ("--clip-obs", "1e999"))             # no clip
             assert flag in takes_any_text or valid, (flag, token)
+
+
+def test_a_shipped_safe_variant_config_replays_a_round(tmp_path, capsys):
+    """The earlier safe variant's config (the teacher, hand-over flights, a tighter label filter, its
+    warm start at the earlier layout's path) replays on the one engine: one short round."""
+    config = training.POLICIES_DIR / "servicing_pereira2022_tight_teacher" / "config.json"
+    out = tmp_path / "run"
+    assert main(["--config", str(config), "--out-dir", str(out), "--prior-labels", "", "--rounds", "1",
+                 "--round0-episodes", "1", "--env-kwargs", '{"max_steps": 6}', "--eval-seeds", "700000",
+                 "--shield-seeds", "1", "--epochs", "1", "--progress", "false"]) == 0
+    saved = json.loads((out / "config.json").read_text())
+    assert (saved["fly"], saved["label"], saved["label_filter"]) == ("handover", "teacher", {"margin": 0.02, "velocity_margin": 0.2, "gamma": 0.5})
+    history = json.loads((out / "history.json").read_text())
+    assert history[0]["labels"] == 6 * 2 and set(history[0]["loss"]) == {"imitation", "intervention", "barrier", "prior"}
+    shipped = json.loads((out / "rounds" / "0000" / "env.json").read_text())
+    assert "safety_filter" in shipped                        # the warm start's env.json, its filter named
+    capsys.readouterr()

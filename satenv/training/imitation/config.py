@@ -303,12 +303,28 @@ def _upgrade_safe(data: dict[str, Any]) -> dict[str, Any]:
     d.setdefault("label", "filtered")
     d.setdefault("paper_start_share", 0.0)       # the earlier safe variant flew the training task only
     d.setdefault("final_eval", False)            # and shipped a round chosen on validation
+    d.setdefault("round0_episodes", d.get("episodes_per_round", 12))    # every round flew as many
     n = d.pop("val_seeds", 100)
     d["eval_seeds"] = list(task.seeds("validation", n)) if isinstance(n, int) and not isinstance(n, bool) else n
-    prior = d.get("prior_labels", "")
+    prior = _moved(d.get("prior_labels", ""))
     d["prior_labels"] = [prior] if isinstance(prior, str) and prior else ([] if prior == "" else prior)
+    d["warm_start"] = _moved(d.get("warm_start"))
     d.setdefault("expert_options", dict(tasks.system(system).imitation.get("expert_options", {})))
     return d
+
+
+MOVED = {"training/policies/": "satenv/training/policies/", "training/runs/": "studies/runs/"}
+"""Folders of the earlier layout -> where they live now (the shipped policies are package data,
+the run folders are studies)."""
+
+
+def _moved(path: Any) -> Any:
+    """A saved path of the earlier layout (:data:`MOVED`) as it is now."""
+    if isinstance(path, str):
+        for old, new in MOVED.items():
+            if path.startswith(old):
+                return new + path[len(old):]
+    return path
 
 
 def _upgrade_dagger(data: dict[str, Any]) -> dict[str, Any]:
