@@ -309,8 +309,8 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
     def platoon(targets: Any) -> tuple[tuple[str, str, dict[str, Any]], ...]:
         return (("near", "starts drawn within 5 m (per axis) of the targets",
                  {"initial_state": targets, "random_position_spread": 5.0}),
-                ("mid", "starts drawn within 20 m (per axis) of the targets",
-                 {"initial_state": targets, "random_position_spread": 20.0}))
+                ("mid", "starts drawn within 10 m (per axis) of the targets",
+                 {"initial_state": targets, "random_position_spread": 10.0}))
 
     def tolerance(coarse: float, middle: float) -> tuple[tuple[str, str, dict[str, Any]], ...]:
         return tuple((f"tol{tol:g}", f"success tolerance {tol:g} m", {"success_tol": tol}) for tol in (coarse, middle))
