@@ -85,3 +85,12 @@ def test_closed_loop_check_needs_the_same_successes_and_every_metric_within_two_
     assert not _compare({"ipopt": ref, "fast": [row(True, 10.21, 0.1, 90.0)]})["within_tolerance"]
     assert not _compare({"ipopt": ref, "fast": [row(True, 10.0, 0.103, 100.0)]})["within_tolerance"]
     assert not _compare({"ipopt": ref, "fast": [row(False, 9.0, 0.05, 90.0)]})["within_tolerance"]
+
+
+def test_the_nmpc_expert_labels_with_rti_unless_told_otherwise():
+    from satenv.baselines.registry import make_expert
+
+    env = parallel_env()
+    assert make_expert("nmpc", env, horizon=HORIZON).cfg.solver == "rti"
+    assert make_expert("nmpc", env, horizon=HORIZON, solver="ipopt").cfg.solver == "ipopt"
+    assert NMPC(env, horizon=HORIZON).cfg.solver == "ipopt"          # the baseline and the reproduction

@@ -21,7 +21,7 @@ from typing import Any
 
 from satenv.baselines.base import BaselineError, is_satenv_env
 
-__all__ = ["BASELINES", "CHEAP", "EXPERTS", "WRAPPERS", "ResolveError", "get", "get_expert", "make", "make_expert",
+__all__ = ["BASELINES", "CHEAP", "EXPERTS", "EXPERT_OPTIONS", "WRAPPERS", "ResolveError", "get", "get_expert", "make", "make_expert",
            "resolve", "supporting"]
 
 BASELINES: dict[str, str] = {
@@ -47,6 +47,12 @@ EXPERTS: dict[str, str] = {"joint_platoon_mpc": "satenv.baselines.experts:JointP
                            "replanning_tube_rdmpc": "satenv.baselines.experts:ReplanningTubeRDMPC"}
 """The stateless experts for imitation (:mod:`satenv.baselines.experts`) by name; every other
 expert name is a baseline of :data:`BASELINES`. :data:`satenv.tasks.SYSTEMS` names each system's expert."""
+
+
+EXPERT_OPTIONS: dict[str, dict[str, Any]] = {"nmpc": {"solver": "rti"}}
+"""Default options of an expert built by :func:`make_expert` (the call's options replace them): the
+NMPC labels with its real-time iteration, one QP per decision, whose closed loop is within 2 % of
+ipopt's on the reproduction's problems (``python -m satenv.bench.perf.experts``)."""
 
 
 class ResolveError(BaselineError):
@@ -93,8 +99,9 @@ def get_expert(name: str) -> type:
 
 
 def make_expert(name: str, env: Any, **options: Any) -> Any:
-    """``get_expert(name)(env, **options)``: the expert called ``name`` for ``env``."""
-    return get_expert(name)(env, **options)
+    """``get_expert(name)(env, **options)``: the expert called ``name`` for ``env``, with the
+    defaults of :data:`EXPERT_OPTIONS` under ``options``."""
+    return get_expert(name)(env, **{**EXPERT_OPTIONS.get(name, {}), **options})
 
 
 def supporting(env: Any, *, cheap: bool = False) -> list[str]:

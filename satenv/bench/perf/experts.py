@@ -65,13 +65,13 @@ def labels_per_second(system: str, episodes: int = 4, decisions: int | None = No
 
 
 def decision_times(controller: str, task: str, decisions: int, seed: int = 0) -> dict[str, Any]:
-    """ms per agent decision (median of whole ``act`` calls / agents, after the first) of
+    """ms per agent decision (median, and mean, of whole ``act`` calls / agents, after the first) of
     ``controller`` in its fast mode and with ipopt over the first ``decisions`` of ``task``, and
     the fast mode's median QP step alone."""
     import numpy as np
 
     from satenv import tasks
-    from satenv.baselines.experts import make
+    from satenv.baselines.registry import make_expert as make
 
     from ._common import act_times
 
@@ -82,6 +82,7 @@ def decision_times(controller: str, task: str, decisions: int, seed: int = 0) ->
         act_times(env, policy, 2, seed)                    # builds (compiles) before timing
         times = np.asarray(act_times(env, policy, decisions, seed)[1:]) * 1e3 / len(env.possible_agents)
         out[f"{mode}_ms_per_agent_decision"] = float(np.median(times))
+        out[f"{mode}_ms_per_agent_decision_mean"] = float(np.mean(times))
         steps = policy.info.get("qp_ms") or ([] if mode == "ipopt" else None)
         if steps:
             out["fast_qp_ms_median"] = float(np.median(steps))
@@ -166,7 +167,7 @@ def closed_loop_episode(controller: str, task: str, seed: int, options: dict[str
     import numpy as np
 
     from satenv import metrics, tasks
-    from satenv.baselines.experts import make
+    from satenv.baselines.registry import make_expert as make
     from satenv.rollout import rollout
 
     env = tasks.get(task).make_env()
