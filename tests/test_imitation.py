@@ -253,11 +253,14 @@ def test_hostile_run_folders_are_refused_before_anything_is_read(tmp_path, capsy
     with pytest.raises(RunFolderError, match="declares"):
         read_labels(labels / "round_0001.npz")
     bad = tmp_path / "bad.json"
-    for text in ("{not json", "[1, 2]", json.dumps({"rounds": "many"})):
+    for text in ("{not json", "[1, 2]", json.dumps({"rounds": "many"}), json.dumps({"eval_seeds": None}),
+                 json.dumps({"net_arch": 5}), json.dumps({"prior_labels": 5}), json.dumps({"terminal": {"radius": "x"}}),
+                 json.dumps({"safe_dagger": {"system": 5}})):
         bad.write_text(text)
         assert main(["--config", str(bad), "--out-dir", str(tmp_path / "r")]) == 2
         err = capsys.readouterr().err
         assert err.startswith("satenv imitate: error:") and "Traceback" not in err and err.count("\n") == 1
+        assert "object is not" not in err and not (tmp_path / "r").exists(), err      # named, refused up front
 
 
 @pytest.mark.parametrize("flag,value,expected", [("--seed", "null", "--seed 'null': expected an int"),

@@ -200,6 +200,8 @@ def test_choose_ranks_rounds_safety_first_and_ship_never_overwrites(tmp_path):
     hist = [entry(0, 2, 60, 0.98, 0.05), entry(1, 0, 3, 1.0, 0.01), entry(2, 0, 2, 0.97, 0.02),
             entry(3, 0, 2, 0.99, 0.0), entry(4, 1, 0, 1.0, 0.0)]
     assert choose(hist) == 3
+    with pytest.raises(RunFolderError, match="round 2: its validation holds a value that is not a number"):
+        choose([*hist[:2], {**hist[2], "val": {**hist[2]["val"], "success_rate": "1"}}])
     (tmp_path / "history.json").write_text(json.dumps(hist))
     with pytest.raises(RunFolderError, match="not a round folder"):
         ship(tmp_path, 3, tmp_path / "out")

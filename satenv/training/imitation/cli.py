@@ -114,6 +114,10 @@ def main(argv: list[str] | None = None) -> int:
     """The command (module docstring); 0 on success, 2 with one line naming a bad input."""
     try:
         ns, cfg, resume = parse(argv)
+    except (ValueError, TypeError) as err:   # a bad flag, or a saved config's value of the wrong kind
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 2
+    try:
         return _act(ns, cfg, resume)
     except ValueError as err:               # satenv's input errors, run-folder and untrusted-data errors
         print(f"{PROG}: error: {err}", file=sys.stderr)

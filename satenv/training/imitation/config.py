@@ -43,6 +43,9 @@ SPACES = ("flown", "network")
 blended in) or the network's own output."""
 ROUND0_EPOCH_FACTOR = 4
 """A cold network's round 0 fits ``round0_epoch_factor`` times ``epochs``."""
+SEQUENCE_FIELDS = ("eval_seeds", "test_seeds", "net_arch", "eval_baselines", "set_encoder", "obs_drop_dims",
+                   "prior_labels")
+"""The fields that hold a list (a tuple once validated)."""
 DEFAULT_TRAIN_SEED = tasks.SEED_SPLITS["train"][600_000]
 """The first training episode's seed (inside the train band)."""
 
@@ -143,6 +146,9 @@ class ImitationConfig(RunConfig):
     """After the last round, write ``final/`` with ``eval.json`` on ``test_seeds``."""
 
     def __post_init__(self) -> None:
+        for name in SEQUENCE_FIELDS:                 # before the shared checks iterate them
+            if not isinstance(getattr(self, name), list | tuple):
+                raise ValueError(f"{name} must be a list, got {getattr(self, name)!r:.60}")
         super().__post_init__()
         check_run_fields(self, ("expert_options", "terminal", "label_filter"))
         for name in ("round0_episodes", "episodes_per_round", "epochs", "round0_epoch_factor", "batch_size"):
@@ -168,10 +174,13 @@ class ImitationConfig(RunConfig):
         object.__setattr__(self, "set_encoder", tuple(self.set_encoder))
         self._check_baselines()
         object.__setattr__(self, "obs_drop_dims", tuple(self.obs_drop_dims))
+        if not isinstance(self.prior_labels, list | tuple) or not all(isinstance(n, str) for n in self.prior_labels):
+            raise ValueError(f"prior_labels must be a list of label files or folders, got {self.prior_labels!r:.60}")
         object.__setattr__(self, "prior_labels", tuple(self.prior_labels))
-        from satenv.training.shaping import ObsFeatures
+        from satenv.training.shaping import ObsFeatures, TerminalFeedback
 
         ObsFeatures(self.obs_symlog_scale, self.obs_symlog_dims, self.obs_drop_dims)
+        TerminalFeedback.from_config({"terminal": self.terminal})     # its fields checked before a run starts
         self._resolve_expert()
         self._check_seed_splits()
 

@@ -38,8 +38,12 @@ def selection_key(entry: dict[str, Any]) -> tuple[float, ...]:
     """How rounds rank on validation (ascending): collision episodes, violation episodes and
     failures of the network alone, then the filter's interventions per agent-step."""
     alone, shielded = _scores(entry)
-    return (alone.get("collision_episodes", 0), alone.get("violation_episodes", 0) or 0,
-            -(alone.get("success_rate") or 0.0), shielded.get("interventions_per_agent_step") or 0.0)
+    values = (alone.get("collision_episodes"), alone.get("violation_episodes"), alone.get("success_rate"),
+              shielded.get("interventions_per_agent_step") if isinstance(shielded, dict) else None)
+    if any(v is not None and (isinstance(v, bool) or not isinstance(v, int | float)) for v in values):
+        raise RunFolderError(f"round {entry.get('round')!r:.20}: its validation holds a value that is not a number")
+    coll, viol, success, rate = (v or 0 for v in values)
+    return (coll, viol, -success, rate)
 
 
 def choose(entries: list[dict[str, Any]]) -> int:
