@@ -8,7 +8,8 @@ policy card and the scoreboard.
   ``safety_interventions`` and ``safety_infeasible`` (agent-steps), ``safety_steps`` (decisions
   filtered, as :class:`satenv.safety.Shield` counts them), ``safety_agent_steps`` (decisions x
   agents), ``interventions_per_agent_step`` (their ratio) and ``safety_mean_du`` (mean ``|du|`` of
-  an intervention; ``None`` without any). Records written under older key names are read through
+  an intervention; ``None`` without any), ``failure_mode`` (:func:`failure_mode`; ``None`` for a
+  success). Records written under older key names are read through
   :func:`upgrade_record` (:data:`LEGACY_KEYS`).
 * **Aggregate** (:func:`aggregate`) of a list of records, keys:
 
@@ -47,8 +48,9 @@ import numpy as np
 from satenv.errors import SatenvError
 from satenv.metrics import matched_ratios, summary
 
-__all__ = ["COLLISION_EPISODE_RULE", "DECISION_MS_PER_AGENT_LIMIT", "LEGACY_KEYS", "RATIO_LIMIT", "SAFETY_COUNTS",
-           "SUCCESS_MARGIN", "SUCCESS_MIN", "aggregate", "collision_episodes", "episode_record", "matched_ratios",
+__all__ = ["COLLISION_EPISODE_RULE", "DECISION_MS_PER_AGENT_LIMIT", "FAILURE_MODES", "LEGACY_KEYS", "RATIO_LIMIT",
+           "SAFETY_COUNTS", "SUCCESS_MARGIN", "SUCCESS_MIN", "aggregate", "collision_episodes", "episode_record",
+           "failure_mode", "matched_ratios",
            "rank_key", "run_episodes", "targets", "upgrade_record", "wilson"]
 
 SUCCESS_MIN = 0.9
@@ -72,6 +74,23 @@ COLLISION_EPISODE_RULE = "an episode with at least one collision flag counts onc
 """How :func:`aggregate` counts collision (and violation) episodes, in words."""
 
 
+FAILURE_MODES = ("collision", "violation", "left_region", "timeout")
+"""Why an episode failed, the first that applies: a collision, a hard-bound violation, it ended
+early without either (an agent left the allowed region), or it ran to the horizon outside the
+tolerance (timeout)."""
+
+
+def failure_mode(rec: Mapping[str, Any]) -> str | None:
+    """The :data:`FAILURE_MODES` entry of an episode record (``None`` for a success)."""
+    if rec.get("success"):
+        return None
+    if rec.get("collisions"):
+        return "collision"
+    if rec.get("violations"):
+        return "violation"
+    return "left_region" if rec.get("terminated") else "timeout"
+
+
 def episode_record(traj: Any, seed: int, n_agents: int) -> dict[str, Any]:
     """The one episode record (module docstring): ``metrics.summary(traj)`` with ``seed``,
     ``compute_ms_per_agent``, ``episode_return`` and the filter's counts from the policy's ``info``
@@ -82,6 +101,7 @@ def episode_record(traj: Any, seed: int, n_agents: int) -> dict[str, Any]:
     rec["seed"] = int(seed)
     rec["compute_ms_per_agent"] = rec["compute_ms_per_decision"] / agents
     rec["episode_return"] = float(np.mean(np.sum(traj.rewards, axis=0))) if traj.steps else 0.0
+    rec["failure_mode"] = failure_mode(rec)
     if "safety_steps" not in info:
         return rec
     for key in SAFETY_COUNTS:

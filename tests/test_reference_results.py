@@ -1,5 +1,6 @@
 """The reference results: the page is the render of results.json, the results file is complete
-where it claims to be, the runner's log is resumable, the IQM band is the estimator it says."""
+where it claims to be, the runner's log is resumable, the IQM and its stratified bootstrap are the
+estimators they say (hand-computed examples), the grid covers the ladders."""
 
 from __future__ import annotations
 
@@ -9,11 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from satenv import scoring, tasks
 from satenv.bench.learning import grid as G
 from satenv.bench.learning import render, results, runner, trainers
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "studies" / "reference_results" / "results.json"
+RUNG = "platoon-tplf30-rung1-near"
 
 
 def test_page_is_the_render_of_results_json():
@@ -21,7 +24,7 @@ def test_page_is_the_render_of_results_json():
 
     data = json.loads(RESULTS.read_text())
     assert render.PAGE.read_text() == render.render_page(data, render.read_manifest(MANIFEST)), \
-        "docs/reference_results.md is stale: python -m satenv.bench.learning render"
+        "docs/reference_results.md is stale: satenv results render"
 
 
 def test_every_published_record_has_its_curve_and_test_block():
@@ -32,51 +35,82 @@ def test_every_published_record_has_its_curve_and_test_block():
         steps = [p[0] for p in rec["curve"]]
         assert steps == sorted(steps) and steps[-1] == rec["agent_steps"]
         assert rec["budget_agent_steps"] > 0 and rec["wall_s"] >= 0
-        for key in ("success_rate", "collision_episodes", "violation_episodes", "episodes"):
-            assert key in rec["test"], (rec["system"], rec["algorithm"], key)
-        assert rec["test"]["episodes"] == G.TEST_SEEDS_PER_CHECKPOINT
-        assert rec["test_seeds"] == list(G.test_seeds(rec["system"]))
+        for key in ("success_rate", "collision_episodes", "violation_episodes", "episodes", "failure_modes"):
+            assert key in rec["test"], (rec["task"], rec["algorithm"], key)
+        assert rec["test"]["episodes"] == G.FINAL_TEST_SEEDS >= 20
+        assert rec["test_seeds"] == list(G.test_seeds(rec["task"]))
+        assert all(s in tasks.get(rec["task"]).seeds("test") for s in rec["test_seeds"])
+        failed = rec["test"]["episodes"] - round(rec["test"]["success_rate"] * rec["test"]["episodes"])
+        assert sum(rec["test"]["failure_modes"].values()) == failed
+        assert rec["task"] == tasks.ladder(rec["system"])[rec["rung"] - 1]
         if rec["filter"]:
             assert "interventions_per_agent_step" in rec["test"]
-        assert rec["command"].startswith("python -m satenv.bench.learning run ")
+        assert rec["command"].startswith("satenv results run ")
 
 
-def test_iqm_and_its_band():
-    assert render.iqm(np.array([0.0, 1.0, 2.0, 3.0])) == pytest.approx(1.5)
-    flat = np.full((3, 5), 0.4)
-    mid, lo, hi = render.iqm_band(flat, reps=200)
-    assert np.allclose(mid, 0.4) and np.allclose(lo, 0.4) and np.allclose(hi, 0.4)
-    spread = np.array([[0.0, 0.0], [0.5, 1.0], [1.0, 1.0], [1.0, 1.0]])
-    mid, lo, hi = render.iqm_band(spread, reps=500)
-    assert np.all(lo <= mid) and np.all(mid <= hi) and lo[0] < hi[0]
+def test_iqm_by_hand():
+    assert render.iqm([0.0, 1.0, 2.0, 3.0]) == pytest.approx(1.5)              # (1 + 2) / 2
+    assert render.iqm([1.0, 0.0, 0.5, 0.2, 0.9]) == pytest.approx(1.6 / 3)    # int(5/4) = 1 cut each end
+    assert render.iqm([0.0, 0.0, 1.0]) == pytest.approx(1 / 3)                # int(3/4) = 0: the mean
+
+
+def test_bootstrap_interval_by_hand():
+    # three runs scoring 0, 0, 1: a resample is all zeros with probability 8/27 > 2.5 % and all ones
+    # with 1/27 > 2.5 %, so the 95 % percentile interval is [0, 1] around the IQM 1/3
+    mid, lo, hi = render.iqm_ci([0.0, 0.0, 1.0])
+    assert (mid, lo, hi) == (pytest.approx(1 / 3), 0.0, 1.0)
+    # ten runs, nine 1s and a 0: P(no 0 drawn) = 0.9^10 = 0.35, so the upper end is 1; the IQM of a
+    # resample drops below 0.9 only with >= 2 zeros among 10 draws (P = 0.26 > 2.5 %)
+    mid, lo, hi = render.iqm_ci([1.0] * 9 + [0.0])
+    assert mid == pytest.approx(1.0) and hi == 1.0 and lo < 1.0
+    flat = render.iqm_ci(np.full(5, 0.4))
+    assert flat == pytest.approx((0.4, 0.4, 0.4))
+
+
+def test_bootstrap_is_stratified_by_task():
+    """Task A scores 0 on both runs, task B 1: a stratified resample always holds two 0s and two 1s
+    (IQM 0.5), a pooled one would not."""
+    mid, lo, hi = render.iqm_ci(np.array([[0.0, 1.0], [0.0, 1.0]]))
+    assert (mid, lo, hi) == pytest.approx((0.5, 0.5, 0.5))
+
+
+@pytest.mark.parametrize("rec, mode", [
+    ({"success": True, "collisions": 2}, None), ({"success": False, "collisions": 1, "violations": 3}, "collision"),
+    ({"success": False, "collisions": 0, "violations": 1, "terminated": True}, "violation"),
+    ({"success": False, "collisions": 0, "violations": 0, "terminated": True}, "left_region"),
+    ({"success": False, "collisions": 0, "violations": 0, "terminated": False}, "timeout")])
+def test_failure_mode(rec, mode):
+    assert scoring.failure_mode(rec) == mode
 
 
 @pytest.fixture
 def zero_trainer(monkeypatch):
-    """PPO replaced by a 'trainer' that reports the zero policy at every checkpoint (fast)."""
+    """Every trainer (and the controller) replaced by the zero policy at every checkpoint, on a few
+    test seeds (fast)."""
     calls = []
 
-    def fake(run, checkpoint, workdir):
+    def fake(run, checkpoint):
         from satenv import baselines
         calls.append(run.label())
         for k, steps in enumerate(run.checkpoints):
             checkpoint(k, steps, 0.1 * (k + 1), lambda env: baselines.make("zero", env))
 
-    monkeypatch.setitem(trainers.TRAINERS, "ppo", fake)
+    monkeypatch.setattr(trainers, "train", fake)
+    monkeypatch.setattr(G, "FINAL_TEST_SEEDS", 3)
+    monkeypatch.setattr(G, "CURVE_TEST_SEEDS", 2)
     return calls
 
 
 def test_runner_logs_every_checkpoint_and_resumes(tmp_path, zero_trainer):
     log = tmp_path / "log.jsonl"
-    run = G.Run("platoon-pereira2023", "ppo", False, 0, str(log), budget_override=5000)
+    run = G.Run("platoon-pereira2023", "ppo", False, 0, str(log), budget_override=5000, rung=RUNG)
     out = runner.run_one(run)
     assert [r["checkpoint"] for r in out["records"]] == list(range(G.CHECKPOINTS))
-    assert len(runner.read_log(log)) == G.CHECKPOINTS
+    assert [len(r["episodes"]) for r in out["records"]] == [2] * (G.CHECKPOINTS - 1) + [3]
+    assert {r["task"] for r in out["records"]} == {RUNG} and {r["rung"] for r in out["records"]} == {1}
     assert runner.done_runs([run], log) == {run}
-    # a second run writes nothing new
     runner.run_one(run)
     assert len(log.read_text().splitlines()) == G.CHECKPOINTS
-    # killed mid-line: the torn line is set aside, the run is no longer done, a resume writes only it
     lines = log.read_text().splitlines()
     log.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][: len(lines[-1]) // 2])
     with pytest.warns(UserWarning, match="torn or corrupt"):
@@ -90,44 +124,50 @@ def test_runner_logs_every_checkpoint_and_resumes(tmp_path, zero_trainer):
 def test_results_from_the_log(tmp_path, zero_trainer):
     log = tmp_path / "log.jsonl"
     for algo in ("controller", "ppo"):
-        runner.run_one(G.Run("platoon-pereira2023", algo, False, 0, str(log), budget_override=5000))
+        runner.run_one(G.Run("platoon-pereira2023", algo, False, 0, str(log), budget_override=5000, rung=RUNG))
     data = results.build_results(runner.read_log(log))
-    assert set(data["controllers"]) == {"platoon-pereira2023"}
+    assert set(data["controllers"]) == {RUNG}
     (rec,) = data["records"]
+    assert rec["rung"] == 1 and rec["task"] == RUNG
     assert [p[0] for p in rec["curve"]] == G.Run("platoon-pereira2023", "ppo", budget_override=5000).checkpoints
-    # the zero policy against the DMPC: success 0, and its delta-v ratio on matched episodes is 0
     assert rec["test"]["success_rate"] == 0.0
-    if rec["test"]["matched_seeds"]:
-        assert rec["test"]["delta_v_ratio"] == 0.0
+    assert sum(rec["test"]["failure_modes"].values()) == rec["test"]["episodes"] == 3
+    assert rec["command"] == ("satenv results run --systems platoon-pereira2023 --rungs 1 --algorithms ppo --seeds 0 "
+                              "--filter-systems '' --budget 5000")
     page = render.render_page(data)
-    assert "platoon, pereira2023" in page and "No success on any seed at the budget: PPO (SB3)" in page
+    assert "## platoon, pereira2023" in page and "rung 1: not solved by standard RL" in page
+    assert "| platoon, pereira2023: standard RL solves rung 1 (platoon-tplf30-rung1-near) | 0.00" in page
 
 
 def test_a_longer_budget_is_its_own_run_and_row(tmp_path, zero_trainer):
     log = tmp_path / "log.jsonl"
-    short, longer = (G.Run("platoon-pereira2023", "ppo", False, 0, str(log), budget_override=b) for b in (5000, 10000))
+    short, longer = (G.Run("platoon-pereira2023", "ppo", False, 0, str(log), budget_override=b, rung=RUNG)
+                     for b in (5000, 10000))
     runner.run_one(short)
     assert runner.done_runs([short, longer], log) == {short}
     runner.run_one(longer)
-    assert runner.done_runs([short, longer], log) == {short, longer}
     data = results.build_results(runner.read_log(log))
     assert sorted(r["budget_agent_steps"] for r in data["records"]) == [5000, 10000]
-    assert {r["command"].split("--budget ")[-1] for r in data["records"]} == {"5000", "10000"}
     page = render.render_page(data)
-    assert "PPO (SB3), 5,000 agent-steps" in page and "PPO (SB3), 10,000 agent-steps" in page
-    # the grid's own budget needs no --budget
-    assert "--budget" not in results.command("platoon-pereira2023", "ppo", False, 0, G.BUDGET_AGENT_STEPS["platoon-pereira2023"])
+    assert "PPO (lean), 5,000 agent-steps" in page and "PPO (lean), 10,000 agent-steps" in page
+    assert "--budget" not in results.command("platoon-pereira2023", 1, "ppo", False, "0",
+                                             G.BUDGET_AGENT_STEPS["platoon-pereira2023"])
 
 
-def test_grid_covers_the_targets():
-    runs = G.grid(list(G.BUDGET_AGENT_STEPS), G.DEFAULT_ALGORITHMS, [0, 1, 2])
-    systems = {r.system for r in runs}
-    assert len(systems) == 6
-    for s in systems:
-        algos = {r.algorithm for r in runs if r.system == s and not r.filter}
-        assert {"ppo", "mappo", "masac", "dagger", "controller"} <= algos
-        assert len({r.seed for r in runs if r.system == s and r.algorithm == "ppo"}) >= 3
-    assert {r.system for r in runs if r.filter} == set(G.FILTER_SYSTEMS)
+def test_grid_covers_the_ladders():
+    runs = G.grid(tasks.SYSTEMS, G.DEFAULT_ALGORITHMS, G.DEFAULT_SEEDS)
+    for system in tasks.SYSTEMS:
+        for rung in tasks.ladder(system):
+            mine = [r for r in runs if r.task.name == rung]
+            algos = {r.algorithm for r in mine if not r.filter}
+            assert {"ppo", "ippo", "mappo", "ppo_lag", "masac", "dagger", "controller"} <= algos
+            assert len({r.seed for r in mine if r.algorithm == "ppo"}) >= 5
+            assert any(r.filter for r in mine) == (system in G.FILTER_SYSTEMS)
+    assert all(G.BUDGET_AGENT_STEPS[s] >= 10_000_000 for s in tasks.SYSTEMS if s.startswith(("platoon", "formation")))
+    assert G.MASAC_UTD >= 0.25
+    assert [r.task.name for r in G.grid(["cluster-li2022"], ["ppo"], [0], (), rungs=[2])] == [tasks.ladder("cluster-li2022")[1]]
+    with pytest.raises(G.LearningError, match="rungs"):
+        G.grid(["cluster-li2022"], ["ppo"], [0], rungs=[4])
 
 
 def test_bad_run_fields_are_errors():
@@ -135,6 +175,8 @@ def test_bad_run_fields_are_errors():
         G.Run("platoon-pereira2023", "dqn")
     with pytest.raises(G.LearningError, match="seed"):
         G.Run("platoon-pereira2023", "ppo", seed=-1)
+    with pytest.raises(G.LearningError, match="rung"):
+        G.Run("platoon-pereira2023", "ppo", rung="cluster-case1-random")
     for bad in (-5, 2.5, True):
         with pytest.raises(G.LearningError, match="budget"):
             G.Run("platoon-pereira2023", "ppo", budget_override=bad)
@@ -147,10 +189,12 @@ def test_interventions_are_per_agent_step():
           "delta_v": 1.0, "safety_interventions": 10, "safety_infeasible": 0, "safety_steps": 10}
     block = results._test_block([ep], None, n_agents=2)
     assert block["interventions_per_agent_step"] == pytest.approx(0.5)
+    assert block["failure_modes"]["timeout"] == 1
 
 
 @pytest.mark.parametrize("args, field", [
     (["--budget", "-5"], "argument --budget: expected an int >= 0, got '-5'"), (["--seeds", "x"], "--seeds 'x'"),
+    (["--rungs", "x"], "--rungs 'x'"), (["--rungs", "4"], "rungs [4]"),
     (["--workers", "0"], "argument --workers: expected an int >= 1, got '0'"),
     (["--systems", "nope"], "--systems 'nope': expected comma-separated names"),
     (["--systems", ","], "--systems ',': expected comma-separated names"),

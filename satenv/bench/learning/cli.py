@@ -45,9 +45,13 @@ def _runs(ns: argparse.Namespace, log_path: Path) -> list:
         seeds = tasks.parse_seeds(ns.seeds)
     except SatenvError as exc:
         raise LearningError(f"--seeds {ns.seeds!r}: {exc}") from exc
+    try:
+        rungs = tasks.parse_seeds(ns.rungs) if ns.rungs else None
+    except SatenvError as exc:
+        raise LearningError(f"--rungs {ns.rungs!r}: {exc}") from exc
     return grid(_names(ns.systems, tasks.SYSTEMS, "systems"), _names(ns.algorithms, ALGORITHMS, "algorithms"),
                 seeds, _names(ns.filter_systems, tasks.SYSTEMS, "filter-systems") if ns.filter_systems else (),
-                log_path=str(log_path.resolve()), budget=ns.budget)
+                log_path=str(log_path.resolve()), budget=ns.budget, rungs=rungs)
 
 
 def _estimate(todo: list, log: list[dict], workers: int = 1) -> str:
@@ -141,7 +145,8 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--systems", default=",".join(SYSTEM_ORDER), help="comma-separated systems (default: all)")
     r.add_argument("--algorithms", default=",".join(DEFAULT_ALGORITHMS),
                    help="comma-separated algorithms (default: %(default)s)")
-    r.add_argument("--seeds", default="0-2", help="training seeds, e.g. 0-2 (default: %(default)s)")
+    r.add_argument("--seeds", default="0-4", help="training seeds, e.g. 0-4 (default: %(default)s)")
+    r.add_argument("--rungs", default="", help="ladder rungs, 1 the easiest, e.g. 1 or 1-2 (default: every rung)")
     r.add_argument("--filter-systems", default=",".join(FILTER_SYSTEMS),
                    help="systems with the filter-in-training PPO row ('' for none)")
     r.add_argument("--budget", type=int_at_least(0), default=0,

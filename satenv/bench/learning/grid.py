@@ -1,16 +1,17 @@
-"""The grid of the reference results: which runs, at which budget, evaluated where.
+"""The grid of the reference results: which runs, on which rung, at which budget, evaluated where.
 
-A :class:`Run` is one ``(system, algorithm, filter in training, seed)`` training run on the
-system's training task (:func:`satenv.tasks.training_task`); it is evaluated at
-:data:`CHECKPOINTS` evenly spaced checkpoints on the first :data:`TEST_SEEDS_PER_CHECKPOINT` test
-seeds of the task (the same seeds every checkpoint, every algorithm and the controller). The
-controller of the system is one more run (``algorithm="controller"``, no training) on the same
-seeds: the horizontal line of the figures and the reference of the RMSE and delta-v ratios.
+A :class:`Run` is one ``(rung, algorithm, filter in training, seed)`` training run on a task of the
+system's ladder (:func:`satenv.tasks.ladder`: easiest first, ending at the system's training task).
+It is evaluated at :data:`CHECKPOINTS` evenly spaced checkpoints: the intermediate ones on the first
+:data:`CURVE_TEST_SEEDS` test seeds of the rung (the learning curves), the last one on the first
+:data:`FINAL_TEST_SEEDS` (the published result); the same seeds for every algorithm and the
+controller. Nothing is chosen on test seeds: the algorithms run at their defaults (and their tuned
+configurations, chosen on validation seeds, where one is committed). The controller of the system is
+one more run per rung (``algorithm="controller"``, no training).
 
-Budgets (:data:`BUDGET_AGENT_STEPS`) are agent-steps, the same for every RL algorithm of a task
-(SB3 counts agent-steps; BenchMARL frames are converted, one frame = every agent of one env copy
-acting once); DAgger's budget is expert labels (one label = one agent-step labelled by the
-expert), :data:`DAGGER_LABELS`. They are small: the grid was sized for 2 shared CPU cores.
+Budgets are agent-steps (one agent's one decision; BenchMARL frames are converted, one frame = every
+agent of one env copy acting once), the same for every RL algorithm of a system
+(:data:`BUDGET_AGENT_STEPS`); DAgger's budget is expert labels (:data:`DAGGER_LABELS`).
 """
 
 from __future__ import annotations
@@ -21,39 +22,44 @@ from typing import Any
 
 from satenv import tasks
 
-__all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "DAGGER_LABELS", "DEFAULT_SEEDS", "FILTER_SYSTEMS", "KEY",
-           "RL_ALGORITHMS", "Run", "TEST_SEEDS_PER_CHECKPOINT", "LearningError", "grid", "test_seeds"]
+__all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "CURVE_TEST_SEEDS", "DAGGER_LABELS", "DEFAULT_ALGORITHMS",
+           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_UTD", "RL_ALGORITHMS", "Run",
+           "LearningError", "grid", "test_seeds"]
 
 
 class LearningError(ValueError):
     """A bad grid or log entry (names the field, the value and what is expected)."""
 
 
-RL_ALGORITHMS = ("ppo", "mappo", "ippo", "masac", "isac")
-"""The RL rows: SB3 PPO (parameter-shared, ``satenv.training.train``) and BenchMARL's MAPPO, IPPO, MASAC
-and ISAC (``satenv.training.benchmarl_train``)."""
+RL_ALGORITHMS = ("ppo", "ippo", "mappo", "ppo_lag", "masac")
+"""The RL rows: the lean learner's PPO (parameter-shared), IPPO and MAPPO and PPO-Lagrangian
+(``satenv.training.rl``), BenchMARL's MASAC (``satenv.training.benchmarl_train``)."""
 ALGORITHMS = (*RL_ALGORITHMS, "dagger", "controller")
 """Every row of the grid; ``controller`` is the system's controller (no training, the reference)."""
-DEFAULT_ALGORITHMS = ("controller", "ppo", "mappo", "masac", "dagger")
-"""The rows run by default (IPPO and ISAC on request: ``--algorithms``)."""
+DEFAULT_ALGORITHMS = ("controller", "ppo", "ippo", "mappo", "ppo_lag", "masac", "dagger")
+"""The rows run by default."""
+STANDARD_RL = ("ppo", "ippo", "mappo", "masac")
+"""The standard (unconstrained) RL rows."""
 
-DEFAULT_SEEDS = (0, 1, 2)
+DEFAULT_SEEDS = (0, 1, 2, 3, 4)
 """Training seeds of every row."""
 
 CHECKPOINTS = 5
 """Evaluations per run, at 1/5, 2/5, ..., 5/5 of the budget (the last one is the test result)."""
-TEST_SEEDS_PER_CHECKPOINT = 5
-"""Test seeds of each evaluation: the first five of the task's test split (900000-900004)."""
+CURVE_TEST_SEEDS = 10
+"""Test seeds of an intermediate evaluation (a point of the learning curve)."""
+FINAL_TEST_SEEDS = 20
+"""Test seeds of the final evaluation (the published result)."""
 
 BUDGET_AGENT_STEPS: dict[str, int] = {
-    "platoon-pereira2023": 200_000,
-    "platoon-pereira2022": 200_000,
-    "formation-kannan2022-position": 200_000,
-    "formation-kannan2022-collision": 200_000,
-    "cluster-li2022": 200_000,
-    "servicing-pereira2022": 200_000,
+    "platoon-pereira2023": 10_000_000,
+    "platoon-pereira2022": 10_000_000,
+    "formation-kannan2022-position": 10_000_000,
+    "formation-kannan2022-collision": 10_000_000,
+    "cluster-li2022": 10_000_000,
+    "servicing-pereira2022": 10_000_000,
 }
-"""RL budget of each system's training task [agent-steps]."""
+"""RL budget of every rung of each system [agent-steps]."""
 
 DAGGER_LABELS: dict[str, int] = {
     "platoon-pereira2023": 14_400,
@@ -64,8 +70,11 @@ DAGGER_LABELS: dict[str, int] = {
     "servicing-pereira2022": 12_000,
 }
 """DAgger's budget of expert labels (agent-steps labelled by the expert): :data:`CHECKPOINTS` rounds
-of ``satenv.bench.learning.trainers.DAGGER_EPISODES`` whole episodes (agents x episode steps labels
-each); the expert's speed sets it (the servicing NMPC labels a few agent-steps per second)."""
+of ``satenv.bench.learning.trainers.DAGGER_EPISODES`` whole episodes; the expert's speed sets it."""
+
+MASAC_UTD = 0.25
+"""MASAC's update-to-data ratio: gradient steps per frame (BenchMARL's off-policy optimiser steps
+per collected frame)."""
 
 FILTER_SYSTEMS = ("cluster-li2022", "servicing-pereira2022", "platoon-pereira2022")
 """The systems whose PPO row is run once more with the safety filter in the training env."""
@@ -73,7 +82,7 @@ FILTER_PENALTY = 0.1
 """Reward penalty per unit of filter correction ``|du|`` in the filtered training env
 (``satenv.safety.SafetyConfig.penalty``)."""
 
-KEY = ("system", "algorithm", "filter", "seed", "budget_agent_steps", "checkpoint")
+KEY = ("task", "algorithm", "filter", "seed", "budget_agent_steps", "checkpoint")
 """The key of a log record: one evaluation of one run (a run at another budget, ``--budget``, is
 another run)."""
 
@@ -88,10 +97,15 @@ class Run:
     seed: int = 0
     log_path: str = ""
     budget_override: int = 0
-    """RL agent-steps instead of :data:`BUDGET_AGENT_STEPS` (0: the grid's budget; smoke tests)."""
+    """RL agent-steps instead of :data:`BUDGET_AGENT_STEPS` (0: the grid's budget)."""
+    rung: str = ""
+    """The ladder task the run trains and is tested on ('': the system's training task)."""
 
     def __post_init__(self) -> None:
         tasks.system(self.system)
+        if self.rung and self.rung not in tasks.ladder(self.system):
+            raise LearningError(f"rung must be a task of {self.system}'s ladder {list(tasks.ladder(self.system))}, "
+                                f"got {self.rung!r}")
         if self.algorithm not in ALGORITHMS:
             raise LearningError(f"algorithm must be one of {list(ALGORITHMS)}, got {self.algorithm!r}")
         if not isinstance(self.filter, bool):
@@ -104,7 +118,12 @@ class Run:
 
     @property
     def task(self) -> tasks.Task:
-        return tasks.training_task(self.system)
+        return tasks.get(self.rung) if self.rung else tasks.training_task(self.system)
+
+    @property
+    def rung_index(self) -> int:
+        """1 for the ladder's first (easiest) rung."""
+        return tasks.ladder(self.system).index(self.task.name) + 1
 
     @property
     def budget(self) -> int:
@@ -122,8 +141,12 @@ class Run:
             return [0]
         return [round(self.budget * (k + 1) / CHECKPOINTS) for k in range(CHECKPOINTS)]
 
+    def seeds(self, k: int) -> tuple[int, ...]:
+        """The test seeds of checkpoint ``k`` (:data:`FINAL_TEST_SEEDS` at the last one)."""
+        return test_seeds(self.task.name, k == len(self.checkpoints) - 1)
+
     def key(self, checkpoint: int) -> tuple[Any, ...]:
-        return (self.system, self.algorithm, self.filter, self.seed, self.budget, checkpoint)
+        return (self.task.name, self.algorithm, self.filter, self.seed, self.budget, checkpoint)
 
     @property
     def longer(self) -> bool:
@@ -132,30 +155,38 @@ class Run:
 
     def label(self) -> str:
         budget = f"@{self.budget}" if self.longer else ""
-        return f"{self.system}/{self.algorithm}{'+filter' if self.filter else ''}{budget}/seed{self.seed}"
+        return f"{self.task.name}/{self.algorithm}{'+filter' if self.filter else ''}{budget}/seed{self.seed}"
 
     def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in asdict(self).items() if k not in ("log_path", "budget_override")}
+        return {**{k: v for k, v in asdict(self).items() if k not in ("log_path", "budget_override", "rung")},
+                "task": self.task.name}
 
 
-def test_seeds(system: str) -> tuple[int, ...]:
-    """The test seeds every evaluation of ``system`` uses."""
-    return tasks.training_task(system).seeds("test", TEST_SEEDS_PER_CHECKPOINT)
+def test_seeds(task: str, final: bool = True) -> tuple[int, ...]:
+    """The test seeds of an evaluation on ``task`` (final: :data:`FINAL_TEST_SEEDS`, else
+    :data:`CURVE_TEST_SEEDS`; the curve's are the first of the final's)."""
+    return tasks.get(task).seeds("test", FINAL_TEST_SEEDS if final else CURVE_TEST_SEEDS)
 
 
 def grid(systems: Iterable[str], algorithms: Iterable[str], seeds: Iterable[int],
          filter_systems: Iterable[str] = FILTER_SYSTEMS, filter_algorithm: str = "ppo",
-         log_path: str = "", budget: int = 0) -> list[Run]:
-    """Every run: per system, the controller once, then each algorithm x seed, then the
-    filter-in-training row (``filter_algorithm``) on ``filter_systems``; cheap systems first
-    (the order of ``systems``)."""
+         log_path: str = "", budget: int = 0, rungs: Iterable[int] | None = None) -> list[Run]:
+    """Every run: per system and rung (``rungs``: 1-based indices of the ladder, default all; easiest
+    first), the controller once, then each algorithm x seed, then the filter-in-training row
+    (``filter_algorithm``) on ``filter_systems``; systems in the order given."""
     algorithms, seeds, filt = list(algorithms), list(seeds), set(filter_systems)
     runs = []
     for system in systems:
-        if "controller" in algorithms:
-            runs.append(Run(system, "controller", False, 0, log_path, budget))
-        for seed in seeds:
-            runs += [Run(system, a, False, seed, log_path, budget) for a in algorithms if a != "controller"]
-            if system in filt and filter_algorithm in algorithms:
-                runs.append(Run(system, filter_algorithm, True, seed, log_path, budget))
+        ladder = tasks.ladder(system)
+        picked = list(rungs) if rungs is not None else list(range(1, len(ladder) + 1))
+        bad = [i for i in picked if not 1 <= i <= len(ladder)]
+        if bad:
+            raise LearningError(f"rungs {bad}: {system}'s ladder has rungs 1-{len(ladder)}")
+        for rung in (ladder[i - 1] for i in picked):
+            if "controller" in algorithms:
+                runs.append(Run(system, "controller", False, 0, log_path, budget, rung))
+            for seed in seeds:
+                runs += [Run(system, a, False, seed, log_path, budget, rung) for a in algorithms if a != "controller"]
+                if system in filt and filter_algorithm in algorithms:
+                    runs.append(Run(system, filter_algorithm, True, seed, log_path, budget, rung))
     return runs

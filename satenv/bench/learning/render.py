@@ -2,10 +2,9 @@
 from ``results.json`` alone (:func:`render_page` is a pure function of the file: a test checks
 that the committed page equals it).
 
-Learning curves: per algorithm, the interquartile mean (IQM) of the success rate over seeds at
-each checkpoint, with a 95 % stratified bootstrap interval over seeds (one task per figure, so
-the stratified bootstrap resamples the seeds; :func:`iqm_band`, the estimator of rliable, with
-numpy and scipy: rliable's ``arch`` dependency does not import with this project's pandas).
+Statistics are rliable's (Agarwal et al. 2021), written with numpy: the interquartile mean (IQM,
+:func:`iqm`) of the runs' scores and its 95 % percentile interval by the stratified bootstrap
+(:func:`iqm_ci`: the runs of each task resampled with replacement, independently per task).
 """
 
 from __future__ import annotations
@@ -21,32 +20,45 @@ import numpy as np
 from satenv import scoring, tasks
 from satenv.bench.learning import grid as G
 
-__all__ = ["ASSETS", "PAGE", "iqm", "iqm_band", "read_manifest", "render_page", "write_figures", "write_page"]
+__all__ = ["ASSETS", "PAGE", "SOLVED_MIN_SEEDS", "iqm", "iqm_ci", "read_manifest", "render_page", "write_figures",
+           "write_page"]
 
 ROOT = Path(__file__).resolve().parents[3]
 PAGE = ROOT / "docs" / "reference_results.md"
 ASSETS = ROOT / "docs" / "assets" / "reference_results"
 BOOTSTRAP_REPS = 2000
-"""Bootstrap resamples of each interval (seeded: the figures are reproducible)."""
-LABELS = {"ppo": "PPO (SB3)", "mappo": "MAPPO (BenchMARL)", "ippo": "IPPO (BenchMARL)",
-          "masac": "MASAC (BenchMARL)", "isac": "ISAC (BenchMARL)", "dagger": "DAgger of the expert"}
+"""Bootstrap resamples of each interval (seeded: the page is reproducible)."""
+SOLVED_MIN_SEEDS = 5
+"""A rung is solved by a row when its mean test success is at least ``scoring.SUCCESS_MIN`` over at
+least this many training seeds (the target: "some standard RL algorithm reaches mean test success
+>= 0.9 over >= 5 training seeds")."""
+UPPER_RUNG_MIN = 0.5
+"""The cluster and servicing target on a rung above the first: success >= 0.5."""
+LABELS = {"ppo": "PPO (lean)", "ippo": "IPPO (lean)", "mappo": "MAPPO (lean)", "ppo_lag": "PPO-Lagrangian (lean)",
+          "masac": "MASAC (BenchMARL)", "dagger": "DAgger of the expert"}
+FAILURE_LABELS = {"timeout": "timeout", "left_region": "left", "collision": "collision", "violation": "violation"}
 
 
-def iqm(x: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Interquartile mean (the mean of the middle 50 %, ``scipy.stats.trim_mean(x, 0.25)``)."""
-    from scipy import stats
+def iqm(scores: Any) -> float:
+    """Interquartile mean of every score (rliable's ``scipy.stats.trim_mean(x, 0.25, axis=None)``:
+    ``int(n / 4)`` scores cut at each end of the sorted scores, the rest averaged)."""
+    x = np.sort(np.asarray(scores, dtype=float).ravel())
+    k = int(0.25 * x.size)
+    return float(x[k:x.size - k].mean())
 
-    return stats.trim_mean(x, 0.25, axis=axis)
 
-
-def iqm_band(scores: np.ndarray, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """IQM over seeds of ``scores`` ``(seeds, checkpoints)`` and its 95 % bootstrap interval
-    (percentile; seeds resampled with replacement, the same resample for every checkpoint)."""
-    scores = np.asarray(scores, dtype=float)
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, scores.shape[0], size=(reps, scores.shape[0]))
-    boot = np.stack([iqm(scores[i]) for i in idx])
-    return iqm(scores), np.percentile(boot, 2.5, axis=0), np.percentile(boot, 97.5, axis=0)
+def iqm_ci(scores: Any, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> tuple[float, float, float]:
+    """IQM of ``scores`` ``(runs,)`` or ``(runs, tasks)`` and its 95 % stratified-bootstrap interval
+    (percentile): each resample draws ``runs`` runs with replacement from each task's column,
+    independently per task, and takes the IQM of all the drawn scores."""
+    s = np.asarray(scores, dtype=float)
+    s = s[:, None] if s.ndim == 1 else s
+    runs, n_tasks = s.shape
+    idx = np.random.default_rng(seed).integers(0, runs, size=(reps, runs, n_tasks))
+    boot = np.sort(np.take_along_axis(np.broadcast_to(s, (reps, runs, n_tasks)), idx, axis=1).reshape(reps, -1), axis=1)
+    k = int(0.25 * boot.shape[1])
+    stats = boot[:, k:boot.shape[1] - k].mean(axis=1)
+    return iqm(s), float(np.percentile(stats, 2.5)), float(np.percentile(stats, 97.5))
 
 
 Group = tuple[str, bool, int]
@@ -54,15 +66,17 @@ Group = tuple[str, bool, int]
 
 
 def _longer(rec: dict[str, Any]) -> int:
-    run = G.Run(rec["system"], rec["algorithm"], rec["filter"], rec["seed"],
-                budget_override=int(rec.get("budget_agent_steps") or 0))
+    if rec["algorithm"] not in G.RL_ALGORITHMS:
+        return 0
+    run = G.Run(rec["system"], rec["algorithm"], rec["filter"], budget_override=int(rec.get("budget_agent_steps") or 0))
     return run.budget if run.longer else 0
 
 
-def _groups(results: dict[str, Any]) -> dict[str, dict[Group, list[dict[str, Any]]]]:
-    out: dict[str, dict[Group, list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
+def _groups(results: dict[str, Any]) -> dict[str, dict[Group, dict[int, list[dict[str, Any]]]]]:
+    """system -> row -> rung -> the row's runs on that rung."""
+    out: dict[str, Any] = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
     for rec in results["records"]:
-        out[rec["system"]][(rec["algorithm"], rec["filter"], _longer(rec))].append(rec)
+        out[rec["system"]][(rec["algorithm"], rec["filter"], _longer(rec))][rec["rung"]].append(rec)
     return out
 
 
@@ -71,88 +85,174 @@ def _order(group: Group) -> tuple[int, bool, int]:
 
 
 def _label(algo: str, filtered: bool, budget: int = 0) -> str:
-    return (LABELS[algo] + (" + filter in training" if filtered else "")
+    return (LABELS.get(algo, algo) + (" + filter in training" if filtered else "")
             + (f", {budget:,} agent-steps" if budget else ""))
 
 
-def _fmt(x: Any, nd: int = 2) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
+def _successes(recs: list[dict[str, Any]]) -> np.ndarray:
+    return np.array([r["test"]["success_rate"] for r in recs], dtype=float)
+
+
+def _solved(recs: list[dict[str, Any]]) -> bool:
+    return len(recs) >= SOLVED_MIN_SEEDS and float(_successes(recs).mean()) >= scoring.SUCCESS_MIN
+
+
+def _cell(recs: list[dict[str, Any]] | None) -> str:
+    if not recs:
         return "–"
-    return f"{x:.{nd}f}" if isinstance(x, float) else str(x)
-
-
-def _final_row(label: str, recs: list[dict[str, Any]], n_test: int) -> str:
-    t = [r["test"] for r in recs]
-    succ = [x["success_rate"] for x in t]
-
-    def mean(key: str, nd: int = 2) -> str:
-        vals = [x[key] for x in t if x.get(key) is not None]
-        return _fmt(float(np.mean(vals)), nd) if vals else "–"
-
-    steps = sorted({r["agent_steps"] for r in recs})
-    cmd = recs[0]["command"].replace(f"--seeds {recs[0]['seed']}", f"--seeds {_seeds(recs)}")
-    return (f"| {label} | {len(recs)} | {np.mean(succ):.2f} [{min(succ):.1f}, {max(succ):.1f}] | "
-            f"{sum(x['collision_episodes'] for x in t)}/{n_test * len(recs)} | "
-            f"{sum(x['violation_episodes'] for x in t)}/{n_test * len(recs)} | {mean('rmse_ratio')} | "
-            f"{mean('delta_v_ratio')} | {mean('interventions_per_agent_step', 3)} | "
-            f"{'/'.join(f'{s:,}' for s in steps)} | {np.mean([r['wall_s'] for r in recs]):.0f} | `{cmd}` |")
+    mid, lo, hi = iqm_ci(_successes(recs))
+    mark = " **solved**" if _solved(recs) else ""
+    return f"{mid:.2f} [{lo:.2f}, {hi:.2f}] ({len(recs)}){mark}"
 
 
 def _seeds(recs: list[dict[str, Any]]) -> str:
     return tasks.show_seeds(sorted(r["seed"] for r in recs))
 
 
+def _failures(recs: list[dict[str, Any]]) -> str:
+    total = {m: sum(r["test"]["failure_modes"][m] for r in recs) for m in scoring.FAILURE_MODES}
+    shown = [f"{FAILURE_LABELS[m]} {n}" for m, n in total.items() if n]
+    return ", ".join(shown) if shown else "none"
+
+
+def _detail_row(group: Group, rung: int, recs: list[dict[str, Any]]) -> str:
+    t = [r["test"] for r in recs]
+    n_eps = sum(x["episodes"] for x in t)
+    mid, lo, hi = iqm_ci(_successes(recs))
+    cmd = recs[0]["command"].replace(f"--seeds {recs[0]['seed']}", f"--seeds {_seeds(recs)}")
+    steps = sorted({r["agent_steps"] for r in recs})
+    return (f"| {rung} | {_label(*group)} | {len(recs)} | {_successes(recs).mean():.2f} | {mid:.2f} [{lo:.2f}, {hi:.2f}] | "
+            f"{sum(x['collision_episodes'] for x in t)}/{n_eps} | {sum(x['violation_episodes'] for x in t)}/{n_eps} | "
+            f"{_failures(recs)} | {'/'.join(f'{s:,}' for s in steps)} | {np.mean([r['wall_s'] for r in recs]):.0f} | "
+            f"`{cmd}` |")
+
+
 def _load_note(results: dict[str, Any]) -> str:
     loads = [r["load_avg_1m"] for r in results["records"] if r.get("load_avg_1m") is not None]
     if not loads:
         return "on two CPU cores shared with other jobs"
-    spread = max((max(w) / min(w) for rows in _groups(results).values() for recs in rows.values()
-                  if len(w := [r["wall_s"] for r in recs if r.get("wall_s")]) > 1), default=1.0)
     return (f"on two CPU cores shared with other jobs (1-minute load average {min(loads):.0f}-{max(loads):.0f} "
-            f"at the checkpoints); the seeds of one row differ by up to {spread:.0f}x with the load and the run's "
-            "share of the CPU, so compare algorithms by their budgets, not by this column")
+            "at the checkpoints): compare algorithms by their budgets, not by this column")
 
 
-def _says(system: str, groups: dict[Group, list[dict[str, Any]]], ctrl: dict[str, Any] | None) -> str:
-    """What the curves say, from the numbers (the rule is written on the page)."""
-    learned, partial, none = [], [], []
-    for group, recs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
-        finals = np.array([r["test"]["success_rate"] for r in recs])
-        label = _label(*group)
-        if iqm(finals) >= scoring.SUCCESS_MIN:
-            learned.append(label)
-        elif finals.max() > 0:
-            partial.append(f"{label} (final success IQM {iqm(finals):.2f}, best seed {finals.max():.2f})")
-        else:
-            none.append(label)
-    parts = []
-    if ctrl:
-        parts.append(f"The controller ({ctrl['controller']}) succeeds on "
-                     f"{ctrl['test']['success_rate']:.2f} of the test seeds.")
-    parts.append("Reaches the success bar at the budget: " + (", ".join(learned) if learned else "none") + ".")
-    if partial:
-        parts.append("Some success, below the bar: " + "; ".join(partial) + ".")
-    if none:
-        parts.append("No success on any seed at the budget: " + ", ".join(none) + ".")
-    return " ".join(parts)
+def _rates(results: dict[str, Any]) -> list[str]:
+    """Measured training speed per system and algorithm (agent-steps per second of training wall
+    time, median over runs) and what the default grid costs at it."""
+    speed: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for r in results["records"]:
+        if r["algorithm"] in G.RL_ALGORITHMS and r.get("wall_s"):
+            speed[(r["system"], r["algorithm"])].append(r["agent_steps"] / r["wall_s"])
+    if not speed:
+        return []
+    lines = ["Measured training speed (agent-steps per second of training wall time, median over the runs, "
+             "one worker under `nice` on the shared cores) and the hours one run of the grid's budget takes at it:", "",
+             "| system | algorithm | runs | agent-steps/s | hours per run at the grid's budget |", "|---|---|---|---|---|"]
+    for (system, algo), v in sorted(speed.items(), key=lambda kv: (list(tasks.SYSTEMS).index(kv[0][0]),
+                                                                  G.ALGORITHMS.index(kv[0][1]))):
+        rate = float(np.median(v))
+        hours = results["grid"]["budget_agent_steps"][system] / rate / 3600
+        lines.append(f"| {system} | {LABELS[algo]} | {len(v)} | {rate:,.0f} | {hours:.1f} |")
+    return lines + [""]
 
 
-def _summary(results: dict[str, Any], groups: dict[str, Any]) -> list[str]:
-    """Final success per system and row: IQM over seeds (number of seeds)."""
-    cols = sorted({g for s in tasks.SYSTEMS for g in groups.get(s, {})}, key=_order)
-    lines = ["## Summary", "",
-             "Final test success rate per system (IQM over seeds, number of seeds in brackets; `–`: not run "
-             "yet). The sections below have the curves, every test metric and the commands.", "",
-             "| system | controller | " + " | ".join(_label(*g) for g in cols) + " |",
-             "|---" * (len(cols) + 2) + "|"]
+def _solved_rungs(groups: dict[Group, dict[int, list[dict[str, Any]]]], standard: tuple[str, ...]) -> dict[int, list[str]]:
+    out: dict[int, list[str]] = defaultdict(list)
+    for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+        if group[0] in standard and not group[1]:
+            for rung, recs in rungs.items():
+                if _solved(recs):
+                    out[rung].append(_label(*group))
+    return out
+
+
+def _targets(results: dict[str, Any], groups: dict[str, Any]) -> list[str]:
+    """The targets, each with its measured number (best row) or 'not run yet'."""
+    lines = ["## Targets", "",
+             f"Rule: a row solves a rung when its mean test success over >= {SOLVED_MIN_SEEDS} training seeds is "
+             f">= {scoring.SUCCESS_MIN} (`satenv.scoring.SUCCESS_MIN`); standard RL = "
+             f"{', '.join(LABELS[a] for a in G.STANDARD_RL)}; constrained RL = {LABELS['ppo_lag']}.", "",
+             "| target | measured (best row: mean success over its seeds) | met |", "|---|---|---|"]
+
+    def best(system: str, rung: int, algos: tuple[str, ...]) -> tuple[float, str, int] | None:
+        found = [(float(_successes(recs).mean()), _label(*g), len(recs))
+                 for g, rungs in groups.get(system, {}).items() if g[0] in algos and not g[1]
+                 for r, recs in rungs.items() if r == rung]
+        return max(found) if found else None
+
     for name, sysdef in tasks.SYSTEMS.items():
-        ctrl = results["controllers"].get(name)
-        cells = [f"{ctrl['test']['success_rate']:.2f}" if ctrl else "–"]
-        for key in cols:
-            recs = groups.get(name, {}).get(key)
-            cells.append(f"{iqm(np.array([r['test']['success_rate'] for r in recs])):.2f} ({len(recs)})"
-                         if recs else "–")
-        lines.append(f"| {sysdef.label} | " + " | ".join(cells) + " |")
+        ladder = results["grid"]["ladders"][name]
+        checks = [(f"{sysdef.label}: standard RL solves rung 1 ({ladder[0]})", 1, G.STANDARD_RL, scoring.SUCCESS_MIN)]
+        if name == "platoon-pereira2023":
+            checks.append((f"{sysdef.label}: standard RL solves the training task ({ladder[-1]})", len(ladder),
+                           G.STANDARD_RL, scoring.SUCCESS_MIN))
+        if name in ("cluster-li2022", "servicing-pereira2022"):
+            for rung in range(2, len(ladder) + 1):
+                checks.append((f"{sysdef.label}: standard or constrained RL >= {UPPER_RUNG_MIN} on rung {rung} "
+                               f"({ladder[rung - 1]})", rung, (*G.STANDARD_RL, "ppo_lag"), UPPER_RUNG_MIN))
+        for text, rung, algos, bar in checks:
+            b = best(name, rung, algos)
+            if b is None:
+                lines.append(f"| {text} | not run yet | – |")
+                continue
+            met = b[0] >= bar and b[2] >= SOLVED_MIN_SEEDS
+            lines.append(f"| {text} | {b[0]:.2f} ({b[1]}, {b[2]} seed{'s' if b[2] > 1 else ''}) | {'yes' if met else 'no'} |")
+    lines += ["", "Success along each ladder (mean success of the best standard-RL row per rung; the target: it falls "
+              "from rung 1 to the last rung):", ""]
+    for name, sysdef in tasks.SYSTEMS.items():
+        ladder = results["grid"]["ladders"][name]
+        vals = []
+        for rung in range(1, len(ladder) + 1):
+            b = best(name, rung, G.STANDARD_RL)
+            vals.append("–" if b is None else f"{b[0]:.2f}")
+        known = [float(v) for v in vals if v != "–"]
+        verdict = ("not measured on every rung yet" if len(known) < len(ladder)
+                   else "falls" if all(a >= b for a, b in zip(known, known[1:])) and known[0] > known[-1]
+                   else "does not fall")
+        lines.append(f"- {sysdef.label}: {' -> '.join(vals)} ({verdict})")
+    return lines + [""]
+
+
+def _says(system: str, groups: dict[Group, dict[int, list[dict[str, Any]]]], n_rungs: int) -> str:
+    solved = _solved_rungs(groups, G.STANDARD_RL)
+    if not groups:
+        return "No RL run complete yet."
+    parts = []
+    for rung in range(1, n_rungs + 1):
+        if rung in solved:
+            parts.append(f"rung {rung}: solved by {', '.join(solved[rung])}")
+        elif any(rung in r for r in groups.values()):
+            parts.append(f"rung {rung}: not solved by standard RL at the budgets run")
+        else:
+            parts.append(f"rung {rung}: not run yet")
+    return "Standard RL: " + "; ".join(parts) + "."
+
+
+def _system_section(name: str, results: dict[str, Any], groups: dict[Group, dict[int, list[dict[str, Any]]]]) -> list[str]:
+    sysdef = tasks.SYSTEMS[name]
+    ladder = results["grid"]["ladders"][name]
+    lines = [f"## {sysdef.label}", "", f"Controller `{sysdef.controller}`, expert `{sysdef.expert}`. Ladder (easiest first; "
+             "the last rung is the training task):", "", "| rung | task | what it changes | controller success (test seeds) |",
+             "|---|---|---|---|"]
+    for k, task in enumerate(ladder, start=1):
+        ctrl = results["controllers"].get(task)
+        c = f"{ctrl['test']['success_rate']:.2f} ({ctrl['test']['episodes']} seeds)" if ctrl else "not run yet"
+        lines.append(f"| {k} | `{task}` | {tasks.get(task).description} | {c} |")
+    lines += ["", _says(name, groups, len(ladder)), ""]
+    if not groups:
+        return lines
+    lines += [f"![learning curves, {sysdef.label}](assets/reference_results/{name}.png)", "",
+              "Final test success per rung: IQM over training seeds [95 % stratified-bootstrap interval] (seeds); "
+              "**solved**: mean success >= 0.9 over >= 5 seeds.", "",
+              "| algorithm | " + " | ".join(f"rung {k}" for k in range(1, len(ladder) + 1)) + " |",
+              "|---" * (len(ladder) + 1) + "|"]
+    for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+        lines.append(f"| {_label(*group)} | " + " | ".join(_cell(rungs.get(k)) for k in range(1, len(ladder) + 1)) + " |")
+    lines += ["", "| rung | algorithm | seeds | success (mean) | success IQM [95 % CI] | collision episodes | "
+              "violation episodes | failure modes (episodes) | agent-steps (labels) | train wall [s] | command |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+        for rung in sorted(rungs):
+            lines.append(_detail_row(group, rung, rungs[rung]))
     return lines + [""]
 
 
@@ -192,81 +292,62 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
     """The markdown of the page (a pure function of ``results`` and the datasets' manifest)."""
     g = results["grid"]
     groups = _groups(results)
-    n_test = g["test_seeds_per_checkpoint"]
+    budgets = ", ".join(f"{s}: {b:,}" for s, b in g["budget_agent_steps"].items())
     lines = [
         "# Reference results",
         "",
-        "What standard algorithms reach on each paper system's **training task** (randomised starts, "
-        "`satenv.tasks`) at a fixed, small budget, next to the system's controller: "
-        "learning curves and final test results, every number from "
-        "`studies/reference_results/results.json`, rendered by "
-        "`python -m satenv.bench.learning render` from that file alone.",
+        "What standard learning algorithms reach on every rung of each paper system's **ladder** "
+        "(`satenv.tasks.ladder(system)`: easiest first, ending at the system's training task), next to the "
+        "system's controller: learning curves and final test results, every number from "
+        "`studies/reference_results/results.json`, rendered by `satenv results render` from that file alone.",
         "",
         "## Protocol",
         "",
-        f"- **Budget**: the same number of agent-steps for every RL algorithm of a task "
-        f"({', '.join(f'{s}: {b:,}' for s, b in g['budget_agent_steps'].items())}); DAgger gets expert "
-        f"labels instead ({', '.join(f'{s}: {b:,}' for s, b in g['dagger_labels'].items())}). The "
-        "budgets were sized for two shared CPU cores, not for convergence: a row that does not learn "
-        "here may learn with more. A row labelled with a number of agent-steps ran at that longer budget "
-        "(`--budget`), on the systems and algorithms where it was run, with everything else the same.",
-        f"- **Checkpoints**: {g['checkpoints']} evaluations per run, evenly spaced over the budget "
-        "(RL budgets are rounded up to whole collection rounds; the agent-steps actually run are in the "
-        "table). Each evaluation flies the deterministic policy on the task's **first "
-        f"{n_test} test seeds** (900000-{900000 + n_test - 1}); the controller flies the same seeds. "
-        "The last checkpoint is the test result.",
-        "- **Seeds**: training seeds 0-2 per row (the table's `seeds` column says how many have run); "
-        "curves show the interquartile mean (IQM) over seeds and its 95 % stratified bootstrap interval "
-        f"(seeds resampled, {BOOTSTRAP_REPS} resamples): rliable's estimator, computed with numpy and "
-        "scipy (rliable's `arch` dependency does not import beside this project's pandas).",
+        f"- **Budget**: the grid's budget is the same number of agent-steps for every RL algorithm and rung of a "
+        f"system ({budgets}); DAgger gets expert labels instead "
+        f"({', '.join(f'{s}: {b:,}' for s, b in g['dagger_labels'].items())}). A row labelled with a number of "
+        "agent-steps ran at that budget instead (`--budget`), everything else the same: the first table of the "
+        "grid was run at 3,000,000 agent-steps to have numbers within minutes. On the cluster and servicing the "
+        "grid's budget is where the learning loop's measured speed allows five seeds per row in about a day "
+        "(speeds below).",
+        "- **Smoke tests**: the earlier grid of this page (SB3 PPO, BenchMARL MAPPO and MASAC at 200,000 "
+        "agent-steps, 3 seeds, 5 test seeds, on the training tasks only) was a smoke test of the pipeline, not a "
+        "result; its log is kept in `studies/reference_results/smoke_200k_log.jsonl` and is not on this page.",
+        f"- **Evaluations**: {g['checkpoints']} per run, evenly spaced over the budget. Each flies the "
+        f"deterministic policy on the rung's first {g['curve_test_seeds']} test seeds (the curves), the last "
+        f"one on its first {g['final_test_seeds']} test seeds (the published result). No test seed chose "
+        "anything: the learners run at their defaults.",
+        f"- **Seeds**: training seeds {tasks.show_seeds(g['default_seeds'])} per row; the tables say how many "
+        "have run.",
+        f"- **Statistics**: IQM of the final success over training seeds with its 95 % stratified-bootstrap "
+        f"interval ({BOOTSTRAP_REPS} resamples, percentile), rliable's method written with numpy "
+        "(`satenv.bench.learning.render.iqm_ci`); the curves show the IQM and its interval at each evaluation.",
+        "- **Algorithms**: the lean batched learner `satenv.training.rl` (`satenv ppo`, the grid's default "
+        "trainer) as PPO (shared parameters), IPPO (per-agent parameters) and MAPPO (centralised critic), and as "
+        "**PPO-Lagrangian** (constrained RL: a dual variable on the episode `safety_cost` against the task's "
+        "`cost_budget`, `--lagrangian`); BenchMARL **MASAC** with "
+        f"{g['masac_utd']} gradient steps per frame; DAgger of the system's expert (`satenv imitate`, one round "
+        "per checkpoint); and PPO once more with the **safety filter in the training env** "
+        "(`task.make_env(safety_filter=True)`, the filter's defaults) on the cluster, servicing and §5.1 "
+        "platoon, evaluated behind the filter, as trained.",
+        "- **Failure modes** of each failed test episode (`satenv.scoring.failure_mode`, the first that applies): "
+        "collision, violation (a hard bound), left (ended early without either: an agent left the region), "
+        "timeout (reached the horizon outside the tolerance).",
         f"- **Wall time**: training only (evaluations excluded), mean over seeds, {_load_note(results)}.",
-        "- **Algorithms**, each at its trainer's documented defaults plus the fast configuration "
-        "(`satenv.bench.perf.learning.FAST_CONFIGS`, [Training](training.md#fast-configurations)): "
-        "SB3 PPO with parameter sharing (`satenv.training.train`), BenchMARL MAPPO and MASAC "
-        "(`satenv.training.benchmarl_train`), DAgger of the system's expert (`satenv imitate`, "
-        "one round per checkpoint), and PPO once more with the **safety filter in the training env** "
-        f"(`satenv.make(..., safety_filter=SafetyConfig(penalty={g['filter_penalty']}))`: the filter "
-        "corrects every action and the reward pays for each unit of correction) on the cluster, "
-        "servicing and §5.1 platoon; that row is evaluated behind the filter, as trained.",
-        "- **Success bar** (the sentence under each figure): final success IQM over seeds >= "
-        f"{scoring.SUCCESS_MIN} (`satenv.scoring.SUCCESS_MIN`).",
-        "- **Ratios**: RMSE and Δv over the controller's, on matched completed episodes "
-        "(`satenv.scoring.matched_ratios`), mean over seeds; `–` where no episode matched.",
         "",
         "Run, resume (the log is kill-safe; the same command skips what is logged) and render:",
         "",
         "```bash",
-        "nohup studies/reference_results/run_all.sh &  # the whole grid, breadth first; run it again to resume",
-        "python -m satenv.bench.learning results   # studies/reference_results/log.jsonl -> results.json",
-        "python -m satenv.bench.learning render    # results.json -> this page and its figures",
+        "nohup studies/reference_results/run_all.sh > studies/reference_results/run_all.out 2>&1 &  # cheapest cells first",
+        "satenv results results   # studies/reference_results/log.jsonl -> results.json",
+        "satenv results render    # results.json -> this page and its figures",
         "```",
         "",
-        "`--backend ray --address HOST:PORT` runs the grid on a Ray cluster (the scoreboard's backends).",
-        "",
-        *_summary(results, groups),
+        *_rates(results),
+        *_targets(results, groups),
     ]
-    for name, sysdef in tasks.SYSTEMS.items():
-        task = tasks.get(sysdef.training_task)
-        ctrl = results["controllers"].get(name)
-        lines += [f"## {sysdef.label}", "",
-                  f"Training task `{task.name}` ({task.description}); controller `{sysdef.controller}`, "
-                  f"expert `{sysdef.expert}`.", ""]
-        if name not in groups and not ctrl:
-            lines += ["Not run yet.", ""]
-            continue
-        lines += [f"![learning curves, {sysdef.label}](assets/reference_results/{name}.png)", "",
-                  _says(name, groups.get(name, {}), ctrl), "",
-                  "| algorithm | seeds | success (mean [min, max]) | collision episodes | violation episodes | "
-                  "RMSE ratio | Δv ratio | interventions / agent-step | agent-steps (labels) | train wall [s] | command |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
-        if ctrl:
-            t = ctrl["test"]
-            lines.append(f"| controller `{ctrl['controller']}` | – | {t['success_rate']:.2f} | "
-                         f"{t['collision_episodes']}/{t['episodes']} | {t['violation_episodes']}/{t['episodes']} | "
-                         f"1 | 1 | – | – | – | `{ctrl['command']}` |")
-        for group, recs in sorted(groups.get(name, {}).items(), key=lambda kv: _order(kv[0])):
-            lines.append(_final_row(_label(*group), recs, n_test))
-        lines.append("")
+    for name in tasks.SYSTEMS:
+        lines += _system_section(name, results, groups.get(name, {}))
     lines += _datasets_section(datasets or {})
     lines += ["## Not complete yet", ""]
     from satenv.bench.learning.results import run_key
@@ -279,60 +360,57 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         lines.append("Every run of the grid is complete.")
     if missing:
         lines += ["Runs with checkpoints missing (the resume command above completes them):", ""]
-        lines += [f"- {m['system']} / {_label(m['algorithm'], m['filter'], _longer(m)) if m['algorithm'] != 'controller' else 'controller'}"
+        lines += [f"- {m['task']} / {_label(m['algorithm'], m['filter'], _longer(m)) if m['algorithm'] != 'controller' else 'controller'}"
                   f" / seed {m['seed']}: checkpoints logged {m['checkpoints_logged']}" for m in missing] + [""]
     if results.get("not_run"):
-        by: dict[str, list[str]] = defaultdict(list)
-        for r in results["not_run"]:
-            name = "controller" if r["algorithm"] == "controller" else _label(r["algorithm"], r["filter"])
-            by[r["system"]].append(f"{name} seed {r['seed']}")
-        lines += [f"Not run yet ({len(results['not_run'])} runs of the grid; the resume command above runs them):", ""]
-        lines += [f"- {s}: {', '.join(v)}" for s, v in by.items()]
+        lines += [f"Runs of the grid at its budgets not run yet ({sum(results['not_run'].values())}; the resume "
+                  "command above runs them), per rung:", ""]
+        lines += [f"- `{t}`: {n}" for t, n in results["not_run"].items()]
     lines.append("")
     return "\n".join(lines)
 
 
 def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
-    """One learning-curve figure per system: success rate (IQM and 95 % band over seeds) and mean
-    return against agent-steps for the RL rows; DAgger against expert labels; the controller as a
-    horizontal line."""
+    """One learning-curve figure per system, a panel per rung: success rate on the test seeds (IQM
+    and 95 % stratified-bootstrap band over training seeds) against agent-steps for the RL rows; the
+    rung's controller as a horizontal line (DAgger, counted in expert labels, is in the tables)."""
     from matplotlib.ticker import EngFormatter
 
     from satenv.render import new_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, groups in _groups(results).items():
-        ctrl = results["controllers"].get(name)
-        fig = new_figure(figsize=(14, 3.8), dpi=80)
-        axes = fig.subplots(1, 3)
-        for (algo, filtered, budget), recs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
-            curves = np.array([r["curve"] for r in recs], dtype=float)    # seeds x checkpoints x 4
-            x = np.median(curves[:, :, 0], axis=0)
-            panels = [(axes[2], 1)] if algo == "dagger" else [(axes[0], 1), (axes[1], 2)]
-            for ax, col in panels:
-                mid, lo, hi = iqm_band(curves[:, :, col])
-                line, = ax.plot(x, mid, "o-", ms=3, label=_label(algo, filtered, budget))
-                ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
-        if ctrl:
-            for ax, value in ((axes[0], ctrl["test"]["success_rate"]), (axes[1], ctrl["mean_return"]),
-                              (axes[2], ctrl["test"]["success_rate"])):
-                ax.axhline(value, color="k", ls="--", lw=1, label=f"controller {ctrl['controller']}")
-        for ax, ylabel, xlabel in ((axes[0], "success rate (test seeds)", "agent-steps"),
-                                   (axes[1], "mean episode return", "agent-steps"),
-                                   (axes[2], "success rate (test seeds)", "expert labels (DAgger)")):
-            ax.set_xlabel(xlabel)
+    groups_of = _groups(results)
+    for name in set(tasks.SYSTEMS) - set(groups_of):   # no figure for a system without runs
+        (folder / f"{name}.png").unlink(missing_ok=True)
+    for name, groups in groups_of.items():
+        ladder = results["grid"]["ladders"][name]
+        fig = new_figure(figsize=(4.6 * len(ladder), 3.6), dpi=80)
+        axes = fig.subplots(1, len(ladder), squeeze=False)[0]
+        for k, (ax, task) in enumerate(zip(axes, ladder, strict=True), start=1):
+            for (algo, filtered, budget), rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+                if algo == "dagger" or k not in rungs:
+                    continue
+                curves = np.array([r["curve"] for r in rungs[k]], dtype=float)   # seeds x checkpoints x 4
+                x = np.median(curves[:, :, 0], axis=0)
+                band = np.array([iqm_ci(curves[:, j, 1]) for j in range(curves.shape[1])])
+                line, = ax.plot(x, band[:, 0], "o-", ms=3, label=_label(algo, filtered, budget))
+                ax.fill_between(x, band[:, 1], band[:, 2], color=line.get_color(), alpha=0.2)
+            if not any(k in rungs for rungs in groups.values()):
+                ax.set_xticks([])
+                ax.text(0.5, 0.5, "not run yet", ha="center", va="center", transform=ax.transAxes)
+            ctrl = results["controllers"].get(task)
+            if ctrl:
+                ax.axhline(ctrl["test"]["success_rate"], color="k", ls="--", lw=1, label=f"controller {ctrl['controller']}")
+            ax.set_title(f"rung {k}: {task}", fontsize=8)
+            ax.set_xlabel("agent-steps")
             ax.xaxis.set_major_formatter(EngFormatter(sep=" "))
-            ax.set_ylabel(ylabel)
+            ax.set_ylabel("success rate (test seeds)")
+            ax.set_ylim(-0.05, 1.05)
             ax.grid(alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=7)
-        for ax in (axes[0], axes[2]):
-            ax.set_ylim(-0.05, 1.05)
-        if not any(group[0] == "dagger" for group in groups):
-            axes[2].set_xticks([])
-            axes[2].text(0.5, 0.5, "DAgger: not run yet", ha="center", va="center", transform=axes[2].transAxes)
-        fig.suptitle(f"{tasks.SYSTEMS[name].label}: IQM over seeds, 95 % bootstrap band")
+        fig.suptitle(f"{tasks.SYSTEMS[name].label}: IQM over training seeds, 95 % stratified-bootstrap band")
         fig.tight_layout()
         path = folder / f"{name}.png"
         fig.savefig(path)

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from satenv.bench.learning.evaluate import evaluate_policy
-from satenv.bench.learning.grid import KEY, Run, test_seeds
+from satenv.bench.learning.grid import KEY, Run
 from satenv.bench.scoreboard.runner import EpisodeLog, read_episodes
 
 __all__ = ["done_runs", "logged_keys", "read_log", "run_one", "lost_record"]
@@ -41,8 +41,8 @@ def done_runs(runs: Iterable[Run], path: str | Path) -> set[Run]:
 
 
 def _base(run: Run) -> dict[str, Any]:
-    return {"system": run.system, "task": run.task.name, "algorithm": run.algorithm, "filter": run.filter,
-            "seed": run.seed, "budget_agent_steps": run.budget}
+    return {"system": run.system, "task": run.task.name, "rung": run.rung_index, "algorithm": run.algorithm,
+            "filter": run.filter, "seed": run.seed, "budget_agent_steps": run.budget}
 
 
 def lost_record(run: Run, error: str) -> dict[str, Any]:
@@ -60,7 +60,6 @@ def run_one(run: Run) -> dict[str, Any]:
     path = Path(run.log_path) if run.log_path else None
     log = EpisodeLog(path) if path is not None and path.parent.is_dir() else None
     skip = logged_keys(path) if log is not None else set()
-    seeds = test_seeds(run.system)
     records: list[dict[str, Any]] = []
     if all(run.key(k) in skip for k in range(len(run.checkpoints))):   # done meanwhile (another invocation)
         if log is not None:
@@ -72,6 +71,7 @@ def run_one(run: Run) -> dict[str, Any]:
         if run.key(k) in skip:
             return
         t0 = time.perf_counter()
+        seeds = run.seeds(k)
         episodes = evaluate_policy(run.task.make_env, make_policy, seeds, filtered=run.filter)
         rec = {**_base(run), "checkpoint": k, "agent_steps": int(agent_steps), "wall_s": round(wall_s, 2),
                "eval_s": round(time.perf_counter() - t0, 2), "load_avg_1m": round(os.getloadavg()[0], 2),

@@ -4,21 +4,24 @@ Every trainer gets a :class:`~satenv.bench.learning.grid.Run` and a callback
 ``checkpoint(k, agent_steps, wall_s, make_policy)`` that it calls at each of the run's
 checkpoints (``make_policy(env)`` gives the current policy for an env; ``wall_s`` is the training
 wall time so far, evaluations excluded). Each uses the project's own trainer at its documented
-defaults plus the fast configuration (:data:`satenv.bench.perf.learning.FAST_CONFIGS`):
+defaults (the lean learner's own, plus its tuned configuration of the task where one is committed,
+chosen on validation seeds), every run on its rung (``run.task``):
 
-* ``ppo``: ``satenv.training.train.train`` (SB3 PPO, parameter sharing, ``task=``) run to each checkpoint's budget
-  in turn, resuming from its own checkpoint (``--resume`` semantics: the env copies are re-seeded
-  at each resume); the filter-in-training row trains on ``satenv.make(..., safety_filter=
-  SafetyConfig(penalty=FILTER_PENALTY))`` through :func:`filtered_task_env`;
-* ``mappo``, ``ippo``, ``masac``, ``isac``: ``satenv.training.benchmarl_train.build_experiment`` with a
-  BenchMARL callback that exports the actor (``satenv.training.benchmarl_train.export_actor``) at each
-  checkpoint;
+* ``ppo``, ``ippo``, ``mappo``, ``ppo_lag``: the lean learner (``satenv.training.rl.ppo.train``,
+  the grid's default trainer; ``ppo_lag`` is its PPO-Lagrangian option on the ``safety_cost`` info
+  at the task's ``cost_budget``) run to each checkpoint's budget in turn, resuming bit for bit from
+  its own checkpoint; the filter-in-training row trains on ``task.make_env(safety_filter=True)``
+  (the filter's defaults: every action filtered, no reward penalty for a correction);
+* ``masac``: ``satenv.training.benchmarl_train.build_experiment`` (the fast configuration, with
+  :data:`~satenv.bench.learning.grid.MASAC_UTD` gradient steps per frame) with a BenchMARL callback
+  that exports the actor (``satenv.training.benchmarl_train.export_actor``) at each checkpoint;
 * ``dagger``: ``satenv.training.imitation.run`` (the project's one imitation engine, the system's expert
   and hyper-parameters from :data:`satenv.tasks.SYSTEMS`) one round per checkpoint.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import tempfile
 import time
@@ -26,7 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from satenv.bench.learning.grid import CHECKPOINTS, FILTER_PENALTY, Run
+from satenv.bench.learning.grid import CHECKPOINTS, FILTER_PENALTY, MASAC_UTD, Run
 
 __all__ = ["Checkpoint", "DAGGER_EPISODES", "filtered_task_env", "train"]
 
@@ -59,25 +62,33 @@ def _fast(trainer: str) -> dict[str, Any]:
     return dict(FAST_CONFIGS[trainer])
 
 
-def train_ppo(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
+def lean_policy(final: Path, env: Any) -> Any:
+    """The policy of a lean run's ``final/`` folder for ``env`` (IPPO: one folder per agent)."""
     from satenv import training
-    from satenv.training.config import TrainConfig
-    from satenv.training.train import train
+    from satenv.training.rl.ppo import PerAgentPolicy
+
+    agents = final / "agents"
+    if agents.is_dir():
+        return PerAgentPolicy({a: training.load(agents / a, env=env) for a in env.possible_agents})
+    return training.load(final, env=env)
+
+
+def train_lean(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
+    from satenv.training.rl import ppo
 
     task = run.task
-    env = ({"env_id": "satenv.bench.learning.trainers:filtered_task_env", "env_kwargs": {"task": task.name}}
-           if run.filter else {"task": task.name})
+    env = {"task": task.name, "env_kwargs": {"safety_filter": True} if run.filter else {}}
+    variant = "ppo" if run.algorithm == "ppo_lag" else run.algorithm
     wall = 0.0
     for k, target in enumerate(run.checkpoints):
-        cfg = TrainConfig(**env, seed=run.seed, total_timesteps=target,
-                          eval_every=0, checkpoint_every=run.budget, eval_baselines=("zero",),
-                          test_seeds=task.seeds("validation", 1), out_dir=str(workdir), progress=False,
-                          workers=1, **_fast("sb3_ppo"))
+        cfg = ppo.LeanConfig(**{**ppo.tuned(task.name), **env}, variant=variant, lagrangian=run.algorithm == "ppo_lag",
+                             seed=run.seed, budget=target, checkpoint_every=0, eval_baselines=(),
+                             test_seeds=task.seeds("validation", 1), out_dir=str(workdir), progress=False)
         t0 = time.perf_counter()
-        final = train(cfg, resume=k > 0)
+        final = ppo.train(cfg, resume=k > 0)
         wall += time.perf_counter() - t0
-        steps = int(training.load(final).meta["step"])
-        checkpoint(k, steps, wall, lambda env, final=final: training.load(final, env=env))
+        steps = json.loads((workdir / "progress.jsonl").read_text().splitlines()[-1])["agent_steps"]
+        checkpoint(k, steps, wall, lambda env, final=final: lean_policy(final, env))
 
 
 def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
@@ -93,9 +104,12 @@ def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     n_agents = len(env.possible_agents)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
+    fast = _fast("benchmarl_mappo")
+    if run.algorithm in ("masac", "isac"):   # off-policy: MASAC_UTD gradient steps per collected frame
+        fast["minibatch_iters"] = math.ceil(MASAC_UTD * fast["frames_per_batch"])
     cfg = BenchMARLConfig(algorithm=run.algorithm, task=task.name,
                           seed=run.seed, max_frames=math.ceil(run.budget / n_agents), out_dir=str(workdir),
-                          progress=False, workers=1, **_fast("benchmarl_mappo")).planned()
+                          progress=False, workers=1, **fast).planned()
     experiment = build_experiment(cfg)
     experiment.config.checkpoint_at_end = False
     meta = policy_env_meta(task.env_id, env, dict(task.env_kwargs), dict(task.env_kwargs))
@@ -127,7 +141,6 @@ def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
 
 def train_dagger(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     import dataclasses
-    import json
 
     from satenv import training
     from satenv.training import imitation
@@ -135,7 +148,7 @@ def train_dagger(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     task = run.task
     fast = {k: v for k, v in _fast("dagger").items() if k != "torch_threads"}
     episodes = DAGGER_EPISODES[run.system]
-    cfg = imitation.system_config(run.system, **{**fast, "seed": run.seed,
+    cfg = imitation.system_config(run.system, **{**fast, "task": task.name, "seed": run.seed,
                                               "train_seed": task.seeds("train")[0] + 10_000 * run.seed,
                                               "round0_episodes": episodes, "episodes_per_round": episodes,
                                               "eval_seeds": task.seeds("validation", 1), "final_eval": False})
@@ -148,8 +161,8 @@ def train_dagger(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
 
 
 TRAINERS: dict[str, Callable[[Run, Checkpoint, Path], None]] = {
-    "ppo": train_ppo, "mappo": train_benchmarl, "ippo": train_benchmarl, "masac": train_benchmarl,
-    "isac": train_benchmarl, "dagger": train_dagger}
+    "ppo": train_lean, "ippo": train_lean, "mappo": train_lean, "ppo_lag": train_lean, "masac": train_benchmarl,
+    "dagger": train_dagger}
 
 
 def train(run: Run, checkpoint: Checkpoint) -> None:
