@@ -28,6 +28,7 @@ import ast
 import functools
 import inspect
 import json
+import os
 import re
 import textwrap
 import types
@@ -92,6 +93,14 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
     return read
 
 
+def _under_a_file(path: Path) -> Path | None:
+    """The nearest existing ancestor of ``path`` when it is not a folder (``path`` cannot be made)."""
+    for parent in path.parents:
+        if os.path.lexists(parent):
+            return None if parent.is_dir() else parent
+    return None
+
+
 def out_folder(text: str) -> Path:
     """An argparse ``type``: an output folder (a new path or an existing folder; not '', not a file)."""
     if not text.strip():
@@ -99,6 +108,8 @@ def out_folder(text: str) -> Path:
     path = Path(text)
     if path.exists() and not path.is_dir() or path.is_symlink() and not path.exists():
         raise argparse.ArgumentTypeError(f"{text!r} exists and is not a folder; give a new or an existing folder")
+    if (blocker := _under_a_file(path)) is not None:
+        raise argparse.ArgumentTypeError(f"{text!r} lies under {str(blocker)!r}, which is not a folder")
     return path
 
 
@@ -109,6 +120,8 @@ def out_file(text: str) -> Path:
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is a folder; expected a file path")
+    if (blocker := _under_a_file(path)) is not None:
+        raise argparse.ArgumentTypeError(f"{text!r} lies under {str(blocker)!r}, which is not a folder")
     return path
 
 

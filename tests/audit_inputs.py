@@ -1427,6 +1427,174 @@ def audit_resume(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[st
     return "accepted", field
 
 
+# ------------------------------------------------------------------------------- the satenv command's newest sub-commands
+POS_INT = ("0", "-1", "1.5", "abc", "", "nan", "null", "[]", "1e999")
+"""Values no count of at least 1 may take."""
+NONNEG_INT = ("-1", "1.5", "abc", "", "null", "[]")
+POS_FLOAT = ("nan", "inf", "-1", "0", "abc", "", "null")
+UNIT_FLOAT = ("nan", "-0.1", "1.5", "abc", "", "null")
+CHOICE = ("nope", "", "null", "[]")
+
+
+def _cli_table(tmp: str) -> dict[str, dict]:
+    """Per sub-command: a base command line that would run (its output in ``tmp``), the functions
+    that start the work (replaced by a stop while auditing: reaching one means the input was
+    accepted) and, per flag, values it must refuse."""
+    a_file = os.path.join(tmp, "cli_a_file")
+    a_dir = os.path.join(tmp, "cli_a_dir")
+    missing = os.path.join(tmp, "cli_missing", "config.json")
+    os.makedirs(a_dir, exist_ok=True)
+    with open(a_file, "w") as f:
+        f.write("not json {")
+    out_dir = ("", a_file)
+    out_file = ("", a_dir, os.path.join(a_file, "sub"))
+    in_file = ("", missing, a_dir, a_file)
+    folder = good_policy_folder(os.path.join(tmp, "cli_policy"))
+    return {
+        "train": {"base": ["--out-dir", os.path.join(tmp, "cli_train"), "--eval-every", "0"],
+                  "stops": [("satenv.training.train", "build_model")],   # after the env, before the model
+                  "flags": {"--budget": POS_INT, "--num-envs": POS_INT, "--n-steps": POS_INT,
+                            "--batch-size": POS_INT, "--n-epochs": POS_INT, "--seed": NONNEG_INT,
+                            "--lr": POS_FLOAT, "--gamma": UNIT_FLOAT, "--gae-lambda": UNIT_FLOAT,
+                            "--algo": CHOICE, "--task": CHOICE, "--env-id": CHOICE, "--out-dir": out_dir,
+                            "--config": in_file, "--init-actor": (a_file, a_dir, missing),   # '' is the default: none
+                            "--env-kwargs": ("[]", "{", "null", '{"nope": 1}'), "--net-arch": ("0", "-4", "a,b", ""),
+                            "--eval-seeds": ("", "5-1", "a"), "--eval-baselines": ("nope", "dmpc,nope")}},   # '' is none
+        "ppo": {"base": ["--out-dir", os.path.join(tmp, "cli_ppo")],
+                "stops": [("satenv.training.rl.ppo", "Run")],   # after the env, before the learner
+                "flags": {"--budget": POS_INT, "--num-envs": POS_INT, "--n-steps": POS_INT,
+                          "--minibatch-size": POS_INT, "--n-epochs": POS_INT, "--seed": NONNEG_INT,
+                          "--lr": POS_FLOAT, "--gamma": UNIT_FLOAT, "--gae-lambda": UNIT_FLOAT,
+                          "--variant": CHOICE, "--task": CHOICE, "--out-dir": out_dir,
+                          "--net-arch": ("0", "-4", "a,b", ""), "--test-seeds": ("", "5-1", "a"),
+                          "--env-kwargs": ("[]", "{", "null", '{"nope": 1}')}},
+        "imitate": {"base": ["--out-dir", os.path.join(tmp, "cli_imitate")],
+                    "stops": [("satenv.training.imitation.rounds", "run"),
+                              ("satenv.training.imitation.ship", "ship"),
+                              ("satenv.training.imitation.ship", "validate_round")],
+                    "flags": {"--rounds": ("-1", "1.5", "abc", "", "null"), "--epochs": POS_INT,
+                              "--batch-size": POS_INT, "--seed": NONNEG_INT, "--lr": POS_FLOAT,
+                              "--task": CHOICE, "--system": CHOICE, "--expert": CHOICE,
+                              "--out-dir": out_dir, "--config": in_file, "--warm-start": ("", a_file, missing),
+                              "--validate-seeds": POS_INT}},
+        "safety-alone": {"base": ["--entry", f"platoon-pereira2023={folder}", "--out",
+                                  os.path.join(tmp, "cli_safety")],
+                         "stops": [("satenv.bench.safety_alone", "evaluate_entry"),
+                                   ("satenv.bench.safety_alone", "write_folders")],
+                         "flags": {"--seeds": POS_INT, "--controller-seeds": NONNEG_INT,
+                                   "--filter-seeds": NONNEG_INT, "--perturbation-seeds": NONNEG_INT,
+                                   "--perturbation-entries": POS_INT, "--out": out_dir,
+                                   "--entry": ("", "nope", "platoon-pereira2023=", f"nope={folder}",
+                                               f"platoon-pereira2023={a_dir}", f"platoon-pereira2023={folder}@x"),
+                                   "--folders-from": in_file}},
+        "datasets": {"base": ["write", "--systems", "platoon-pereira2023", "--root", os.path.join(tmp, "cli_minari"),
+                              "--manifest", "", "--cache", os.path.join(tmp, "cli_cache")],
+                     "stops": [("satenv.bench.learning.datasets", "write"), ("satenv.bench.learning.datasets", "read")],
+                     "flags": {"--systems": (",", "nope", "", "all,nope"), "--episodes": POS_INT,
+                               "--workers": POS_INT, "--root": out_dir, "--cache": out_dir,
+                               "--manifest": (a_dir, os.path.join(a_file, "sub"))}},
+        "results": {"base": ["run", "--dry-run", "--log", os.path.join(tmp, "cli_grid", "log.jsonl")],
+                    "stops": [("satenv.bench.scoreboard.backends", "stream"),
+                              ("satenv.bench.learning.results", "write_results"),
+                              ("satenv.bench.learning.render", "write_page")],
+                    "flags": {"--log": out_file, "--systems": (",", "nope", ""), "--algorithms": ("nope", ",", ""),
+                              "--seeds": ("", "5-1", "a", "-1"), "--rungs": ("0", "a", "9", "2-1"),
+                              "--budget": NONNEG_INT, "--workers": POS_INT, "--backend": CHOICE}},
+    }
+
+
+class Started(Exception):
+    """A sub-command reached the work it starts: the input was accepted."""
+
+
+def audit_satenv_cli(tmp: str, rng: np.random.Generator, timeout: float, table: dict) -> tuple[str, str]:
+    """``satenv <command> ...`` (train, ppo, imitate, safety-alone, datasets, results) with one
+    flag given a value it must refuse: ``clear`` is an exit status 2 (or a satenv ``ValueError``)
+    whose one error line names the flag, ``accepted`` (an accepted invalid input) is reaching the
+    work the command starts, ``obscure`` any other exception."""
+    command = sorted(table)[int(rng.integers(len(table)))]
+    spec = table[command]
+    flag = sorted(spec["flags"])[int(rng.integers(len(spec["flags"])))]
+    value = spec["flags"][flag][int(rng.integers(len(spec["flags"][flag])))]
+    return cli_case(command, flag, value, spec, timeout)
+
+
+def cli_case(command: str, flag: str, value: str, spec: dict, timeout: float) -> tuple[str, str]:
+    """One case of :func:`audit_satenv_cli` (``python tests/audit_inputs.py --cli-all`` runs every one)."""
+    import importlib
+    import io
+
+    from satenv.cli import main as satenv_main
+
+    base = list(spec["base"])
+    if flag in base:   # the flag replaces its base value
+        i = base.index(flag)
+        del base[i:i + 2]
+    argv = [command, *base, flag, value]
+    field = f"{command} {flag}"
+
+    def stop(*args, **kwargs):
+        raise Started
+
+    saved = []
+    for module, attr in spec["stops"]:
+        mod = importlib.import_module(module)
+        saved.append((mod, attr, getattr(mod, attr)))
+        setattr(mod, attr, stop)
+    err = io.StringIO()
+    env_before = os.environ.get("MINARI_DATASETS_PATH")
+    try:
+        with time_limit(timeout), contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            code = satenv_main(argv)
+    except Started:
+        LAST_ERROR[0] = f"{flag} {value!r}: accepted (the command started)"
+        return "accepted", field
+    except SystemExit as exc:
+        code = exc.code
+    except BaseException as exc:  # noqa: BLE001
+        out = classify_error(exc, flag)
+        LAST_ERROR[0] = f"{flag} {value!r}: {LAST_ERROR[0]}"
+        return out, field
+    finally:
+        for mod, attr, fn in saved:
+            setattr(mod, attr, fn)
+        if env_before is None:
+            os.environ.pop("MINARI_DATASETS_PATH", None)
+        else:
+            os.environ["MINARI_DATASETS_PATH"] = env_before
+    if isinstance(code, str):   # SystemExit("error: ..."): the interpreter prints it on stderr
+        err.write(code + "\n")
+        code = 1
+    text = err.getvalue().strip()
+    last = text.splitlines()[-1] if text else ""
+    LAST_ERROR[0] = f"{flag} {value!r}: exit {code}: {last[:160]}"
+    if code in (0, None):
+        return "accepted", field
+    if "Traceback" in text:
+        return "obscure", field
+    names = flag in text or flag.lstrip("-").replace("-", "_") in text
+    return ("clear" if "error" in last and names else "vague"), field
+
+
+def cli_all(timeout: float) -> dict:
+    """Every case of the satenv CLIs' table once: counts, and each case not refused clearly."""
+    warnings.simplefilter("ignore")
+    table = _cli_table(tempfile.mkdtemp(prefix="audit_cli_"))
+    counts, unclear = Counter(), []
+    for command, spec in sorted(table.items()):
+        for flag, values in sorted(spec["flags"].items()):
+            for value in values:
+                LAST_ERROR[0] = ""
+                cat, field = cli_case(command, flag, value, spec, timeout)
+                counts[cat] += 1
+                if cat != "clear":
+                    unclear.append(f"{cat}: {command} {LAST_ERROR[0]}")
+    for line in unclear:
+        print(line)
+    print("satenv CLIs, every case: " + " ".join(f"{k}={counts[k]}" for k in CATEGORIES if counts[k]))
+    return {"counts": dict(counts), "unclear": unclear}
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=600, help="inputs per entry point")
@@ -1437,8 +1605,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", default=None, help="write the counts (and examples) as JSON")
     ap.add_argument("--only", default="", help="comma-separated substrings: audit only the entry points "
                     "whose name contains one of them ('faults', 'crafted' for the two extra checks)")
+    ap.add_argument("--cli-all", action="store_true", help="run every case of the satenv CLIs' table once "
+                    "and list those not refused clearly, then stop")
     args = ap.parse_args(argv)
     only = [w for w in args.only.split(",") if w]
+    if args.cli_all:
+        return cli_all(args.timeout)
     warnings.simplefilter("ignore")
     np.seterr(all="ignore")
     import torch  # noqa: F401  (heavy imports first: an alarm inside an import would leave it half done)
@@ -1480,7 +1652,10 @@ def main(argv: list[str] | None = None) -> dict:
                 ("satenv.training.load paths", lambda r: audit_load_paths(tmp, r, args.timeout)),
                 ("gymnasium.make", lambda r: audit_gym_make(r, args.timeout)),
                 ("train --resume", lambda r: audit_resume(tmp, r, args.timeout))]
-    slow = ("satenv.baselines.make", "torchrl device", "CLI paths")
+    if not only or any(w in "satenv CLIs" for w in only):
+        table = _cli_table(tmp)
+        entries += [("satenv CLIs", lambda r: audit_satenv_cli(tmp, r, args.timeout, table))]
+    slow = ("satenv.baselines.make", "torchrl device", "CLI paths", "satenv CLIs")
     t0 = time.time()
     entries = [(n, f) for n, f in entries if not only or any(w in n for w in only)]
     for name, fn in entries:
@@ -1490,7 +1665,8 @@ def main(argv: list[str] | None = None) -> dict:
             LAST_ERROR[0] = ""
             cat, field = fn(rng)
             c[cat] += 1
-            if cat not in ("clear", "accepted") and len(ex.setdefault(cat, [])) < 5:
+            if (cat != "clear" and (cat != "accepted" or name == "satenv CLIs")   # there, accepted is invalid
+                    and len(ex.setdefault(cat, [])) < 5):
                 ex[cat].append(f"{field} -> {LAST_ERROR[0]}")
         print(f"{name:22s} " + " ".join(f"{k}={c[k]}" for k in CATEGORIES), flush=True)
     total = Counter()

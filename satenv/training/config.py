@@ -15,6 +15,7 @@ separated lists (``--net-arch 64,64``), seeds as ``A-B`` (inclusive) or lists (`
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import typing
@@ -28,6 +29,7 @@ from satenv.cliargs import (
     add_config_flags,
     config_from_args,
     new_parser,
+    out_folder,
     parse_bool,
     parse_json_object,
 )
@@ -314,8 +316,14 @@ def check_run_fields(cfg: Any, dict_fields: tuple[str, ...]) -> None:
     """Validate (and freeze) the fields every run config shares: ``env_id``, the JSON-object
     ``dict_fields``, ``eval_seeds``/``test_seeds`` (tuples of ints >= 0), ``eval_baselines``
     (a tuple of names) and ``out_dir``."""
+    import satenv
+    from satenv.baselines.registry import BASELINES
+
     if not isinstance(cfg.env_id, str) or not cfg.env_id:
         raise ValueError(f"env_id must be a non-empty string such as 'platoon_v0', got {cfg.env_id!r}")
+    if cfg.env_id not in satenv.ENV_IDS and ":" not in cfg.env_id:
+        raise ValueError(f"env_id {cfg.env_id!r:.80} is not registered; expected one of {list(satenv.ENV_IDS)} "
+                         "(or a 'module:callable' id)")
     for name in dict_fields:
         value = getattr(cfg, name)
         if not isinstance(value, dict):
@@ -332,8 +340,16 @@ def check_run_fields(cfg: Any, dict_fields: tuple[str, ...]) -> None:
             check_int(name, v, minimum=0)
         object.__setattr__(cfg, name, seeds)
     object.__setattr__(cfg, "eval_baselines", tuple(str(b) for b in cfg.eval_baselines))
+    unknown = [b for b in cfg.eval_baselines if b not in BASELINES and b != "auto"]
+    if unknown:
+        raise ValueError(f"eval_baselines: {unknown!r:.80} not registered; expected names of {sorted(BASELINES)} "
+                         "(or 'auto')")
     if not isinstance(cfg.out_dir, str) or not cfg.out_dir:
         raise ValueError(f"out_dir must be a non-empty path string, got {cfg.out_dir!r}")
+    try:
+        out_folder(cfg.out_dir)
+    except argparse.ArgumentTypeError as err:
+        raise ValueError(f"out_dir: {err}") from None
 
 
 def check_int(name: str, v: Any, minimum: int) -> None:

@@ -135,11 +135,14 @@ def init_policy(cfg: TrainConfig):
     """The network of ``cfg.init_actor`` (alone, never its filter), checked against ``cfg``: an
     MLP of hidden sizes ``net_arch``, the same observation features, action map and clip, no
     terminal feedback (SB3 has none). A mismatch is a ``ValueError`` naming the field."""
-    from satenv.training.policy import load
+    from satenv.training.policy import PolicyLoadError, load
 
-    seed = load(cfg.init_actor, shielded=False)
-    spec, norm = seed.actor.spec, seed.normalizer
     where = f"init_actor {cfg.init_actor!r}"
+    try:
+        seed = load(cfg.init_actor, shielded=False)
+    except PolicyLoadError as err:
+        raise ValueError(f"init_actor: {err}") from None
+    spec, norm = seed.actor.spec, seed.normalizer
     if spec.get("type") != "mlp":
         raise ValueError(f"{where}: needs an MLP actor, got type {spec.get('type')!r}")
     if tuple(spec["hidden"]) != tuple(cfg.net_arch):
