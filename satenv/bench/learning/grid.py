@@ -5,13 +5,13 @@ system's ladder (:func:`satenv.tasks.ladder`: easiest first, ending at the syste
 It is evaluated at :data:`CHECKPOINTS` evenly spaced checkpoints: the intermediate ones on the first
 :data:`CURVE_TEST_SEEDS` test seeds of the rung (the learning curves), the last one on the first
 :data:`FINAL_TEST_SEEDS` (the published result); the same seeds for every algorithm and the
-controller. Nothing is chosen on test seeds: the algorithms run at their defaults (and their tuned
-configurations, chosen on validation seeds, where one is committed). The controller of the system is
+controller. Nothing is chosen on test seeds: the algorithms run at their defaults. The controller of the system is
 one more run per rung (``algorithm="controller"``, no training).
 
 Budgets are agent-steps (one agent's one decision; BenchMARL frames are converted, one frame = every
 agent of one env copy acting once), the same for every RL algorithm of a system
-(:data:`BUDGET_AGENT_STEPS`); DAgger's budget is expert labels (:data:`DAGGER_LABELS`).
+(:data:`BUDGET_AGENT_STEPS`), MASAC's smaller (:data:`MASAC_BUDGET_AGENT_STEPS`: its gradient steps
+are the cost); DAgger's budget is expert labels (:data:`DAGGER_LABELS`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 from satenv import tasks
 
 __all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "CURVE_TEST_SEEDS", "DAGGER_LABELS", "DEFAULT_ALGORITHMS",
-           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_UTD", "RL_ALGORITHMS", "Run",
+           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_BUDGET_AGENT_STEPS", "MASAC_UTD", "grid_budget", "RL_ALGORITHMS", "Run",
            "LearningError", "grid", "test_seeds"]
 
 
@@ -75,6 +75,10 @@ of ``satenv.bench.learning.trainers.DAGGER_EPISODES`` whole episodes; the expert
 MASAC_UTD = 0.25
 """MASAC's update-to-data ratio: gradient steps per frame (BenchMARL's off-policy optimiser steps
 per collected frame)."""
+MASAC_BUDGET_AGENT_STEPS = 1_000_000
+"""MASAC's budget on every rung [agent-steps]: at :data:`MASAC_UTD` a BenchMARL gradient step costs
+about 0.1 s on these shared cores (measured: 2,048 platoon frames, 512 steps, 65 s), so 10 M
+agent-steps would take about a day per run; the page states it."""
 
 FILTER_SYSTEMS = ("cluster-li2022", "servicing-pereira2022", "platoon-pereira2022")
 """The systems whose PPO row is run once more with the safety filter in the training env."""
@@ -132,7 +136,7 @@ class Run:
             return 0
         if self.algorithm == "dagger":
             return DAGGER_LABELS[self.system]
-        return self.budget_override or BUDGET_AGENT_STEPS[self.system]
+        return self.budget_override or grid_budget(self.system, self.algorithm)
 
     @property
     def checkpoints(self) -> list[int]:
@@ -151,7 +155,7 @@ class Run:
     @property
     def longer(self) -> bool:
         """An RL run at a budget other than the grid's (``--budget``): its own row on the page."""
-        return self.algorithm in RL_ALGORITHMS and self.budget != BUDGET_AGENT_STEPS[self.system]
+        return self.algorithm in RL_ALGORITHMS and self.budget != grid_budget(self.system, self.algorithm)
 
     def label(self) -> str:
         budget = f"@{self.budget}" if self.longer else ""
@@ -160,6 +164,15 @@ class Run:
     def to_json(self) -> dict[str, Any]:
         return {**{k: v for k, v in asdict(self).items() if k not in ("log_path", "budget_override", "rung")},
                 "task": self.task.name}
+
+
+def grid_budget(system: str, algorithm: str) -> int:
+    """The grid's budget of a row: agent-steps (RL), expert labels (DAgger), 0 (controller)."""
+    if algorithm == "controller":
+        return 0
+    if algorithm == "dagger":
+        return DAGGER_LABELS[system]
+    return MASAC_BUDGET_AGENT_STEPS if algorithm == "masac" else BUDGET_AGENT_STEPS[system]
 
 
 def test_seeds(task: str, final: bool = True) -> tuple[int, ...]:

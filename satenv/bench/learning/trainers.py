@@ -4,8 +4,8 @@ Every trainer gets a :class:`~satenv.bench.learning.grid.Run` and a callback
 ``checkpoint(k, agent_steps, wall_s, make_policy)`` that it calls at each of the run's
 checkpoints (``make_policy(env)`` gives the current policy for an env; ``wall_s`` is the training
 wall time so far, evaluations excluded). Each uses the project's own trainer at its documented
-defaults (the lean learner's own, plus its tuned configuration of the task where one is committed,
-chosen on validation seeds), every run on its rung (``run.task``):
+defaults (the lean learner's own on every task: one configuration per row, whatever tuned
+configurations are committed), every run on its rung (``run.task``):
 
 * ``ppo``, ``ippo``, ``mappo``, ``ppo_lag``: the lean learner (``satenv.training.rl.ppo.train``,
   the grid's default trainer; ``ppo_lag`` is its PPO-Lagrangian option on the ``safety_cost`` info
@@ -81,7 +81,7 @@ def train_lean(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     variant = "ppo" if run.algorithm == "ppo_lag" else run.algorithm
     wall = 0.0
     for k, target in enumerate(run.checkpoints):
-        cfg = ppo.LeanConfig(**{**ppo.tuned(task.name), **env}, variant=variant, lagrangian=run.algorithm == "ppo_lag",
+        cfg = ppo.LeanConfig(**env, variant=variant, lagrangian=run.algorithm == "ppo_lag",
                              seed=run.seed, budget=target, checkpoint_every=0, eval_baselines=(),
                              test_seeds=task.seeds("validation", 1), out_dir=str(workdir), progress=False)
         t0 = time.perf_counter()
