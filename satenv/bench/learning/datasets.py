@@ -290,10 +290,10 @@ def _root() -> Path:
     return Path(get_dataset_path())
 
 
-def remove_incomplete(did: str, out: Any = sys.stderr) -> list[Path]:
+def remove_incomplete(did: str, out: Any = None) -> list[Path]:
     """Remove what a killed write of dataset ``did`` left: a staging copy (:data:`STAGING`), a folder
     swap half done (:func:`satenv.training.runfolder.recover_folder`) and a dataset folder without a
-    readable ``metadata.json``; each removal is named on ``out``. Returns the folders removed."""
+    readable ``metadata.json``; each removal is named on ``out`` (default: stderr). Returns the folders removed."""
     import shutil
 
     from minari.dataset.minari_storage import MinariStorage
@@ -316,7 +316,8 @@ def remove_incomplete(did: str, out: Any = sys.stderr) -> list[Path]:
             shutil.rmtree(folder)
             removed.append(folder)
     for path in removed:
-        print(f"removed {path}: an incomplete dataset folder left by an interrupted write", file=out, flush=True)
+        print(f"removed {path}: an incomplete dataset folder left by an interrupted write", file=out or sys.stderr,
+              flush=True)
     return removed
 
 

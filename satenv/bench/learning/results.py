@@ -159,6 +159,6 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
 def write_results(log: Path, out: Path) -> Path:
     """Write ``results.json`` from the log (sorted keys, stable order: a re-run changes only what changed)."""
     from satenv.bench.learning.runner import read_log
+    from satenv.training import runfolder
 
-    out.write_text(json.dumps(build_results(read_log(log)), indent=1, sort_keys=True) + "\n")
-    return out
+    return runfolder.write_json(out, build_results(read_log(log)), sort_keys=True)   # whole or absent
