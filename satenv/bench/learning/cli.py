@@ -55,13 +55,15 @@ def _runs(ns: argparse.Namespace, log_path: Path) -> list:
 
 
 def _estimate(todo: list, log: list[dict], workers: int = 1) -> str:
-    """The expected wall time of ``todo`` from the runs of the same system and algorithm already in
-    ``log`` (their longest ``wall_s``), or why there is none."""
+    """The expected training wall time of ``todo`` from the runs of the same system and algorithm
+    already in ``log`` (their slowest seconds per agent-step times each run's budget; the
+    controller's evaluation time), or why there is none."""
     measured: dict[tuple, float] = {}
     for rec in log:
         key = (rec.get("system"), rec.get("algorithm"), rec.get("filter"))
-        measured[key] = max(measured.get(key, 0.0), float(rec.get("wall_s") or 0.0))
-    known = [measured[(r.system, r.algorithm, r.filter)] for r in todo if (r.system, r.algorithm, r.filter) in measured]
+        steps, wall = rec.get("agent_steps") or 0, float(rec.get("wall_s") or 0.0) + float(rec.get("eval_s") or 0.0)
+        measured[key] = max(measured.get(key, 0.0), wall / steps if steps else wall)
+    known = [measured[k] * (r.budget or 1) for r in todo if (k := (r.system, r.algorithm, r.filter)) in measured]
     if not known:
         return "no run of these systems and algorithms in the log to time them by"
     unknown = len(todo) - len(known)
