@@ -171,3 +171,21 @@ def test_lean_ppo_matches_sb3_ppo_on_the_platoon(tmp_path):
     s_lean, s_sb3 = np.array(report["lean"]["success_rate"]), np.array(report["sb3"]["success_rate"])
     spread = max(s_lean.std(), s_sb3.std(), 1 / len(SB3_MATCH_TEST_SEEDS))
     assert abs(s_lean.mean() - s_sb3.mean()) <= spread + 1e-12, report   # 1e-12: float rounding of k / 20
+
+
+def test_tuned_configs_are_valid_and_flags_override_them():
+    import dataclasses
+
+    fields = {f.name for f in dataclasses.fields(ppo.LeanConfig)}
+    files = sorted(ppo.TUNED_DIR.glob("*.json"))
+    assert files
+    for path in files:
+        doc = json.loads(path.read_text())
+        assert doc["task"] == path.stem and doc["task"] in tasks.TASKS
+        assert doc["chosen_on"]["split"] == "validation" and set(doc["config"]) <= fields
+        ppo.LeanConfig(task=doc["task"], **doc["config"])
+    assert ppo.tuned("platoon-tplf30-rung2-mid") == {"lr": 0.001} and ppo.tuned(TASK) == {}
+    cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-rung2-mid", "--tuned"])
+    assert cfg.lr == 0.001
+    cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-rung2-mid", "--tuned", "--lr", "0.0002"])
+    assert cfg.lr == 0.0002
