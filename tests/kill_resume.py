@@ -2,11 +2,12 @@
 (not a pytest module; ``tests/test_scoreboard.py`` has the single-kill test).
 
     python tests/kill_resume.py [--kills 17] [--seeds 0-149] [--seed 0]
-    python tests/kill_resume.py --target dagger     # or safe, or train: a real kill at every write boundary
+    python tests/kill_resume.py --target dagger     # or safe, train, datasets, safety: a real kill at every write boundary
 
 ``--target dagger`` / ``--target safe`` / ``--target train`` run the tiny DAgger, safe-imitation
 (:mod:`satenv.training.imitation` with a warm start flown with the filter) and PPO runs of
-``tests/test_crash_windows.py`` in fresh interpreters: once uninterrupted (counting its write
+``tests/test_crash_windows.py``, ``--target datasets`` / ``--target safety`` the tiny Minari dataset
+and ``satenv safety-alone`` runs of ``tests/test_kill_writers.py``, in fresh interpreters: once uninterrupted (counting its write
 boundaries, :mod:`satenv.training.runfolder`), then, for every boundary ``k``, one run ended there by
 ``os._exit`` (``SATENV_CRASH_AT_WRITE=k``: the disk as a ``kill -9`` leaves it) and one resume to
 the end; it prints the runs that could not finish, the rounds / evaluations lost or duplicated and
@@ -80,13 +81,37 @@ from satenv.training.train import latest_checkpoint, train
 out = Path({out!r})
 train(tiny_train_config(out), resume=latest_checkpoint(out) is not None)
 """,
+    "datasets": """
+import sys
+sys.path.insert(0, {tests!r})
+from pathlib import Path
+from test_kill_writers import write_dataset
+write_dataset(Path({out!r}))
+""",
+    "safety": """
+import sys
+sys.path.insert(0, {tests!r})
+from pathlib import Path
+from test_kill_writers import _safety
+_safety(Path({out!r}))
+""",
 }
+
+
+def _results(target: str):
+    """``(result of a finished run folder, the rounds / evaluations it holds)`` of ``target``."""
+    if target in ("dagger", "safe"):
+        from test_crash_windows import dagger_result
+        return dagger_result, lambda got: [h["round"] for h in json.loads(got[0])]
+    if target == "train":
+        from test_crash_windows import train_result
+        return train_result, lambda got: got[0]
+    from test_kill_writers import _safety_result, dataset_result
+    return (dataset_result if target == "datasets" else _safety_result), lambda got: []
 
 
 def sweep(target: str) -> int:
     """Kill ``target`` at every write boundary in a subprocess, resume, compare (module docstring)."""
-    from test_crash_windows import dagger_result, train_result
-
     from satenv.training import runfolder
 
     tmp = Path(tempfile.mkdtemp(prefix=f"kill_{target}_"))
@@ -99,12 +124,12 @@ def sweep(target: str) -> int:
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=900).returncode
 
     rounds = target in ("dagger", "safe")
-    result = dagger_result if rounds else train_result
+    result, held = _results(target)
     log = tmp / "boundaries.log"
     assert go(tmp / "ref", **{runfolder.LOG_ENV: str(log)}) == 0
     labels = log.read_text().splitlines()
     reference = result(tmp / "ref")
-    ref_steps = [h["round"] for h in json.loads(reference[0])] if rounds else reference[0]
+    ref_steps = held(reference)
     kills = unfinished = lost = duplicated = equal = 0
     for k in range(1, len(labels) + 1):
         out = tmp / f"k{k}"
@@ -114,7 +139,7 @@ def sweep(target: str) -> int:
             print(f"boundary {labels[k - 1]}: the resume did not finish", flush=True)
             continue
         got = result(out)
-        steps = [h["round"] for h in json.loads(got[0])] if rounds else got[0]
+        steps = held(got)
         lost += len(set(ref_steps) - set(steps))
         duplicated += len(steps) - len(set(steps))
         same = got == reference
@@ -133,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--kills", type=int, default=17)
     ap.add_argument("--seeds", default="0-149")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--target", choices=("scoreboard", "dagger", "safe", "train"), default="scoreboard")
+    ap.add_argument("--target", choices=("scoreboard", *RUN_SCRIPTS), default="scoreboard")
     args = ap.parse_args(argv)
     if args.target != "scoreboard":
         return sweep(args.target)

@@ -89,6 +89,16 @@ def _write(tmp_path: Path, name: str):
     return go
 
 
+def write_dataset(out: Path) -> None:
+    """The tiny dataset (2 episodes) written into ``out`` (Minari's root, cache and manifest there)."""
+    _write(out, "root")()
+
+
+def dataset_result(out: Path) -> tuple[str, str]:
+    """What :func:`write_dataset` left in ``out``: the dataset and the manifest (wall time aside)."""
+    return _dataset(out / "root"), _manifest(out / "root.json")
+
+
 def _datasets_sweep(tmp_path, monkeypatch, pick) -> int:
     pytest.importorskip("minari")
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))   # restored after the test

@@ -348,11 +348,12 @@ def _create_whole(did: str, buffers: list[Any], env: gym.Env, **card: Any) -> An
 
 def drop_stale(system: str, seeds: Iterable[int], cache: Path = CACHE) -> list[int]:
     """Replay every cached episode of ``seeds`` and delete those that do not replay exactly (recorded
-    by an env that has changed since, or unreadable); the seeds deleted."""
+    by an env that has changed since, or unreadable: a link or a file past the cap is removed
+    unread); the seeds deleted."""
     stale = []
     for s in seeds:
         path = _episode_path(cache, system, s)
-        if not path.is_file():
+        if not os.path.lexists(path):
             continue
         try:
             exact = replays_exactly(replay(system, load_episode(path), s))
@@ -494,7 +495,8 @@ def main(argv: Iterable[str] | None = None) -> int:
     if ns.manifest:
         try:
             out_file(ns.manifest)
-        except argparse.ArgumentTypeError as err:
+            _read_manifest(Path(ns.manifest))   # before any episode is recorded
+        except (argparse.ArgumentTypeError, DatasetError) as err:
             p.error(f"argument --manifest: {err}")
     if ns.root:
         os.environ["MINARI_DATASETS_PATH"] = str(ns.root)
