@@ -1576,6 +1576,30 @@ def cli_case(command: str, flag: str, value: str, spec: dict, timeout: float) ->
     return ("clear" if "error" in last and names else "vague"), field
 
 
+def audit_perturbed(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
+    """``satenv.perturbations.make_env(task, name)`` with every task and any name (registered or not,
+    of the task or another system's): built and stepped once, or a clear error naming the name."""
+    from satenv import perturbations, tasks
+
+    names = (*perturbations.PERTURBATIONS, "nope", "", None, 1, "nav-0.1m ")
+    task = tasks.get(sorted(tasks.TASKS)[int(rng.integers(len(tasks.TASKS)))])
+    name = names[int(rng.integers(len(names)))]
+    field = "perturbation"
+    try:
+        with time_limit(timeout):
+            env = perturbations.make_env(task, name)
+            obs, _ = env.reset(seed=0)
+            out = env.step({a: np.zeros(env.action_space(a).shape, np.float32) for a in env.agents})
+    except BaseException as exc:  # noqa: BLE001
+        LAST_ERROR[0] = f"{task.name} {name!r}: "
+        cat = classify_error(exc, field)
+        LAST_ERROR[0] = f"{task.name} {name!r}: {LAST_ERROR[0]}"
+        return cat, field
+    ok = name is None or name in task.perturbations or isinstance(name, str) and name in perturbations.PERTURBATIONS
+    LAST_ERROR[0] = f"{task.name} {name!r}: accepted"
+    return ("accepted" if ok and finite(*obs.values(), *out[0].values()) else "nonfinite"), field
+
+
 def cli_all(timeout: float) -> dict:
     """Every case of the satenv CLIs' table once: counts, and each case not refused clearly."""
     warnings.simplefilter("ignore")
@@ -1652,6 +1676,7 @@ def main(argv: list[str] | None = None) -> dict:
                 ("satenv.training.load paths", lambda r: audit_load_paths(tmp, r, args.timeout)),
                 ("gymnasium.make", lambda r: audit_gym_make(r, args.timeout)),
                 ("train --resume", lambda r: audit_resume(tmp, r, args.timeout))]
+    entries += [("perturbations.make_env", lambda r: audit_perturbed(r, args.timeout))]
     if not only or any(w in "satenv CLIs" for w in only):
         table = _cli_table(tmp)
         entries += [("satenv CLIs", lambda r: audit_satenv_cli(tmp, r, args.timeout, table))]
