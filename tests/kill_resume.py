@@ -3,6 +3,7 @@
 
     python tests/kill_resume.py [--kills 17] [--seeds 0-149] [--seed 0]
     python tests/kill_resume.py --target dagger     # or safe, train, datasets, safety: a real kill at every write boundary
+    python tests/kill_resume.py --target safety --random 5   # five SIGKILLs at random moments, then the same command
 
 ``--target dagger`` / ``--target safe`` / ``--target train`` run the tiny DAgger, safe-imitation
 (:mod:`satenv.training.imitation` with a warm start flown with the filter) and PPO runs of
@@ -77,9 +78,8 @@ import sys
 sys.path.insert(0, {tests!r})
 from pathlib import Path
 from test_crash_windows import tiny_train_config
-from satenv.training.train import latest_checkpoint, train
-out = Path({out!r})
-train(tiny_train_config(out), resume=latest_checkpoint(out) is not None)
+from satenv.training.train import train
+train(tiny_train_config(Path({out!r})), resume=True)   # always --resume: a folder without a checkpoint starts fresh
 """,
     "datasets": """
 import sys
@@ -153,15 +153,57 @@ def sweep(target: str) -> int:
                  and equal == len(labels)) else 1
 
 
+def random_kills(target: str, kills: int, seed: int) -> int:
+    """``target`` killed with SIGKILL from outside at ``kills`` random moments of one run folder
+    (each a fresh start of the same command, killed after a uniform delay within the uninterrupted
+    run's wall time), then the same command to the end: equal to the uninterrupted run?"""
+    rng = np.random.default_rng(seed)
+    tmp = Path(tempfile.mkdtemp(prefix=f"kill_random_{target}_"))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS.parent), str(TESTS)]),
+           "OMP_NUM_THREADS": "1", "SATENV_CACHE_DIR": str(tmp / "cache")}
+
+    def start(out: Path) -> subprocess.Popen:
+        code = RUN_SCRIPTS[target].format(tests=str(TESTS), out=str(out))
+        return subprocess.Popen([sys.executable, "-c", code], env=env, cwd=TESTS.parent,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+    result, _ = _results(target)
+    t0 = time.perf_counter()
+    ref = start(tmp / "ref")
+    assert ref.wait(timeout=1800) == 0, ref.stderr.read().decode()[-2000:]
+    wall = time.perf_counter() - t0
+    reference = result(tmp / "ref")
+    run, killed = tmp / "run", 0
+    for k in range(kills):
+        proc = start(run)
+        delay = float(rng.uniform(0.2, 1.0) * wall)
+        try:
+            proc.wait(timeout=delay)
+        except subprocess.TimeoutExpired:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=60)
+        killed += proc.returncode == -signal.SIGKILL
+        print(f"round {k + 1}: killed after {delay:.1f} s: {proc.returncode == -signal.SIGKILL}", flush=True)
+    final = start(run)
+    finished = final.wait(timeout=1800) == 0
+    same = finished and result(run) == reference
+    print(f"{target}: {killed} SIGKILLs at random moments of {kills} starts (uninterrupted run {wall:.0f} s); "
+          f"the same command then {'finished' if finished else 'failed'}, "
+          f"{'equal to' if same else 'different from'} the uninterrupted run")
+    return 0 if same else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kills", type=int, default=17)
     ap.add_argument("--seeds", default="0-149")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--target", choices=("scoreboard", *RUN_SCRIPTS), default="scoreboard")
+    ap.add_argument("--random", type=int, default=0, metavar="N",
+                    help="with a --target other than scoreboard: N SIGKILLs at random moments instead of the sweep")
     args = ap.parse_args(argv)
     if args.target != "scoreboard":
-        return sweep(args.target)
+        return random_kills(args.target, args.random, args.seed) if args.random else sweep(args.target)
     from test_scoreboard import _board, _strip
 
     from satenv.bench.scoreboard import EPISODES_FILE, read_episodes

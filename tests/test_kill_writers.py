@@ -183,9 +183,13 @@ def test_an_incomplete_dataset_folder_in_place_is_named_and_removed(tmp_path, mo
 
 
 @pytest.mark.slow
-def test_datasets_killed_for_real_at_every_write_boundary():
-    """``kill_resume.py --target datasets``: a real process ended at every boundary, then resumed."""
-    done = subprocess.run([sys.executable, str(TESTS / "kill_resume.py"), "--target", "datasets"], cwd=TESTS.parent,
+@pytest.mark.parametrize("args", [["--target", "datasets"], ["--target", "datasets", "--random", "4"],
+                                  ["--target", "safety"], ["--target", "safety", "--random", "4"],
+                                  ["--target", "train", "--random", "4"]])
+def test_writers_killed_for_real_resume_to_the_uninterrupted_run(args):
+    """``kill_resume.py``: a real process ended at every write boundary, or SIGKILLed at random
+    moments, then the same command (``train``: always with ``--resume``) to the end."""
+    done = subprocess.run([sys.executable, str(TESTS / "kill_resume.py"), *args], cwd=TESTS.parent,
                           capture_output=True, text=True, timeout=3600)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
 
