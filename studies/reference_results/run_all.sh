@@ -10,19 +10,19 @@ PY=${PYTHON:-.venv/bin/python}   # the project venv unless PYTHON names another 
 RUN="nice -n 10 $PY -m satenv.bench.learning run --workers 1"
 PLATOON=platoon-pereira2023,platoon-pereira2022
 FORMATION=formation-kannan2022-position,formation-kannan2022-collision
+SWARMS=cluster-li2022,servicing-pereira2022
+LEAN=ppo,ippo,mappo,ppo_lag
 NO_FILTER="--filter-systems ''"
-# 1. A first table in minutes: the first rung of the platoons and formations, lean PPO, 3 M agent-steps
-#    (the controllers are evaluated later: 20 episodes of the formation and cluster MPCs take 0.5-3 h).
+# 1. A first table in minutes: the first rung of the platoons and formations, lean PPO, 3 M agent-steps.
 eval $RUN --systems $PLATOON,$FORMATION --rungs 1 --algorithms ppo --seeds 0-4 --budget 3000000 $NO_FILTER
-# 2. The other lean rows on the same cells and budget, then the same on the cluster and servicing.
-eval $RUN --systems $PLATOON,$FORMATION --rungs 1 --algorithms ippo,mappo,ppo_lag --seeds 0-4 --budget 3000000 $NO_FILTER
-eval $RUN --systems cluster-li2022,servicing-pereira2022 --rungs 1 --algorithms ppo,mappo,ppo_lag --seeds 0-4 --budget 3000000 $NO_FILTER
-# 3. The grid at its budgets (10 M agent-steps per RL run), every rung, easiest rungs first.
+# 2. The grid at its budgets (10 M agent-steps per lean run), rung by rung, easiest first: the lean
+#    rows with the filter-in-training row (cluster, servicing, platoon 5.1), then the controllers
+#    (20 test episodes of the formation and cluster MPCs take 0.5-3 h).
 for RUNG in 1 2 3; do
-  $RUN --systems $PLATOON,$FORMATION --rungs $RUNG --algorithms controller,ppo,ippo,mappo,ppo_lag --seeds 0-4
-  $RUN --systems cluster-li2022,servicing-pereira2022 --rungs $RUNG --algorithms controller,ppo,ippo,mappo,ppo_lag --seeds 0-4
+  $RUN --systems $PLATOON,$FORMATION,$SWARMS --rungs $RUNG --algorithms $LEAN --seeds 0-4
+  $RUN --systems $PLATOON,$FORMATION,$SWARMS --rungs $RUNG --algorithms controller
 done
-# 4. The slow rows last: MASAC (BenchMARL, 0.25 gradient steps per frame) and DAgger (the experts label).
+# 3. The slow rows last: MASAC (BenchMARL, 0.25 gradient steps per frame) and DAgger (the experts label).
 for RUNG in 1 2 3; do
-  $RUN --systems $PLATOON,$FORMATION,cluster-li2022,servicing-pereira2022 --rungs $RUNG --algorithms masac,dagger --seeds 0-4 $NO_FILTER
+  eval $RUN --systems $PLATOON,$FORMATION,$SWARMS --rungs $RUNG --algorithms masac,dagger --seeds 0-4 $NO_FILTER
 done
