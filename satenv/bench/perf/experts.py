@@ -146,7 +146,7 @@ CLOSED_LOOP_CASES: tuple[tuple[str, str, str, int], ...] = (
     ("nmpc", "servicing-pereira2022", "test", 1),
     ("nmpc", "servicing-pereira2022-random", "train", 3),
     ("tube_rdmpc", "cluster-case1", "test", 1),
-    ("replanning_tube_rdmpc", "cluster-case1-random", "train", 3),
+    ("replanning_tube_rdmpc", "cluster-case1-random", "train", 2),
 )
 """The reproduction's problems the fast modes are checked on: the paper task (its one scenario)
 and the first training seeds of the system's training task (the states DAgger labels)."""
