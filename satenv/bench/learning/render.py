@@ -115,6 +115,17 @@ def _failures(recs: list[dict[str, Any]]) -> str:
     return ", ".join(shown) if shown else "none"
 
 
+def _per_seed(recs: list[dict[str, Any]]) -> str:
+    """Each seed's final success, with the failure modes of a seed below the success bar."""
+    out = []
+    for r in sorted(recs, key=lambda r: r["seed"]):
+        cell = f"{r['seed']}: {r['test']['success_rate']:.2f}"
+        if r["test"]["success_rate"] < scoring.SUCCESS_MIN:
+            cell += f" ({_failures([r])})"
+        out.append(cell)
+    return "; ".join(out)
+
+
 def _detail_row(group: Group, rung: int, recs: list[dict[str, Any]]) -> str:
     t = [r["test"] for r in recs]
     n_eps = sum(x["episodes"] for x in t)
@@ -123,7 +134,7 @@ def _detail_row(group: Group, rung: int, recs: list[dict[str, Any]]) -> str:
     steps = sorted({r["agent_steps"] for r in recs})
     return (f"| {rung} | {_label(*group)} | {len(recs)} | {_successes(recs).mean():.2f} | {mid:.2f} [{lo:.2f}, {hi:.2f}] | "
             f"{sum(x['collision_episodes'] for x in t)}/{n_eps} | {sum(x['violation_episodes'] for x in t)}/{n_eps} | "
-            f"{_failures(recs)} | {'/'.join(f'{s:,}' for s in steps)} | {np.mean([r['wall_s'] for r in recs]):.0f} | "
+            f"{_failures(recs)} | {_per_seed(recs)} | {'/'.join(f'{s:,}' for s in steps)} | {np.mean([r['wall_s'] for r in recs]):.0f} | "
             f"`{cmd}` |")
 
 
@@ -250,8 +261,9 @@ def _system_section(name: str, results: dict[str, Any], groups: dict[Group, dict
     for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
         lines.append(f"| {_label(*group)} | " + " | ".join(_cell(rungs.get(k)) for k in range(1, len(ladder) + 1)) + " |")
     lines += ["", "| rung | algorithm | seeds | success (mean) | success IQM [95 % CI] | collision episodes | "
-              "violation episodes | failure modes (episodes) | agent-steps (labels) | train wall [s] | command |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "violation episodes | failure modes (episodes) | per seed: success (failure modes of a seed below 0.9) | "
+              "agent-steps (labels) | train wall [s] | command |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
         for rung in sorted(rungs):
             lines.append(_detail_row(group, rung, rungs[rung]))
