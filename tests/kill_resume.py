@@ -176,7 +176,7 @@ def random_kills(target: str, kills: int, seed: int) -> int:
     run, killed = tmp / "run", 0
     for k in range(kills):
         proc = start(run)
-        delay = float(rng.uniform(0.2, 1.0) * wall)
+        delay = float(rng.uniform(0.1, 0.6) * wall)   # a resumed start is shorter than the whole run
         try:
             proc.wait(timeout=delay)
         except subprocess.TimeoutExpired:
