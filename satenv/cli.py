@@ -10,7 +10,6 @@ when it runs: ``satenv --help`` is fast and works without the optional extras.
 
 from __future__ import annotations
 
-import importlib
 import importlib.util
 import sys
 from typing import NamedTuple
@@ -19,38 +18,38 @@ __all__ = ["COMMANDS", "Command", "main", "resolve"]
 
 
 class Command(NamedTuple):
-    """A sub-command: its ``"module:function"`` entry points (the first whose module exists runs),
-    one line for ``satenv --help``, and the extra it needs, if any."""
+    """A sub-command: its ``"module:function"`` entry point, one line for ``satenv --help``, and the
+    extra it needs, if any."""
 
-    targets: tuple[str, ...]
+    target: str
     summary: str
     extra: str = ""
 
 
 COMMANDS: dict[str, Command] = {
-    "train": Command(("satenv.training.train:main",), "train a shared policy with stable-baselines3 (PPO, SAC)",
+    "train": Command("satenv.training.train:main", "train a shared policy with stable-baselines3 (PPO, SAC)",
                      "train"),
-    "train-marl": Command(("satenv.training.benchmarl_train:main",),
+    "train-marl": Command("satenv.training.benchmarl_train:main",
                           "train with BenchMARL (MAPPO, IPPO, MASAC, ISAC, MADDPG, IDDPG)", "marl"),
-    "train-rllib": Command(("satenv.training.rllib_train:main",), "train with Ray RLlib (multi-agent PPO)", "rllib"),
-    "ppo": Command(("satenv.training.rl.ppo:main",), "train with the lean batched PPO (ppo, ippo, mappo)", "train"),
-    "imitate": Command(("satenv.training.imitation.cli:main", "satenv.training.imitate:main"),
+    "train-rllib": Command("satenv.training.rllib_train:main", "train with Ray RLlib (multi-agent PPO)", "rllib"),
+    "ppo": Command("satenv.training.rl.ppo:main", "train with the lean batched PPO (ppo, ippo, mappo)", "train"),
+    "imitate": Command("satenv.training.imitation.cli:main",
                        "imitate an expert controller (DAgger and its safe variants), resume, validate, ship",
                        "train"),
-    "heldout": Command(("satenv.training.recipes.heldout:main",),
+    "heldout": Command("satenv.training.recipes.heldout:main",
                        "score a policy folder on a system's held-out test seeds", "train"),
-    "team-sizes": Command(("satenv.training.team_sizes:main",),
+    "team-sizes": Command("satenv.training.team_sizes:main",
                           "one set-encoder policy on teams of other sizes than it was trained on", "train"),
-    "card": Command(("satenv.training.card:main",), "the shipped policies' cards: numbers both ways, targets"),
-    "board": Command(("satenv.bench.scoreboard.cli:main",), "the scoreboard: rank every policy on every task"),
-    "reproduce": Command(("satenv.bench.reproduce:main",), "reproduce a paper's table and claims", "mpc"),
-    "results": Command(("satenv.bench.learning.cli:main",),
+    "card": Command("satenv.training.card:main", "the shipped policies' cards: numbers both ways, targets"),
+    "board": Command("satenv.bench.scoreboard.cli:main", "the scoreboard: rank every policy on every task"),
+    "reproduce": Command("satenv.bench.reproduce:main", "reproduce a paper's table and claims", "mpc"),
+    "results": Command("satenv.bench.learning.cli:main",
                        "the reference-results grid: run it, write results.json, render the page", "train"),
-    "datasets": Command(("satenv.bench.learning.datasets:main",),
+    "datasets": Command("satenv.bench.learning.datasets:main",
                         "write or read the Minari demonstration datasets", "datasets"),
-    "safety-alone": Command(("satenv.bench.safety_alone:main",),
+    "safety-alone": Command("satenv.bench.safety_alone:main",
                             "learned policies alone and behind the safety filter, on test seeds", "train"),
-    "perf": Command(("satenv.bench.perf:main",), "time the batched core, the envs, the solvers, the learners"),
+    "perf": Command("satenv.bench.perf:main", "time the batched core, the envs, the solvers, the learners"),
 }
 """Sub-command -> where it lives (``satenv --help`` lists them in this order)."""
 
@@ -60,15 +59,16 @@ class Unavailable(Exception):
 
 
 def resolve(name: str):
-    """The ``main`` of sub-command ``name``: the first of its targets whose module exists
-    (:func:`importlib.util.find_spec`; an import error inside it is raised as it is)."""
-    command = COMMANDS[name]
-    for target in command.targets:
-        module, _, func = target.partition(":")
-        if _exists(module):
-            return getattr(importlib.import_module(module), func)
-    raise Unavailable(f"'satenv {name}' is not available in this installation (none of "
-                      f"{', '.join(t.partition(':')[0] for t in command.targets)} is installed)")
+    """The ``main`` of sub-command ``name`` (:func:`satenv.baselines.registry.resolve`, imported here
+    so that ``satenv --help`` stays light); a module not installed is :class:`Unavailable`, an
+    import error inside an installed one is raised as it is."""
+    from satenv.baselines.registry import resolve as resolve_target
+
+    target = COMMANDS[name].target
+    module = target.partition(":")[0]
+    if not _exists(module):
+        raise Unavailable(f"'satenv {name}' is not available in this installation ({module} is not installed)")
+    return resolve_target(target)
 
 
 def _exists(module: str) -> bool:

@@ -44,7 +44,8 @@ def test_help_lists_every_command_in_one_line_and_imports_no_extra():
     listed = re.findall(r"^  ([a-z-]+)  ", run.stdout, flags=re.M)
     assert listed == list(cli.COMMANDS)
     probe = subprocess.run([sys.executable, "-c", "import sys; from satenv.cli import main; main(['--help']); "
-                            "print(sorted(m for m in ('torch', 'casadi', 'ray', 'benchmarl', 'stable_baselines3') "
+                            "print(sorted(m for m in ('torch', 'casadi', 'ray', 'benchmarl', 'stable_baselines3', "
+                            "'satenv.baselines.registry') "
                             "if m in sys.modules))"], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert probe.stdout.strip().endswith("[]"), probe.stdout      # the commands are imported when they run
 
@@ -58,17 +59,19 @@ def test_an_unknown_or_missing_command_is_one_error_line(monkeypatch, capsys):
     assert cli.main(["bord"]) == 2
     assert "unknown command 'bord' (did you mean 'board'?)" in capsys.readouterr().err
     assert cli.main([]) == 2
-    monkeypatch.setitem(cli.COMMANDS, "ghost", cli.Command(("satenv.no_such.module:main",), "x"))
+    monkeypatch.setitem(cli.COMMANDS, "ghost", cli.Command("satenv.no_such.module:main", "x"))
     assert cli.main(["ghost", "--help"]) == 2
     assert "'satenv ghost' is not available" in capsys.readouterr().err
 
 
-def test_imitate_falls_back_while_the_new_engine_is_missing(monkeypatch):
-    monkeypatch.setitem(cli.COMMANDS, "imitate", cli.Command(
-        ("satenv.training.no_such_engine.cli:main", "satenv.training.train:main"), "x"))
-    from satenv.training import train
+def test_a_command_resolves_through_the_registry_resolver(monkeypatch):
+    """One resolver of ``"module:attribute"`` strings: an installed module without the function is
+    the registry's ``ResolveError``, not a raw ``AttributeError``."""
+    from satenv.baselines.registry import ResolveError
 
-    assert cli.resolve("imitate") is train.main
+    monkeypatch.setitem(cli.COMMANDS, "hollow", cli.Command("satenv.training.train:no_such_main", "x"))
+    with pytest.raises(ResolveError, match="no attribute 'no_such_main'"):
+        cli.resolve("hollow")
 
 
 NOT_YET_PLAIN = {"ppo"}
