@@ -202,7 +202,7 @@ def test_dagger_killed_at_every_write_boundary_resumes_to_the_same_rounds(tmp_pa
     capsys.readouterr()
 
 
-def test_safe_imitation_killed_at_each_write_of_a_round_resumes_to_the_same_rounds(tmp_path, monkeypatch, capsys):
+def test_safe_variant_killed_at_each_write_of_a_round_resumes_to_the_same_rounds(tmp_path, monkeypatch, capsys):
     """The safe variant (a warm start flown with the filter, the safe loss): every boundary of the
     last round; the resumed run's labels, weights and history equal the uninterrupted run's (the
     fit's generator comes from (seed, round), not from the session)."""
@@ -211,7 +211,7 @@ def test_safe_imitation_killed_at_each_write_of_a_round_resumes_to_the_same_roun
 
 
 @pytest.mark.slow
-def test_safe_imitation_killed_at_every_write_boundary_resumes_to_the_same_rounds(tmp_path, monkeypatch, capsys):
+def test_safe_variant_killed_at_every_write_boundary_resumes_to_the_same_rounds(tmp_path, monkeypatch, capsys):
     _dagger_sweep(tmp_path, monkeypatch, last_round_only=False, tiny=tiny_safe)
     capsys.readouterr()
 

@@ -427,8 +427,8 @@ def test_shipped_policy_reproduces_its_eval_json(name):
 
 
 TRAINER_COMMANDS = {"train": "train", "benchmarl_train": "train-marl", "rllib_train": "train-rllib",
-                    "imitate": "imitate", "recipes.dagger": "imitate", "rl.ppo": "ppo"}
-"""``python -m satenv.training.<module>`` (the older form some policy READMEs keep) -> ``satenv <command>``."""
+                    "imitation.cli": "imitate", "rl.ppo": "ppo"}
+"""``python -m satenv.training.<module>`` (the module form some pages keep) -> ``satenv <command>``."""
 
 
 def _trainer_parsers() -> dict:
