@@ -62,7 +62,8 @@ More sections run only when named in ``--sections`` (they take minutes):
 * ``experts`` DAgger expert labels per second (:mod:`satenv.bench.perf.experts`): each system's
               expert (NMPC on servicing, re-planning tube-RDMPC on the cluster) through
               :class:`satenv.baselines.experts.ExpertPool` with one worker and with two, and the targets
-              (>= 100 / >= 50 labels/s on two cores).
+              (labels/s on two cores, :data:`satenv.bench.perf.experts.LABEL_TARGETS`: >= 100 on
+              servicing, >= 200 on the cluster).
 
 The default sections also include
 
