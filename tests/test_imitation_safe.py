@@ -13,6 +13,7 @@ torch = pytest.importorskip("torch")
 
 from satenv import tasks  # noqa: E402
 from satenv.errors import SatenvError  # noqa: E402
+from satenv.perturbations import UncertaintyBounds  # noqa: E402
 from satenv.safety import SafetyConfig, SafetyFilter  # noqa: E402
 from satenv.training.imitation.barrier import (  # noqa: E402
     agent_constraints,
@@ -47,13 +48,13 @@ def fit(policy, data, cfg, norm_mode, generator, prior=None):
                     norm_mode=norm_mode, generator=generator, prior=prior)
 
 
-def _states(system: str, steps: int, seed: int):
+def _states(system: str, steps: int, seed: int, bounds=None):
     """(proposed, filtered, intervened, infeasible, rows, lower) along an episode of full thrust
     in a fixed random direction per agent, reversed 10 steps in 40 (many actions unsafe),
-    stepping the filtered actions."""
+    stepping the filtered actions (a filter told ``bounds``, tightened by them)."""
     env = tasks.training_task(system).make_env(terminate_on_collision=False)
     env.reset(seed=seed)
-    filt = SafetyFilter(env)
+    filt = SafetyFilter(env, bounds=bounds)
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(len(env.possible_agents), filt.model.action_dim))
     d /= np.abs(d).max(axis=1, keepdims=True)
@@ -69,10 +70,16 @@ def _states(system: str, steps: int, seed: int):
     return out
 
 
-@pytest.mark.parametrize("system", ["platoon-pereira2022", "platoon-pereira2023", "servicing-pereira2022"])
-def test_hinge_is_zero_exactly_where_the_filter_passes_the_action(system):
+THRUST_LOSS = UncertaintyBounds(thrust=0.5)
+"""A filter told half the thrust may be lost: its positive bounds double (the barrier must follow)."""
+
+
+@pytest.mark.parametrize("system,bounds", [("platoon-pereira2022", None), ("platoon-pereira2023", None),
+                                           ("servicing-pereira2022", None), ("platoon-pereira2022", THRUST_LOSS),
+                                           ("platoon-pereira2023", THRUST_LOSS)])
+def test_hinge_is_zero_exactly_where_the_filter_passes_the_action(system, bounds):
     seen_intervention = seen_pass = False
-    for a, safe, intervened, infeasible, rows, lower, norm_mode in _states(system, 160, 3):
+    for a, safe, intervened, infeasible, rows, lower, norm_mode in _states(system, 160, 3, bounds):
         h = barrier_hinge(torch.as_tensor(a), torch.as_tensor(rows, dtype=torch.float64),
                           torch.as_tensor(lower, dtype=torch.float64), norm_mode=norm_mode).numpy()
         hs = barrier_hinge(torch.as_tensor(safe), torch.as_tensor(rows, dtype=torch.float64),

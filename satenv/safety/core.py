@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -41,6 +41,39 @@ def solve_qp(u_ref: np.ndarray, rows: np.ndarray, lower: np.ndarray, box: float)
     return np.asarray(x, dtype=float), int(flag)
 
 
+class ActionRows(NamedTuple):
+    """The filter's constraints on the normalised actions, ``rows @ eff(u) >= lower``."""
+
+    rows: np.ndarray
+    """``(B, M, K, d)``: the state rows through the action-to-acceleration map (and the
+    angular-rate rows of an attitude model)."""
+    lower: np.ndarray
+    """``(B, M, K)``: the bounds, tightened for the thrust loss (:func:`tighten_lower`); a chaser's
+    :func:`chain_slots` still lack its target's acceleration term."""
+    w: np.ndarray
+    """``(B, M, K', 6)``: the state rows (the chain's target-acceleration term is ``w @ acc``)."""
+    s: np.ndarray
+    """The action-to-acceleration map: ``(3, d)``, or ``(B, M, 3, d)`` in a body frame."""
+
+
+def action_rows(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarray) -> ActionRows:
+    """The filter's constraint rows at states ``x (B, M, >= 6)`` and times ``t (B,)`` [s], as
+    :func:`filter_actions` solves against them (one home: the barrier of imitation reads them too)."""
+    s = m.S if not m.body_frame else np.einsum("bmij,jk->bmik", quat_to_matrix(x[..., 6:10]), m.S)
+    w, lo = constraint_rows(m, cfg, x, t)
+    rows = np.einsum("bmki,ij->bmkj", w, s) if s.ndim == 2 else np.einsum("bmki,bmij->bmkj", w, s)
+    if m.attitude is not None:
+        w_om, lo_om = _omega_rows(m, cfg, x)
+        rows, lo = np.concatenate([rows, w_om], axis=2), np.concatenate([lo, lo_om], axis=2)
+    return ActionRows(rows, tighten_lower(m, lo), w, s)
+
+
+def chain_slots(m: SafetyModel) -> np.ndarray:
+    """The row slots of a chaser that hold its target's acceleration (a chain model's)."""
+    slots = m.budget[0].shape[1]
+    return np.r_[slots - m.n_chain:slots, 2 * slots - m.n_chain:2 * slots]
+
+
 def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarray,
                    actions: np.ndarray) -> tuple[np.ndarray, SafetyRecord]:
     """Safe actions ``(B, M, d)`` and the :class:`SafetyRecord` for states ``x (B, M, >= 6)``
@@ -49,21 +82,14 @@ def filter_actions(m: SafetyModel, cfg: SafetyConfig, x: np.ndarray, t: np.ndarr
     Pure: reads only its arguments. Inputs are validated (:class:`SafetyError` names the field).
     """
     x, t, a = _check_inputs(m, x, t, actions)
-    s = m.S if not m.body_frame else np.einsum("bmij,jk->bmik", quat_to_matrix(x[..., 6:10]), m.S)
-    w, lo = constraint_rows(m, cfg, x, t)
-    rows = np.einsum("bmki,ij->bmkj", w, s) if s.ndim == 2 else np.einsum("bmki,bmij->bmkj", w, s)
-    if m.attitude is not None:
-        w_om, lo_om = _omega_rows(m, cfg, x)
-        rows, lo = np.concatenate([rows, w_om], axis=2), np.concatenate([lo, lo_om], axis=2)
-    lo = tighten_lower(m, lo)
+    rows, lo, w, s = action_rows(m, cfg, x, t)
     kinds = np.asarray(m.kinds, dtype=np.int64)
     bsz, na, d = a.shape
     if not m.n_chain:
         res = _solve_rows(m, rows.reshape(bsz * na, -1, d), lo.reshape(bsz * na, -1), a.reshape(bsz * na, d), kinds)
         out, safe, infeasible, active = (v.reshape(bsz, na, *v.shape[1:]) for v in res)
     else:   # down the chain: a chaser's rows hold its target's filtered acceleration
-        slots = m.budget[0].shape[1]
-        idx = np.r_[slots - m.n_chain:slots, 2 * slots - m.n_chain:2 * slots]
+        idx = chain_slots(m)
         out, safe = np.empty_like(a), np.empty((bsz, na), dtype=bool)
         infeasible, active = np.empty((bsz, na), dtype=bool), np.empty((bsz, na), dtype=np.int64)
         acc_prev = np.zeros((bsz, 3))                      # the passive leader's

@@ -1,7 +1,8 @@
 """The safety filter's constraint rows as a differentiable barrier on the network's action.
 
 The filter's rows are the discrete barrier condition on the next state (``h(x+) >= (1 - gamma)
-h(x)``, linear in the action): :func:`agent_constraints` reads them at the filter's state,
+h(x)``, linear in the action): :func:`agent_constraints` reads them at the filter's state through
+the filter's own :func:`satenv.safety.core.action_rows` (its margins and thrust-loss tightening),
 :func:`barrier_hinge` is zero exactly where the filter would pass an action (a margin inside), and
 :func:`terminal_affine` writes the policy's terminal feedback as an affine map of the network's
 action, so the loss acts on what is flown.
@@ -26,24 +27,18 @@ def agent_constraints(filt: Any, applied: np.ndarray) -> tuple[np.ndarray, np.nd
     (``eff``: the env's clipping). ``applied (M, d)`` are the actions the filter let through this
     step: down a chain, a chaser's rows hold its target's applied acceleration, as in the filter.
     Unused slots get ``lower = ROW_LOWER_FLOOR``."""
-    from satenv.safety import _effective, _omega_rows, constraint_rows, quat_to_matrix
+    from satenv.safety.core import _effective, action_rows, chain_slots
 
-    m, cfg = filt.model, filt.config
+    m = filt.model
     x = np.asarray(filt.core.x, dtype=float)[:1]
     t = np.asarray(filt.core.t, dtype=float).reshape(-1)[:1] * float(filt.core.scenario.dt)
-    w, lo = constraint_rows(m, cfg, x, t)
-    s = m.S if not m.body_frame else np.einsum("bmij,jk->bmik", quat_to_matrix(x[..., 6:10]), m.S)
-    rows = (np.einsum("bmki,ij->bmkj", w, s) if s.ndim == 2 else np.einsum("bmki,bmij->bmkj", w, s))[0]
-    lo = lo[0].copy()
-    if m.attitude is not None:
-        w_om, lo_om = _omega_rows(m, cfg, x)
-        rows, lo = np.concatenate([rows, w_om[0]], axis=1), np.concatenate([lo, lo_om[0]], axis=1)
+    found = action_rows(m, filt.config, x, t)                 # the filter's own rows, thrust loss included
+    rows, lo = found.rows[0], found.lower[0].copy()
     if m.n_chain:
-        slots = m.budget[0].shape[1]
-        idx = np.r_[slots - m.n_chain:slots, 2 * slots - m.n_chain:2 * slots]
+        idx = chain_slots(m)
         acc = _effective(m, np.asarray(applied, dtype=float)) @ m.S.T     # chains are never body-frame
         for f in range(1, len(lo)):
-            lo[f, idx] += w[0, f, idx] @ acc[f - 1]
+            lo[f, idx] += found.w[0, f, idx] @ acc[f - 1]
     scale = np.linalg.norm(rows, axis=-1)
     tiny = scale < 1e-12
     rows = np.where(tiny[..., None], 0.0, rows / np.where(tiny, 1.0, scale)[..., None])
