@@ -38,7 +38,7 @@ from dataclasses import MISSING, Field, dataclass, fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-__all__ = ["Arg", "add_config_flags", "config_from_args", "config_parser", "config_to_argv", "flag_name",
+__all__ = ["Arg", "add_config_flags", "config_from_args", "config_parser", "config_to_argv", "flag_message", "flag_name",
            "int_at_least", "new_parser", "out_file", "out_folder", "parse_bool", "parse_config", "parse_json_object",
            "plain"]
 
@@ -276,7 +276,7 @@ def add_config_flags(parser: argparse.ArgumentParser, cls: type, *, title: str |
         group.add_argument(flag, **kw)
 
 
-def _flag_message(cls: type, message: str) -> str:
+def flag_message(cls: type, message: str) -> str:
     """A dataclass's message with a leading field name written as its flag."""
     flags = {f.name: flag_name(cls, f) for f in fields(cls)}
     m = re.match(r"(\w+)\b", message)
@@ -300,7 +300,7 @@ def config_from_args(parser: argparse.ArgumentParser, cls: type, ns: argparse.Na
     try:
         return cls(**values)
     except (ValueError, TypeError) as err:
-        parser.error(_flag_message(cls, str(err)))
+        parser.error(flag_message(cls, str(err)))
 
 
 def config_parser(cls: type, *, prog: str | None = None, description: str | None = None,

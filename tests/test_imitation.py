@@ -261,6 +261,19 @@ def test_hostile_run_folders_are_refused_before_anything_is_read(tmp_path, capsy
         err = capsys.readouterr().err
         assert err.startswith("satenv imitate: error:") and "Traceback" not in err and err.count("\n") == 1
         assert "object is not" not in err and not (tmp_path / "r").exists(), err      # named, refused up front
+        assert f"error: --config {bad}: " in err, err
+
+
+@pytest.mark.parametrize("where", ["missing", "a file"])
+def test_a_warm_start_that_is_no_folder_is_refused_before_anything_is_written(where, tmp_path, capsys):
+    warm = tmp_path / "warm"
+    if where == "a file":
+        warm.write_text("{}")
+    assert main(["--system", "platoon-pereira2022", "--warm-start", str(warm), "--fly", "filtered", "--label",
+                 "filtered", "--rounds", "1", "--out-dir", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "warm_start policy folder is not a folder" in err if where == "a file" else "no such policy folder" in err
+    assert not (tmp_path / "r" / "config.json").exists() and not (tmp_path / "r" / "labels").exists(), err
 
 
 @pytest.mark.parametrize("flag,value,expected", [("--seed", "null", "--seed 'null': expected an int"),
@@ -269,7 +282,11 @@ def test_hostile_run_folders_are_refused_before_anything_is_read(tmp_path, capsy
                                                   ("--expert-options", "{x", "--expert-options '{x': expected a JSON"),
                                                   ("--beta", "x", "--beta 'x': expected a number"),
                                                   ("--squash", "maybe", "--squash 'maybe': expected true or false"),
-                                                  ("--fly", "nope", "--fly: invalid choice: 'nope'")])
+                                                  ("--fly", "nope", "--fly: invalid choice: 'nope'"),
+                                                  ("--validate-seeds", "0", "--validate-seeds: expected an int >= 1"),
+                                                  ("--validate-seeds", "-1", "--validate-seeds: expected an int >= 1"),
+                                                  ("--env-kwargs", '{"nope": 1}',
+                                                   "--env-kwargs: platoon_v0: unknown keyword argument(s) ['nope']")])
 def test_a_bad_flag_value_is_one_clear_error(flag, value, expected, tmp_path, capsys):
     assert main(["--task", "platoon-pereira2022-random", "--out-dir", str(tmp_path / "r"), flag, value]) == 2
     err = capsys.readouterr().err

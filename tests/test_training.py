@@ -85,7 +85,9 @@ def test_cli_flags_parse_into_the_config(capsys):
     assert (old.num_envs, old.lr, old.eval_seeds) == (4, 0.01, (5, 6, 7))
     for argv, match in [(["--env-kwargs", "randomize"], "JSON object"), (["--num-envs", "many"], "num-envs"),
                         (["--algo", "dqn"], "ppo"), (["--num-envs", "0"], "error: --num-envs must be an int >= 1, got 0"),
-                        (["--test-seeds", "0-999999999"], "more than 100000 seeds")]:
+                        (["--test-seeds", "0-999999999"], "more than 100000 seeds"),
+                        (["--env-kwargs", '{"nope": 1}'], "error: --env-kwargs: platoon_v0: unknown keyword argument"),
+                        (["--eval-env-kwargs", '{"dt": -1}'], "error: --eval-env-kwargs: dt must be a finite number")]:
         with pytest.raises(SystemExit):
             parse_args(argv)
         assert match in _text(capsys.readouterr().err)
@@ -492,3 +494,18 @@ def test_evaluation_is_the_same_in_worker_processes_and_baselines_are_cached(tmp
     assert not calls, "a cached baseline was evaluated again"
     evaluate_baselines(env, ["zero"], [0, 2], progress=False)  # other seeds: another entry
     assert len(calls) == 1
+
+
+def test_a_run_resumed_mid_episode_on_a_training_task_equals_the_uninterrupted_one(tmp_path, monkeypatch):
+    """The training reward remembers each copy's episode (``SatVectorEnv.reward_state``): the
+    checkpoint saves it with the episodes in flight (``SatVectorEnv.get_state``), so a run resumed
+    mid-episode trains on exactly as the uninterrupted one did."""
+    monkeypatch.setenv("SATENV_CACHE_DIR", str(tmp_path / "cache"))
+    kw = dict(task="platoon-pereira2022-random", num_envs=2, n_steps=8, batch_size=32, n_epochs=1, net_arch=(8,),
+              eval_every=0, checkpoint_every=64, test_seeds=(900_000,), eval_baselines=("zero",), workers=1,
+              progress=False)
+    whole = train(TrainConfig(**kw, total_timesteps=128, out_dir=str(tmp_path / "whole")))
+    train(TrainConfig(**kw, total_timesteps=64, out_dir=str(tmp_path / "cut")))
+    assert latest_checkpoint(tmp_path / "cut")[0] == 64
+    resumed = train(TrainConfig(**kw, total_timesteps=128, out_dir=str(tmp_path / "cut")), resume=True)
+    assert (resumed / "weights.safetensors").read_bytes() == (whole / "weights.safetensors").read_bytes()

@@ -75,12 +75,14 @@ def test_the_code_flag_must_be_a_bool_and_the_config_an_object():
 
 
 def _refusal(main, argv, capsys) -> str:
-    """The message of a command line refused before it runs: a ``SystemExit`` or a status 2 and its
-    stderr (the imitation engine's ``main`` returns its status)."""
+    """The message of a command line refused before it runs: a ``SystemExit`` with the message, or a
+    status 2 (returned or exited with) and its stderr."""
     try:
         status = main(argv)
     except SystemExit as stop:
-        return str(stop)
+        if not isinstance(stop.code, int):
+            return str(stop)
+        status = stop.code
     assert status == 2, f"accepted: {argv}"
     return capsys.readouterr().err
 
@@ -154,8 +156,8 @@ def test_scoreboard_out_naming_a_file_is_the_cli_error(tmp_path, capsys):
 
     target = tmp_path / "passwd"
     target.write_text("root:x:0:0\n")
-    assert main(["--out", str(target), "--quick", "--no-progress", "--no-plots"]) == 2
-    assert "exists and is not a directory" in capsys.readouterr().err
+    assert "exists and is not a folder" in _refusal(main, ["--out", str(target), "--quick", "--no-progress",
+                                                           "--no-plots"], capsys)
     assert target.read_text() == "root:x:0:0\n"
 
 

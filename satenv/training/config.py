@@ -36,7 +36,7 @@ from satenv.cliargs import (
 from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
 __all__ = ["BUDGET_FLAG", "RunConfig", "announce", "TrainConfig", "canonical_flags", "parse_args", "parse_bool", "parse_seeds",
-           "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
+           "check_env_kwargs", "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
 
@@ -129,6 +129,7 @@ class RunConfig:
     def __post_init__(self) -> None:
         self._resolve_task()
         check_run_fields(self, ("env_kwargs", "eval_env_kwargs"))
+        check_env_kwargs(self)
         check_int("seed", self.seed, minimum=0)
         check_int("torch_threads", self.torch_threads, minimum=1)
         check_int("workers", self.workers, minimum=0)
@@ -352,6 +353,21 @@ def check_run_fields(cfg: Any, dict_fields: tuple[str, ...]) -> None:
         raise ValueError(f"out_dir: {err}") from None
 
 
+def check_env_kwargs(cfg: Any) -> None:
+    """``env_kwargs`` and ``eval_env_kwargs`` of a satenv env id are accepted by its env (built
+    once with each, about a millisecond): an unknown keyword or a bad value is an error naming the
+    field, before a run folder is made. A ``module:callable`` id is not built here (that runs code)."""
+    import satenv
+
+    if cfg.env_id not in satenv.ENV_IDS:
+        return
+    for name, kwargs in (("env_kwargs", cfg.env_kwargs), ("eval_env_kwargs", cfg.resolved_eval_env_kwargs)):
+        try:
+            satenv.make(cfg.env_id, **kwargs).close()
+        except (ValueError, TypeError) as err:
+            raise type(err)(f"{name}: {err}") from None
+
+
 def check_int(name: str, v: Any, minimum: int) -> None:
     """Raise ``ValueError`` unless ``v`` is an int (not a bool) >= ``minimum``."""
     if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
@@ -429,9 +445,9 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     A bad flag or value exits (``SystemExit(2)``) with one ``error:`` line naming the flag; a bad
     ``--config`` file raises ``ValueError``.
     """
-    import os
     import sys
 
+    from satenv.training import runfolder
     from satenv.training.trust import CODE_FLAG
 
     argv = canonical_flags(list(sys.argv[1:] if argv is None else argv))
@@ -458,10 +474,7 @@ def parse_args(argv: list[str] | None = None, *, cls: type = TrainConfig, base: 
     # without a base the field defaults (not a resolved instance: the default task's env must not
     # stick to a run given another --task)
     cfg = config_from_args(parser, cls, ns, base)
-    if opts.resume and base is None and not os.path.lexists(f"{cfg.out_dir}/config.json"):
-        print(f"--resume: {cfg.out_dir}/config.json does not exist (no run, or one stopped before writing "
-              "it): starting the run fresh from the flags given", file=sys.stderr, flush=True)
-    elif opts.resume and base is None:
+    if opts.resume and base is None and runfolder.resumable(cfg.out_dir):
         saved = f"{cfg.out_dir}/config.json"
         try:
             saved_cfg = load_config(saved, cls, allow_code_env_id=opts.allow_code_env_id)

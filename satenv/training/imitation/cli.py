@@ -41,7 +41,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The run options and every :class:`ImitationConfig` field as a flag (:mod:`satenv.cliargs`)."""
-    from satenv.cliargs import add_config_flags, plain
+    from satenv.cliargs import add_config_flags, int_at_least, plain
 
     p = _Parser(prog=PROG, description=plain(__doc__.split("\n\n")[0]), allow_abbrev=False,
                 epilog=plain("\n\n".join(__doc__.split("\n\n")[1:])), formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -54,7 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--ship-round", type=int, help="the round to ship (default: chosen on validation)")
     run.add_argument("--ship-filter", action="store_true", help="the shipped folder names the safety filter")
     run.add_argument("--validate-round", type=int, help="score this round (-1: the warm start), then stop")
-    run.add_argument("--validate-seeds", type=int, default=100, help="validation seeds of --validate-round")
+    run.add_argument("--validate-seeds", type=int_at_least(1), default=100,
+                     help="validation seeds of --validate-round")
     add_config_flags(p, ImitationConfig, title="config fields (ImitationConfig)")
     return p
 
@@ -80,23 +81,30 @@ def parse(argv: list[str] | None = None) -> tuple[argparse.Namespace, ImitationC
         from satenv.training.recipes import system_name
 
         ns.task = tasks.training_task(system_name(ns.system)).name
-    if ns.config is not None or resume:
-        base = _saved(ns.config if ns.config is not None else saved, ns.allow_code_env_id)
+    if ns.config is not None:
+        base = _saved(ns.config, ns.allow_code_env_id, f"--config {ns.config}")
+    elif resume:
+        base = _saved(saved, ns.allow_code_env_id, str(saved))
     else:
         base = _fresh_base(getattr(ns, "task", None), hasattr(ns, "env_id"))
     return ns, config_from_args(parser, ImitationConfig, ns, base), resume
 
 
-def _saved(path: Path, allow_code: bool) -> ImitationConfig:
-    """The config of a saved ``config.json`` (its names vetted before anything is built)."""
+def _saved(path: Path, allow_code: bool, source: str) -> ImitationConfig:
+    """The config of a saved ``config.json`` (its names vetted before anything is built); an error
+    names ``source`` (``--config PATH``, or the run folder's file)."""
     from satenv.training.imitation.config import upgrade
     from satenv.training.trust import check_replayed_config, read_json
 
-    data = read_json(path.parent, path.name)
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object of config fields, got {type(data).__name__}")
-    check_replayed_config(upgrade(data), allow_code_env_id=allow_code, source=str(path))
-    return from_json(data)
+    try:
+        data = read_json(path.parent, path.name)
+        if not isinstance(data, dict):
+            raise ValueError(f"expected a JSON object of config fields, got {type(data).__name__}")
+        check_replayed_config(upgrade(data), allow_code_env_id=allow_code, source=source)
+        return from_json(data)
+    except (ValueError, TypeError) as err:
+        text = str(err).removeprefix(f"{path}: ").removeprefix(f"{os.path.abspath(path)}: ")
+        raise (err if text.startswith(source) else type(err)(f"{source}: {text}")) from None
 
 
 def _fresh_base(task_name: str | None, env_id_given: bool) -> ImitationConfig | None:

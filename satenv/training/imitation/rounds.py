@@ -80,8 +80,6 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
     for sub in ("labels", "rounds"):
         check_folder(run_dir / sub, f"{sub} folder")
     torch.set_num_threads(cfg.torch_threads)
-    (run_dir / "labels").mkdir(parents=True, exist_ok=True)
-    runfolder.write_json(run_dir / "config.json", {**cfg.to_json(), "out_dir": str(run_dir)}, indent=2)
     envs = setup.make_envs(cfg.env_id, cfg.env_kwargs, cfg.eval_env_kwargs, cfg.task, cfg.system,
                            cfg.collect_through_collisions)
     meta = policy_env_meta(cfg.env_id, envs.collect, setup.collect_kwargs(cfg.env_id, cfg.env_kwargs,
@@ -93,6 +91,8 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
     label_config = label_filter_config(cfg.label_filter, net.shipped_filter)
     if cfg.safe:
         check_label_space(cfg.label, cfg.imitation_space, net.policy)
+    (run_dir / "labels").mkdir(parents=True, exist_ok=True)   # written once the warm start and experts are read
+    runfolder.write_json(run_dir / "config.json", {**cfg.to_json(), "out_dir": str(run_dir)}, indent=2)
     fitted = cfg.warm_start is not None          # the normaliser is the warm start's, or round 0's
     if history:
         _restore(net.policy, round_folder(run_dir, len(history) - 1))

@@ -9,7 +9,7 @@ from typing import Any, NamedTuple
 from satenv import tasks
 
 __all__ = ["Envs", "Network", "cold_network", "make_envs", "make_expert", "paper_task", "score", "warm_network",
-           "warm_start_filter"]
+           "warm_start_filter", "warm_start_folder"]
 
 
 class Envs(NamedTuple):
@@ -109,16 +109,28 @@ def cold_network(env: Any, config: dict[str, Any], meta: dict[str, Any], seed: i
     return Network(policy, meta, config, None)
 
 
+def warm_start_folder(folder: str | Path) -> Path:
+    """``folder`` if it is a real folder; absent, a file or a symbolic link is a
+    :class:`~satenv.training.imitation.folder.RunFolderError` naming ``warm_start``."""
+    from satenv.training.imitation.folder import check_folder
+    from satenv.training.runfolder import RunFolderError
+
+    root = check_folder(Path(folder), "warm_start policy folder")
+    if not root.is_dir():
+        raise RunFolderError(f"warm_start {folder}: no such policy folder")
+    return root
+
+
 def warm_start_filter(folder: str | Path) -> Any:
     """The :class:`satenv.safety.SafetyConfig` a policy folder ships with (``env.json``
     ``"safety_filter"``; the default filter when it ships none): the filter of the labels, the
     rows, the flights behind it and the validation."""
     from satenv.safety import SafetyConfig
-    from satenv.training.imitation.folder import check_folder, read_run_json
+    from satenv.training.imitation.folder import read_run_json
     from satenv.training.policy import shipped_filter
     from satenv.training.trust import MAX_JSON_BYTES
 
-    root = check_folder(Path(folder), "warm-start policy folder")
+    root = warm_start_folder(folder)
     meta = read_run_json(root, "env.json", "the warm start's env.json", MAX_JSON_BYTES)
     if not isinstance(meta, dict):
         raise ValueError(f"warm_start {folder}: env.json must be a JSON object")
@@ -129,11 +141,11 @@ def warm_network(folder: str, imitation: dict[str, Any]) -> Network:
     """The network of the policy folder ``folder`` (its own features, normaliser and feedback),
     whose rounds carry its ``env.json`` and its ``config.json`` with the run's config under
     ``"imitation"``; the filter it ships with (the default filter when it ships none)."""
-    from satenv.training.imitation.folder import check_folder, read_run_json
+    from satenv.training.imitation.folder import read_run_json
     from satenv.training.policy import load
     from satenv.training.trust import MAX_JSON_BYTES
 
-    root = check_folder(Path(folder), "warm-start policy folder")
+    root = warm_start_folder(folder)
     meta = read_run_json(root, "env.json", "the warm start's env.json", MAX_JSON_BYTES)
     config = read_run_json(root, "config.json", "the warm start's config.json", MAX_JSON_BYTES)
     if not isinstance(meta, dict) or not isinstance(config, dict):
