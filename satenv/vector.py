@@ -51,6 +51,7 @@ Semantics (the same as the PettingZoo env, :class:`satenv.envs.base.SatParallelE
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -303,6 +304,59 @@ class SatVectorEnv:
         """The global state of every copy ``(B, ...)`` (the PettingZoo env's ``state()``), float64."""
         return np.asarray(self.core.global_state(), dtype=np.float64)
 
+    # ----------------------------------------------------------------- state (resume)
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The episodes in flight as arrays (no pickle): the batched core's arrays (``core.<name>``),
+        every generator's state (``generators``, JSON text), the finished copies (``ended``) and the
+        training reward's memory of each copy (``reward.<name>``). :meth:`set_state` puts them back:
+        a checkpoint resumes mid-episode, bit for bit (both trainers save it)."""
+        if self._rngs is None:
+            raise SatenvError("get_state(): reset() first (there is no episode yet)")
+        state = {f"core.{k}": v.copy() for k, v in vars(self.core).items() if isinstance(v, np.ndarray)}
+        gens = {k: v.bit_generator.state for k, v in vars(self.core).items() if isinstance(v, np.random.Generator)}
+        state["generators"] = np.array(json.dumps({"copies": [g.bit_generator.state for g in self._rngs.generators],
+                                                   "core": gens}))
+        state["ended"] = self._ended.copy()
+        if self.reward_state is not None:
+            state.update({f"reward.{k}": v.copy() for k, v in vars(self.reward_state).items()
+                          if isinstance(v, np.ndarray)})
+        return state
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`get_state` (names, shapes and dtypes checked: a ``SatenvError`` naming the
+        entry, before anything changes)."""
+        arrays = [(self.core, k, v) for k, v in state.items() if k.startswith("core.")]
+        if self.reward_state is not None:
+            arrays += [(self.reward_state, f"reward.{k}", _entry(state, f"reward.{k}"))
+                       for k, v in vars(self.reward_state).items() if isinstance(v, np.ndarray)]
+        for owner, key, value in arrays:
+            old = getattr(owner, key.partition(".")[2], None)
+            value = np.asarray(value)
+            if not isinstance(old, np.ndarray) or old.shape != value.shape or old.dtype != value.dtype:
+                raise SatenvError(f"env state: {key} does not match this env's {type(owner).__name__} "
+                                  f"({getattr(old, 'shape', None)} {getattr(old, 'dtype', None)}, got {value.shape} "
+                                  f"{value.dtype})")
+        try:
+            gens = json.loads(str(_entry(state, "generators")))
+            rngs = []
+            for g in gens["copies"]:
+                rngs.append(np.random.default_rng())
+                rngs[-1].bit_generator.state = g
+            core_gens = [(getattr(self.core, name), g) for name, g in gens["core"].items()]
+            for gen, g in core_gens:                       # checked on a copy: nothing changes yet
+                type(gen.bit_generator)().state = g
+        except (KeyError, TypeError, ValueError, AttributeError) as err:
+            raise SatenvError(f"env state: the generators' entry is malformed ({type(err).__name__}: {err})") from None
+        ended = np.asarray(_entry(state, "ended"), dtype=bool)
+        if len(rngs) != self.num_envs or ended.shape != (self.num_envs,):
+            raise SatenvError(f"env state: {len(rngs)} copies, this env has {self.num_envs}")
+        for owner, key, value in arrays:
+            setattr(owner, key.partition(".")[2], np.array(value, copy=True))
+        for gen, g in core_gens:
+            gen.bit_generator.state = g
+        self._rngs = CopyGenerators(rngs)
+        self._ended = ended.copy()
+
     def close(self) -> None:
         self.env.close()
 
@@ -367,3 +421,10 @@ class FilteredVectorEnv(SatVectorEnv):
             raise SafetyTypeError("FilteredVectorEnv: safety_filter must be True or a SafetyConfig, "
                                   f"got {safety_filter!r}")
         super().__init__(env, num_envs, seed=seed, autoreset=autoreset, safety_filter=safety_filter)
+
+
+def _entry(state: dict[str, np.ndarray], key: str) -> np.ndarray:
+    """``state[key]``; a missing entry is a ``SatenvError`` naming it."""
+    if key not in state:
+        raise SatenvError(f"env state: no {key!r} entry (a state of get_state() holds it)")
+    return state[key]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -91,6 +92,29 @@ def test_a_seed_fixes_the_run_and_resume_equals_uninterrupted(tmp_path):
     assert [json.loads(x)["agent_steps"] for x in lines] == [128, 256, 384, 512]
 
 
+def test_resume_without_a_checkpoint_starts_the_run_fresh(tmp_path, capsys):
+    """An "always --resume" loop is never stuck: a folder with no run, or with a run killed before
+    its first checkpoint (its config.json written), starts fresh, says so, and ends as a run
+    without --resume."""
+    argv = ["--task", TASK, "--num-envs", "4", "--n-steps", "8", "--minibatch-size", "64", "--n-epochs", "2",
+            "--test-seeds", "900000", "--eval-baselines", "zero", "--workers", "1", "--no-progress",
+            "--checkpoint-every", "0", "--budget", "128"]
+    assert ppo.main([*argv, "--out-dir", str(tmp_path / "plain")]) == 0
+    assert ppo.main([*argv, "--out-dir", str(tmp_path / "none"), "--resume"]) == 0
+    assert "config.json does not exist" in capsys.readouterr().err
+    killed = tmp_path / "killed"
+    assert ppo.main([*argv, "--out-dir", str(killed)]) == 0
+    for folder in ("checkpoints", "final"):        # as a kill before the first checkpoint leaves it
+        shutil.rmtree(killed / folder)
+    assert ppo.main([*argv, "--out-dir", str(killed), "--resume"]) == 0
+    assert "no checkpoint under" in capsys.readouterr().err
+    w = _weights(tmp_path / "plain" / "final")
+    for folder in (tmp_path / "none", killed):
+        assert all(np.array_equal(w[k], v) for k, v in _weights(folder / "final").items())
+    with pytest.raises(ValueError, match="already has checkpoints"):
+        ppo.train(ppo.LeanConfig(**TINY, budget=128, out_dir=str(killed)))
+
+
 @pytest.mark.parametrize("variant", ["ippo", "mappo"])
 def test_variants_train_and_write_their_folders(tmp_path, variant):
     from satenv.training import load
@@ -117,7 +141,9 @@ def test_gamma_follows_the_horizon_and_bad_input_is_named(tmp_path, capsys):
     assert ppo.main(["--task", TASK, "--gamma-k", "500", "--budget", "128", "--num-envs", "4", "--n-steps", "8",
                      "--out-dir", str(tmp_path / "x")]) == 2
     assert "gamma_k" in capsys.readouterr().err
-    assert ppo.main(["--out-dir", str(tmp_path / "none"), "--resume"]) == 2
+    assert ppo.main(["--task", TASK, "--env-kwargs", '{"nope": 1}', "--out-dir", str(tmp_path / "k")]) == 2
+    assert "error: --env-kwargs: platoon_v0: unknown keyword argument(s) ['nope']" in capsys.readouterr().err
+    assert not (tmp_path / "k").exists()
     with pytest.raises(SystemExit):
         ppo.main(["--budg", "10"])      # no abbreviations
 

@@ -164,3 +164,38 @@ def test_observe_copies_are_the_rows_of_observe(env_id, kwargs):
         vec.reset(indices=[k])
     idx = np.array([4, 0, 2])
     np.testing.assert_array_equal(vec.core.observe_copies(idx), vec.core.observe()[idx])
+
+
+def test_the_episode_state_round_trips_with_the_training_rewards_memory():
+    """``get_state`` / ``set_state``: a fresh batch given a batch's state mid-episode steps on to
+    the same observations and training rewards (the reward's per-copy memory included); a state
+    without that memory, or of another batch size, is refused naming the entry, the batch unchanged."""
+    from satenv import tasks
+
+    env = tasks.get("platoon-pereira2022-random").make_env()
+    a, b = SatVectorEnv(env, 3, seed=4), SatVectorEnv(env, 3, seed=9)
+    assert a.reward_state is not None
+    rng = np.random.default_rng(0)
+    a.reset(), b.reset()
+    for _ in range(5):
+        a.step(rng.uniform(-1, 1, a.action_shape))
+    state = a.get_state()
+    assert any(k.startswith("reward.") for k in state)
+    b.set_state(state)
+    for _ in range(5):
+        act = rng.uniform(-1, 1, a.action_shape)
+        one, two = a.step(act), b.step(act)
+        assert np.array_equal(one[0], two[0]) and np.array_equal(one[1], two[1])
+    before = b.get_state()
+    key = next(k for k in state if k.startswith("reward."))
+    with pytest.raises(SatenvError, match=f"no '{key}' entry"):
+        b.set_state({k: v for k, v in state.items() if k != key})
+    with pytest.raises(SatenvError, match="copies|does not match"):
+        b.set_state(_state_of(SatVectorEnv(env, 2, seed=1)))
+    after = b.get_state()
+    assert all(np.array_equal(before[k], after[k]) for k in before)
+
+
+def _state_of(vec):
+    vec.reset()
+    return vec.get_state()

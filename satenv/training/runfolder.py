@@ -22,12 +22,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["CRASH_EXIT_CODE", "RunFolderError", "boundary", "crash", "read_json", "recover_folder",
-           "replace_folder", "reset_boundaries", "save_with", "staging", "write_bytes", "write_json", "write_text"]
+__all__ = ["CRASH_EXIT_CODE", "RunFolderError", "boundary", "crash", "latest_checkpoint", "read_json",
+           "recover_folder", "replace_folder", "resumable", "resume_checkpoint", "reset_boundaries", "save_with", "staging", "write_bytes", "write_json", "write_text"]
 
 CRASH_EXIT_CODE = 86
 """Exit status of a process ended at a write boundary by ``SATENV_CRASH_AT_WRITE``."""
@@ -183,3 +184,39 @@ def recover_folder(folder: str | Path) -> Path | None:
         if leftover.exists():
             shutil.rmtree(leftover)
     return folder if folder.exists() else None
+
+
+def latest_checkpoint(out: str | Path, marker: str) -> tuple[int, Path] | None:
+    """``(steps, folder)`` of the newest complete ``out/checkpoints/step_<N>`` (one holding the file
+    ``marker``), or ``None``; a checkpoint swap a kill interrupted is finished or undone first."""
+    checkpoints = Path(out) / "checkpoints"
+    for p in checkpoints.glob("step_*"):
+        if p.name.endswith((_OLD, _TMP)):
+            recover_folder(p.with_name(p.name.removesuffix(_OLD).removesuffix(_TMP)))
+    found = [(int(p.name[5:]), p) for p in checkpoints.glob("step_*")
+             if p.name[5:].isdigit() and (p / marker).is_file()]
+    return max(found) if found else None
+
+
+def resume_checkpoint(out: str | Path, resume: bool, marker: str) -> tuple[int, Path] | None:
+    """The checkpoint a trainer's run continues from (:func:`latest_checkpoint`), the one resume
+    rule: ``--resume`` on a folder without a checkpoint starts the run fresh and says so on stderr
+    (a loop that always passes ``--resume`` is never stuck); without ``--resume``, a folder that has
+    checkpoints is refused (nothing is overwritten)."""
+    ckpt = latest_checkpoint(out, marker)
+    if resume and ckpt is None:
+        print(f"--resume: no checkpoint under {Path(out) / 'checkpoints'}: starting the run fresh", file=sys.stderr,
+              flush=True)
+    if not resume and ckpt is not None:
+        raise RunFolderError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
+    return ckpt if resume else None
+
+
+def resumable(out: str | Path) -> bool:
+    """Whether ``--resume`` finds the run's ``config.json`` in ``out``; without it (no run yet, or one
+    killed before writing it) the run starts fresh from the flags given, and says so on stderr."""
+    if os.path.lexists(Path(out) / "config.json"):
+        return True
+    print(f"--resume: {Path(out) / 'config.json'} does not exist (no run, or one stopped before writing it): "
+          "starting the run fresh from the flags given", file=sys.stderr, flush=True)
+    return False

@@ -26,7 +26,6 @@ parameter sharing); timesteps count agent-steps. Read top to bottom:
 from __future__ import annotations
 
 import json
-import re
 import shutil
 import sys
 import time
@@ -68,16 +67,9 @@ __all__ = ["main", "train", "latest_checkpoint", "init_policy", "seed_actor"]
 
 # --------------------------------------------------------------------------- helpers
 def latest_checkpoint(out_dir: Path) -> tuple[int, Path] | None:
-    """``(steps, folder)`` of the newest complete ``checkpoints/step_<N>``, or ``None`` (a
-    checkpoint swap a kill interrupted is finished or undone first: :func:`satenv.training.runfolder.recover_folder`)."""
-    for aside in (out_dir / "checkpoints").glob("step_*.old"):
-        runfolder.recover_folder(aside.with_name(aside.name[:-len(".old")]))
-    found = []
-    for p in (out_dir / "checkpoints").glob("step_*"):
-        m = re.fullmatch(r"step_(\d+)", p.name)
-        if m and (p / CHECKPOINT_STATE).is_file():
-            found.append((int(m.group(1)), p))
-    return max(found) if found else None
+    """``(steps, folder)`` of the newest complete checkpoint, or ``None``
+    (:func:`satenv.training.runfolder.latest_checkpoint`)."""
+    return runfolder.latest_checkpoint(out_dir, CHECKPOINT_STATE)
 
 
 def env_meta(cfg: TrainConfig, env: Any) -> dict[str, Any]:
@@ -472,13 +464,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     from satenv.training.vec_env import SatVecEnv
 
     out = Path(cfg.out_dir)
-    ckpt = latest_checkpoint(out) if resume else None
-    if resume and ckpt is None:   # stopped before its first checkpoint: nothing to continue from
-        print(f"--resume: no checkpoint under {out / 'checkpoints'}: starting the run fresh", file=sys.stderr,
-              flush=True)
-        resume = False
-    if not resume and latest_checkpoint(out) is not None:
-        raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
+    ckpt = runfolder.resume_checkpoint(out, resume, CHECKPOINT_STATE)
+    resume = ckpt is not None
     out.mkdir(parents=True, exist_ok=True)
     for name in ("best", "final"):   # a folder swap a kill interrupted: the old content or the new, whole
         runfolder.recover_folder(out / name)

@@ -16,7 +16,6 @@ last step (``(B, M, ...)``, before any auto-reset) are in :attr:`SatVecEnv.last_
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -140,47 +139,14 @@ class SatVecEnv(VecEnv):
 
     # ------------------------------------------------------------------ state (resume)
     def get_state(self) -> dict[str, np.ndarray]:
-        """Everything the next ``step`` reads, as arrays (no pickle): the batched core's array
-        attributes (``core.<name>``) and every random generator's state (JSON text); with
-        :meth:`set_state` a checkpoint resumes the episodes mid-flight, bit for bit."""
-        if self.vec._rngs is None:
-            raise SatenvError("SatVecEnv.get_state(): reset() first (there is no episode yet)")
-        state = {f"core.{k}": v.copy() for k, v in vars(self.core).items() if isinstance(v, np.ndarray)}
-        gens = {k: v.bit_generator.state for k, v in vars(self.core).items() if isinstance(v, np.random.Generator)}
-        state["generators"] = np.array(json.dumps({"copies": [g.bit_generator.state for g in self.vec._rngs.generators],
-                                                   "core": gens}))
-        state["ended"] = self.vec._ended.copy()
-        return state
+        """The episodes in flight (:meth:`satenv.vector.SatVectorEnv.get_state`: the core, the
+        generators, the training reward's memory); with :meth:`set_state` a checkpoint resumes
+        them bit for bit."""
+        return self.vec.get_state()
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Restore :meth:`get_state` (names and shapes checked: ``ValueError`` naming the entry)."""
-        from satenv.vector import CopyGenerators
-
-        for key, value in state.items():
-            if not key.startswith("core."):
-                continue
-            name = key[len("core."):]
-            old = getattr(self.core, name, None)
-            if not isinstance(old, np.ndarray) or old.shape != value.shape or old.dtype != value.dtype:
-                raise ValueError(f"env state: {key} does not match this env's core ({type(self.core).__name__}: "
-                                 f"{getattr(old, 'shape', None)} {getattr(old, 'dtype', None)}, got {value.shape} "
-                                 f"{value.dtype})")
-            setattr(self.core, name, value.copy())
-        try:
-            gens = json.loads(str(state["generators"]))
-            rngs = []
-            for g in gens["copies"]:
-                gen = np.random.default_rng()
-                gen.bit_generator.state = g
-                rngs.append(gen)
-            for name, g in gens["core"].items():
-                getattr(self.core, name).bit_generator.state = g
-        except (KeyError, TypeError, ValueError, AttributeError) as err:
-            raise ValueError(f"env state: the generators' entry is malformed ({type(err).__name__}: {err})") from None
-        if len(rngs) != self.n_copies:
-            raise ValueError(f"env state: {len(rngs)} copies, this env has {self.n_copies}")
-        self.vec._rngs = CopyGenerators(rngs)
-        self.vec._ended = np.asarray(state["ended"], dtype=bool).copy()
+        """Restore :meth:`get_state` (:meth:`satenv.vector.SatVectorEnv.set_state`)."""
+        self.vec.set_state(state)
 
     # ------------------------------------------------------ attribute plumbing
     def _indices(self, indices: VecEnvIndices) -> list[int]:

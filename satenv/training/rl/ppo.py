@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import dataclasses
 import json
 import math
 import sys
@@ -383,35 +382,6 @@ CHECKPOINT_ARRAYS = "env_state.npz"
 CHECKPOINT_JSON = "state.json"
 
 
-def _env_state(vec: Any) -> dict[str, np.ndarray]:
-    """The batched env's episodes in flight (the SB3 adapter's record of them, one home) and the
-    training reward's memory of them (every array of ``satenv.rewards.RewardState``)."""
-    from types import SimpleNamespace
-
-    from satenv.training.vec_env import SatVecEnv
-
-    state = SatVecEnv.get_state(SimpleNamespace(vec=vec, core=vec.core, n_copies=vec.num_envs))
-    memory = getattr(vec, "reward_state", None)
-    if memory is not None:
-        state.update({f"reward.{k}": v.copy() for k, v in vars(memory).items() if isinstance(v, np.ndarray)})
-    return state
-
-
-def _set_env_state(vec: Any, state: dict[str, np.ndarray]) -> None:
-    from types import SimpleNamespace
-
-    from satenv.training.vec_env import SatVecEnv
-
-    SatVecEnv.set_state(SimpleNamespace(vec=vec, core=vec.core, n_copies=vec.num_envs), state)
-    memory = getattr(vec, "reward_state", None)
-    if memory is not None:
-        for k, old in [(k, v) for k, v in vars(memory).items() if isinstance(v, np.ndarray)]:
-            new = np.asarray(state[f"reward.{k}"], dtype=old.dtype)
-            if new.shape != old.shape:
-                raise ValueError(f"env state: reward.{k} has shape {new.shape}, this env's is {old.shape}")
-            setattr(memory, k, new.copy())
-
-
 def save_checkpoint(run: Run, out: Path) -> Path:
     """``checkpoints/step_<N>/``: weights and Adam moments (safetensors), the env's episodes and
     the generators (npz), the statistics (JSON); written whole or not at all."""
@@ -427,7 +397,7 @@ def save_checkpoint(run: Run, out: Path) -> Path:
         tensors[f"adam.{names[id(p)]}.exp_avg_sq"] = s["exp_avg_sq"].contiguous()
         steps[names[id(p)]] = float(s["step"])
     save_file(tensors, str(tmp / CHECKPOINT_TENSORS))
-    arrays = {f"env.{k}": v for k, v in _env_state(run.vec).items()}
+    arrays = {f"env.{k}": v for k, v in run.vec.get_state().items()}
     arrays.update({"obs": run.obs, "returns": run.norm.returns, "generator": run.gen.get_state().numpy(),
                    **{f"episode.{k}": v for k, v in run.episode.items()}})
     np.savez(tmp / CHECKPOINT_ARRAYS, **arrays)
@@ -438,15 +408,9 @@ def save_checkpoint(run: Run, out: Path) -> Path:
 
 
 def latest_checkpoint(out: Path) -> Path | None:
-    """The newest complete ``checkpoints/step_<N>`` (an interrupted swap finished or undone first)."""
-    found = []
-    for p in (out / "checkpoints").glob("step_*"):
-        if p.name.endswith((".old", ".tmp")):
-            runfolder.recover_folder(p.with_suffix(""))
-            continue
-        if (p / CHECKPOINT_JSON).is_file() and p.name[5:].isdigit():
-            found.append((int(p.name[5:]), p))
-    return max(found)[1] if found else None
+    """The newest complete ``checkpoints/step_<N>`` (:func:`satenv.training.runfolder.latest_checkpoint`)."""
+    found = runfolder.latest_checkpoint(out, CHECKPOINT_JSON)
+    return found[1] if found else None
 
 
 def load_checkpoint(run: Run, folder: Path) -> None:
@@ -464,7 +428,7 @@ def load_checkpoint(run: Run, folder: Path) -> None:
                                     "exp_avg_sq": tensors[f"adam.{name}.exp_avg_sq"].clone()}
         with np.load(folder / CHECKPOINT_ARRAYS, allow_pickle=False) as d:
             data = {k: d[k] for k in d.files}
-        _set_env_state(run.vec, {k[4:]: v for k, v in data.items() if k.startswith("env.")})
+        run.vec.set_state({k[4:]: v for k, v in data.items() if k.startswith("env.")})
         run.obs, run.norm.returns = data["obs"].copy(), data["returns"].copy()
         run.gen.set_state(torch.from_numpy(data["generator"].copy()))
         run.episode = {k: data[f"episode.{k}"].copy() for k in run.episode}
@@ -591,11 +555,8 @@ def train(cfg: LeanConfig, resume: bool = False) -> Path:
 
     torch.set_num_threads(cfg.torch_threads)
     out = Path(cfg.out_dir)
-    ckpt = latest_checkpoint(out) if resume else None
-    if resume and ckpt is None:
-        raise ValueError(f"--resume: no checkpoint under {out / 'checkpoints'}; train first without --resume")
-    if not resume and latest_checkpoint(out) is not None:
-        raise ValueError(f"{out} already has checkpoints; pass --resume to continue or choose another --out-dir")
+    found = runfolder.resume_checkpoint(out, resume, CHECKPOINT_JSON)
+    ckpt = found[1] if found else None
     out.mkdir(parents=True, exist_ok=True)
     runfolder.recover_folder(out / "final")
     env = tasks.get(cfg.task).make_env(**cfg.env_kwargs) if cfg.task else make_env(cfg.env_id, **cfg.env_kwargs)
@@ -707,18 +668,24 @@ def tuned(task: str) -> dict[str, Any]:
 
 
 def config_from_args(argv: list[str] | None) -> tuple[LeanConfig, bool]:
+    """``(config, resume)`` of a command line; a bad value is an error naming its flag."""
+    from satenv.cliargs import flag_message
+
     args = parser().parse_args(argv)
     given = {k: v for k, v in vars(args).items() if v is not None and k not in ("resume", "tuned", "no_progress")}
     if args.no_progress:
         given["progress"] = False
-    if args.resume:
-        out = Path(given.get("out_dir", LeanConfig.out_dir))
-        saved = runfolder.read_json(out / "config.json", "the run's config")
-        saved.pop("gamma_used", None)
-        return config_from_json({**saved, **given}, LeanConfig), True
-    if args.tuned:
-        given = {**tuned(given.get("task") or LeanConfig(**given).task), **given}
-    return LeanConfig(**given), False
+    try:
+        if args.resume and runfolder.resumable(given.get("out_dir", LeanConfig.out_dir)):
+            saved = runfolder.read_json(Path(given.get("out_dir", LeanConfig.out_dir)) / "config.json",
+                                        "the run's config")
+            saved.pop("gamma_used", None)
+            return config_from_json({**saved, **given}, LeanConfig), True
+        if args.tuned:
+            given = {**tuned(given.get("task") or LeanConfig(**given).task), **given}
+        return LeanConfig(**given), args.resume
+    except (ValueError, TypeError) as err:
+        raise type(err)(flag_message(LeanConfig, str(err))) from None
 
 
 def main(argv: list[str] | None = None) -> int:
