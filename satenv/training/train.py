@@ -369,9 +369,9 @@ ENV_STATE = "env_state.npz"
 
 
 def env_state(model, venv) -> dict[str, np.ndarray]:
-    """The episodes in flight (the batched core and its generators, :meth:`SatVecEnv.get_state`),
-    the wrappers' running sums, the model's last observation and the torch / numpy random states,
-    as arrays (saved with ``np.savez``: no pickle)."""
+    """The episodes in flight (the batched core, its generators and the training reward's memory:
+    :meth:`SatVecEnv.get_state`), the wrappers' running sums, the model's last observation and the
+    torch / numpy random states, as arrays (saved with ``np.savez``: no pickle)."""
     import torch
 
     monitor, sat = venv.venv, venv.venv.venv
