@@ -10,8 +10,9 @@ time (``docs/hooks.py``), so nothing on them is typed in: the JSON is the one so
 ``--render-only`` re-renders the ``.md`` files from the committed JSONs (after a run made by hand,
 e.g. ``reproduce li2022 --case 1``). By default only the fast papers run (seconds); ``--slow`` adds
 the ones that take minutes. Every call also rewrites the time column of
-``docs/reproductions/index.md`` from the committed JSONs' ``wall_time_s``. A paper's exit status 1 (a paper-valued claim of our run not met) is
-recorded in its JSON (``pass``) and shown on its page, not treated as an error here.
+``docs/reproductions/index.md`` from the committed JSONs' ``wall_time_s``. A paper's exit status 1
+(a paper-valued claim of our run not met) is recorded in its JSON (``pass``) and shown on its page,
+not treated as an error here.
 """
 
 from __future__ import annotations
@@ -87,12 +88,14 @@ def render(result: dict) -> str:
     n = count(result.get("claims", []))
     verdict = "all met" if result.get("pass") else "**not all met**"
     parts = [f"**Verdict:** the paper-valued claims of our run: {n['gating_met']} of {n['gating']} met ({verdict}). "
-             f"All rows (our run, as published, ablations, other readings, comparisons with our own designs): {n['met']} met, {n['not met']} not met, "
+             "All rows (our run, as published, ablations, other readings, comparisons with our own designs): "
+             f"{n['met']} met, {n['not met']} not met, "
              f"{n['paper gives no value']} where the paper gives no value (reported, never counted as met). "
              "A claim's rule comes from the paper's sentence it quotes: a value is judged as a +-10 % band "
              "around it, a stated limit or fact as stated."]
     if result.get("not_run"):
-        parts.append("**Not run in this result** (run it and re-render): " + "; ".join(f"`{c}`" for c in result["not_run"]))
+        parts.append("**Not run in this result** (run it and re-render): "
+                     + "; ".join(f"`{c}`" for c in result["not_run"]))
     if result.get("departures"):
         parts += ["### Departures from the paper",
                   "Every setting where our run differs from the paper, with its measured effect on the claims.",

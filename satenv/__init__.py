@@ -128,8 +128,8 @@ def _register_gymnasium() -> None:
 
 _register_gymnasium()
 
-__all__ = ["ENV_IDS", "EnvModule", "GYM_IDS", "GYM_MAX_EPISODE_STEPS", "__version__", "cluster_v0", "formation_v0", "make", "make_vec",
-           "platoon_v0", "servicing_v0"]
+__all__ = ["ENV_IDS", "EnvModule", "GYM_IDS", "GYM_MAX_EPISODE_STEPS", "__version__", "cluster_v0", "formation_v0",
+           "make", "make_vec", "platoon_v0", "servicing_v0"]
 
 _SUBMODULES = frozenset({"allocation", "dynamics", "envs", "errors", "metrics", "perturbations", "rollout", "safety",
                          "scenarios", "scoring", "tasks", "vector", "baselines", "training", "bench"})

@@ -38,9 +38,9 @@ from dataclasses import MISSING, Field, dataclass, fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-__all__ = ["Arg", "add_config_flags", "config_from_args", "config_parser", "config_to_argv", "flag_message", "flag_name",
-           "int_at_least", "new_parser", "out_file", "out_folder", "parse_bool", "parse_config", "parse_json_object",
-           "plain"]
+__all__ = ["Arg", "add_config_flags", "config_from_args", "config_parser", "config_to_argv", "flag_message",
+           "flag_name", "int_at_least", "new_parser", "out_file", "out_folder", "parse_bool", "parse_config",
+           "parse_json_object", "plain"]
 
 
 @dataclass(frozen=True)

@@ -103,7 +103,8 @@ def rollout(env, policy, *, seed: int | None = None, options: dict | None = None
     return Trajectory(
         env_id=env.metadata.get("name", type(env).__name__), agents=agents, dt=dt,
         t=np.arange(len(infos)) * dt, states=states,
-        actions=np.array(actions).reshape(-1, len(agents), env.action_space(agents[0]).shape[0]), rewards=np.array(rewards).reshape(-1, len(agents)),
+        actions=np.array(actions).reshape(-1, len(agents), env.action_space(agents[0]).shape[0]),
+        rewards=np.array(rewards).reshape(-1, len(agents)),
         info=stacked, terminated=terminated, truncated=truncated, compute_time=np.array(times),
         policy_info=dict(getattr(policy, "info", {}) or {}), seed=seed, **rule,
     )

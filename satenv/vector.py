@@ -198,8 +198,10 @@ class SatVectorEnv:
             idx = np.flatnonzero(idx)
         idx = idx.astype(np.int64, copy=False).reshape(-1)
         if idx.size and (idx.min() < 0 or idx.max() >= self.num_envs):
-            raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), got {str(idx.tolist())[:80]}")
-        info = self._reset_info(self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)), idx) if idx.size else {}
+            raise SatenvError(f"reset(indices=...) must be copy indices in [0, {self.num_envs}), "
+                              f"got {str(idx.tolist())[:80]}")
+        info = (self._reset_info(self.core.reset(self._sample(idx), idx, self._rngs.subset(idx)), idx)
+                if idx.size else {})
         self._ended[idx] = False
         obs = self.core.observe()
         if idx.size:

@@ -8,8 +8,9 @@ A bound with ``lb == ub`` is an equality (DAQP's sense flag 5). :meth:`DenseQP.s
 ``(x, ok, status)`` for :func:`satenv.baselines.base.guarded_solve`.
 
 :class:`BufferedFunction` evaluates a CasADi function into preallocated numpy arrays (20x faster
-than converting its ``DM`` outputs on these problems). :func:`linearisation` builds, from a CasADi NLP, the function ``(w, p) -> (H_f, grad f, g, J_g)``
-(the cost's exact Hessian and gradient, the rows and their Jacobian, dense) that a sequential-QP
+than converting its ``DM`` outputs on these problems). :func:`linearisation` builds, from a CasADi NLP,
+the function ``(w, p) -> (H_f, grad f, g, J_g)`` (the cost's exact Hessian and gradient, the rows
+and their Jacobian, dense) that a sequential-QP
 step linearises about.
 """
 

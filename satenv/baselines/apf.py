@@ -73,7 +73,8 @@ class APFConfig:
         c_min [m]: smallest clearance used in the repulsion.
         cw_compensation: cancel the CW natural dynamics (feed-forward).
         solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
-            flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard, the law takes microseconds.
+            flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard, the
+            law takes microseconds.
     """
 
     k_att: float = 4e-3

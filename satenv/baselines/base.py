@@ -31,8 +31,8 @@ from satenv.dynamics._checks import show
 
 __all__ = [
     "Baseline", "BaselineError", "BaselineTypeError", "Policy", "RandomPolicy", "ZeroPolicy", "check_env",
-    "config_from_options", "flag", "choice", "guard_nonfinite", "guarded_solve", "is_satenv_env", "new_info", "nlpsol_cached",
-    "number", "integer", "record_fallback", "row_violation", "weights",
+    "config_from_options", "flag", "choice", "guard_nonfinite", "guarded_solve", "is_satenv_env", "new_info",
+    "nlpsol_cached", "number", "integer", "record_fallback", "row_violation", "weights",
 ]
 
 C = TypeVar("C")

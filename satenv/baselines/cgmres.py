@@ -34,10 +34,11 @@ Arnoldi steps, restarted from the previous ``dU/dt``) with the matrix-free forwa
 Newton's method (:meth:`FormationOCP.refine`).
 
 Safety (the shared guard :func:`satenv.baselines.base.guarded_solve` around the Newton restart and every
-continuation step): an exception, a wrong-shaped or non-finite update, a GMRES solve that leaves more than ``fallback_tol`` of the right-hand
-side unresolved, or an optimality residual ``|F|`` above ``max_residual`` is a failure: the
-controller commands zero thrust for that step (kannan2022 §3: ``u = 0`` is always admissible),
-counts it in ``info["fallbacks"]`` (why: ``info["solver_status"]``) and restarts the continuation from ``T = 0`` at the next sample.
+continuation step): an exception, a wrong-shaped or non-finite update, a GMRES solve that leaves more
+than ``fallback_tol`` of the right-hand side unresolved, or an optimality residual ``|F|`` above
+``max_residual`` is a failure: the controller commands zero thrust for that step (kannan2022 §3:
+``u = 0`` is always admissible), counts it in ``info["fallbacks"]`` (why: ``info["solver_status"]``)
+and restarts the continuation from ``T = 0`` at the next sample.
 The applied input is clipped to ``[-1, 1]``.
 """
 
@@ -334,7 +335,8 @@ class CGMRESConfig:
         max_residual: |F| above which the continuation is considered diverged (fallback).
         newton_iterations: Newton steps of the restart at ``T = 0`` (:meth:`FormationOCP.refine`).
         solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
-            flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard, a continuation update takes milliseconds.
+            flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard, a
+            continuation update takes milliseconds.
     """
 
     horizon: float = 3.0

@@ -104,7 +104,8 @@ class DMPCConfig:
         velocity_margin: the box (40) is imposed as ``(g+d) v_max - velocity_margin`` [m/s]
             (one_hop): the applied error velocity also depends on the neighbours' final
             iterates, which differ from the ones agent f planned against by up to the Jacobi
-            tolerance; without the margin the bound was exceeded by 1e-8 m/s on 2-3 steps.        coupled_constraints: convex_step agents impose the constraints of both pairs they move
+            tolerance; without the margin the bound was exceeded by 1e-8 m/s on 2-3 steps.
+        coupled_constraints: convex_step agents impose the constraints of both pairs they move
             (:class:`ConvexStepDMPC`).
         solver: ``"daqp"`` or ``"osqp"``.
         warm_start: ``"shift"`` or ``"previous"`` (one_hop); initial: ``"random"`` or ``"zeros"``.

@@ -1,8 +1,8 @@
 """Cooperative nonlinear MPC for on-orbit servicing (pereira2022 §4.2-4.4; ``satenv.servicing_v0``).
 
-``NMPC(env, config=None, **options)`` (:class:`NMPCConfig`) is a scripted policy (``reset(seed=None)``, ``act(observations)``) that
-reads ``env.state()`` and ``env.scenario`` and returns normalised inputs ``u / u_max`` in
-``[-1, 1]^6`` per spacecraft.
+``NMPC(env, config=None, **options)`` (:class:`NMPCConfig`) is a scripted policy (``reset(seed=None)``,
+``act(observations)``) that reads ``env.state()`` and ``env.scenario`` and returns normalised inputs
+``u / u_max`` in ``[-1, 1]^6`` per spacecraft.
 
 Per spacecraft i and decision step, one NLP (eq. 38) over ``N`` steps (``NMPCConfig.horizon``,
 30 as in §5.2), multiple shooting with stage-wise variables ``(x_0, u_0, x_1, …, x_N)``:
@@ -57,8 +57,9 @@ outside its bounds (input box, velocity bounds) or a constraint row violated by 
 ``NLP_CONSTRAINT_TOL`` is a failure (``info["solver_status"]`` says which). A failed solve applies the
 next input of the spacecraft's last successful plan while one remains, else the brake-and-hold
 action :meth:`NMPC.safe_action` (zero thrust is not safe here: the §5.2 spacecraft start on the
-keep-out sphere and drift into it), and is counted in ``info["fallbacks"]``. ``info`` also keeps ``"solve_ms"`` (wall time of every
-``act``), ``"agent_solve_ms"`` (every NLP solve), ``"iterations"``, ``"statuses"``.
+keep-out sphere and drift into it), and is counted in ``info["fallbacks"]``. ``info`` also keeps
+``"solve_ms"`` (wall time of every ``act``), ``"agent_solve_ms"`` (every NLP solve), ``"iterations"``,
+``"statuses"``.
 
 Real-time iteration (``solver="rti"``, acados-style): one QP per spacecraft and decision instead of
 an NLP. The NLP above is linearised about the spacecraft's previous plan shifted by one step: the
@@ -288,7 +289,8 @@ class NMPCConfig:
         solver_options: extra CasADi ``nlpsol`` options (a dict with string keys).
         seed: unused (the NMPC is deterministic); accepted for the common policy signature.
         solve_time_limit: wall-time limit [s] of one solve (None: none); a solve over it is a
-            flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard, the median ipopt solve is 20-40 ms; ipopt's own max_wall_time is set to it.
+            flagged failure like any other (``satenv.baselines.base.guarded_solve``): a stall guard, the
+            median ipopt solve is 20-40 ms; ipopt's own max_wall_time is set to it.
         quaternion_error: ``"sign-free"`` (default, ours: ``1 - |eta~|``, blind to the sign of
             ``q_d``) or ``"signed"`` (``1 - eta~`` as eq. 39 prints it).
     """

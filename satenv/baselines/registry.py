@@ -21,8 +21,8 @@ from typing import Any
 
 from satenv.baselines.base import BaselineError, is_satenv_env
 
-__all__ = ["BASELINES", "CHEAP", "EXPERTS", "EXPERT_OPTIONS", "WRAPPERS", "ResolveError", "get", "get_expert", "make", "make_expert",
-           "resolve", "supporting"]
+__all__ = ["BASELINES", "CHEAP", "EXPERTS", "EXPERT_OPTIONS", "WRAPPERS", "ResolveError", "get", "get_expert", "make",
+           "make_expert", "resolve", "supporting"]
 
 BASELINES: dict[str, str] = {
     "zero": "satenv.baselines.base:ZeroPolicy",

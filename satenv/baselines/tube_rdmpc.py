@@ -183,8 +183,8 @@ class TubeRDMPCConfig:
         workers: threads that solve the satellites' exact NLPs of one decision in parallel (they
             are independent: each plans against the others' previous plans), each with its own
             solver copy (``ipopt-jit`` compiles one per thread); the same points as ``workers=1``.
-        solver: ``"ipopt"`` (default, the reference), ``"ipopt-jit"`` or ``"rti"``. ``"ipopt-jit"``: the same NLP and ipopt
-            options on gcc-compiled problem functions (the same iterates to round-off), compiled
+        solver: ``"ipopt"`` (default, the reference), ``"ipopt-jit"`` or ``"rti"``. ``"ipopt-jit"``: the
+            same NLP and ipopt options on gcc-compiled problem functions (the same iterates to round-off), compiled
             once per process and config (about 20-50 s of gcc on 2 cores). Not the default: with
             ``warm_duals`` (the default, most of the fast path's gain) it saves only ~10 % a solve
             (10.7 against 11.9 ms on recorded li2022 problems, ``satenv.bench.perf --sections
@@ -565,7 +565,9 @@ class _NominalNLP:
         a, lo, hi = jac[:, :n_q], lbg - g, ubg - g
         convex = self.convex_rows(k)
         for _ in range(CUT_ROUNDS):
-            d = guarded_solve(info, lambda a=a, lo=lo, hi=hi: self._qp.solve(h, f, a, lo, hi, lb, ub, owner=(owner, a.shape[0])),
+            d = guarded_solve(info,
+                              lambda a=a, lo=lo, hi=hi: self._qp.solve(h, f, a, lo, hi, lb, ub,
+                                                                       owner=(owner, a.shape[0])),
                               shape=(n_q,), lower=lb, upper=ub, fallback=False, tol=QP_ROW_TOL,
                               violation=lambda d, a=a, lo=lo, hi=hi: row_violation(a @ d, lo, hi),
                               violation_tol=QP_ROW_TOL, time_limit=self.cfg.solve_time_limit)

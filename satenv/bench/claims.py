@@ -43,8 +43,8 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["BAND", "NO_VALUE", "NOT_STATED", "band", "bound", "statement", "no_value", "departure",
-           "against_our_design", "paper_claims", "design_comparisons", "gating", "passed", "count", "format_claims", "markdown_claims", "markdown_departures",
-           "markdown_rows", "summary_rows", "changed_claims"]
+           "against_our_design", "paper_claims", "design_comparisons", "gating", "passed", "count", "format_claims",
+           "markdown_claims", "markdown_departures", "markdown_rows", "summary_rows", "changed_claims"]
 
 BAND = 0.10
 """Default half-width of the band around a paper value (relative)."""
@@ -229,7 +229,8 @@ def format_claims(claims: Iterable[dict[str, Any]]) -> str:
     lines = [f"{'claim':<{width}} | {'variant':<12} | {'paper':>12} | {'measured':>12} | rule | status"]
     for c in claims:
         lines.append(f"{c['claim']:<{width}} | {c['variant']:<12} | {_fmt(c['paper']):>12} | "
-                     f"{_fmt(c['measured']):>12} | {c['rule']} | {c['status'].upper() if c['status'] == 'not met' else c['status']}")
+                     f"{_fmt(c['measured']):>12} | {c['rule']} | "
+                     f"{c['status'].upper() if c['status'] == 'not met' else c['status']}")
     lines.append(_verdict(claims))
     return "\n".join(lines)
 

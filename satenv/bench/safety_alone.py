@@ -44,7 +44,8 @@ __all__ = ["VARIANTS", "evaluate_entry", "evaluate_perturbed", "folder_evaluatio
 def _cached(cache_dir: Path, tag: str) -> both_ways.Episodes:
     """The both-ways episode runner of an entry: :func:`_episodes` into ``<cache_dir>/<tag>__<variant>.jsonl``."""
     def run(env: Any, policy: Any, seeds: list[int], variant: str) -> list[dict[str, Any]]:
-        return _episodes(env, policy, seeds, cache_dir / f"{tag}__{variant.replace(' ', '_').replace('+', 'plus')}.jsonl")
+        name = variant.replace(" ", "_").replace("+", "plus")
+        return _episodes(env, policy, seeds, cache_dir / f"{tag}__{name}.jsonl")
     return run
 
 
@@ -102,8 +103,8 @@ def evaluate_perturbed(system: str, folder: Path, n_seeds: int, n_controller: in
             except (baselines.BaselineError, baselines.BaselineTypeError) as exc:   # refuses the wrapped env
                 row["controller"] = {"error": f"{type(exc).__name__}: {exc}"}
             else:
-                row["controller"] = aggregate(_episodes(env, ctrl, seeds[:n_controller],
-                                                        cache_dir / f"{system}__controller_{task.controller}__{name}.jsonl"))
+                cache = cache_dir / f"{system}__controller_{task.controller}__{name}.jsonl"
+                row["controller"] = aggregate(_episodes(env, ctrl, seeds[:n_controller], cache))
         print(system, folder.name, name, json.dumps({k: {m: v.get(m) for m in ("success_rate", "collision_episodes",
               "violation_episodes", "delta_v", "interventions_per_agent_step")} for k, v in row.items()}), flush=True)
         out[name] = row
@@ -192,7 +193,8 @@ def plot(result: dict[str, Any], path: Path) -> None:
     x = np.arange(len(entries))
     fig, ax = plt.subplots(1, 2, figsize=(max(8, 2.6 * len(entries) + 3), 4.6))
     width = 0.2
-    for k, (name, key) in enumerate([(v, key) for v in VARIANTS for key in ("collision_episodes", "violation_episodes")]):
+    bars = [(v, key) for v in VARIANTS for key in ("collision_episodes", "violation_episodes")]
+    for k, (name, key) in enumerate(bars):
         vals = [100.0 * (1 - e[name]["aggregate"][key] / e[name]["aggregate"]["episodes"]) for e in entries]
         ax[0].bar(x + (k - 1.5) * width, vals, width, label=f"{name}: {key.split('_')[0]}-free")
     ax[0].axhline(99, color="k", ls="--", lw=0.8, label="target 99 %")
@@ -202,7 +204,8 @@ def plot(result: dict[str, Any], path: Path) -> None:
     ax[0].legend(fontsize=7, loc="lower left")
     rate = [e[VARIANTS[1]]["aggregate"].get("interventions_per_agent_step") or 0.0 for e in entries]
     ax[1].bar(x, [100 * r for r in rate], 0.5)
-    ax[1].axhline(100 * INTERVENTIONS_LIMIT, color="k", ls="--", lw=0.8, label=f"target {100 * INTERVENTIONS_LIMIT:g} %")
+    ax[1].axhline(100 * INTERVENTIONS_LIMIT, color="k", ls="--", lw=0.8,
+                  label=f"target {100 * INTERVENTIONS_LIMIT:g} %")
     ax[1].set_ylabel("filter interventions [% of agent-steps]")
     ax[1].set_xticks(x, labels, fontsize=7)
     ax[1].legend(fontsize=7)

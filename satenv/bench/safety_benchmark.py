@@ -134,7 +134,8 @@ def _learned_pair(name: str, scen: str, seeds: int, out_dir: str) -> dict[str, A
     board = run_scoreboard(f"{out_dir}/{name.split(':')[1]}", scenarios=scen, policies=f"{name},{name}+shield",
                            seeds=f"{HELD_OUT}-{HELD_OUT + seeds - 1}", plots=False, progress=False, overwrite=True)
     agg = board.aggregates[scen]
-    names = {"interventions": "safety_interventions", "mean_du": "safety_mean_du", "infeasible_steps": "safety_infeasible"}
+    names = {"interventions": "safety_interventions", "mean_du": "safety_mean_du",
+             "infeasible_steps": "safety_infeasible"}
     out = {}
     for pol in agg:
         out["filtered" if pol.endswith("+shield") else "unfiltered"] = {

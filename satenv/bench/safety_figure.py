@@ -82,9 +82,11 @@ def plot(out: str | Path, name: str = POLICY, seed: int = SEED) -> dict[str, Any
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     return {"steps": [len(raw["pair"]), len(safe["pair"])],
-            "collision_unfiltered": bool((raw["pair"] < raw["limits"][0]).any() | (raw["obstacle"] < raw["limits"][1]).any()
+            "collision_unfiltered": bool((raw["pair"] < raw["limits"][0]).any()
+                                         | (raw["obstacle"] < raw["limits"][1]).any()
                                          | (raw["target"] < raw["limits"][2]).any()),
-            "collision_filtered": bool((safe["pair"] < safe["limits"][0]).any() | (safe["obstacle"] < safe["limits"][1]).any()
+            "collision_filtered": bool((safe["pair"] < safe["limits"][0]).any()
+                                       | (safe["obstacle"] < safe["limits"][1]).any()
                                        | (safe["target"] < safe["limits"][2]).any()),
             "interventions": int(safe["intervened"].sum())}
 

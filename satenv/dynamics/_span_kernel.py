@@ -26,8 +26,9 @@ with its constant input (``w = 0``).
 common to every body of a copy (``common``: the cluster's sinusoid disturbance, the same for
 every satellite and, in lockstep, every copy) is passed apart from the bodies' own held inputs,
 so that their deviations are equal bit for bit: one table per span for the whole batch. A
-result never depends on which other copies share a call. The chief's track is shared by consecutive copies with the same chief, as
-in :mod:`._truth_kernel`. Importing this module imports numba; compiled code is cached next to it.
+result never depends on which other copies share a call. The chief's track is shared by
+consecutive copies with the same chief, as in :mod:`._truth_kernel`. Importing this module imports
+numba; compiled code is cached next to it.
 """
 
 from __future__ import annotations

@@ -1,18 +1,18 @@
 """Compiled (numba) truth propagation: :meth:`RelativeModel.step` of the ``nonlinear`` / ``j2`` /
 ``j2_drag`` models over many steps in one call.
 
-The numpy path (:mod:`._soa`, :func:`.forces.acceleration_soa`, :func:`.integrators.rk4_step`)
-is the reference; this kernel evaluates the same formulas (in the same order but for the
-reciprocal of ``|r|^2``), per copy and per body, with no temporaries. The LVLH <-> ECI conversions are hoisted out of the step loop: a call
-converts the LVLH states to ECI once, integrates ``n`` steps of ``substeps`` RK4 sub-steps (the
-LVLH inputs of step ``s`` held in the rotating frame, as the reference: they are rotated by the
-chief's current LVLH axes at every stage) and converts back once. Converting back and forth at
-every step, as ``n`` calls of the reference do, is the identity up to rounding, so the two agree
-to rounding (``tests/test_truth_kernel.py``). The chief's motion does not depend on the deputies:
-its RK4 stages are computed once (:func:`_chief_track`) and shared by consecutive copies with
-the same chief, as the copies of a batch stepped in lockstep are. Optionally the LVLH positions after every step are
-written out (a rotation only: the frame rate does not enter positions). Importing this module
-imports numba; compiled code is cached next to the module.
+The numpy path (:mod:`._soa`, :func:`.forces.acceleration_soa`, :func:`.integrators.rk4_step`) is
+the reference; this kernel evaluates the same formulas (in the same order but for the reciprocal of
+``|r|^2``), per copy and per body, with no temporaries. The LVLH <-> ECI conversions are hoisted out
+of the step loop: a call converts the LVLH states to ECI once, integrates ``n`` steps of
+``substeps`` RK4 sub-steps (the LVLH inputs of step ``s`` held in the rotating frame, as the
+reference: they are rotated by the chief's current LVLH axes at every stage) and converts back once.
+Converting back and forth at every step, as ``n`` calls of the reference do, is the identity up to
+rounding, so the two agree to rounding (``tests/test_truth_kernel.py``). The chief's motion does not
+depend on the deputies: its RK4 stages are computed once (:func:`_chief_track`) and shared by
+consecutive copies with the same chief, as the copies of a batch stepped in lockstep are. Optionally
+the LVLH positions after every step are written out (a rotation only: the frame rate does not enter
+positions). Importing this module imports numba; compiled code is cached next to the module.
 """
 
 from __future__ import annotations

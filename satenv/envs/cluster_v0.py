@@ -544,7 +544,8 @@ class ClusterEnv(SatParallelEnv):
     core_class = ClusterCore
     agent_prefix = "sat"
 
-    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, reward: str = "paper", **kwargs) -> None:
+    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, reward: str = "paper",
+                 **kwargs) -> None:
         scenario = resolve_preset("cluster_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode, reward=reward)
 

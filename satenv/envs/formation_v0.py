@@ -76,8 +76,8 @@ Termination / truncation
 ------------------------
 Terminated (all agents) when a spacecraft leaves the ball of radius ``max_distance`` around the
 origin, when a pair is closer than ``collision_distance`` (0 by default = never: the paper starts
-all three at the same point; only if ``terminate_on_collision``), or — only with ``terminate_on_disconnect`` — when the proximity
-graph disconnects. Truncated at ``max_steps``.
+all three at the same point; only if ``terminate_on_collision``), or — only with
+``terminate_on_disconnect`` — when the proximity graph disconnects. Truncated at ``max_steps``.
 
 Infos (per agent, SI units)
 ---------------------------
@@ -136,8 +136,8 @@ class FormationCore(BatchedCore):
     :data:`satenv.neighbours.DENSE_MAX` spacecraft): ``"dense"`` builds the ``M x M`` distances and
     the reachability matrix; ``"sparse"`` finds the nearest spacecraft with an exact k-nearest
     search and the proximity links and components from the pairs within ``connection_range``
-    (:func:`satenv.neighbours.pairs_within`, ``scipy.sparse.csgraph.connected_components``). The observation lists every other
-    spacecraft (``6 M + 1`` entries), so it stays ``O(M)`` per agent.
+    (:func:`satenv.neighbours.pairs_within`, ``scipy.sparse.csgraph.connected_components``). The
+    observation lists every other spacecraft (``6 M + 1`` entries), so it stays ``O(M)`` per agent.
     """
 
     state_dim = 6

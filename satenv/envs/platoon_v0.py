@@ -457,7 +457,8 @@ class PlatoonEnv(SatParallelEnv):
     core_class = PlatoonCore
     agent_prefix = "follower"
 
-    def __init__(self, preset: str = "pereira2023", render_mode: str | None = None, reward: str = "paper", **kwargs) -> None:
+    def __init__(self, preset: str = "pereira2023", render_mode: str | None = None, reward: str = "paper",
+                 **kwargs) -> None:
         scenario = resolve_preset("platoon_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode, reward=reward)
         self.topology = scenario.graph

@@ -396,7 +396,8 @@ class ServicingEnv(SatParallelEnv):
     core_class = ServicingCore
     agent_prefix = "sat"
 
-    def __init__(self, preset: str = "pereira2022", render_mode: str | None = None, reward: str = "paper", **kwargs) -> None:
+    def __init__(self, preset: str = "pereira2022", render_mode: str | None = None, reward: str = "paper",
+                 **kwargs) -> None:
         scenario = resolve_preset("servicing_v0", preset, PRESETS, resolve_scenario, kwargs)
         super().__init__(scenario, render_mode=render_mode, reward=reward)
 

@@ -71,13 +71,14 @@ backup action — maximum braking: the action in the box that maximises the smal
 ``infeasible`` flag; never an exception, never a NaN.
 
 Guarantee (for the CW double-integrator model, the scenario's disturbance bound, errors within the
-declared bounds and states whose rows are feasible): separation and half-space gaps stay >= 0 at every decision and the pair stays
-brakeable; the velocity boxes hold at the next decision. Not guaranteed: infeasible starts (a
-start inside the margin with closing speed), model mismatch (J2, drag, nonlinear terms beyond the
-drift bound), dips between decisions larger than the margin, constraints of other agents' QPs
-that fall back (their share is then missing), an agent squeezed between several pairs at once
-(each pair assumes its full authority), the allowed region (``max_distance``) and the
-pereira2023 minimum-error constraint (41) (implied by separation for the PLF topology only).
+declared bounds and states whose rows are feasible): separation and half-space gaps stay >= 0 at
+every decision and the pair stays brakeable; the velocity boxes hold at the next decision. Not
+guaranteed: infeasible starts (a start inside the margin with closing speed), model mismatch (J2,
+drag, nonlinear terms beyond the drift bound), dips between decisions larger than the margin,
+constraints of other agents' QPs that fall back (their share is then missing), an agent squeezed
+between several pairs at once (each pair assumes its full authority), the allowed region
+(``max_distance``) and the pereira2023 minimum-error constraint (41) (implied by separation for the
+PLF topology only).
 """
 
 from __future__ import annotations

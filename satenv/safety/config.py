@@ -99,7 +99,8 @@ class SafetyRecord:
 
     ``intervened`` (the action changed), ``delta`` ``|du|`` (Euclidean norm of the change of the
     normalised action the env applies: the proposal clipped to the action box first, so it is
-    finite and at most the box's diameter for any finite proposal), ``infeasible`` (QP infeasible or failed: the backup action was applied),
+    finite and at most the box's diameter for any finite proposal), ``infeasible`` (QP infeasible or
+    failed: the backup action was applied),
     ``active`` (index into :data:`CONSTRAINTS` of the binding constraint, -1 when none).
     """
 

@@ -14,17 +14,18 @@ class Shield:
     """A policy filtered by :class:`SafetyFilter` for the env it acts on (same ``reset`` /
     ``act`` / ``info`` as any policy). It reads the state the env holds when the policy acts, as the
     policy does (under a perturbation's navigation error: the estimate), and plans with the
-    nominal model and the env's declared bounds (:class:`SafetyFilter`). An action that is safe is returned as the policy gave it (the same
-    object); ``info`` adds ``safety_interventions``, ``safety_delta`` (sum of ``|du|``),
-    ``safety_infeasible`` (agent-steps) and ``safety_steps`` since :meth:`reset`, and
-    ``safety_record`` (the last :class:`SafetyRecord`).
+    nominal model and the env's declared bounds (:class:`SafetyFilter`). An action that is safe is
+    returned as the policy gave it (the same object); ``info`` adds ``safety_interventions``,
+    ``safety_delta`` (sum of ``|du|``), ``safety_infeasible`` (agent-steps) and ``safety_steps`` since
+    :meth:`reset`, and ``safety_record`` (the last :class:`SafetyRecord`).
     """
 
     name = "shield"
 
     def __init__(self, env: Any, policy: Any, config: SafetyConfig | None = None, **options: Any) -> None:
         if not (callable(getattr(policy, "act", None)) and callable(getattr(policy, "reset", None))):
-            raise SafetyTypeError(f"shield: policy must have reset() and act(observations), got {type(policy).__name__}")
+            raise SafetyTypeError("shield: policy must have reset() and act(observations), "
+                                  f"got {type(policy).__name__}")
         self.filter = SafetyFilter(env, config, **options)
         self.env = env
         self.policy = policy

@@ -25,8 +25,8 @@ from satenv.dynamics._checks import integer as _integer
 from satenv.dynamics._checks import real as _real
 from satenv.errors import SatenvError, SatenvTypeError
 
-__all__ = ["MAX_AGENTS", "MAX_INT", "MAX_MAGNITUDE", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "SatenvError", "array",
-           "at_most", "derived", "flag", "from_preset", "integer", "nested", "number", "real",
+__all__ = ["MAX_AGENTS", "MAX_INT", "MAX_MAGNITUDE", "MAX_RELATIVE_SPEED", "MAX_STEPS", "MAX_SUBSTEPS", "SatenvError",
+           "array", "at_most", "derived", "flag", "from_preset", "integer", "nested", "number", "real",
            "obs_neighbours", "orbit_step", "spreads_in_region", "states_in_region", "steps", "vector"]
 
 MAX_AGENTS: int = 1024

@@ -336,7 +336,8 @@ class ClusterScenario:
         if bad:
             raise ValueError(f"unknown cluster scenario parameter(s) {bad}; valid names: {sorted(known)}")
         if "initial_positions" in overrides and "initial_velocities" not in overrides:
-            n_new = np.shape(overrides["initial_positions"])[0] if np.ndim(overrides["initial_positions"]) == 2 else None
+            positions = overrides["initial_positions"]
+            n_new = np.shape(positions)[0] if np.ndim(positions) == 2 else None
             if self.initial_velocities is not None and n_new != self.n_agents:
                 overrides["initial_velocities"] = None
         return replace(self, **overrides)

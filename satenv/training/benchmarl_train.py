@@ -247,8 +247,9 @@ def run(cfg: BenchMARLConfig) -> Path:
               f"agent-steps), frames_per_batch {cfg.frames_per_batch} -> {planned.frames_per_batch} (whole "
               "batches of whole env steps)", file=sys.stderr)
         cfg = planned
-    announce(cfg, f"BenchMARL {cfg.algorithm.upper()}, {cfg.max_frames} frames ({cfg.max_frames * len(env.possible_agents)} "
-             f"agent-steps) in batches of {cfg.frames_per_batch}", tensorboard=False)
+    announce(cfg, f"BenchMARL {cfg.algorithm.upper()}, {cfg.max_frames} frames "
+             f"({cfg.max_frames * len(env.possible_agents)} agent-steps) in batches of {cfg.frames_per_batch}",
+             tensorboard=False)
     experiment = build_experiment(cfg)
     (out / "config.json").write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
     if cfg.init_actor:

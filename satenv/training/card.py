@@ -337,7 +337,8 @@ def readme(folder: Path, *, title: str, about: str, command: str, notes: str = "
         f"**Retrain** ({c['source']}; `config.json` holds every setting):\n\n```bash\n{command}\n```\n",
     ]
     if (folder / "learning_curve.png").is_file():
-        parts.append("**Learning curve** (evaluation seeds, not the held-out ones):\n\n![learning curve](learning_curve.png)\n")
+        parts.append("**Learning curve** (evaluation seeds, not the held-out ones):\n\n"
+                     "![learning curve](learning_curve.png)\n")
     parts.append(f"**Evaluation** (`eval.json`: {c['episodes']} held-out seeds, never used for training or "
                  f"selection; ratios against `{c['baseline']}` on the same seeds):\n\n{folder_table(folder)}\n")
     if notes:

@@ -35,8 +35,8 @@ from satenv.cliargs import (
 )
 from satenv.tasks import MAX_SEEDS, SEED_SPLITS, parse_seeds, show_seeds  # the one seed grammar
 
-__all__ = ["BUDGET_FLAG", "RunConfig", "announce", "TrainConfig", "canonical_flags", "parse_args", "parse_bool", "parse_seeds",
-           "check_env_kwargs", "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
+__all__ = ["BUDGET_FLAG", "RunConfig", "announce", "TrainConfig", "canonical_flags", "parse_args", "parse_bool",
+           "parse_seeds", "check_env_kwargs", "config_from_json", "load_config", "planned_timesteps", "MAX_SEEDS"]
 
 ALGOS = ("ppo", "sac")
 

@@ -61,8 +61,8 @@ from satenv.training.trust import (
     sha256_file,
 )
 
-__all__ = ["INFERENCE_THREADS", "LearnedPolicy", "PolicyLoadError", "ShippedFilterError", "load", "policy_folder", "save_artifacts", "ObsNormalizer", "from_sb3",
-           "convert_sb3", "convert_weights_pt", "write_manifest"]
+__all__ = ["INFERENCE_THREADS", "LearnedPolicy", "PolicyLoadError", "ShippedFilterError", "load", "policy_folder",
+           "save_artifacts", "ObsNormalizer", "from_sb3", "convert_sb3", "convert_weights_pt", "write_manifest"]
 
 FORMAT = "satenv-policy/1"
 WEIGHTS = "weights.safetensors"

@@ -28,7 +28,8 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["CRASH_EXIT_CODE", "RunFolderError", "boundary", "crash", "latest_checkpoint", "read_json",
-           "recover_folder", "replace_folder", "resumable", "resume_checkpoint", "reset_boundaries", "save_with", "staging", "write_bytes", "write_json", "write_text"]
+           "recover_folder", "replace_folder", "resumable", "resume_checkpoint", "reset_boundaries", "save_with",
+           "staging", "write_bytes", "write_json", "write_text"]
 
 CRASH_EXIT_CODE = 86
 """Exit status of a process ended at a write boundary by ``SATENV_CRASH_AT_WRITE``."""

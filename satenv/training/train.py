@@ -138,7 +138,8 @@ def init_policy(cfg: TrainConfig):
     if spec.get("type") != "mlp":
         raise ValueError(f"{where}: needs an MLP actor, got type {spec.get('type')!r}")
     if tuple(spec["hidden"]) != tuple(cfg.net_arch):
-        raise ValueError(f"{where}: hidden layers {spec['hidden']}; give --net-arch {','.join(map(str, spec['hidden']))}"
+        raise ValueError(f"{where}: hidden layers {spec['hidden']}; "
+                         f"give --net-arch {','.join(map(str, spec['hidden']))}"
                          f" (got {','.join(map(str, cfg.net_arch))})")
     if seed.terminal is not None:
         raise ValueError(f"{where}: has terminal feedback ({seed.terminal}); SB3 PPO trains the network alone")
@@ -149,7 +150,8 @@ def init_policy(cfg: TrainConfig):
     if seed.action_map != action_map_from_config(cfg.to_json()):
         raise ValueError(f"{where}: action map {seed.action_map}; give the same --action-power")
     if (norm.mean is not None) != cfg.norm_obs or (norm.mean is not None and norm.clip_obs != cfg.clip_obs):
-        raise ValueError(f"{where}: observation normaliser {'clip ' + str(norm.clip_obs) if norm.mean is not None else 'none'}"
+        kind = "clip " + str(norm.clip_obs) if norm.mean is not None else "none"
+        raise ValueError(f"{where}: observation normaliser {kind}"
                          f"; the run has --norm-obs {cfg.norm_obs} --clip-obs {cfg.clip_obs}")
     return seed
 
@@ -377,7 +379,8 @@ def env_state(model, venv) -> dict[str, np.ndarray]:
     monitor, sat = venv.venv, venv.venv.venv
     state = {f"env.{k}": v for k, v in sat.get_state().items()}
     rng = np.random.get_state()  # noqa: NPY002 - SB3 draws its minibatches from the legacy global state
-    state.update({"monitor.episode_returns": monitor.episode_returns, "monitor.episode_lengths": monitor.episode_lengths,
+    state.update({"monitor.episode_returns": monitor.episode_returns,
+                  "monitor.episode_lengths": monitor.episode_lengths,
                   "normalize.returns": np.asarray(venv.returns), "last_obs": np.asarray(model._last_obs),
                   "last_episode_starts": np.asarray(model._last_episode_starts),
                   "torch_rng": torch.get_rng_state().numpy(), "numpy_rng.keys": rng[1],
@@ -543,7 +546,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> Path:
     test_baselines = _cached_baselines(out / "baselines_test.json", eval_env, cfg, cfg.test_seeds)
     final_policy = export_policy(model, venv, meta, {"features": features, "action_map": action_map})
     summary = _summary(cfg, eval_env, final_policy, test_baselines, model.num_timesteps, wall)
-    staged = save_artifacts(runfolder.staging(out / "final"), final_policy, env_meta={**meta, "step": model.num_timesteps},
+    staged = save_artifacts(runfolder.staging(out / "final"), final_policy,
+                            env_meta={**meta, "step": model.num_timesteps},
                             config=cfg.to_json(), evaluation=summary, source=f"stable-baselines3 {cfg.algo.upper()}")
     if (out / "learning_curve.png").is_file():
         shutil.copyfile(out / "learning_curve.png", staged / "learning_curve.png")

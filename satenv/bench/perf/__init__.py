@@ -234,7 +234,8 @@ def run(batches: list[int], sections: tuple[str, ...] = SECTIONS, min_time: floa
         result["solvers"] = solver_times(solver_scale, policies=solvers)
         for k, v in result["solvers"].items():
             log(f"solver {k}: " + (f"skipped ({v['skipped']})" if "skipped" in v else
-                                   f"act median {v['act_ms_median']:.3g} ms ({v['act_ms_per_agent_median']:.3g} ms/agent)"))
+                                   f"act median {v['act_ms_median']:.3g} ms "
+                                   f"({v['act_ms_per_agent_median']:.3g} ms/agent)"))
     if "fast_solvers" in sections and (solvers is None or {"tube_rdmpc", "nmpc"} & set(solvers)):
         fast = result.setdefault("solvers", {})["fast_vs_ipopt"] = fast_vs_ipopt(solver_scale, solvers)
         for k, v in fast.items():

@@ -1,8 +1,9 @@
 """The ``envs`` section: the envs that learning needs, each beside its peer in the same run.
 
 * PettingZoo dict API of ``cluster_v0`` (li2022 case 1, 10 satellites, J2 + drag truth: one DOP853
-  step per 5 s decision, the 0.25 s physics steps' positions interpolated) and ``servicing_v0`` (pereira2022, 6-DOF) against mpe2
-  ``simple_spread`` (3 agents, continuous), timed in interleaved repeats, per agent-step;
+  step per 5 s decision, the 0.25 s physics steps' positions interpolated) and ``servicing_v0``
+  (pereira2022, 6-DOF) against mpe2 ``simple_spread`` (3 agents, continuous), timed in interleaved
+  repeats, per agent-step;
 * ``make_vec("cluster_v0", 1024)`` against VMAS ``navigation`` at 1024 envs, interleaved;
 * the ring swarm core (``platoon_v0`` ``swarm(N, "ring", "RING")``, cw, 64 copies, ``step`` +
   ``observe``) at N = 1024 against N = 4, per agent-step.

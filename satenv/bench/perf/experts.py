@@ -49,7 +49,8 @@ def labels_per_second(system: str, episodes: int = 4, decisions: int | None = No
 
     sys_ = tasks.system(system)
     steps = decisions or DECISIONS.get(system, 20)
-    jobs = [LabelJob(sys_.training_task, seed=1000 + e, env_kwargs={"max_steps": steps, "terminate_on_collision": False})
+    jobs = [LabelJob(sys_.training_task, seed=1000 + e,
+                     env_kwargs={"max_steps": steps, "terminate_on_collision": False})
             for e in range(episodes)]
     warm = (LabelJob(sys_.training_task, seed=1, env_kwargs=jobs[0].env_kwargs),)
     out: dict[str, Any] = {"expert": sys_.expert, "options": dict(options or {}), "task": sys_.training_task,
@@ -112,7 +113,8 @@ def run(o, log) -> dict[str, Any]:
                         "value": row["fast_ms_per_agent_decision"], "target": DECISION_TARGETS_MS[controller],
                         "op": "<=", "met": bool(row["fast_ms_per_agent_decision"] <= DECISION_TARGETS_MS[controller])})
         log(f"experts {controller}@{task}: {row['fast_ms_per_agent_decision']:.2f} ms per agent decision fast, "
-            f"{row['ipopt_ms_per_agent_decision']:.2f} ipopt (x{row['speedup']:.1f}; load {row['load_average_at_start']})")
+            f"{row['ipopt_ms_per_agent_decision']:.2f} ipopt "
+            f"(x{row['speedup']:.1f}; load {row['load_average_at_start']})")
     for system, goal in LABEL_TARGETS.items():
         expert = _expert(system)
         kw = {"episodes": max(2, round(4 * scale)), "decisions": max(3, round(DECISIONS[system] * scale))}

@@ -189,8 +189,8 @@ def _agents(env_id: str) -> list[str]:
     return list(satenv.make(env_id).possible_agents)
 
 
-TRAINER_RUNS: dict[str, Callable[[str, int, str, dict[str, Any]], dict]] = {"sb3_ppo": _sb3, "benchmarl_mappo": _benchmarl,
-                                                             "dagger": _dagger}
+TRAINER_RUNS: dict[str, Callable[[str, int, str, dict[str, Any]], dict]] = {
+    "sb3_ppo": _sb3, "benchmarl_mappo": _benchmarl, "dagger": _dagger}
 
 
 def end_to_end(trainer: str, env_id: str, agent_steps: int = 4096, config: dict[str, Any] | None = None) -> dict:
@@ -249,7 +249,8 @@ def learning_throughput(batch: int = 256, agent_steps: int = 16384, steps: int =
             rows[env_id] = end_to_end(trainer, env_id, budget)
             _log_row(log, f"{trainer} {env_id}", rows[env_id])
         if "skipped" not in rows[env_ids[0]]:   # the trainer's default config, same env, same run
-            ref = rows[f"{env_ids[0]} (defaults)"] = end_to_end(trainer, env_ids[0], rows[env_ids[0]]["agent_steps"], {})
+            ref = rows[f"{env_ids[0]} (defaults)"] = end_to_end(trainer, env_ids[0],
+                                                                rows[env_ids[0]]["agent_steps"], {})
             ref["fast_speedup"] = rows[env_ids[0]]["agent_steps_per_s"] / ref["agent_steps_per_s"]
             _log_row(log, f"{trainer} {env_ids[0]} with its defaults", ref)
     return out

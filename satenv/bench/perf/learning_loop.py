@@ -61,7 +61,8 @@ def lean_row(task: str, agent_steps: int, config: dict[str, Any] | None = None) 
         update(run, collect(run, timers), timers)
     wall = time.perf_counter() - t0
     acc = {"env": timers["env"], "learner": timers["update"], "forward": timers["forward"]}
-    return _row(iterations * per_iter, wall, acc, {k: list(v) if isinstance(v, tuple) else v for k, v in config.items()})
+    return _row(iterations * per_iter, wall, acc,
+                {k: list(v) if isinstance(v, tuple) else v for k, v in config.items()})
 
 
 def env_alone(task: str, num_envs: int, min_time: float = 0.5) -> float:
@@ -89,7 +90,8 @@ def learning_loop(agent_steps: int = 65536, repeats: int = 2, systems: tuple[str
     from satenv import tasks
 
     sb3 = sb3_config(same)
-    out: dict[str, Any] = {"same_config": {"lean_ppo": {k: list(v) if isinstance(v, tuple) else v for k, v in same.items()},
+    lean_config = {k: list(v) if isinstance(v, tuple) else v for k, v in same.items()}
+    out: dict[str, Any] = {"same_config": {"lean_ppo": lean_config,
                                            "sb3_ppo": {**sb3, "net_arch": list(sb3["net_arch"])}},
                            "load_average_at_start": _load(), "tasks": {}, "targets": [],
                            "benchmarl_mappo": {"skipped": "its runner trains on an env id's defaults, not on "

@@ -61,13 +61,13 @@ TOLERANCES = {"final_position_m": 1.0, "separation_m": 10.0, "separation_after_s
 """``final_position_m``: the 1 m of ``time_within_1m_s`` (a reported number, not a claim);
 ``separation_m``: the paper's 10 m; ``separation_after_s``: the end of the start transient (ours)."""
 SOURCES = {
-    "kannan2022-position": "The 3 satellites start from condition $[x_i, y_i, z_i] = [0, 0, 0]$ for $i = \\{1, 2, 3\\}$ "
-                           "to the final position $[x_1, y_1, z_1] = [100, 100, 100]$, $[x_2, y_2, z_2] = [100, 200, 100]$, "
-                           "$[x_3, y_3, z_3] = [100, 300, 100]$.",
+    "kannan2022-position": "The 3 satellites start from condition $[x_i, y_i, z_i] = [0, 0, 0]$ "
+                           "for $i = \\{1, 2, 3\\}$ to the final position $[x_1, y_1, z_1] = [100, 100, 100]$, "
+                           "$[x_2, y_2, z_2] = [100, 200, 100]$, $[x_3, y_3, z_3] = [100, 300, 100]$.",
     "kannan2022-collision": "In Fig. 5 we can see the position evolution of Spacecraft-1 from $[0, 0, 0]$ to "
                             "$[100, 110, 100]$ with respectively the velocities and control input. In Fig. 6 evolution "
-                            "of Spacecraft-2 from $[0, 0, 0]$ to $[100, 100, 100]$ and in Fig. 4 we can respectively see "
-                            "the states and inputs of spacecraft-3 reaching $[100, 90, 100]$.",
+                            "of Spacecraft-2 from $[0, 0, 0]$ to $[100, 100, 100]$ and in Fig. 4 we can respectively "
+                            "see the states and inputs of spacecraft-3 reaching $[100, 90, 100]$.",
     "input": "where e_p is the respective position error, $-50 \\leq u \\leq 50$ is the control input, while Q, R "
              "are respectively position and control gains.",
     "connected": "Theorem 4 along with the discussions given in the previous section can be used to conclude that the "
@@ -210,7 +210,8 @@ def row_claims(row: dict[str, Any], variant: str = "ours") -> list[dict[str, Any
                      variant=variant, **sc))
     out.append(statement(f"{name}: connected network throughout", SOURCES["connected"], "connected",
                          row["always_connected"], row["always_connected"],
-                         rule=f"proximity graph connected at every step (range {row['connection_range_m']:.0f} m, ours)",
+                         rule="proximity graph connected at every step "
+                              f"(range {row['connection_range_m']:.0f} m, ours)",
                          variant=variant, smallest_range_connected_throughout_m=row.get(
                              "smallest_range_connected_throughout_m"), **sc))
     out.append(no_value(f"{name}: solver fallbacks", SOURCES["connected"], row["controller"]["fallbacks"],
@@ -232,7 +233,8 @@ def row_claims(row: dict[str, Any], variant: str = "ours") -> list[dict[str, Any
                             note="all three start at one point: no separation holds at t = 0", variant=variant, **sc))
         out.append(no_value(f"{name}: order y1 > y2 > y3 kept (t >= 0.1 s)", SOURCES["distance"],
                             row["y_order_kept_t_ge_0.1s"],
-                            ours=f"kept: {'met' if row['y_order_kept_t_ge_0.1s'] else 'not met'}", variant=variant, **sc))
+                            ours=f"kept: {'met' if row['y_order_kept_t_ge_0.1s'] else 'not met'}",
+                            variant=variant, **sc))
     return out
 
 

@@ -556,7 +556,8 @@ def ablation(rows: list[dict], checks: list[dict]) -> list[dict[str, Any]]:
                     "convergence_time_s": r["convergence_time_s"], "final_error_m": r["final_error_m"],
                     "satellites_within_1m_at_end": r["satellites_within_1m_at_end"],
                     "max_rise_m": r["max_rise_m"], "collisions": r["collisions"],
-                    "min_pair_distance_m": r["min_pair_distance_m"], "min_obstacle_distance_m": r["min_obstacle_distance_m"],
+                    "min_pair_distance_m": r["min_pair_distance_m"],
+                    "min_obstacle_distance_m": r["min_obstacle_distance_m"],
                     "failed_solves": r.get("failed_solves"), "relaxed_solves": r.get("relaxed_solves"),
                     "fallbacks": r["fallbacks"], "wall_time_s": r["wall_time_s"],
                     "changed_claims": [f"{n} -> {s}" for n, s in _changes(ours, mine)]})
@@ -675,7 +676,8 @@ def departures(abl: list[dict] | None = None, rows: list[dict] | None = None,
                   "at reset only", "repeated allocation at every step costs computation and may repeat results "
                   "(li2022 §3.3 says so itself)", pub_effect, fields=["reallocate_every"]),
         departure("APF controller of the comparison (§4.3)", NOT_STATED + " (the method of Hwang et al. is named; "
-                  "no potential functions, no gains)", "satenv.baselines.apf: attraction capped at 70 % of u_max, FIRAS "
+                  "no potential functions, no gains)",
+                  "satenv.baselines.apf: attraction capped at 70 % of u_max, FIRAS "
                   "repulsion, closing-speed braking, swirl; gains of APFConfig",
                   "the comparison needs an APF; ours is a standard one tuned to avoid collisions under the thrust "
                   "bound", "the 'RDMPC faster / more accurate than APF' claims judge our RDMPC against our APF, not "
@@ -832,7 +834,8 @@ def _assemble(rows: list[dict], state: dict, opts: dict, variants, wall: float) 
     not_run = [f"case {c}: python -m satenv.bench.reproduce li2022 --case {c} --with li2022.json "
                f"--out li2022.json --plots figs/" for c in missing]
     ablated = {r["variant"] for r in rows if r["case"] == 1}
-    if 1 in result["cases"] and (absent := [LABELS[f"ours-no-{a}"] for a in ADDITIONS if f"ours-no-{a}" not in ablated]):
+    if 1 in result["cases"] and (absent := [LABELS[f"ours-no-{a}"] for a in ADDITIONS
+                                            if f"ours-no-{a}" not in ablated]):
         not_run.append(f"ablation {', '.join(absent)}: python -m satenv.bench.reproduce li2022 --case 1 --with "
                        "li2022.json --out li2022.json")
     if not_run:
@@ -858,7 +861,8 @@ def notes(checks: list[dict], span: dict) -> list[str]:
                                                                                       "accuracy")), None)
     if acc is not None and acc["measured"] is not None:
         out.append(f"**Accuracy.** The band around the paper's {PAPER_ACCURACY_M} m is {acc['status']}: our final "
-                   f"error is {acc['measured']:.3g} m ({'smaller, i.e. more accurate' if acc['more_accurate_than_paper'] else 'larger'}); "
+                   f"error is {acc['measured']:.3g} m "
+                   f"({'smaller, i.e. more accurate' if acc['more_accurate_than_paper'] else 'larger'}); "
                    f"its floor sqrt(lyapunov_tolerance / sigma) = {acc['lyapunov_floor_m']:.4f} m comes from our "
                    "Lyapunov tolerance (the sensitivity table), not from the paper.")
     return out

@@ -159,7 +159,8 @@ def departures(variants: dict[str, dict]) -> list[dict[str, Any]]:
               f"pair error {max(pub['final_position_error_m']):.3g} m")
     ours = variants.get("own_pair")
     fallback_effect = ("not measured in this result" if pub is None or ours is None else
-                       f"fallbacks to the box-only QP: as published (coupled) {pub['fallbacks']}, ours {ours['fallbacks']}; "
+                       f"fallbacks to the box-only QP: as published (coupled) {pub['fallbacks']}, "
+                       f"ours {ours['fallbacks']}; "
                        "a fallback step plans without the keep-out and LOS rows")
     return [
         departure("pair constraints each agent imposes (eq. 29)", "every pair its input moves (j and j+1)",

@@ -77,7 +77,8 @@ on the 15 m waypoints). §5.2 gives the waypoints (eq. 50) and figures, no toler
 ours, so the waypoint rows are reported, never gating."""
 POINTING_TOL_DEG = 5.0     # our threshold for "pointing achieved"
 SETTLE_WINDOW_S = 10.0     # last seconds of each phase
-RUN_TIME = "about 5-10 min on 2 shared cores (two episodes, the as-published one slower; the attitude step responses: --no-diagnostics)"
+RUN_TIME = ("about 5-10 min on 2 shared cores (two episodes, the as-published one slower; "
+            "the attitude step responses: --no-diagnostics)")
 
 
 class PhaseProgress:

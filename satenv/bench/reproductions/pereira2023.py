@@ -85,7 +85,8 @@ SOURCE_F2_INPUT = ("behaviors, the most significant difference being in the cont
 SOURCE_F3 = "In the control action, the BDL presents significantly more oscillation than the other topologies."
 SOURCE_F4_FIG = "Of these two topologies, the PLF is faster and with less overshoot."
 SOURCE_F4 = "This comparison is also seen in Table II, where PLF performs better on all criteria."
-SOURCE_TRANSIENT = "It can also be seen that the TPLF has in general better performance in the transient networks response."
+SOURCE_TRANSIENT = ("It can also be seen that the TPLF has in general better performance in the transient "
+                    "networks response.")
 SOURCE_TRUSTWORTHY = ("And finally, the 1-hop interactive local optimization algorithm proposed, results in a more "
                       "trustworthy solution, when compared to the simple convex step distributed algorithm used in "
                       "[21], for this cooperative scenario.")
@@ -140,7 +141,8 @@ def foe_analysis(rows: list[dict], seed: int = 0, violations: int | None = None)
     base = {(r["topology"], r["follower"]): r["foe"] for r in rows}
     paper = {(r["topology"], r["follower"]): r["paper_foe"] for r in rows}
     out = [{"setting": "our default (Table I, sigma = 0.5, per-agent stopping, shift warm start)",
-            "foe_ratio_min": min(base[k] / paper[k] for k in base), "foe_ratio_max": max(base[k] / paper[k] for k in base),
+            "foe_ratio_min": min(base[k] / paper[k] for k in base),
+            "foe_ratio_max": max(base[k] / paper[k] for k in base),
             "max_change_vs_default": 0.0, "cells_within_10pct": sum(abs(base[k] / paper[k] - 1) <= 0.1 for k in base),
             "violations": violations, "rmse_worst_rel_err": max(abs(r["rmse_rel_err"]) for r in rows)}]
     for name, opts in VARIATIONS.items():
@@ -361,7 +363,8 @@ def comparative_claims(rows: list[dict], variant: str = "ours") -> list[dict[str
         ref = _lower(_paper_values(f, win), _paper_values(f, lose))
         out.append(statement(name, src, ref, got, got >= need,
                              rule=f"{win} lower than {lose} on at least {need} of RMSE, RMSEE, FOE "
-                                  f"(Table II: {ref} of 3)", **{win: _values(rows, f, win), lose: _values(rows, f, lose)},
+                                  f"(Table II: {ref} of 3)",
+                             **{win: _values(rows, f, win), lose: _values(rows, f, lose)},
                              **tag))
 
     def per(f: int, key: str) -> dict[str, float]:
@@ -445,12 +448,14 @@ def departures(foe_rows: list[dict] | None = None, published: dict | None = None
               f"{margin['violations']} (ours: 0)")
     min_err = next((r for r in foe_rows or [] if r["setting"].startswith("minimum-error")), None)
     min_effect = ("not measured in this result" if min_err is None else
-                  f"with it (FOE analysis): FOE / Table II {min_err['foe_ratio_min']:.2f}-{min_err['foe_ratio_max']:.2f}, "
+                  "with it (FOE analysis): FOE / Table II "
+                  f"{min_err['foe_ratio_min']:.2f}-{min_err['foe_ratio_max']:.2f}, "
                   f"largest FOE change {100 * min_err['max_change_vs_default']:.2g} %, worst RMSE error "
                   f"{100 * min_err['rmse_worst_rel_err']:.1f} %, violations {min_err['violations']}")
     return [
         departure("minimum tracking-error constraint (41)-(42)", "imposed (Fig. 8: 'also satisfied')", "off "
-                  "(the preset's min_error_constraint=False)", "the platoon scenario's default (the preset does not turn it on); no "
+                  "(the preset's min_error_constraint=False)",
+                  "the platoon scenario's default (the preset does not turn it on); no "
                   "reason is recorded: its measured effect is beside", min_effect + "; " + both,
                   fields=["min_error_constraint"]),
         departure("velocity box (40) margin", "(g+d) v_max", "(g+d) v_max - 1e-4 m/s",

@@ -27,7 +27,8 @@ The package, one job per module:
   only change *where* episodes run, so records equal a serial run's except the measured times
   (:data:`TIMING_FIELDS`);
 * :mod:`~satenv.bench.scoreboard.report` — aggregation (the counts of :func:`satenv.scoring.aggregate`;
-  mean and 95 % interval over seeds: percentile bootstrap for metrics, Wilson for the success rate), ranking (safety first: success rate desc, collision episodes asc, violation episodes asc, RMSE asc,
+  mean and 95 % interval over seeds: percentile bootstrap for metrics, Wilson for the success rate),
+  ranking (safety first: success rate desc, collision episodes asc, violation episodes asc, RMSE asc,
   delta-v asc) and the outputs in ``OUT`` (default ``results/scoreboard``,
   ``results/scoreboard/quick`` with ``--quick``): ``scoreboard.md``, ``scoreboard.json``,
   ``scoreboard.csv``, ``episodes.csv``, ``plots/<metric>.png``, ``plots/trajectories/*.png``;

@@ -146,9 +146,10 @@ def plan_line(keys: list[tuple[str, str, int]], done, workers: int,
             + (f" ({done} already in the log)" if done else ""))
     if timed:
         minutes = sum(timed) / workers / 60
-        text += (f", about {f'{minutes:.0f} min' if minutes >= 1 else 'a minute or less'} on {workers} worker(s) at the published board's "
-                 f"measured rate" + (f" (+{len(todo) - len(timed)} episodes of tasks it has not timed)"
-                                     if len(timed) < len(todo) else ""))
+        text += (f", about {f'{minutes:.0f} min' if minutes >= 1 else 'a minute or less'} on {workers} worker(s) "
+                 f"at the published board's measured rate"
+                 + (f" (+{len(todo) - len(timed)} episodes of tasks it has not timed)"
+                    if len(timed) < len(todo) else ""))
     swarms = sorted(t for t in tasks if SWARM_MARK in t)
     if swarms:
         text += f"; the swarm tasks {', '.join(swarms)} take minutes per episode"

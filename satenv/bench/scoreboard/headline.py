@@ -2,13 +2,13 @@
 the best scripted and the best learned policy side by side, as a table at the top of
 ``scoreboard.md`` and one figure, ``plots/headline.png``.
 
-On each system's task (the first of its tasks on the board: the one its learned policies
-are ranked on), the best of each kind by the board's own safety-first ranking (success rate desc,
-collision episodes asc, violation episodes asc, RMSE asc, delta-v asc); learned means a ``trained:`` or ``user:`` policy (with or without the safety filter),
-scripted everything else. The RMSE and delta-v ratios (learned / scripted, ratio of the means)
-are taken on *matched, completed* episodes only (``satenv.metrics.matched_ratios``):
-the seeds where both episodes ran to the end without an error and without a collision, so an
-episode that ends early cannot improve a ratio.
+On each system's task (the first of its tasks on the board: the one its learned policies are ranked
+on), the best of each kind by the board's own safety-first ranking (success rate desc, collision
+episodes asc, violation episodes asc, RMSE asc, delta-v asc); learned means a ``trained:`` or
+``user:`` policy (with or without the safety filter), scripted everything else. The RMSE and delta-v
+ratios (learned / scripted, ratio of the means) are taken on *matched, completed* episodes only
+(``satenv.metrics.matched_ratios``): the seeds where both episodes ran to the end without an error
+and without a collision, so an episode that ends early cannot improve a ratio.
 
 Pure functions of the episode records and the board's ranking.
 """
@@ -136,7 +136,8 @@ def headline_section(rows: list[dict[str, Any]], figure: bool = True) -> list[st
              "Per system of the papers, on the task its learned policies are ranked on, the best "
              "scripted and the best learned policy by this board's safety-first ranking (success rate, "
              "then collision episodes, then violation episodes, then RMSE, then Δv), so the best learned "
-             "policy is the best *safe* one among equally successful ones. Collision episodes, violation episodes: episodes with at least one collision, with at least "
+             "policy is the best *safe* one among equally successful ones. Collision episodes, violation "
+             "episodes: episodes with at least one collision, with at least "
              "one hard-constraint violation counted by the env. RMSE and Δv ratios: "
              "learned / scripted, ratio of the means over the *matched, completed* episodes (seeds "
              "where both episodes ran to the end without a collision), so an episode that ends "

@@ -262,7 +262,9 @@ def _cell(stat: dict[str, Any], metric: str) -> str:
         return "–"
     if metric == "success":   # no interval on one episode (a deterministic task runs one seed)
         one = stat.get("n", 2) < 2
-        return f"{100 * mean:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]" if lo is not None and not one else f"{100 * mean:.0f} %"
+        if lo is not None and not one:
+            return f"{100 * mean:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]"
+        return f"{100 * mean:.0f} %"
     if lo is None or hi is None or hi - lo <= 1e-9 * max(1.0, abs(mean)):  # one seed, or the same value on all
         return _fmt(mean)
     return f"{_fmt(mean)} [{_fmt(lo)}, {_fmt(hi)}]"
@@ -339,8 +341,8 @@ def _summary_section(summary: dict[str, Any]) -> list[str]:
             f"{e['p_improvement']:.2f} [{e['p_improvement_ci95'][0]:.2f}, {e['p_improvement_ci95'][1]:.2f}]"
         lines.append(f"| {pol} | {e['tasks']} | {e['episodes']} | {e['iqm']:.2f} [{lo:.2f}, {hi:.2f}] | {poi} |")
     if summary["skipped"]:
-        lines += ["", "Left out of these aggregates: " + "; ".join(f"{s} ({why})" for s, why in summary["skipped"].items())
-                  + "."]
+        lines += ["", "Left out of these aggregates: "
+                  + "; ".join(f"{s} ({why})" for s, why in summary["skipped"].items()) + "."]
     return lines + [""]
 
 

@@ -21,8 +21,8 @@ from typing import Any
 
 from satenv.training.both_ways import NETWORK_ALONE
 
-__all__ = ["LEARNED_TARGET", "SHIELD_SUFFIX", "PolicySpec", "ScoreboardError", "TaskSpec", "Unavailable", "checkpoint_policy",
-           "policy_fits", "resolve", "shielded"]
+__all__ = ["LEARNED_TARGET", "SHIELD_SUFFIX", "PolicySpec", "ScoreboardError", "TaskSpec", "Unavailable",
+           "checkpoint_policy", "policy_fits", "resolve", "shielded"]
 
 SHIELD_SUFFIX = "+shield"
 """A policy name ending in this is the policy filtered by :mod:`satenv.safety` (:func:`shielded`)."""

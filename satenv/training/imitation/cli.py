@@ -2,7 +2,8 @@
 
     satenv imitate --task platoon-pereira2022-random --rounds 8 --out-dir runs/platoon_dagger
     satenv imitate --env-id formation_v0 --expert cgmres --rounds 4 --out-dir runs/formation_dagger
-    satenv imitate --system platoon-pereira2022 --warm-start satenv/training/policies/platoon_pereira2022_dagger_shield \\
+    satenv imitate --system platoon-pereira2022 \\
+        --warm-start satenv/training/policies/platoon_pereira2022_dagger_shield \\
         --fly filtered --label filtered --lr 1e-4 --epochs 4 --out-dir runs/p22_safe
     satenv imitate --config satenv/training/policies/<name>/config.json --out-dir runs/replay
     satenv imitate --out-dir runs/p22_safe --ship satenv/training/policies/<new name>
@@ -44,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     from satenv.cliargs import add_config_flags, int_at_least, plain
 
     p = _Parser(prog=PROG, description=plain(__doc__.split("\n\n")[0]), allow_abbrev=False,
-                epilog=plain("\n\n".join(__doc__.split("\n\n")[1:])), formatter_class=argparse.RawDescriptionHelpFormatter)
+                epilog=plain("\n\n".join(__doc__.split("\n\n")[1:])),
+                formatter_class=argparse.RawDescriptionHelpFormatter)
     run = p.add_argument_group("run")
     run.add_argument("--config", type=Path, help="replay a saved config.json (any release's)")
     run.add_argument("--system", help="a satenv.tasks system: its training task and hyper-parameters")

@@ -169,8 +169,10 @@ class ImitationConfig(RunConfig):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         self._check_choices()
         self._check_safe()
-        if not self.set_encoder or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.set_encoder):
-            raise ValueError(f"set_encoder must be a non-empty tuple of positive ints (e.g. 64,64), got {self.set_encoder!r:.60}")
+        if not self.set_encoder or any(isinstance(w, bool) or not isinstance(w, int) or w < 1
+                                       for w in self.set_encoder):
+            raise ValueError("set_encoder must be a non-empty tuple of positive ints (e.g. 64,64), "
+                             f"got {self.set_encoder!r:.60}")
         object.__setattr__(self, "set_encoder", tuple(self.set_encoder))
         self._check_baselines()
         object.__setattr__(self, "obs_drop_dims", tuple(self.obs_drop_dims))

@@ -89,7 +89,8 @@ def fit_safe(policy: Any, data: dict[str, np.ndarray], loss: SafeLoss, *, lr: fl
     if prior is not None:
         px = inputs(policy, prior["obs"])
         py = torch.as_tensor(prior["act"], dtype=torch.float32).clamp(-1, 1)
-        p_off, p_slope = (torch.as_tensor(v, dtype=torch.float32) for v in terminal_affine(policy, prior["obs"], py.shape[-1]))
+        p_off, p_slope = (torch.as_tensor(v, dtype=torch.float32)
+                          for v in terminal_affine(policy, prior["obs"], py.shape[-1]))
     on_flown = loss.imitation_space == "flown"
     prior_on_flown = (loss.prior_space or loss.imitation_space) == "flown"
     actor = policy.actor

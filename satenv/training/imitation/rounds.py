@@ -126,7 +126,8 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
                             batch_size=cfg.batch_size, weight_decay=cfg.weight_decay)
         entry = {"task": cfg.task, "system": cfg.system, "round": k, "labels": n_rows, "episodes": episode,
                  "loss": loss, "beta": cfg.beta ** k if not cfg.safe else 0.0, "collect_s": round(collect_s, 1),
-                 "fit_s": round(time.perf_counter() - t1, 1), **validate(envs, net, cfg.eval_seeds, paper_seeds, shield_seeds)}
+                 "fit_s": round(time.perf_counter() - t1, 1),
+                 **validate(envs, net, cfg.eval_seeds, paper_seeds, shield_seeds)}
         if cfg.safe:
             steps = sum(s["agent_steps"] for s in flown)
             entry["flown_interventions_per_agent_step"] = sum(s["interventions"] for s in flown) / max(1, steps)
@@ -375,7 +376,8 @@ def finish(cfg: ImitationConfig, run_dir: Path, net: setup.Network, history: lis
         from satenv.training.imitation.folder import MAX_PICTURE_BYTES
         from satenv.training.trust import read_member
 
-        (staged / "learning_curve.png").write_bytes(bytes(read_member(run_dir, "learning_curve.png", MAX_PICTURE_BYTES)))
+        curve = read_member(run_dir, "learning_curve.png", MAX_PICTURE_BYTES)
+        (staged / "learning_curve.png").write_bytes(bytes(curve))
     runfolder.replace_folder(staged, final)
     print(f"final policy after {len(history)} rounds on {len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
     return final

@@ -101,7 +101,8 @@ def cold_network(env: Any, config: dict[str, Any], meta: dict[str, Any], seed: i
         if feats.drop_dims and feats.drop_dims[-1] >= own:
             raise ValueError(f"obs_drop_dims {list(feats.drop_dims)} must be own entries (< {own}) with "
                              "architecture='set' (a dropped slot entry would break the permutation invariance)")
-        actor = SetActor(feats.out_dim(obs_dim), act_dim, own, slot, k, list(config["set_encoder"]), hidden, act, squash)
+        actor = SetActor(feats.out_dim(obs_dim), act_dim, own, slot, k, list(config["set_encoder"]), hidden, act,
+                         squash)
     else:
         actor = MLPActor(feats.out_dim(obs_dim), act_dim, hidden, act, squash)
     policy = LearnedPolicy(actor, None, obs_shape=(obs_dim,), features=feats,

@@ -123,7 +123,8 @@ def validate_round(run_dir: Path, k: int, env: Any, warm_start: str | None, seed
     policy = load(folder, shielded=False)
     val = score(env, policy, seeds)
     out = {"round": k, "val": val, "shield": {"val": score(env, shield(policy, env, filter_config), shield_seeds)}}
-    path = check_folder(run_dir / "validation", "validation folder") / f"round_{k:04d}_{len(seeds)}_{len(shield_seeds)}.json"
+    validation = check_folder(run_dir / "validation", "validation folder")
+    path = validation / f"round_{k:04d}_{len(seeds)}_{len(shield_seeds)}.json"
     return runfolder.write_json(path, out, default=float)
 
 
@@ -133,7 +134,8 @@ def recorded(run_dir: Path) -> list[dict[str, Any]]:
     entries = {h["round"]: h for h in read_history(Path(run_dir))}
     folder = check_folder(Path(run_dir) / "validation", "validation folder")
     if folder.is_dir():
-        for name in sorted(os.listdir(folder), key=lambda n: [int(p) for p in n[6:-5].split("_") if p.lstrip("-").isdigit()]):
+        for name in sorted(os.listdir(folder),
+                           key=lambda n: [int(p) for p in n[6:-5].split("_") if p.lstrip("-").isdigit()]):
             if name.startswith("round_") and name.endswith(".json"):
                 entry = read_run_json(folder, name, "a round's validation", MAX_HISTORY_BYTES)
                 if isinstance(entry, dict) and isinstance(entry.get("round"), int):

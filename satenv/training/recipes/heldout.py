@@ -137,7 +137,8 @@ def main(argv: list[str] | None = None) -> None:
     ns = p.parse_args(argv)
     try:
         system = tasks.system(system_name(ns.system))
-        seeds = list(tasks.parse_seeds(ns.seeds)) if ns.seeds else list(tasks.get(system.training_task).seeds("test", 50))
+        seeds = (list(tasks.parse_seeds(ns.seeds)) if ns.seeds
+                 else list(tasks.get(system.training_task).seeds("test", 50)))
         paper_seeds = (list(tasks.parse_seeds(ns.paper_seeds)) if ns.paper_seeds
                        else list(tasks.get(system.paper_task).seeds("test")))
         ctrl_seeds = list(tasks.parse_seeds(ns.controller_seeds)) if ns.controller_seeds else None

@@ -476,7 +476,8 @@ def write_final(run: Run, out: Path, env: Any, wall: float) -> Path:
     meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs), "step": run.steps}
     config = {**cfg.to_json(), "gamma_used": run.gamma, "trainer": "satenv.training.rl.ppo"}
     policies = _policies(run, meta, config)
-    learned = policies[0] if len(policies) == 1 else PerAgentPolicy(dict(zip(env.possible_agents, policies, strict=True)))
+    learned = (policies[0] if len(policies) == 1
+               else PerAgentPolicy(dict(zip(env.possible_agents, policies, strict=True))))
     summary = run_summary(cfg, learned, reference=CONTROLLERS.get(cfg.env_id, "dmpc"), steps=run.steps,
                           train_wall_s_this_session=round(wall, 1))
     from satenv.training.policy import _jsonable, save_artifacts
