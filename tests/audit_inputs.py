@@ -278,7 +278,8 @@ def audit_simulate(rng: np.random.Generator, timeout: float) -> tuple[str, str]:
         elif n == "orbit":
             kwargs[n] = bad_value(rng, None)
         elif n == "u":
-            kwargs[n] = bad_value(rng, np.full((kwargs["steps"], 1, 3), 0.01)) if isinstance(kwargs["steps"], int) and 0 < kwargs["steps"] <= 10**4 else bad_value(rng, None)
+            fits = isinstance(kwargs["steps"], int) and 0 < kwargs["steps"] <= 10**4
+            kwargs[n] = bad_value(rng, np.full((kwargs["steps"], 1, 3), 0.01)) if fits else bad_value(rng, None)
         elif n == "x0":
             kwargs[n] = (np.array([[-6878e3, 0, 0, 0, 0, 0.0]]) if rng.random() < 0.15
                          else bad_value(rng, defaults["x0"]))
@@ -1159,7 +1160,8 @@ def audit_filtered_vec(vecs: dict, rng: np.random.Generator, timeout: float) -> 
             obs, rew, _, _, infos = vec.step(actions)
     except BaseException as exc:  # noqa: BLE001
         return classify_error(exc, "actions"), "actions"
-    ok = finite(obs, rew, infos["state"], *[infos[k] for k in infos if k.startswith("safety_") and k != "safety_active"])
+    ok = finite(obs, rew, infos["state"],
+                *[infos[k] for k in infos if k.startswith("safety_") and k != "safety_active"])
     return ("accepted" if ok else "nonfinite"), "actions"
 
 
@@ -1241,7 +1243,8 @@ def audit_corrupted_state(rng: np.random.Generator, timeout: float) -> tuple[str
     policy.reset(seed=0)
     x = env.core.x
     for _ in range(int(rng.integers(1, 4))):
-        x[0, int(rng.integers(x.shape[1])), int(rng.integers(x.shape[2]))] = float(rng.choice([np.nan, np.inf, -np.inf]))
+        bad = float(rng.choice([np.nan, np.inf, -np.inf]))   # the value is drawn before the indices
+        x[0, int(rng.integers(x.shape[1])), int(rng.integers(x.shape[2]))] = bad
     field = f"{name} state"
     try:
         with time_limit(timeout):
@@ -1427,7 +1430,7 @@ def audit_resume(tmp: str, rng: np.random.Generator, timeout: float) -> tuple[st
     return "accepted", field
 
 
-# ------------------------------------------------------------------------------- the satenv command's newest sub-commands
+# ---------------------------------------------------------------- the satenv command's newest sub-commands
 POS_INT = ("0", "-1", "1.5", "abc", "", "nan", "null", "[]", "1e999")
 """Values no count of at least 1 may take."""
 NONNEG_INT = ("-1", "1.5", "abc", "", "null", "[]")
@@ -1459,7 +1462,8 @@ def _cli_table(tmp: str) -> dict[str, dict]:
                             "--algo": CHOICE, "--task": CHOICE, "--env-id": CHOICE, "--out-dir": out_dir,
                             "--config": in_file, "--init-actor": (a_file, a_dir, missing),   # '' is the default: none
                             "--env-kwargs": ("[]", "{", "null", '{"nope": 1}'), "--net-arch": ("0", "-4", "a,b", ""),
-                            "--eval-seeds": ("", "5-1", "a"), "--eval-baselines": ("nope", "dmpc,nope")}},   # '' is none
+                            "--eval-seeds": ("", "5-1", "a"),   # '' is none
+                            "--eval-baselines": ("nope", "dmpc,nope")}},
         "ppo": {"base": ["--out-dir", os.path.join(tmp, "cli_ppo")],
                 "stops": [("satenv.training.rl.ppo", "Run")],   # after the env, before the learner
                 "flags": {"--budget": POS_INT, "--num-envs": POS_INT, "--n-steps": POS_INT,

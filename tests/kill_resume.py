@@ -2,17 +2,19 @@
 (not a pytest module; ``tests/test_scoreboard.py`` has the single-kill test).
 
     python tests/kill_resume.py [--kills 17] [--seeds 0-149] [--seed 0]
-    python tests/kill_resume.py --target dagger     # or safe, train, datasets, safety: a real kill at every write boundary
+    python tests/kill_resume.py --target dagger     # or safe, train, datasets, safety:
+                                                    # a real kill at every write boundary
     python tests/kill_resume.py --target safety --random 5   # five SIGKILLs at random moments, then the same command
 
 ``--target dagger`` / ``--target safe`` / ``--target train`` run the tiny DAgger, safe-imitation
 (:mod:`satenv.training.imitation` with a warm start flown with the filter) and PPO runs of
 ``tests/test_crash_windows.py``, ``--target datasets`` / ``--target safety`` the tiny Minari dataset
-and ``satenv safety-alone`` runs of ``tests/test_kill_writers.py``, in fresh interpreters: once uninterrupted (counting its write
-boundaries, :mod:`satenv.training.runfolder`), then, for every boundary ``k``, one run ended there by
-``os._exit`` (``SATENV_CRASH_AT_WRITE=k``: the disk as a ``kill -9`` leaves it) and one resume to
-the end; it prints the runs that could not finish, the rounds / evaluations lost or duplicated and
-how many resumed runs equal the uninterrupted one (timings aside).
+and ``satenv safety-alone`` runs of ``tests/test_kill_writers.py``, in fresh interpreters: once
+uninterrupted (counting its write boundaries, :mod:`satenv.training.runfolder`), then, for every
+boundary ``k``, one run ended there by ``os._exit`` (``SATENV_CRASH_AT_WRITE=k``: the disk as a
+``kill -9`` leaves it) and one resume to the end; it prints the runs that could not finish, the
+rounds / evaluations lost or duplicated and how many resumed runs equal the uninterrupted one
+(timings aside).
 
 Each round starts ``run_scoreboard(..., resume=True)`` on the toy board of
 ``tests/test_scoreboard.py`` (platoon, 20 steps, ``zero`` and ``random``) in a fresh interpreter

@@ -286,7 +286,8 @@ def _help(argv: list[str]) -> str:
     import contextlib
     import io
 
-    head = argv[:2] if argv[0] in ("reproduce", "results") and len(argv) > 1 and not argv[1].startswith("-") else argv[:1]
+    two_words = argv[0] in ("reproduce", "results") and len(argv) > 1 and not argv[1].startswith("-")
+    head = argv[:2] if two_words else argv[:1]
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf), pytest.raises(SystemExit):
         cli.resolve(head[0])([*head[1:], "--help"])

@@ -11,7 +11,8 @@ from satenv.training.benchmarl_train import BenchMARLConfig
 from satenv.training.config import DEPRECATED_FLAGS, TrainConfig, canonical_flags, parse_args
 from satenv.training.rllib_train import RLlibConfig
 
-TRAINERS = [(TrainConfig, "python -m satenv.training.train"), (BenchMARLConfig, "python -m satenv.training.benchmarl_train"),
+TRAINERS = [(TrainConfig, "python -m satenv.training.train"),
+            (BenchMARLConfig, "python -m satenv.training.benchmarl_train"),
             (RLlibConfig, "python -m satenv.training.rllib_train")]
 
 

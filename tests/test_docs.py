@@ -83,7 +83,8 @@ def test_claims_table_reads_any_claim_shape():
 def test_docstring_conversion():
     hooks = _hooks()
     doc = ("title\n\nSpaces\n------\n``preset``   ``\"a\"`` or\n             ``\"b\"``.\nnext :class:`~x.Y`\n\n"
-           "=======  =======\nentries  meaning\n=======  =======\n0–2      first\n         more\n3        second\n=======  =======\n")
+           "=======  =======\nentries  meaning\n=======  =======\n0–2      first\n         more\n"
+           "3        second\n=======  =======\n")
     md = hooks.rst_to_markdown(doc)
     assert "## Spaces" in md and '* ``preset``: ``"a"`` or ``"b"``.' in md and "next ``Y``" in md
     assert "| entries | meaning |" in md and "| 0–2 | first more |" in md and "| 3 | second |" in md

@@ -149,7 +149,8 @@ def _open_all(browser, site: Path, base: str, pages: list[str]) -> dict[str, lis
 def test_the_checks_catch_a_broken_page(browser, tmp_path):
     """A page with each fault is reported for each (so the site test can fail)."""
     (tmp_path / "bad").mkdir()
-    (tmp_path / "index.html").write_text("<html><head><link rel='icon' href='data:,'></head><body><p id='here'>ok</p><a href='bad/'>x</a></body></html>")
+    (tmp_path / "index.html").write_text("<html><head><link rel='icon' href='data:,'></head>"
+                                         "<body><p id='here'>ok</p><a href='bad/'>x</a></body></html>")
     (tmp_path / "bad" / "index.html").write_text(
         "<html><body><script>console.error('boom'); undefined_name();</script>"
         "<img src='missing.png'><div style='width:5000px'>wide</div>"

@@ -184,7 +184,8 @@ def test_training_page_lists_every_shipped_policy_with_its_current_numbers():
     from satenv.training.card import shipped_table
 
     page = (Path(__file__).parents[1] / "docs" / "training.md").read_text()
-    assert shipped_table() in page, "docs/training.md's shipped-policies table is stale: paste `python -m satenv.training.card`"
+    assert shipped_table() in page, ("docs/training.md's shipped-policies table is stale: "
+                                     "paste `python -m satenv.training.card`")
 
 
 def _npz_declaring(path, shape):
@@ -254,7 +255,8 @@ def test_hostile_run_folders_are_refused_before_anything_is_read(tmp_path, capsy
         read_labels(labels / "round_0001.npz")
     bad = tmp_path / "bad.json"
     for text in ("{not json", "[1, 2]", json.dumps({"rounds": "many"}), json.dumps({"eval_seeds": None}),
-                 json.dumps({"net_arch": 5}), json.dumps({"prior_labels": 5}), json.dumps({"terminal": {"radius": "x"}}),
+                 json.dumps({"net_arch": 5}), json.dumps({"prior_labels": 5}),
+                 json.dumps({"terminal": {"radius": "x"}}),
                  json.dumps({"safe_dagger": {"system": 5}})):
         bad.write_text(text)
         assert main(["--config", str(bad), "--out-dir", str(tmp_path / "r")]) == 2
@@ -366,9 +368,11 @@ def test_a_shipped_safe_variant_config_replays_a_round(tmp_path, capsys):
                  "--round0-episodes", "1", "--env-kwargs", '{"max_steps": 6}', "--eval-seeds", "700000",
                  "--shield-seeds", "1", "--epochs", "1", "--progress", "false"]) == 0
     saved = json.loads((out / "config.json").read_text())
-    assert (saved["fly"], saved["label"], saved["label_filter"]) == ("handover", "teacher", {"margin": 0.02, "velocity_margin": 0.2, "gamma": 0.5})
+    assert (saved["fly"], saved["label"], saved["label_filter"]) == (
+        "handover", "teacher", {"margin": 0.02, "velocity_margin": 0.2, "gamma": 0.5})
     history = json.loads((out / "history.json").read_text())
-    assert history[0]["labels"] == 6 * 2 and set(history[0]["loss"]) == {"imitation", "intervention", "barrier", "prior"}
+    assert history[0]["labels"] == 6 * 2
+    assert set(history[0]["loss"]) == {"imitation", "intervention", "barrier", "prior"}
     shipped = json.loads((out / "rounds" / "0000" / "env.json").read_text())
     assert "safety_filter" in shipped                        # the warm start's env.json, its filter named
     capsys.readouterr()

@@ -295,7 +295,8 @@ def test_hinge_of_an_unreachable_bound_asks_for_the_best_along_the_row(norm_mode
     lower = torch.tensor([[5.0]], dtype=torch.float64)
     best = r if norm_mode else np.array([1.0, 1.0, 0.0])
     top = 1.0 if norm_mode else np.sqrt(2.0)
-    assert barrier_hinge(torch.as_tensor(best[None]), rows, lower, norm_mode=norm_mode).item() == pytest.approx(0.0, abs=1e-12)
+    hinge = barrier_hinge(torch.as_tensor(best[None]), rows, lower, norm_mode=norm_mode).item()
+    assert hinge == pytest.approx(0.0, abs=1e-12)
     zero = torch.zeros((1, 3), dtype=torch.float64)
     assert barrier_hinge(zero, rows, lower, norm_mode=norm_mode).item() == pytest.approx(top ** 2)
     assert barrier_hinge(zero, rows, lower, margin=0.5, norm_mode=norm_mode).item() == pytest.approx(top ** 2)
@@ -383,8 +384,8 @@ def test_a_label_filter_tightens_the_labels_and_rows_not_the_flight():
     student = _Fixed(np.where(np.arange(n)[:, None] % 2 == 1, 1.0, -1.0) * np.ones((n, d)))
     teacher = _Fixed(np.roll(student.a, 1, axis=1))
     shipped = SafetyConfig(margin=0.05)
-    tight = label_filter_config((SafeDaggerConfig(label_filter={"margin": 3.0, "velocity_margin": 0.9, "gamma": 0.1})).label_filter,
-                                shipped)
+    tight = label_filter_config(
+        (SafeDaggerConfig(label_filter={"margin": 3.0, "velocity_margin": 0.9, "gamma": 0.1})).label_filter, shipped)
     assert (tight.margin, tight.velocity_margin, tight.gamma, tight.los_margin) == (3.0, 0.9, 0.1, shipped.los_margin)
     rows, _ = collect_episode(env, teacher, student, 700_321, fly="filtered", filter_config=shipped,
                               label_config=tight)
@@ -432,9 +433,10 @@ def test_teacher_labels_with_terminal_feedback_must_be_compared_flown(feedback_p
     with pytest.raises(SatenvError, match="imitation_space"):
         check_label_space(*_space(SafeDaggerConfig(label="teacher", imitation_space="network",
                                            system="servicing-pereira2022")), with_fb)
-    check_label_space(*_space(SafeDaggerConfig(label="teacher", imitation_space="flown", system="servicing-pereira2022")), with_fb)
-    check_label_space(*_space(SafeDaggerConfig(label="teacher", imitation_space="network", system="servicing-pereira2022")),
-                      without)
+    check_label_space(*_space(SafeDaggerConfig(label="teacher", imitation_space="flown",
+                                               system="servicing-pereira2022")), with_fb)
+    check_label_space(*_space(SafeDaggerConfig(label="teacher", imitation_space="network",
+                                               system="servicing-pereira2022")), without)
     check_label_space(*_space(SafeDaggerConfig(label="expert", imitation_space="network")), with_fb)
 
 

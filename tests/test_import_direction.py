@@ -1,6 +1,7 @@
 """The import direction of the design, floor by floor: the core (``satenv``) -> ``satenv.baselines``
--> ``satenv.training`` -> ``satenv.bench`` -> ``satenv.cli`` (the ``satenv`` command), never upward, and no cycle between modules (imports inside functions included: a lazy import
-hides a cycle, it does not remove it)."""
+-> ``satenv.training`` -> ``satenv.bench`` -> ``satenv.cli`` (the ``satenv`` command), never upward,
+and no cycle between modules (imports inside functions included: a lazy import hides a cycle, it does
+not remove it)."""
 
 from __future__ import annotations
 

@@ -77,7 +77,8 @@ def _dataset(root: Path) -> str:
 
 
 def _manifest(path: Path) -> str:
-    return canonical({k: {f: v for f, v in e.items() if f != "wall_s"} for k, e in json.loads(path.read_text()).items()})
+    entries = json.loads(path.read_text())
+    return canonical({k: {f: v for f, v in e.items() if f != "wall_s"} for k, e in entries.items()})
 
 
 def _write(tmp_path: Path, name: str):
@@ -220,7 +221,8 @@ def safety_reference(tmp_path_factory):
 
 
 @pytest.mark.parametrize("n, torn", [(1, True), (3, False), (4, True)])
-def test_safety_alone_killed_between_episodes_resumes_to_the_same_json(tmp_path, monkeypatch, safety_reference, n, torn):
+def test_safety_alone_killed_between_episodes_resumes_to_the_same_json(tmp_path, monkeypatch, safety_reference,
+                                                                        n, torn):
     """Killed at the n-th cached episode (its line whole or torn): the same command ends equal."""
     with monkeypatch.context() as m:
         _kill_after_appends(m, n, torn)

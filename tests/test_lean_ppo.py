@@ -172,9 +172,9 @@ SB3_MATCH_TEST_SEEDS = tuple(range(900000, 900020))
 
 @pytest.mark.slow
 def test_lean_ppo_matches_sb3_ppo_on_the_platoon(tmp_path):
-    """Same task (the platoon ladder's first rung), budget, seeds, network, batch and discount: the lean learner's mean test success
-    is within the seeds' spread of SB3 PPO's (the larger of the two standard deviations, and at
-    least one test episode's worth)."""
+    """Same task (the platoon ladder's first rung), budget, seeds, network, batch and discount: the
+    lean learner's mean test success is within the seeds' spread of SB3 PPO's (the larger of the two
+    standard deviations, and at least one test episode's worth)."""
     from satenv.training.config import TrainConfig
     from satenv.training.train import train as sb3_train
 

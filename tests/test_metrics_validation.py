@@ -112,7 +112,8 @@ def _corrupt(traj, draw) -> tuple[object, str]:
         return dataclasses.replace(traj, agents=traj.agents[:-1]), "agents"
     if kind == "compute":
         return dataclasses.replace(traj, compute_time=np.array([np.nan])), "compute_time"
-    return dataclasses.replace(traj, policy_info={"fallbacks": draw(st.sampled_from([-1, 1.5, "2", True]))}), "fallbacks"
+    bad = draw(st.sampled_from([-1, 1.5, "2", True]))
+    return dataclasses.replace(traj, policy_info={"fallbacks": bad}), "fallbacks"
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))

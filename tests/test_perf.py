@@ -56,14 +56,16 @@ def test_perf_opt_in_sections_smoke(tmp_path):
 def test_perf_guard_section_smoke():
     out = perf.guard_cost(0.01, [1, 2], log=lambda line: None)
     pz = out["pettingzoo"]
-    assert pz["step_us"] > 0 and pz["check_us"] > 0 and pz["check_share"] == pytest.approx(pz["check_us"] / pz["step_us"], rel=1e-12)
+    assert pz["step_us"] > 0 and pz["check_us"] > 0
+    assert pz["check_share"] == pytest.approx(pz["check_us"] / pz["step_us"], rel=1e-12)
     assert [r["batch"] for r in out["make_vec"]] == [1, 2] and isinstance(out["met"], bool)
 
 
 def test_perf_reproductions_section_smoke(tmp_path, monkeypatch):
     """Issue 17's reproduction wall times, on the one-second pereira2023 reproduction: a row with
     its time, target and exit status, and a target flag that can fail."""
-    monkeypatch.setattr(perf.reproductions, "REPRODUCTION_TARGETS_S", {"pereira2023": (["pereira2023", "--no-analysis"], 1e-3)})
+    monkeypatch.setattr(perf.reproductions, "REPRODUCTION_TARGETS_S",
+                        {"pereira2023": (["pereira2023", "--no-analysis"], 1e-3)})
     out = tmp_path / "perf.json"
     perf.main(["--out", str(out), "--sections", "reproductions"])
     data = json.loads(out.read_text())
@@ -140,7 +142,8 @@ def test_perf_package_has_no_import_cycle_and_runs_as_a_module():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    code = "import satenv.bench.perf.scaling, satenv.bench.perf.envs; import satenv.bench.perf as p; print(len(p.REGISTRY))"
+    code = ("import satenv.bench.perf.scaling, satenv.bench.perf.envs; import satenv.bench.perf as p; "
+            "print(len(p.REGISTRY))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
     assert int(proc.stdout.strip()) >= 7
     proc = subprocess.run([sys.executable, "-m", "satenv.bench.perf", "--help"], capture_output=True, text=True,

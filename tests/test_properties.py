@@ -252,7 +252,8 @@ def prop_baseline(case):
 # ------------------------------------------------------------------------------- satenv.training.load
 json_values = st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.integers(-10**30, 10**30),
                                      st.text(max_size=5)),
-                           lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+                           lambda inner: (st.lists(inner, max_size=4)
+                                          | st.dictionaries(st.text(max_size=8), inner, max_size=4)),
                            max_leaves=8)
 
 

@@ -163,7 +163,8 @@ def test_as_published_run_and_its_departures(result):
     pub = [c for c in result["claims"] if c["variant"] == "as published"]
     assert pub and not any(c["gating"] for c in pub)
     ours = {c["claim"] for c in result["claims"] if c["variant"] == "ours"}
-    assert {c["claim"] for c in pub} == ours - {"the 1-hop algorithm more trustworthy than the convex step of pereira2022"}
+    assert {c["claim"] for c in pub} == ours - {
+        "the 1-hop algorithm more trustworthy than the convex step of pereira2022"}
     deps = {d["name"]: d for d in result["departures"]}
     warm = deps["warm start of Algorithm 1 (line 6)"]
     assert warm["fields"] == ["warm_start"] and "FOE analysis" in warm["effect"]

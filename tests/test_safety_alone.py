@@ -13,7 +13,8 @@ def test_two_episodes_write_json_png_and_resume_from_the_cache(tmp_path):
     from satenv.bench import safety_alone
 
     folder = "satenv/training/policies/platoon_tplf_safe_distill"
-    args = ["--entry", f"platoon-pereira2023={folder}", "--seeds", "2", "--controller-seeds", "1", "--out", str(tmp_path)]
+    args = ["--entry", f"platoon-pereira2023={folder}", "--seeds", "2", "--controller-seeds", "1",
+            "--out", str(tmp_path)]
     safety_alone.main(args)
     res = json.loads((tmp_path / "safety_alone.json").read_text())
     assert (tmp_path / "safety_alone.png").stat().st_size > 0
@@ -56,7 +57,8 @@ def test_a_run_is_written_into_a_policy_folder_that_the_card_reads(tmp_path):
     assert c["evaluation"] == BOTH_WAYS_FILE and c["episodes"] == c["network_alone"]["episodes"] == 2
     assert c["interventions_per_agent_step"] is not None and c["baseline_episodes"] == 1
     stamp = (folder / BOTH_WAYS_FILE).stat().st_mtime_ns
-    assert safety_alone.write_folders(json.loads((out / "safety_alone.json").read_text()), out / "safety_alone.json") == []
+    result = out / "safety_alone.json"
+    assert safety_alone.write_folders(json.loads(result.read_text()), result) == []
     assert (folder / BOTH_WAYS_FILE).stat().st_mtime_ns == stamp   # the same evaluation: left as it is
 
 

@@ -109,7 +109,8 @@ def test_permuting_the_slots_leaves_the_action_exactly_unchanged():
         y = actor(torch.as_tensor(x)).numpy()
         for perm in ([3, 2, 1, 0], [1, 0, 3, 2], [2, 3, 0, 1]):
             xp = x.copy()
-            xp[:, N_FIXED_OBS:N_FIXED_OBS + 7 * K] = x[:, N_FIXED_OBS:N_FIXED_OBS + 7 * K].reshape(64, K, 7)[:, perm].reshape(64, -1)
+            block = slice(N_FIXED_OBS, N_FIXED_OBS + 7 * K)
+            xp[:, block] = x[:, block].reshape(64, K, 7)[:, perm].reshape(64, -1)
             assert np.array_equal(actor(torch.as_tensor(xp)).numpy(), y)
         # an empty slot's content is not read; a present slot's is
         xe = x.copy()

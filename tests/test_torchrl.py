@@ -44,7 +44,8 @@ def test_copies_reproduce_the_pettingzoo_env_and_reset_through_torchrl():
         out, td = env.step_and_maybe_reset(td)
         for i, p in enumerate(pz):
             o, r, te, tr, _ = p.step({a: actions[k, i, j].double().numpy() for j, a in enumerate(agents)})
-            np.testing.assert_allclose(out["next", "agents", "reward"][i, :, 0].numpy(), [r[a] for a in agents], rtol=1e-6)
+            np.testing.assert_allclose(out["next", "agents", "reward"][i, :, 0].numpy(), [r[a] for a in agents],
+                                       rtol=1e-6)
             assert bool(out["next", "done"][i]) == (te[agents[0]] or tr[agents[0]]) == ((k + 1) % steps == 0)
             obs[i] = p.reset()[0] if (te[agents[0]] or tr[agents[0]]) else o
 

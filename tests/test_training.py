@@ -84,7 +84,8 @@ def test_cli_flags_parse_into_the_config(capsys):
         old, _ = parse_args(["--n-copies", "4", "--learning-rate", "0.01", "--eval-seeds", "5:8"])
     assert (old.num_envs, old.lr, old.eval_seeds) == (4, 0.01, (5, 6, 7))
     for argv, match in [(["--env-kwargs", "randomize"], "JSON object"), (["--num-envs", "many"], "num-envs"),
-                        (["--algo", "dqn"], "ppo"), (["--num-envs", "0"], "error: --num-envs must be an int >= 1, got 0"),
+                        (["--algo", "dqn"], "ppo"),
+                        (["--num-envs", "0"], "error: --num-envs must be an int >= 1, got 0"),
                         (["--test-seeds", "0-999999999"], "more than 100000 seeds"),
                         (["--env-kwargs", '{"nope": 1}'], "error: --env-kwargs: platoon_v0: unknown keyword argument"),
                         (["--eval-env-kwargs", '{"dt": -1}'], "error: --eval-env-kwargs: dt must be a finite number")]:
@@ -440,7 +441,8 @@ def _trainer_parsers() -> dict:
     from satenv.training.rl.ppo import config_from_args
     from satenv.training.rllib_train import RLlibConfig
 
-    return {"train": lambda a: parse_args(a, cls=TrainConfig), "train-marl": lambda a: parse_args(a, cls=BenchMARLConfig),
+    return {"train": lambda a: parse_args(a, cls=TrainConfig),
+            "train-marl": lambda a: parse_args(a, cls=BenchMARLConfig),
             "train-rllib": lambda a: parse_args(a, cls=RLlibConfig), "imitate": parse_imitation,
             "ppo": config_from_args}
 

@@ -101,7 +101,8 @@ def test_config_replay_refuses_code_before_anything_runs(tmp_path, cli, capsys):
     cfg.update(env_id="subprocess:run", env_kwargs={"args": f"touch {marker}", "shell": True},
                out_dir=str(tmp_path / "run"))
     (tmp_path / "config.json").write_text(json.dumps(cfg))
-    assert re.search(f"module:callable.*{CODE_FLAG}", _refusal(main, ["--config", str(tmp_path / "config.json")], capsys))
+    refusal = _refusal(main, ["--config", str(tmp_path / "config.json")], capsys)
+    assert re.search(f"module:callable.*{CODE_FLAG}", refusal)
     cfg.update(env_id="platoon_v0", env_kwargs={}, eval_baselines=["os:system"])
     (tmp_path / "config.json").write_text(json.dumps(cfg))
     assert "baseline 'os:system' is not registered" in _refusal(main, ["--config", str(tmp_path / "config.json")],
