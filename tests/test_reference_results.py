@@ -165,7 +165,8 @@ def test_grid_covers_the_ladders():
             assert any(r.filter for r in mine) == (system in G.FILTER_SYSTEMS)
     assert all(G.BUDGET_AGENT_STEPS[s] >= 10_000_000 for s in tasks.SYSTEMS if s.startswith(("platoon", "formation")))
     assert G.MASAC_UTD >= 0.25
-    assert [r.task.name for r in G.grid(["cluster-li2022"], ["ppo"], [0], (), rungs=[2])] == [tasks.ladder("cluster-li2022")[1]]
+    assert ([r.task.name for r in G.grid(["cluster-li2022"], ["ppo"], [0], (), rungs=[2])]
+            == [tasks.ladder("cluster-li2022")[1]])
     with pytest.raises(G.LearningError, match="rungs"):
         G.grid(["cluster-li2022"], ["ppo"], [0], rungs=[4])
 

@@ -88,7 +88,8 @@ def cmd_run(ns: argparse.Namespace) -> int:
     done = done_runs(runs, log_path)
     todo = [r for r in runs if r not in done]
     print(f"{len(runs)} runs, {len(done)} already in {log_path}, {len(todo)} to run"
-          + (f": {_estimate(todo, log + (read_log(LOG) if LOG.is_file() else []), ns.workers)}; the same command resumes after an interruption" if todo else ""),
+          + (f": {_estimate(todo, log + (read_log(LOG) if LOG.is_file() else []), ns.workers)}; "
+             "the same command resumes after an interruption" if todo else ""),
           flush=True)
     if ns.dry_run:
         for r in todo:
@@ -143,7 +144,8 @@ def parser() -> argparse.ArgumentParser:
         return c
 
     r = command("run", "train and evaluate the grid (resumable: the same command skips the runs in the log)", cmd_run)
-    r.add_argument("--log", type=out_file, default=LOG, help="the evaluation log (JSON lines; default: studies/reference_results/log.jsonl)")
+    r.add_argument("--log", type=out_file, default=LOG,
+                   help="the evaluation log (JSON lines; default: studies/reference_results/log.jsonl)")
     r.add_argument("--systems", default=",".join(SYSTEM_ORDER), help="comma-separated systems (default: all)")
     r.add_argument("--algorithms", default=",".join(DEFAULT_ALGORITHMS),
                    help="comma-separated algorithms (default: %(default)s)")
@@ -158,10 +160,13 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     r.add_argument("--dry-run", action="store_true", help="list the runs to do, with the time estimate, and stop")
     s = command("results", "log -> results.json", cmd_results)
-    s.add_argument("--log", type=out_file, default=LOG, help="the evaluation log (default: studies/reference_results/log.jsonl)")
-    s.add_argument("--out", type=out_file, default=RESULTS, help="the results file (default: studies/reference_results/results.json)")
+    s.add_argument("--log", type=out_file, default=LOG,
+                   help="the evaluation log (default: studies/reference_results/log.jsonl)")
+    s.add_argument("--out", type=out_file, default=RESULTS,
+                   help="the results file (default: studies/reference_results/results.json)")
     d = command("render", "results.json -> docs page and figures", cmd_render)
-    d.add_argument("--results", type=out_file, default=RESULTS, help="the results file (default: studies/reference_results/results.json)")
+    d.add_argument("--results", type=out_file, default=RESULTS,
+                   help="the results file (default: studies/reference_results/results.json)")
     return p
 
 

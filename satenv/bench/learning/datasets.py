@@ -9,8 +9,9 @@ Each dataset (id ``satenv/<system>/<controller>-v0``, e.g. ``satenv/platoon-pere
 holds the system controller's episodes (:data:`satenv.tasks.CONTROLLERS`) on the first
 ``--episodes`` **train** seeds of the system's training task (:func:`satenv.tasks.training_task`),
 recorded through the centralised Gymnasium view ``satenv/<Env>-v0`` (:class:`satenv.gym_env.CentralisedEnv`)
-and written by Minari (``minari.create_dataset_from_buffers``, the storage of its ``DataCollector``). Datasets live in Minari's folder (``MINARI_DATASETS_PATH``,
-default ``~/.minari/datasets``; ``--root`` sets it), never in git: this command regenerates them.
+and written by Minari (``minari.create_dataset_from_buffers``, the storage of its ``DataCollector``).
+Datasets live in Minari's folder (``MINARI_DATASETS_PATH``, default ``~/.minari/datasets``; ``--root``
+sets it), never in git: this command regenerates them.
 
 **Layout of the multi-agent data** (also in each dataset's description, the dataset card):
 
@@ -271,7 +272,8 @@ def write(system: str, episodes: int, seed0: int = 0, progress: bool = True, man
     counts = _safety_counts(buffers)
     env = make_env(system)
     try:
-        ds = _create_whole(dataset_id(system), buffers, env, algorithm_name=f"scripted controller {tasks.system(system).controller}",
+        ds = _create_whole(dataset_id(system), buffers, env,
+                           algorithm_name=f"scripted controller {tasks.system(system).controller}",
                            author="satenv", code_permalink="satenv/bench/learning/datasets.py",
                            description=_card(system, seeds, steps, inner_loop_name(system), counts))
     finally:
@@ -502,7 +504,8 @@ def main(argv: Iterable[str] | None = None) -> int:
         os.environ["MINARI_DATASETS_PATH"] = str(ns.root)
     if ns.command == "write":
         print(f"writing {len(ns.systems)} dataset(s) of {ns.episodes} episodes: "
-              f"{_estimate(ns.systems, ns.episodes, ns.workers)}; to {ns.root or 'MINARI_DATASETS_PATH (~/.minari/datasets)'}",
+              f"{_estimate(ns.systems, ns.episodes, ns.workers)}; "
+              f"to {ns.root or 'MINARI_DATASETS_PATH (~/.minari/datasets)'}",
               file=sys.stderr, flush=True)
     for system in ns.systems:
         ds = (write(system, ns.episodes, manifest=Path(ns.manifest) if ns.manifest else None, workers=ns.workers,

@@ -20,8 +20,8 @@ from satenv import scoring
 __all__ = ["EPISODE_FIELDS", "evaluate_policy"]
 
 EPISODE_FIELDS = ("seed", "success", "collisions", "violations", "terminated", "rmse", "delta_v",
-                  "final_error_m", "steps", "min_separation_m", "compute_ms_per_agent", "episode_return", "failure_mode",
-                  *scoring.SAFETY_COUNTS, "safety_agent_steps")
+                  "final_error_m", "steps", "min_separation_m", "compute_ms_per_agent", "episode_return",
+                  "failure_mode", *scoring.SAFETY_COUNTS, "safety_agent_steps")
 """What a logged episode keeps."""
 
 

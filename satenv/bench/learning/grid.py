@@ -23,8 +23,8 @@ from typing import Any
 from satenv import tasks
 
 __all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "CURVE_TEST_SEEDS", "DAGGER_LABELS", "DEFAULT_ALGORITHMS",
-           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_BUDGET_AGENT_STEPS", "MASAC_UTD", "grid_budget", "RL_ALGORITHMS", "Run",
-           "LearningError", "grid", "test_seeds"]
+           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_BUDGET_AGENT_STEPS", "MASAC_UTD",
+           "grid_budget", "RL_ALGORITHMS", "Run", "LearningError", "grid", "test_seeds"]
 
 
 class LearningError(ValueError):

@@ -10,7 +10,6 @@ Statistics are rliable's (Agarwal et al. 2021), written with numpy: the interqua
 from __future__ import annotations
 
 import json
-import math
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -132,9 +131,11 @@ def _detail_row(group: Group, rung: int, recs: list[dict[str, Any]]) -> str:
     mid, lo, hi = iqm_ci(_successes(recs))
     cmd = recs[0]["command"].replace(f"--seeds {recs[0]['seed']}", f"--seeds {_seeds(recs)}")
     steps = sorted({r["agent_steps"] for r in recs})
-    return (f"| {rung} | {_label(*group)} | {len(recs)} | {_successes(recs).mean():.2f} | {mid:.2f} [{lo:.2f}, {hi:.2f}] | "
+    return (f"| {rung} | {_label(*group)} | {len(recs)} | {_successes(recs).mean():.2f} | "
+            f"{mid:.2f} [{lo:.2f}, {hi:.2f}] | "
             f"{sum(x['collision_episodes'] for x in t)}/{n_eps} | {sum(x['violation_episodes'] for x in t)}/{n_eps} | "
-            f"{_failures(recs)} | {_per_seed(recs)} | {'/'.join(f'{s:,}' for s in steps)} | {np.mean([r['wall_s'] for r in recs]):.0f} | "
+            f"{_failures(recs)} | {_per_seed(recs)} | {'/'.join(f'{s:,}' for s in steps)} | "
+            f"{np.mean([r['wall_s'] for r in recs]):.0f} | "
             f"`{cmd}` |")
 
 
@@ -156,8 +157,10 @@ def _rates(results: dict[str, Any]) -> list[str]:
     if not speed:
         return []
     lines = ["Measured training speed (agent-steps per second of training wall time, median over the runs, "
-             "one worker under `nice` on the shared cores) and the hours one run of the grid's budget takes at it:", "",
-             "| system | algorithm | runs | agent-steps/s | hours per run at the grid's budget |", "|---|---|---|---|---|"]
+             "one worker under `nice` on the shared cores) and the hours one run of the grid's budget takes at it:",
+             "",
+             "| system | algorithm | runs | agent-steps/s | hours per run at the grid's budget |",
+             "|---|---|---|---|---|"]
     for (system, algo), v in sorted(speed.items(), key=lambda kv: (list(tasks.SYSTEMS).index(kv[0][0]),
                                                                   G.ALGORITHMS.index(kv[0][1]))):
         rate = float(np.median(v))
@@ -168,7 +171,8 @@ def _rates(results: dict[str, Any]) -> list[str]:
     return lines + [""]
 
 
-def _solved_rungs(groups: dict[Group, dict[int, list[dict[str, Any]]]], standard: tuple[str, ...]) -> dict[int, list[str]]:
+def _solved_rungs(groups: dict[Group, dict[int, list[dict[str, Any]]]],
+                  standard: tuple[str, ...]) -> dict[int, list[str]]:
     out: dict[int, list[str]] = defaultdict(list)
     for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
         if group[0] in standard and not group[1]:
@@ -208,7 +212,8 @@ def _targets(results: dict[str, Any], groups: dict[str, Any]) -> list[str]:
                 lines.append(f"| {text} | not run yet | – |")
                 continue
             met = b[0] >= bar and b[2] >= SOLVED_MIN_SEEDS
-            lines.append(f"| {text} | {b[0]:.2f} ({b[1]}, {b[2]} seed{'s' if b[2] > 1 else ''}) | {'yes' if met else 'no'} |")
+            lines.append(f"| {text} | {b[0]:.2f} ({b[1]}, {b[2]} seed{'s' if b[2] > 1 else ''}) | "
+                         f"{'yes' if met else 'no'} |")
     lines += ["", "Success along each ladder (mean success of the best standard-RL row per rung; the target: it falls "
               "from rung 1 to the last rung):", ""]
     for name, sysdef in tasks.SYSTEMS.items():
@@ -219,7 +224,7 @@ def _targets(results: dict[str, Any], groups: dict[str, Any]) -> list[str]:
             vals.append("–" if b is None else f"{b[0]:.2f}")
         known = [float(v) for v in vals if v != "–"]
         verdict = ("not measured on every rung yet" if len(known) < len(ladder)
-                   else "falls" if all(a >= b for a, b in zip(known, known[1:])) and known[0] > known[-1]
+                   else "falls" if all(a >= b for a, b in zip(known, known[1:], strict=False)) and known[0] > known[-1]
                    else "does not fall")
         lines.append(f"- {sysdef.label}: {' -> '.join(vals)} ({verdict})")
     return lines + [""]
@@ -240,11 +245,14 @@ def _says(system: str, groups: dict[Group, dict[int, list[dict[str, Any]]]], n_r
     return "Standard RL: " + "; ".join(parts) + "."
 
 
-def _system_section(name: str, results: dict[str, Any], groups: dict[Group, dict[int, list[dict[str, Any]]]]) -> list[str]:
+def _system_section(name: str, results: dict[str, Any],
+                    groups: dict[Group, dict[int, list[dict[str, Any]]]]) -> list[str]:
     sysdef = tasks.SYSTEMS[name]
     ladder = results["grid"]["ladders"][name]
-    lines = [f"## {sysdef.label}", "", f"Controller `{sysdef.controller}`, expert `{sysdef.expert}`. Ladder (easiest first; "
-             "the last rung is the training task):", "", "| rung | task | what it changes | controller success (test seeds) |",
+    lines = [f"## {sysdef.label}", "",
+             f"Controller `{sysdef.controller}`, expert `{sysdef.expert}`. Ladder (easiest first; "
+             "the last rung is the training task):", "",
+             "| rung | task | what it changes | controller success (test seeds) |",
              "|---|---|---|---|"]
     for k, task in enumerate(ladder, start=1):
         ctrl = results["controllers"].get(task)
@@ -259,7 +267,8 @@ def _system_section(name: str, results: dict[str, Any], groups: dict[Group, dict
               "| algorithm | " + " | ".join(f"rung {k}" for k in range(1, len(ladder) + 1)) + " |",
               "|---" * (len(ladder) + 1) + "|"]
     for group, rungs in sorted(groups.items(), key=lambda kv: _order(kv[0])):
-        lines.append(f"| {_label(*group)} | " + " | ".join(_cell(rungs.get(k)) for k in range(1, len(ladder) + 1)) + " |")
+        lines.append(f"| {_label(*group)} | "
+                     + " | ".join(_cell(rungs.get(k)) for k in range(1, len(ladder) + 1)) + " |")
     lines += ["", "| rung | algorithm | seeds | success (mean) | success IQM [95 % CI] | collision episodes | "
               "violation episodes | failure modes (episodes) | per seed: success (failure modes of a seed below 0.9) | "
               "agent-steps (labels) | train wall [s] | command |",
@@ -358,7 +367,8 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "Run, resume (the log is kill-safe; the same command skips what is logged) and render:",
         "",
         "```bash",
-        "nohup studies/reference_results/run_all.sh > studies/reference_results/run_all.out 2>&1 &  # cheapest cells first",
+        "nohup studies/reference_results/run_all.sh > studies/reference_results/run_all.out 2>&1 &  "
+        "# cheapest cells first",
         "satenv results results   # studies/reference_results/log.jsonl -> results.json",
         "satenv results render    # results.json -> this page and its figures",
         "```",
@@ -374,14 +384,17 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
 
     complete = {run_key(r) for r in results["records"]}
     errors = [e for e in results["errors"] if run_key(e) not in complete]
-    missing = results["incomplete"] + [{**e, "checkpoints_logged": "none (the run crashed: " + e["error"].split(" (")[0][:80] + ")"}
-                                       for e in errors]
+    missing = results["incomplete"] + [
+        {**e, "checkpoints_logged": "none (the run crashed: " + e["error"].split(" (")[0][:80] + ")"}
+        for e in errors]
     if not missing and not results.get("not_run"):
         lines.append("Every run of the grid is complete.")
     if missing:
         lines += ["Runs with checkpoints missing (the resume command above completes them):", ""]
-        lines += [f"- {m['task']} / {_label(m['algorithm'], m['filter'], _longer(m)) if m['algorithm'] != 'controller' else 'controller'}"
-                  f" / seed {m['seed']}: checkpoints logged {m['checkpoints_logged']}" for m in missing] + [""]
+        lines += [f"- {m['task']} / "
+                  + (_label(m["algorithm"], m["filter"], _longer(m)) if m["algorithm"] != "controller"
+                     else "controller")
+                  + f" / seed {m['seed']}: checkpoints logged {m['checkpoints_logged']}" for m in missing] + [""]
     if results.get("not_run"):
         lines += [f"Runs of the grid at its budgets not run yet ({sum(results['not_run'].values())}; the resume "
                   "command above runs them), per rung:", ""]
@@ -421,7 +434,8 @@ def write_figures(results: dict[str, Any], folder: Path = ASSETS) -> list[Path]:
                 ax.text(0.5, 0.5, "not run yet", ha="center", va="center", transform=ax.transAxes)
             ctrl = results["controllers"].get(task)
             if ctrl:
-                ax.axhline(ctrl["test"]["success_rate"], color="k", ls="--", lw=1, label=f"controller {ctrl['controller']}")
+                ax.axhline(ctrl["test"]["success_rate"], color="k", ls="--", lw=1,
+                           label=f"controller {ctrl['controller']}")
             ax.set_title(f"rung {k}: {task}", fontsize=8)
             ax.set_xlabel("agent-steps")
             ax.xaxis.set_major_formatter(EngFormatter(sep=" "))

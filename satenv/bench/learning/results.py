@@ -23,7 +23,6 @@ logged yet.
 
 from __future__ import annotations
 
-import json
 from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
@@ -113,7 +112,8 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
             rec = cps[0]
             reference[task] = rec["episodes"]
             controllers[task] = {"system": system, "rung": rec["rung"], "controller": tasks.system(system).controller,
-                                 "test_seeds": rec["test_seeds"], "test": _test_block(rec["episodes"], None, _agents(task)),
+                                 "test_seeds": rec["test_seeds"],
+                                 "test": _test_block(rec["episodes"], None, _agents(task)),
                                  "mean_return": _point(rec)[2], "eval_s": rec.get("eval_s"),
                                  "command": command(system, rec["rung"], "controller", False, "0")}
     out, incomplete = [], []
