@@ -157,17 +157,17 @@ def _rates(results: dict[str, Any]) -> list[str]:
     if not speed:
         return []
     lines = ["Measured training speed (agent-steps per second of training wall time, median over the runs, "
-             "one worker under `nice` on the shared cores) and the hours one run of the grid's budget takes at it:",
+             "one worker under `nice` on the shared cores) and the training minutes one run of the grid's budget takes at it:",
              "",
-             "| system | algorithm | runs | agent-steps/s | hours per run at the grid's budget |",
+             "| system | algorithm | runs | agent-steps/s | minutes per run at the grid's budget |",
              "|---|---|---|---|---|"]
     for (system, algo), v in sorted(speed.items(), key=lambda kv: (list(tasks.SYSTEMS).index(kv[0][0]),
                                                                   G.ALGORITHMS.index(kv[0][1]))):
         rate = float(np.median(v))
         budget = (results["grid"]["masac_budget_agent_steps"] if algo == "masac"
                   else results["grid"]["budget_agent_steps"][system])
-        hours = budget / rate / 3600
-        lines.append(f"| {system} | {LABELS[algo]} | {len(v)} | {rate:,.0f} | {hours:.1f} |")
+        minutes = budget / rate / 60
+        lines.append(f"| {system} | {LABELS[algo]} | {len(v)} | {rate:,.0f} | {minutes:.1f} |")
     return lines + [""]
 
 
