@@ -157,7 +157,8 @@ def _rates(results: dict[str, Any]) -> list[str]:
     if not speed:
         return []
     lines = ["Measured training speed (agent-steps per second of training wall time, median over the runs, "
-             "one worker under `nice` on the shared cores) and the training minutes one run of the grid's budget takes at it:",
+             "one worker under `nice` on the shared cores) and the training minutes one run of the grid's budget "
+             "takes at it:",
              "",
              "| system | algorithm | runs | agent-steps/s | minutes per run at the grid's budget |",
              "|---|---|---|---|---|"]
