@@ -123,3 +123,19 @@ def test_a_cached_episode_that_does_not_replay_is_recorded_again(tmp_path, monke
     assert recorded == [0]
     for ep in ds.iterate_episodes():
         assert datasets.replay(SYSTEM, ep, datasets.episode_seed(ds, ep.id)) == EXACT
+
+
+def test_the_command_records_into_a_user_folder_unless_asked_to_update_the_packaged_manifest(tmp_path, monkeypatch,
+                                                                                               capsys):
+    """``satenv datasets write`` leaves the packaged manifest alone by default; ``--update-published``
+    names it, and giving both it and ``--manifest`` is one error."""
+    packaged = datasets.MANIFEST.read_bytes()
+    monkeypatch.chdir(tmp_path)
+    args = ["write", "--systems", SYSTEM, "--episodes", "1", "--root", str(tmp_path / "minari"),
+            "--cache", str(tmp_path / "cache")]
+    assert datasets.main(args) == 0
+    assert datasets.MANIFEST.read_bytes() == packaged
+    assert datasets.dataset_id(SYSTEM) in (tmp_path / datasets.USER_MANIFEST).read_text()
+    with pytest.raises(SystemExit) as exit_:
+        datasets.main([*args, "--update-published", "--manifest", str(tmp_path / "m.json")])
+    assert exit_.value.code == 2 and "--update-published" in capsys.readouterr().err

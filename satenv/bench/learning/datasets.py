@@ -79,6 +79,9 @@ INFO_FIELDS = {"collision": bool, "violations": np.int64, "cost": np.float64, "m
 MANIFEST = Path(__file__).resolve().parent / "datasets.json"
 """What was generated (id, task, seeds, size, wall time; committed, the datasets are not): the docs
 page's dataset table."""
+USER_MANIFEST = Path("results") / "datasets" / "manifest.json"
+"""Where ``satenv datasets write`` records what it wrote unless told otherwise (a user folder: the
+packaged :data:`MANIFEST` changes only with ``--update-published``)."""
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "satenv" / "episodes"
 """Where recorded episodes wait until their dataset is written (one ``.npz`` per seed)."""
 MAX_EPISODE_BYTES = 2**30
@@ -488,12 +491,20 @@ def main(argv: Iterable[str] | None = None) -> int:
     p.add_argument("--systems", type=_systems, default="all", help="comma-separated systems or 'all' (default)")
     p.add_argument("--episodes", type=int_at_least(1), default=50, help="episodes per dataset (default 50)")
     p.add_argument("--root", type=out_folder, default=None, help="Minari's dataset folder (MINARI_DATASETS_PATH)")
-    p.add_argument("--manifest", default=str(MANIFEST),
-                   help="JSON file of what was written ('' for none; default: the packaged datasets.json)")
+    p.add_argument("--manifest", default=None,
+                   help=f"JSON file of what was written ('' for none; default: {USER_MANIFEST})")
+    p.add_argument("--update-published", action="store_true",
+                   help="write the entries into the packaged manifest (satenv/bench/learning/datasets.json, "
+                        "the committed record of the published datasets) instead")
     p.add_argument("--workers", type=int_at_least(1), default=1, help="episodes recorded in parallel")
     p.add_argument("--cache", type=out_folder, default=CACHE,
                    help="recorded episodes kept until the dataset is written (default: ~/.cache/satenv/episodes)")
     ns = p.parse_args(None if argv is None else list(argv))
+    if ns.update_published and ns.manifest is not None:
+        p.error(f"argument --manifest: {ns.manifest!r} given with --update-published (which writes the packaged "
+                "manifest); give one of them")
+    if ns.manifest is None:
+        ns.manifest = str(MANIFEST if ns.update_published else USER_MANIFEST)
     if ns.manifest:
         try:
             out_file(ns.manifest)
