@@ -212,3 +212,21 @@ def test_bad_run_arguments_are_a_one_line_error(tmp_path, capsys, args, field):
     (line,) = [x for x in err.splitlines() if "error:" in x]
     assert line.startswith("satenv results run: error: ") and field in line, line
     assert not log.exists()   # nothing ran, nothing was written
+
+
+def test_the_commands_write_into_a_user_folder_unless_asked_to_update_the_record(tmp_path, monkeypatch, capsys):
+    """``satenv results results`` / ``render`` read and write ``results/reference_results/`` by default;
+    the committed record is touched only with ``--update-published`` (given with a path, one error)."""
+    from satenv.bench.learning import cli
+
+    monkeypatch.chdir(tmp_path)
+    committed = {p: p.read_bytes() for p in (cli.RESULTS, ROOT / "docs" / "reference_results.md")}
+    user = tmp_path / cli.USER
+    user.mkdir(parents=True)
+    (user / "log.jsonl").write_bytes(cli.LOG.read_bytes())
+    assert cli.main(["results"]) == 0 and cli.main(["render"]) == 0
+    assert (user / "results.json").is_file() and (user / "reference_results.md").is_file()
+    assert all(p.read_bytes() == data for p, data in committed.items())
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["results", "--update-published", "--out", str(tmp_path / "r.json")])
+    assert exit_.value.code == 2 and "--update-published" in capsys.readouterr().err

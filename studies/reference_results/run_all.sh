@@ -7,7 +7,7 @@ set -u
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 PY=${PYTHON:-.venv/bin/python}   # the project venv unless PYTHON names another interpreter
-RUN="nice -n 10 $PY -m satenv.bench.learning run --workers 1"
+RUN="nice -n 10 $PY -m satenv.bench.learning run --update-published --workers 1"
 PLATOON=platoon-pereira2023,platoon-pereira2022
 FORMATION=formation-kannan2022-position,formation-kannan2022-collision
 SWARMS=cluster-li2022,servicing-pereira2022

@@ -2,10 +2,13 @@
 
     nice -n 10 env OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 satenv results run \\
         --systems platoon-pereira2023,platoon-pereira2022 --seeds 0-2 --workers 2
-    satenv results results      # studies/reference_results/log.jsonl -> results.json
-    satenv results render       # results.json -> docs/reference_results.md + figures
+    satenv results results      # results/reference_results/log.jsonl -> results.json
+    satenv results render       # results.json -> results/reference_results/reference_results.md + figures
 
-``run`` is resumable: the same command skips every run already in the log (kill -9 safe).
+``run`` is resumable: the same command skips every run already in the log (kill -9 safe). Every
+command writes under ``results/reference_results/`` unless told otherwise; ``--update-published``
+reads and writes the committed record instead (``studies/reference_results/``, and the docs page
+``docs/reference_results.md`` with its figures).
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ __all__ = ["LOG", "RESULTS", "main"]
 
 STUDY = Path(__file__).resolve().parents[3] / "studies" / "reference_results"
 LOG = STUDY / "log.jsonl"
-"""The evaluation log (committed: the raw data of ``results.json``)."""
+"""The published evaluation log (committed: the raw data of ``results.json``)."""
 RESULTS = STUDY / "results.json"
+USER = Path("results") / "reference_results"
+"""Where the commands read and write by default (a user folder, never a tracked file)."""
 SYSTEM_ORDER = ("platoon-pereira2023", "platoon-pereira2022", "formation-kannan2022-position",
                 "formation-kannan2022-collision", "cluster-li2022", "servicing-pereira2022")
 """Cheap systems first."""
@@ -115,7 +120,8 @@ def cmd_results(ns: argparse.Namespace) -> int:
     from satenv.bench.learning.results import write_results
 
     if not Path(ns.log).is_file():
-        ns.parser.error(f"--log {ns.log!r}: expected the grid's log file (satenv results run writes it)")
+        ns.parser.error(f"--log {str(ns.log)!r}: expected the grid's log file (satenv results run writes it)")
+    Path(ns.out).parent.mkdir(parents=True, exist_ok=True)
     out = write_results(Path(ns.log), Path(ns.out))
     print(f"wrote {out}")
     return 0
@@ -125,8 +131,15 @@ def cmd_render(ns: argparse.Namespace) -> int:
     from satenv.bench.learning.render import write_page
 
     if not Path(ns.results).is_file():
-        ns.parser.error(f"--results {ns.results!r}: expected a results.json file (satenv results results writes it)")
-    page = write_page(Path(ns.results))
+        ns.parser.error(f"--results {str(ns.results)!r}: expected a results.json file (satenv results results writes it)")
+    from satenv.bench.learning.render import ASSETS, PAGE
+
+    if ns.update_published:
+        page = write_page(Path(ns.results), PAGE, ASSETS)
+    else:
+        folder = Path(ns.out_dir) if ns.out_dir else USER
+        folder.mkdir(parents=True, exist_ok=True)
+        page = write_page(Path(ns.results), folder / PAGE.name, folder / ASSETS.relative_to(PAGE.parent))
     print(f"wrote {page}")
     return 0
 
@@ -144,8 +157,9 @@ def parser() -> argparse.ArgumentParser:
         return c
 
     r = command("run", "train and evaluate the grid (resumable: the same command skips the runs in the log)", cmd_run)
-    r.add_argument("--log", type=out_file, default=LOG,
-                   help="the evaluation log (JSON lines; default: studies/reference_results/log.jsonl)")
+    r.add_argument("--log", type=out_file, default=None,
+                   help=f"the evaluation log (JSON lines; default: {USER / 'log.jsonl'})")
+    published(r)
     r.add_argument("--systems", default=",".join(SYSTEM_ORDER), help="comma-separated systems (default: all)")
     r.add_argument("--algorithms", default=",".join(DEFAULT_ALGORITHMS),
                    help="comma-separated algorithms (default: %(default)s)")
@@ -160,18 +174,49 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--address", default=None, help="Ray cluster address (--backend ray)")
     r.add_argument("--dry-run", action="store_true", help="list the runs to do, with the time estimate, and stop")
     s = command("results", "log -> results.json", cmd_results)
-    s.add_argument("--log", type=out_file, default=LOG,
-                   help="the evaluation log (default: studies/reference_results/log.jsonl)")
-    s.add_argument("--out", type=out_file, default=RESULTS,
-                   help="the results file (default: studies/reference_results/results.json)")
+    s.add_argument("--log", type=out_file, default=None, help=f"the evaluation log (default: {USER / 'log.jsonl'})")
+    s.add_argument("--out", type=out_file, default=None, help=f"the results file (default: {USER / 'results.json'})")
+    published(s)
     d = command("render", "results.json -> docs page and figures", cmd_render)
-    d.add_argument("--results", type=out_file, default=RESULTS,
-                   help="the results file (default: studies/reference_results/results.json)")
+    d.add_argument("--results", type=out_file, default=None,
+                   help=f"the results file (default: {USER / 'results.json'})")
+    d.add_argument("--out-dir", type=out_file, default=None,
+                   help=f"where the page and its figures go (default: {USER})")
+    published(d)
     return p
+
+
+def published(command: argparse.ArgumentParser) -> None:
+    """The ``--update-published`` flag of a sub-command."""
+    command.add_argument("--update-published", action="store_true",
+                         help="read and write the committed record (studies/reference_results/, and for render "
+                              "docs/reference_results.md with its figures) instead of results/reference_results/")
+
+
+PATH_FLAGS = {"log": ("--log", LOG, "log.jsonl"), "out": ("--out", RESULTS, "results.json"),
+              "results": ("--results", RESULTS, "results.json")}
+"""Each path flag: its name, its published default and its file name under :data:`USER`."""
+
+
+def resolve_paths(ns: argparse.Namespace) -> None:
+    """Fill the path flags left out: the committed record with ``--update-published``, else :data:`USER`
+    (a path given with ``--update-published`` is one error: the flag names where it writes)."""
+    for key, (flag, published_path, name) in PATH_FLAGS.items():
+        if not hasattr(ns, key):
+            continue
+        if getattr(ns, key) is not None and ns.update_published:
+            ns.parser.error(f"argument {flag}: {str(getattr(ns, key))!r} given with --update-published (which writes "
+                            f"{published_path.relative_to(STUDY.parents[1])}); give one of them")
+        if getattr(ns, key) is None:
+            setattr(ns, key, published_path if ns.update_published else USER / name)
+    if hasattr(ns, "out_dir") and ns.out_dir is not None and ns.update_published:
+        ns.parser.error(f"argument --out-dir: {str(ns.out_dir)!r} given with --update-published (which writes "
+                        "docs/reference_results.md); give one of them")
 
 
 def main(argv: list[str] | None = None) -> int:
     ns = parser().parse_args(argv)
+    resolve_paths(ns)
     return ns.func(ns)
 
 

@@ -323,7 +323,7 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "What standard learning algorithms reach on every rung of each paper system's **ladder** "
         "(`satenv.tasks.ladder(system)`: easiest first, ending at the system's training task), next to the "
         "system's controller: learning curves and final test results, every number from "
-        "`studies/reference_results/results.json`, rendered by `satenv results render` from that file alone.",
+        "`studies/reference_results/results.json`, rendered by `satenv results render --update-published` from that file alone.",
         "",
         "## Protocol",
         "",
@@ -370,8 +370,8 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "```bash",
         "nohup studies/reference_results/run_all.sh > studies/reference_results/run_all.out 2>&1 &  "
         "# cheapest cells first",
-        "satenv results results   # studies/reference_results/log.jsonl -> results.json",
-        "satenv results render    # results.json -> this page and its figures",
+        "satenv results results --update-published   # studies/reference_results/log.jsonl -> results.json",
+        "satenv results render --update-published    # results.json -> this page and its figures",
         "```",
         "",
         *_rates(results),
