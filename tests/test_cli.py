@@ -74,12 +74,7 @@ def test_a_command_resolves_through_the_registry_resolver(monkeypatch):
         cli.resolve("hollow")
 
 
-NOT_YET_PLAIN = {"ppo"}
-"""Commands whose parser is built outside ``satenv.cliargs.new_parser`` and still shows raw reST."""
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(
-    n in NOT_YET_PLAIN, reason="its parser does not strip reST yet", strict=True)) for n in cli.COMMANDS])
+@pytest.mark.parametrize("name", cli.COMMANDS)
 def test_every_command_has_a_help_without_raw_rest(name, capsys):
     with pytest.raises(SystemExit) as exit_:
         cli.resolve(name)(["--help"])

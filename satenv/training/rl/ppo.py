@@ -620,7 +620,9 @@ def train(cfg: LeanConfig, resume: bool = False) -> Path:
 # --------------------------------------------------------------------------- CLI
 def parser() -> argparse.ArgumentParser:
     """The command line (flags named as every trainer's: ``--task``, ``--budget``, ``--num-envs``, ...)."""
-    p = argparse.ArgumentParser(prog="satenv ppo", description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    from satenv.cliargs import new_parser
+
+    p = new_parser("satenv ppo", __doc__.split("\n\n")[0])
     p.add_argument("--task", help="a task of satenv.tasks (its env and kwargs)")
     p.add_argument("--env-id", help="a satenv env id (default: the task's)")
     p.add_argument("--env-kwargs", type=_json_object, help="JSON object of env keyword arguments")
