@@ -128,11 +128,11 @@ def cmd_results(ns: argparse.Namespace) -> int:
 
 
 def cmd_render(ns: argparse.Namespace) -> int:
-    from satenv.bench.learning.render import write_page
+    from satenv.bench.learning.render import ASSETS, PAGE, write_page
 
     if not Path(ns.results).is_file():
-        ns.parser.error(f"--results {str(ns.results)!r}: expected a results.json file (satenv results results writes it)")
-    from satenv.bench.learning.render import ASSETS, PAGE
+        ns.parser.error(f"--results {str(ns.results)!r}: expected a results.json file "
+                        "(satenv results results writes it)")
 
     if ns.update_published:
         page = write_page(Path(ns.results), PAGE, ASSETS)

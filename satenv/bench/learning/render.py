@@ -323,7 +323,8 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "What standard learning algorithms reach on every rung of each paper system's **ladder** "
         "(`satenv.tasks.ladder(system)`: easiest first, ending at the system's training task), next to the "
         "system's controller: learning curves and final test results, every number from "
-        "`studies/reference_results/results.json`, rendered by `satenv results render --update-published` from that file alone.",
+        "`studies/reference_results/results.json`, rendered by `satenv results render --update-published` "
+        "from that file alone.",
         "",
         "## Protocol",
         "",
