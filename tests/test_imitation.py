@@ -376,3 +376,14 @@ def test_a_shipped_safe_variant_config_replays_a_round(tmp_path, capsys):
     shipped = json.loads((out / "rounds" / "0000" / "env.json").read_text())
     assert "safety_filter" in shipped                        # the warm start's env.json, its filter named
     capsys.readouterr()
+
+
+def test_a_warm_start_that_is_no_folder_is_refused_on_the_command_line(tmp_path, capsys):
+    """``--warm-start`` naming a missing path or a file is one error naming the flag, before any folder is made."""
+    from satenv.training.imitation.cli import main
+
+    (tmp_path / "a_file").write_text("x")
+    for bad in (tmp_path / "missing", tmp_path / "a_file"):
+        assert main(["--warm-start", str(bad), "--out-dir", str(tmp_path / "run")]) == 2
+        assert "--warm-start" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

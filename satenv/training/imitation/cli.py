@@ -72,6 +72,13 @@ def parse(argv: list[str] | None = None) -> tuple[argparse.Namespace, ImitationC
             for a in (sys.argv[1:] if argv is None else argv)]
     parser = build_parser()
     ns = parser.parse_args(args)
+    if getattr(ns, "warm_start", None):   # given on this command line: checked before anything runs
+        from satenv.training.imitation.setup import warm_start_folder
+
+        try:
+            warm_start_folder(ns.warm_start)
+        except ValueError as err:
+            raise type(err)(f"--warm-start: {err}") from None
     out = Path(getattr(ns, "out_dir", ImitationConfig.out_dir))
     if ns.ship is not None:
         return ns, None, True
