@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -136,7 +137,10 @@ def run(cfg: ImitationConfig, run_dir: str | Path | None = None, *, resume: bool
         _report(k, history[-1])
     if not cfg.final_eval or not history:
         return None
-    return finish(cfg, run_dir, net, history, envs.eval)
+    return finish(run_dir, net, history, envs.eval, reference=reference_name(cfg.expert, cfg.env_id),
+                  baselines=cfg.eval_baselines, test_seeds=cfg.test_seeds, baseline_seeds=cfg.baseline_seeds,
+                  eval_key={"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs},
+                  expert=cfg.expert, teacher=cfg.expert or cfg.label, progress=cfg.progress, workers=cfg.workers)
 
 
 def _experts(label: str, expert: str | None, options: dict[str, Any], warm_start: str | None,
@@ -350,27 +354,27 @@ def reference_name(expert: str | None, env_id: str) -> str:
     return expert if expert in BASELINES else tasks.CONTROLLERS.get(env_id, "zero")
 
 
-def finish(cfg: ImitationConfig, run_dir: Path, net: setup.Network, history: list[dict[str, Any]],
-           eval_env: Any) -> Path:
-    """``final/``: the last round's network with ``eval.json`` on ``cfg.test_seeds`` beside the
-    reference controller and ``eval_baselines``, swapped in whole."""
+def finish(run_dir: Path, net: setup.Network, history: list[dict[str, Any]], eval_env: Any, *, reference: str,
+           baselines: Sequence[str], test_seeds: Sequence[int], baseline_seeds: int, eval_key: dict[str, Any],
+           expert: str | None, teacher: str, progress: bool, workers: int) -> Path:
+    """``final/``: the last round's network with ``eval.json`` on ``test_seeds`` beside the
+    ``reference`` controller and ``baselines`` (on the first ``baseline_seeds`` seeds, 0: all; cached
+    under ``eval_key``), swapped in whole; ``teacher`` names what was imitated."""
     from satenv.training import runfolder
     from satenv.training.evaluate import cached_baselines, test_summary
     from satenv.training.policy import save_artifacts
 
-    reference = reference_name(cfg.expert, cfg.env_id)
-    names = list(dict.fromkeys([reference, *cfg.eval_baselines]))
-    seeds = cfg.test_seeds[:cfg.baseline_seeds] if cfg.baseline_seeds else cfg.test_seeds
-    key = {"env_id": cfg.env_id, "eval_env_kwargs": cfg.resolved_eval_env_kwargs}
-    opts = {"progress": cfg.progress, "workers": cfg.workers}
-    found = cached_baselines(run_dir / "baselines_test.json", eval_env, names, seeds, key, **opts)
-    summary = test_summary(eval_env, net.policy, found, cfg.test_seeds, reference=reference, **opts,
-                           labels=int(history[-1]["labels"]), rounds=len(history), expert=cfg.expert)
+    names = list(dict.fromkeys([reference, *baselines]))
+    seeds = test_seeds[:baseline_seeds] if baseline_seeds else test_seeds
+    opts = {"progress": progress, "workers": workers}
+    found = cached_baselines(run_dir / "baselines_test.json", eval_env, names, seeds, eval_key, **opts)
+    summary = test_summary(eval_env, net.policy, found, test_seeds, reference=reference, **opts,
+                           labels=int(history[-1]["labels"]), rounds=len(history), expert=expert)
     final = run_dir / "final"
     runfolder.recover_folder(final)
     staged = runfolder.staging(final)
     save_artifacts(staged, net.policy, env_meta={**net.meta, "rounds": len(history)}, config=net.config,
-                   evaluation=summary, source=f"imitation of '{cfg.expert or cfg.label}' ({RECIPE}, "
+                   evaluation=summary, source=f"imitation of '{teacher}' ({RECIPE}, "
                    f"{len(history)} rounds)")
     if os.path.lexists(run_dir / "learning_curve.png"):
         from satenv.training.imitation.folder import MAX_PICTURE_BYTES
@@ -379,5 +383,5 @@ def finish(cfg: ImitationConfig, run_dir: Path, net: setup.Network, history: lis
         curve = read_member(run_dir, "learning_curve.png", MAX_PICTURE_BYTES)
         (staged / "learning_curve.png").write_bytes(bytes(curve))
     runfolder.replace_folder(staged, final)
-    print(f"final policy after {len(history)} rounds on {len(cfg.test_seeds)} held-out seeds:\n{summary['table']}")
+    print(f"final policy after {len(history)} rounds on {len(test_seeds)} held-out seeds:\n{summary['table']}")
     return final
