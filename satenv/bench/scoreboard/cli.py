@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "its plan (episodes, tasks, expected time) before the first episode.")
     p.add_argument("--quick", action="store_true",
                    help=f"the small embedded board: {QUICK['scenarios']} x {QUICK['policies']} x seeds "
-                        f"{QUICK['seeds']} (a few minutes on 2 cores)")
+                        f"{QUICK['seeds']} (about 2 minutes on 2 cores)")
     p.add_argument("--scenarios", help="comma-separated task names or globs (default: all available; with "
                                        f"--policy alone: all but the '{SWARM_MARK}' tasks)")
     p.add_argument("--policies", help="comma-separated policy names or globs (default: all available)")
