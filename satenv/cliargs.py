@@ -113,6 +113,19 @@ def out_folder(text: str) -> Path:
     return path
 
 
+def published_or_user(parser: argparse.ArgumentParser, flag: str, given: Any, update_published: bool,
+                      published: Any, user: Any) -> Any:
+    """Where a command writes: ``given`` (the flag's value) when set, else ``published`` (the committed
+    record) with ``--update-published``, else ``user`` (a user folder). A value given together with
+    ``--update-published`` is one error naming both flags."""
+    if given is not None and update_published:
+        parser.error(f"argument {flag}: {str(given)!r} given with --update-published (which writes {published}); "
+                     "give one of them")
+    if given is not None:
+        return given
+    return published if update_published else user
+
+
 def out_file(text: str) -> Path:
     """An argparse ``type``: an output file path (not '', not an existing folder)."""
     if not text.strip():

@@ -201,17 +201,14 @@ PATH_FLAGS = {"log": ("--log", LOG, "log.jsonl"), "out": ("--out", RESULTS, "res
 def resolve_paths(ns: argparse.Namespace) -> None:
     """Fill the path flags left out: the committed record with ``--update-published``, else :data:`USER`
     (a path given with ``--update-published`` is one error: the flag names where it writes)."""
+    from satenv.cliargs import published_or_user
+
     for key, (flag, published_path, name) in PATH_FLAGS.items():
-        if not hasattr(ns, key):
-            continue
-        if getattr(ns, key) is not None and ns.update_published:
-            ns.parser.error(f"argument {flag}: {str(getattr(ns, key))!r} given with --update-published (which writes "
-                            f"{published_path.relative_to(STUDY.parents[1])}); give one of them")
-        if getattr(ns, key) is None:
-            setattr(ns, key, published_path if ns.update_published else USER / name)
-    if hasattr(ns, "out_dir") and ns.out_dir is not None and ns.update_published:
-        ns.parser.error(f"argument --out-dir: {str(ns.out_dir)!r} given with --update-published (which writes "
-                        "docs/reference_results.md); give one of them")
+        if hasattr(ns, key):
+            setattr(ns, key, published_or_user(ns.parser, flag, getattr(ns, key), ns.update_published,
+                                               published_path, USER / name))
+    if hasattr(ns, "out_dir"):
+        published_or_user(ns.parser, "--out-dir", ns.out_dir, ns.update_published, "docs/reference_results.md", USER)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -484,7 +484,7 @@ def _estimate(systems: list[str], episodes: int, workers: int) -> str:
 
 
 def main(argv: Iterable[str] | None = None) -> int:
-    from satenv.cliargs import int_at_least, new_parser, out_file, out_folder
+    from satenv.cliargs import int_at_least, new_parser, out_file, out_folder, published_or_user
 
     p = new_parser("satenv datasets", __doc__.split("**Layout")[0])
     p.add_argument("command", choices=("write", "read"), help="record and write the datasets, or read them back")
@@ -500,11 +500,7 @@ def main(argv: Iterable[str] | None = None) -> int:
     p.add_argument("--cache", type=out_folder, default=CACHE,
                    help="recorded episodes kept until the dataset is written (default: ~/.cache/satenv/episodes)")
     ns = p.parse_args(None if argv is None else list(argv))
-    if ns.update_published and ns.manifest is not None:
-        p.error(f"argument --manifest: {ns.manifest!r} given with --update-published (which writes the packaged "
-                "manifest); give one of them")
-    if ns.manifest is None:
-        ns.manifest = str(MANIFEST if ns.update_published else USER_MANIFEST)
+    ns.manifest = str(published_or_user(p, "--manifest", ns.manifest, ns.update_published, MANIFEST, USER_MANIFEST))
     if ns.manifest:
         try:
             out_file(ns.manifest)
