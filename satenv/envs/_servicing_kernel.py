@@ -1,10 +1,15 @@
-"""Compiled (numba) attitude reference of the servicing core: eq. 43-49 per spacecraft.
+"""Compiled (numba) kernels of the servicing core: the attitude reference (eq. 43-49) and the whole step.
 
-:func:`satenv.envs.servicing_v0.attitude_reference` with the numpy functions of
-:mod:`satenv.dynamics.attitude` (``pointing_frame``, ``matrix_to_quat``, ``pointing_rate``,
-``desired_angular_velocity``), then ``quat_error`` and ``pointing_error``, is the reference; this
-kernel evaluates the same formulas in component arithmetic, one spacecraft at a time
-(``tests/test_servicing_kernel.py``: 1e-12). Importing this module imports numba.
+:func:`attitude_features`: :func:`satenv.envs.servicing_v0.attitude_reference` with the numpy
+functions of :mod:`satenv.dynamics.attitude` (``pointing_frame``, ``matrix_to_quat``,
+``pointing_rate``, ``desired_angular_velocity``), then ``quat_error`` and ``pointing_error``, is
+the reference; this kernel evaluates the same formulas in component arithmetic, one spacecraft at
+a time (``tests/test_servicing_kernel.py``: 1e-12).
+
+:func:`step`: one decision (LVLH thrust) in one call, the substeps by the compiled truth and
+attitude kernels, then the reference above, the infos, eq. 39's reward, the terminations and the
+observation, with the numpy glue's operations in its order (the same numbers bit for bit,
+``tests/test_servicing_kernel.py``). Importing this module imports numba.
 """
 
 from __future__ import annotations
@@ -12,9 +17,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from satenv.dynamics._attitude_kernel import quat_rotation
+from satenv.dynamics._attitude_kernel import attitude_steps, quat_rotation
+from satenv.dynamics._truth_kernel import propagate as truth_propagate
 
-__all__ = ["attitude_features"]
+__all__ = ["attitude_features", "step"]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -111,3 +117,197 @@ def attitude_features(x, target, reference, n, min_sine, q_d, w_d, q_err, pointi
             cosang = m02 * k0 + m12 * k1 + m22 * k2
             pointing[b, i] = np.arccos(min(max(cosang, -1.0), 1.0))
     return bad
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _minimum(a, b):
+    """``np.minimum`` of two floats (a NaN propagates)."""
+    if a != a or b != b:
+        return np.nan
+    return a if a <= b else b
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def step(x, chief, force, torque, u, t, tp, att, j_f, j_f_inv, wl, lead_acc, target, reference, task, weights,
+         waypoints, switch, x_out, chief_out, state, accel, dv, e_p, min_sep, collision, viol, cost, waypoint,
+         phase, d_obj, d_other, pointing, eta, q_err, e_w, e_v, q_d, w_d, dist, rewards, terminated, finite, obs):
+    """One decision of :meth:`satenv.envs.servicing_v0.ServicingCore.step` (LVLH thrust) in one pass.
+
+    Inputs: states ``x`` (B, M, 13), chief ECI states ``chief`` (B, 6), the step's LVLH force,
+    body torque and saturated inputs ``force``, ``torque`` (B, M, 3), ``u`` (B, M, 6) (numpy's
+    products, as the reference), the step counts after the step ``t`` (B,); ``tp`` the force
+    constants of the truth kernel (:func:`satenv.dynamics._truth_kernel.propagate`, RK4); ``att``
+    ``(substeps, h, the truth model's substeps and sub-step, n, min_sine)``; ``j_f``, ``j_f_inv``,
+    ``wl``, ``lead_acc`` the attitude constants (:func:`satenv.dynamics.attitude.attitude_constants`);
+    ``target``, ``reference`` (3,) the pointing target and roll reference; ``task`` (14,)
+    ``desired_velocity (3), keepout - tolerance, separation - tolerance, v_max, omega_max,
+    max_distance, terminate_on_collision, reward_scale, collision_penalty, violation_penalty, dt,
+    scale_p``; ``weights`` (19,) the stage cost's position (3), velocity (3), quaternion (4),
+    omega (3) and input (6) weights;
+    ``waypoints`` (P, M, 3), ``switch`` (P - 1,) the phase-switch steps.
+
+    Writes the new states and chiefs, the info arrays (``eta`` the clipped ``q_err[..., 0]``
+    whose arccos the caller takes), the features (``e_v``, ``q_d``, ``w_d``, ``dist``), rewards,
+    terminations, which copies are all finite (states, rewards and, when ``obs`` has rows, the
+    observations) and the float32 observations (when ``obs.shape[0] > 0``). The reference's
+    formulas in its order of operations (the same numbers). Returns 0, 1 when the attitude step
+    reached a zero-norm quaternion from finite inputs (nothing written but scratch) or 2 when a
+    spacecraft sits on the pointing target (everything written; the caller raises)."""
+    nb, m = x.shape[0], x.shape[1]
+    n_sub, h, model_sub, model_h = int(att[0]), att[1], int(att[2]), att[3]
+    x6 = np.empty((nb, m, 6))
+    us = np.empty((1, nb, m, 3))
+    path = np.empty((0, nb, m, 3))
+    q = np.empty((nb * m, 4))
+    w = np.empty((nb * m, 3))
+    tq = np.empty((nb * m, 3))
+    q_next = np.empty((nb * m, 4))
+    w_next = np.empty((nb * m, 3))
+    inputs_finite = True
+    for b in range(nb):
+        for c in range(6):
+            chief_out[b, c] = chief[b, c]
+        for i in range(m):
+            r = b * m + i
+            for c in range(6):
+                x6[b, i, c] = x[b, i, c]
+            for c in range(4):
+                q[r, c] = x[b, i, 6 + c]
+            for c in range(3):
+                w[r, c] = x[b, i, 10 + c]
+                tq[r, c] = torque[b, i, c]
+                us[0, b, i, c] = force[b, i, c]
+                accel[b, i, c] = 0.0
+                inputs_finite = inputs_finite and np.isfinite(tq[r, c])
+    for _ in range(n_sub):
+        for b in range(nb):
+            for i in range(m):
+                for c in range(3):
+                    accel[b, i, c] += force[b, i, c]
+        truth_propagate(x6, chief_out, us, model_sub, model_h, tp, x6, chief_out, path)
+        finite_in = inputs_finite
+        for r in range(nb * m):
+            for c in range(4):
+                finite_in = finite_in and np.isfinite(q[r, c])
+            for c in range(3):
+                finite_in = finite_in and np.isfinite(w[r, c])
+        attitude_steps(q, w, tq, h, 1, j_f, j_f_inv, wl, lead_acc, q_next, w_next)
+        if finite_in:
+            for r in range(nb * m):
+                for c in range(4):
+                    if np.isnan(q_next[r, c]):
+                        return 1
+        q, q_next = q_next, q
+        w, w_next = w_next, w
+    for b in range(nb):
+        for i in range(m):
+            r = b * m + i
+            for c in range(6):
+                x_out[b, i, c] = x6[b, i, c]
+            for c in range(4):
+                x_out[b, i, 6 + c] = q[r, c]
+            for c in range(3):
+                x_out[b, i, 10 + c] = w[r, c]
+                accel[b, i, c] = accel[b, i, c] / n_sub
+            for c in range(13):
+                state[b, i, c] = x_out[b, i, c]
+    bad = attitude_features(x_out, target, reference, att[4], att[5], q_d, w_d, q_err, pointing)
+    keepout_r, sep_r, v_max, omega_max = task[3], task[4], task[5], task[6]
+    max_distance, stop_on_collision = task[7], task[8] != 0.0
+    reward_scale, collision_penalty, violation_penalty, dt, scale_p = task[9], task[10], task[11], task[12], task[13]
+    observe = obs.shape[0] > 0
+    for b in range(nb):
+        k = 0
+        for s in range(switch.shape[0]):
+            if t[b] > switch[s]:
+                k += 1
+        ended = False
+        collided = False
+        ok = True
+        for i in range(m):
+            xi = x_out[b, i]
+            p0, p1, p2 = xi[0], xi[1], xi[2]
+            phase[b, i] = k
+            for c in range(3):
+                waypoint[b, i, c] = waypoints[k, i, c]
+                e_p[b, i, c] = xi[c] - waypoints[k, i, c]
+                e_v[b, i, c] = xi[3 + c] - task[c]
+                e_w[b, i, c] = xi[10 + c] - w_d[b, i, c]
+            d = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+            d_obj[b, i] = d
+            nearest = np.inf
+            pairs = 0
+            for j in range(m):
+                if j == i:
+                    dij = np.inf
+                else:
+                    d0, d1, d2 = p0 - x_out[b, j, 0], p1 - x_out[b, j, 1], p2 - x_out[b, j, 2]
+                    dij = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                dist[b, i, j] = dij
+                nearest = _minimum(nearest, dij)
+                if dij < sep_r:
+                    pairs += 1
+            d_other[b, i] = nearest
+            min_sep[b, i] = _minimum(d, nearest)
+            keepout = d < keepout_r
+            hit = keepout or pairs > 0
+            collision[b, i] = hit
+            n_viol = (1 if keepout else 0) + pairs
+            for c in range(3):
+                if abs(xi[3 + c]) > v_max:
+                    n_viol += 1
+            for c in range(3):
+                if abs(xi[10 + c]) > omega_max:
+                    n_viol += 1
+            viol[b, i] = n_viol
+            cost[b, i] = float(n_viol)
+            a0, a1, a2 = accel[b, i, 0], accel[b, i, 1], accel[b, i, 2]
+            dv[b, i] = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2) * dt
+            eta[b, i] = min(max(q_err[b, i, 0], -1.0), 1.0) if q_err[b, i, 0] == q_err[b, i, 0] else np.nan
+            # eq. 39's stage cost: each term summed over its axes, the terms in order
+            s_p = weights[0] * (e_p[b, i, 0] * e_p[b, i, 0])
+            for c in range(1, 3):
+                s_p = s_p + weights[c] * (e_p[b, i, c] * e_p[b, i, c])
+            s_v = weights[3] * (e_v[b, i, 0] * e_v[b, i, 0])
+            for c in range(1, 3):
+                s_v = s_v + weights[3 + c] * (e_v[b, i, c] * e_v[b, i, c])
+            qe0 = 1.0 - q_err[b, i, 0]
+            s_q = weights[6] * (qe0 * qe0)
+            for c in range(1, 4):
+                s_q = s_q + weights[6 + c] * (q_err[b, i, c] * q_err[b, i, c])
+            s_w = weights[10] * (e_w[b, i, 0] * e_w[b, i, 0])
+            for c in range(1, 3):
+                s_w = s_w + weights[10 + c] * (e_w[b, i, c] * e_w[b, i, c])
+            s_u = weights[13] * (u[b, i, 0] * u[b, i, 0])
+            for c in range(1, 6):
+                s_u = s_u + weights[13 + c] * (u[b, i, c] * u[b, i, c])
+            stage = (((s_p + s_v) + s_q) + s_w) + s_u
+            rw = (-stage / reward_scale - collision_penalty * (1.0 if hit else 0.0)) - violation_penalty * float(n_viol)
+            rewards[b, i] = rw
+            ended = ended or d > max_distance
+            collided = collided or hit
+            ok = ok and np.isfinite(rw)
+            for c in range(13):
+                ok = ok and np.isfinite(xi[c])
+            if observe:
+                o = obs[b, i]
+                for c in range(3):
+                    o[c] = e_p[b, i, c] / scale_p
+                    o[3 + c] = e_v[b, i, c] / v_max
+                    o[10 + c] = e_w[b, i, c] / omega_max
+                    o[13 + c] = xi[c] / scale_p
+                for c in range(4):
+                    o[6 + c] = q_err[b, i, c]
+                col = 16
+                for j in range(m):
+                    if j == i:
+                        continue
+                    for c in range(3):
+                        o[col + c] = (x_out[b, j, c] - xi[c]) / scale_p
+                        o[col + 3 + c] = (x_out[b, j, 3 + c] - xi[3 + c]) / v_max
+                    col += 6
+                for c in range(o.shape[0]):
+                    ok = ok and np.isfinite(o[c])
+        terminated[b] = ended or (stop_on_collision and collided)
+        finite[b] = ok
+    return 2 if bad else 0

@@ -189,16 +189,22 @@ POINTING_MIN_SINE = 0.1
 (its default)."""
 
 
-def _reference_kernel(scenario: ServicingScenario):
-    """:func:`satenv.envs._servicing_kernel.attitude_features`, or ``None`` (no numba, or eq. 44's
-    ``a = p`` roll reference, which the kernel does not implement)."""
+def _kernel_module(scenario: ServicingScenario):
+    """:mod:`satenv.envs._servicing_kernel`, or ``None`` (no numba, or eq. 44's ``a = p`` roll
+    reference, which the kernel does not implement)."""
     if scenario.pointing_reference is None:
         return None
     try:
-        from satenv.envs._servicing_kernel import attitude_features
+        from satenv.envs import _servicing_kernel
     except ImportError:
         return None
-    return attitude_features
+    return _servicing_kernel
+
+
+def _reference_kernel(scenario: ServicingScenario):
+    """:func:`satenv.envs._servicing_kernel.attitude_features`, or ``None`` (see :func:`_kernel_module`)."""
+    module = _kernel_module(scenario)
+    return None if module is None else module.attitude_features
 
 
 class ServicingCore(BatchedCore):
@@ -234,6 +240,34 @@ class ServicingCore(BatchedCore):
         self.x = np.tile(sc.initial_array(), (self.batch, 1, 1))
         self.chief = np.tile(self.model.initial_chief(), (self.batch, 1))
         self._feat: dict[str, np.ndarray] = self._features(self.x, self.t)
+        self._fused = self._fused_constants()
+
+    def _fused_constants(self) -> tuple | None:
+        """The compiled step's kernel and constants (:func:`satenv.envs._servicing_kernel.step`),
+        or ``None`` when it does not apply: no numba, no compiled truth or attitude kernel (e.g.
+        ``dynamics="cw"``), or body-fixed thrusters (their force turns with the attitude inside
+        the step)."""
+        sc = self.scenario
+        module = _kernel_module(sc)
+        truth = self.model._cache.get("kernel")
+        if (module is None or truth is None or self.model.integrator != "rk4" or self._att_kernel is None
+                or self._ref_kernel is None or sc.thrust_frame != "lvlh"):
+            return None
+        run, params = truth
+        if run is not module.truth_propagate:
+            return None
+        att = np.array([sc.substeps, self.h, self.model.substeps, self.model.dt / self.model.substeps,
+                        sc.mean_motion, POINTING_MIN_SINE])
+        task = np.array([*np.asarray(sc.desired_velocity, dtype=float), sc.keepout_radius - sc.contact_tolerance,
+                         sc.separation_radius - sc.contact_tolerance, sc.v_max, sc.omega_max, sc.max_distance,
+                         float(sc.terminate_on_collision), sc.reward_scale, sc.collision_penalty,
+                         sc.violation_penalty, sc.dt, self.scale_p])
+        weights = np.concatenate([np.broadcast_to(np.asarray(w, dtype=float), (k,)) for w, k in (
+            (sc.position_weight, 3), (sc.velocity_weight, 3), (sc.quaternion_weight, 4), (sc.omega_weight, 3),
+            (sc.input_weight, 6))])
+        return (module.step, self.model, (params, att, *self._att_constants, *self._pointing, task, weights,
+                                          np.ascontiguousarray(self.waypoints), np.asarray(self._switch_steps,
+                                                                                           dtype=np.int64)))
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -262,6 +296,8 @@ class ServicingCore(BatchedCore):
         u = saturate_box(np.asarray(accel, dtype=float), self.u_max)
         force = u @ self.f_t.T
         torque = u @ self.f_r.T
+        if self._fused_applies():
+            return self._step_fused(u, force, torque, observe=False)[0]
         x6, q, w = self.x[..., :6], self.x[..., 6:10], self.x[..., 10:]
         acc_sum = np.zeros_like(force)
         for _ in range(sc.substeps):
@@ -285,6 +321,60 @@ class ServicingCore(BatchedCore):
         if sc.terminate_on_collision:
             terminated |= info["collision"].any(axis=-1)
         return StepResult(rewards, terminated, info)
+
+    def step_observe(self, accel, rng=None) -> tuple[StepResult, np.ndarray]:
+        """:meth:`step` and :meth:`observe` (one compiled pass when :meth:`_step_fused` applies)."""
+        if not self._fused_applies():
+            return super().step_observe(accel, rng)
+        u = saturate_box(np.asarray(accel, dtype=float), self.u_max)
+        return self._step_fused(u, u @ self.f_t.T, u @ self.f_r.T, observe=True)
+
+    def _fused_applies(self) -> bool:
+        fused = self._fused
+        return (fused is not None and fused[1] is self.model and self._att_kernel is not None
+                and self._ref_kernel is not None)
+
+    def _step_fused(self, u: np.ndarray, force: np.ndarray, torque: np.ndarray,
+                    observe: bool) -> tuple[StepResult, np.ndarray]:
+        """:meth:`step` (LVLH thrust) by one call of :func:`satenv.envs._servicing_kernel.step`:
+        the substeps, the features, infos, rewards, terminations, the finiteness check and (when
+        ``observe``) the observations; the same numbers as the numpy glue around the compiled
+        truth, attitude and reference kernels (``tests/test_servicing_kernel.py``)."""
+        b, m = self.batch, self.n_agents
+        bm = (b, m)
+        x, chief = np.empty_like(self.x), np.empty_like(self.chief)
+        f = {"waypoint": np.empty((b, m, 3)), "phase": np.empty(bm, np.int64), "e_p": np.empty((b, m, 3)),
+             "e_v": np.empty((b, m, 3)), "q_d": np.empty((b, m, 4)), "q_err": np.empty((b, m, 4)),
+             "w_d": np.empty((b, m, 3)), "e_w": np.empty((b, m, 3)), "d_obj": np.empty(bm),
+             "dist": np.empty((b, m, m)), "pointing": np.empty(bm)}
+        state, accel, dv, min_sep = np.empty_like(self.x), np.empty((b, m, 3)), np.empty(bm), np.empty(bm)
+        collision, viol, cost = np.empty(bm, bool), np.empty(bm, np.int64), np.empty(bm)
+        d_other, eta, rewards = np.empty(bm), np.empty(bm), np.empty(bm)
+        terminated, finite = np.empty(b, bool), np.empty(b, bool)
+        obs = np.empty((b, m, self.obs_dim) if observe else (0, m, self.obs_dim), np.float32)
+        kernel, _, constants = self._fused
+        code = kernel(self.x, self.chief, force, torque, u, self.t + 1, *constants, x, chief, state, accel, dv,
+                      f["e_p"], min_sep, collision, viol, cost, f["waypoint"], f["phase"], f["d_obj"], d_other,
+                      f["pointing"], eta, f["q_err"], f["e_w"], f["e_v"], f["q_d"], f["w_d"], f["dist"], rewards,
+                      terminated, finite, obs)
+        if code == 1:
+            raise ValueError("cannot normalise a zero quaternion; a unit quaternion [eta, ex, ey, ez] "
+                             "is needed (the attitude step reached a zero-norm quaternion)")
+        self.x, self.chief = x, chief
+        self.t += 1
+        self._feat = f
+        if code == 2:
+            raise ValueError("pointing_frame: the spacecraft position coincides with the target point; "
+                             "the pointing direction is undefined")
+        att = np.arccos(eta)
+        att *= 2.0
+        # the infos share the feature arrays (the core never writes into either)
+        info = {"state": state, "accel": accel, "delta_v": dv, "tracking_error": f["e_p"], "min_separation": min_sep,
+                "collision": collision, "violations": viol, "cost": cost, "thrust": u, "torque": torque,
+                "waypoint": f["waypoint"], "phase": f["phase"], "dist_object": f["d_obj"], "dist_other": d_other,
+                "pointing_error": f["pointing"], "attitude_error": att, "quaternion_error": f["q_err"],
+                "omega_error": f["e_w"]}
+        return StepResult(rewards, terminated, info, finite), obs
 
     # ------------------------------------------------------------------ quantities
     def _features(self, x: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray]:
