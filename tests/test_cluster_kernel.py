@@ -107,3 +107,41 @@ def test_inner_loop_takes_the_physics_step_loop():
     fused.inner_loop = Zero()
     fused.step(np.zeros((1, fused.n_agents, 3)))
     assert Zero.calls == sc.substeps
+
+
+@pytest.mark.parametrize("overrides", [{}, {"disturbance": "random"}, {"reallocate_every": 3},
+                                       {"terminate_on_collision": False}])
+def test_one_pass_decision_matches_the_glue_bit_for_bit(overrides):
+    """The dense step's one compiled pass (_cluster_kernel.decision: separations, infos, rewards,
+    graph, observation) against the numpy glue around the separations kernel, through step,
+    step_observe and resets of some copies (copies at different steps)."""
+    sc = resolve_scenario("li2022-case1", **overrides)
+    one, glue = ClusterCore(sc, batch=8), ClusterCore(sc, batch=8)
+    glue._one_pass = False
+    rng = np.random.default_rng(4)
+    g1, g2 = np.random.default_rng(6), np.random.default_rng(6)
+    x0 = one.sample_initial_state(rng, 8)
+    for core, g in ((one, g1), (glue, g2)):
+        core.reset(x0, None, g)
+    for k in range(16):
+        a = rng.uniform(-1.5, 1.5, (8, one.n_agents, 3)) * sc.u_max
+        if k % 2:
+            (r1, o1), (r2, o2) = one.step_observe(a, g1), glue.step_observe(a, g2)
+            assert o1.dtype == o2.dtype
+            np.testing.assert_array_equal(o1, o2)
+            assert r1.finite.all()
+        else:
+            r1, r2 = one.step(a, g1), glue.step(a, g2)
+        assert list(r1.info) == list(r2.info)
+        for key, val in r2.info.items():
+            assert r1.info[key].dtype == val.dtype, key
+            np.testing.assert_array_equal(r1.info[key], val, err_msg=key)
+        np.testing.assert_array_equal(r1.rewards, r2.rewards)
+        np.testing.assert_array_equal(r1.terminated, r2.terminated)
+        np.testing.assert_array_equal(one.x, glue.x)
+        np.testing.assert_array_equal(one.observe(), glue.observe())
+        if k % 5 == 4 or r1.terminated.any():
+            idx = np.union1d(np.flatnonzero(r1.terminated), [k % 8])
+            x1 = one.sample_initial_state(rng, len(idx))
+            for core, g in ((one, g1), (glue, g2)):
+                core.reset(x1, idx, g)

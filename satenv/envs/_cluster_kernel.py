@@ -1,12 +1,16 @@
-"""Compiled (numba) separation minima of the cluster core over one decision.
+"""Compiled (numba) parts of the cluster core's decision: input saturation, separation minima,
+graph, observation, and the whole end of a dense decision in one pass.
 
 :meth:`satenv.envs.cluster_v0.ClusterCore.step` propagates a decision's physics steps in one call
 of the truth kernel (:meth:`satenv.dynamics.RelativeModel.propagate`), which returns the LVLH
 positions after every physics step; :func:`separations` reduces them to each satellite's
 smallest distance to the nearest other satellite (all pairs, the dense path), to the obstacle and
 to the target spacecraft, in one pass without temporaries. The numpy loop of the core
-(``fused=False``) is the reference (``tests/test_cluster_kernel.py``). Importing this module
-imports numba; compiled code is cached next to the module.
+(``fused=False``) is the reference (``tests/test_cluster_kernel.py``). On the dense path
+:func:`decision` does the rest of the decision in the same pass (separations, infos, rewards,
+terminations, :func:`neighbours`, :func:`observe`), with the numpy glue's operations in its
+order (bit for bit the same numbers); :func:`saturate` is ``saturate_norm`` with the norms.
+Importing this module imports numba; compiled code is cached next to the module.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["neighbours", "observe", "separations"]
+__all__ = ["decision", "neighbours", "observe", "saturate", "separations"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -26,35 +30,40 @@ def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt):
     distances and rooted once (the same numbers: the square root is monotone and correctly
     rounded)."""
     n_steps, nb, m = path.shape[0], path.shape[1], path.shape[2]
-    for b in range(nb):
+    q0, q1, q2 = q_r[0], q_r[1], q_r[2]
+    pl, ol, tl = np.empty(m), np.empty(m), np.empty(m)
+    px, py, pz = np.empty(m), np.empty(m), np.empty(m)
+    for b in range(nb):   # one copy at a time, its minima in local arrays; per satellite the same operations in order
         for i in range(m):
-            pair[b, i] *= pair[b, i]
-            obs[b, i] *= obs[b, i]
-            tgt[b, i] *= tgt[b, i]
-    for s in range(n_steps):
-        for b in range(nb):
+            pl[i] = pair[b, i] * pair[b, i]
+            ol[i] = obs[b, i] * obs[b, i]
+            tl[i] = tgt[b, i] * tgt[b, i]
+        for s in range(n_steps):
             o0, o1, o2 = obstacle[s, b, 0], obstacle[s, b, 1], obstacle[s, b, 2]
             for i in range(m):
                 p0, p1, p2 = path[s, b, i, 0], path[s, b, i, 1], path[s, b, i, 2]
+                px[i], py[i], pz[i] = p0, p1, p2
                 d0, d1, d2 = p0 - o0, p1 - o1, p2 - o2
-                obs[b, i] = min(obs[b, i], d0 * d0 + d1 * d1 + d2 * d2)
-                d0, d1, d2 = p0 - q_r[0], p1 - q_r[1], p2 - q_r[2]
-                tgt[b, i] = min(tgt[b, i], d0 * d0 + d1 * d1 + d2 * d2)
-                if all_pairs:
+                d = d0 * d0 + d1 * d1 + d2 * d2
+                ol[i] = d if d < ol[i] else ol[i]
+                d0, d1, d2 = p0 - q0, p1 - q1, p2 - q2
+                d = d0 * d0 + d1 * d1 + d2 * d2
+                tl[i] = d if d < tl[i] else tl[i]
+            if all_pairs:
+                for i in range(m):
+                    p0, p1, p2 = px[i], py[i], pz[i]
+                    best = pl[i]
                     for j in range(i + 1, m):
-                        d0 = p0 - path[s, b, j, 0]
-                        d1 = p1 - path[s, b, j, 1]
-                        d2 = p2 - path[s, b, j, 2]
+                        d0, d1, d2 = p0 - px[j], p1 - py[j], p2 - pz[j]
                         d = d0 * d0 + d1 * d1 + d2 * d2
-                        if d < pair[b, i]:
-                            pair[b, i] = d
-                        if d < pair[b, j]:
-                            pair[b, j] = d
-    for b in range(nb):
+                        best = d if d < best else best
+                        pl[j] = d if d < pl[j] else pl[j]
+                    pl[i] = best
         for i in range(m):
-            pair[b, i] = np.sqrt(pair[b, i])
-            obs[b, i] = np.sqrt(obs[b, i])
-            tgt[b, i] = np.sqrt(tgt[b, i])
+            if all_pairs:
+                pair[b, i] = np.sqrt(pl[i])
+            obs[b, i] = np.sqrt(ol[i])
+            tgt[b, i] = np.sqrt(tl[i])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -135,3 +144,126 @@ def observe(x, targets, obstacle, p_obs, q_r, remaining, order, pos_scale, vel_s
                 for c in range(3):
                     obs[b, i, base + 1 + c] = (x[b, j, c] - x[b, i, c]) / pos_scale
                     obs[b, i, base + 4 + c] = (x[b, j, 3 + c] - x[b, i, 3 + c]) / vel_scale
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def saturate(accel, u_max, u, norm):
+    """:func:`satenv.dynamics.saturate_norm` of the rows of ``accel`` (N, 3) onto the ``u_max``
+    ball into ``u``, and the saturated rows' norms into ``norm`` (N,): the reference's operations
+    (a NaN propagates as there)."""
+    tiny = np.finfo(np.float64).tiny
+    for r in range(accel.shape[0]):
+        a0, a1, a2 = accel[r, 0], accel[r, 1], accel[r, 2]
+        n = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        if n != n:
+            scale = np.nan
+        else:
+            scale = u_max / (n if n >= tiny else tiny)
+            if scale != scale:
+                scale = np.nan
+            elif scale > 1.0:
+                scale = 1.0
+        v0, v1, v2 = a0 * scale, a1 * scale, a2 * scale
+        u[r, 0], u[r, 1], u[r, 2] = v0, v1, v2
+        norm[r] = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+
+
+@numba.njit(cache=True, nogil=True)
+def _minimum(a, b):
+    """``np.minimum`` of two floats (a NaN propagates)."""
+    if a != a or b != b:
+        return np.nan
+    return a if a <= b else b
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def decision(path, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets, assignment, un, t, dt, limits,
+             k, comm_range, p_obs, pos_scale, vel_scale, pair, obs_dist, tgt_dist, err, min_sep, collision, viol,
+             cost, rewards, terminated, pos, order, degree, finite, obs):
+    """The end of a dense decision of :meth:`satenv.envs.cluster_v0.ClusterCore.step` in one pass:
+    the separation minima over ``path`` (S, B, M, 3) (:func:`separations`, the obstacle at the
+    physics steps' ends ``ts + h``, ``ts`` (S, B) their starts), then from the states ``x``
+    (B, M, 6) after the decision, the allocated targets (``all_targets`` (B, T, 3) at
+    ``assignment`` (B, M)), the saturated inputs' norms ``un`` (B, M) and the step counts ``t``
+    (B,) after it: the tracking errors, minimum separations, collision flags, violations, costs,
+    rewards and terminations of the infos, the graph (:func:`neighbours` of the positions, copied
+    into ``pos`` (B, M, 3)), which copies are all finite (states, rewards and, when ``obs`` has
+    rows, the observations) and, when ``obs.shape[0] > 0``, the observations (:func:`observe`).
+    ``limits``: ``pair_distance, obstacle_distance, target_distance, reward_distance_scale,
+    reward_control_weight, u_max, collision_penalty, max_distance, terminate_on_collision,
+    max_steps``. The numpy glue's operations in its order (the same numbers)."""
+    n_steps, nb, m = path.shape[0], path.shape[1], path.shape[2]
+    obstacle = np.empty((n_steps, nb, 3))
+    for s in range(n_steps):
+        for b in range(nb):
+            tt = ts[s, b] + h
+            for c in range(3):
+                obstacle[s, b, c] = obstacle_pos[c] + tt * obstacle_vel[c]
+    pair[:, :] = np.inf
+    obs_dist[:, :] = np.inf
+    tgt_dist[:, :] = np.inf
+    separations(path, obstacle, q_r, True, pair, obs_dist, tgt_dist)
+    for b in range(nb):
+        for i in range(m):
+            for c in range(3):
+                pos[b, i, c] = x[b, i, c]
+    neighbours(pos, k, comm_range, order, degree)
+    pair_d, obstacle_d, target_d = limits[0], limits[1], limits[2]
+    scale_d, weight_u, u_max, penalty, max_distance = limits[3], limits[4], limits[5], limits[6], limits[7]
+    stop_on_collision, max_steps = limits[8] != 0.0, limits[9]
+    observe_now = obs.shape[0] > 0
+    targets = np.empty((nb if observe_now else 0, m, 3))
+    for b in range(nb):
+        ended = False
+        collided = False
+        ok = True
+        for i in range(m):
+            a = assignment[b, i]
+            e0 = x[b, i, 0] - all_targets[b, a, 0]
+            e1 = x[b, i, 1] - all_targets[b, a, 1]
+            e2 = x[b, i, 2] - all_targets[b, a, 2]
+            if observe_now:
+                for c in range(3):
+                    targets[b, i, c] = all_targets[b, a, c]
+            err[b, i, 0], err[b, i, 1], err[b, i, 2] = e0, e1, e2
+            for c in range(3, 6):
+                err[b, i, c] = x[b, i, c]
+            n_viol = 0
+            if pair[b, i] < pair_d:
+                n_viol += 1
+            if obs_dist[b, i] < obstacle_d:
+                n_viol += 1
+            if tgt_dist[b, i] < target_d:
+                n_viol += 1
+            min_sep[b, i] = _minimum(_minimum(pair[b, i], obs_dist[b, i]), tgt_dist[b, i])
+            hit = n_viol > 0
+            collision[b, i] = hit
+            viol[b, i] = n_viol
+            cost[b, i] = float(n_viol)
+            d = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            q = un[b, i] / u_max
+            r = (-d / scale_d - weight_u * (q * q)) - penalty * (1.0 if hit else 0.0)
+            rewards[b, i] = r
+            p0, p1, p2 = x[b, i, 0], x[b, i, 1], x[b, i, 2]
+            ended = ended or np.sqrt(p0 * p0 + p1 * p1 + p2 * p2) > max_distance
+            collided = collided or hit
+            ok = ok and np.isfinite(r)
+            for c in range(6):
+                ok = ok and np.isfinite(x[b, i, c])
+        terminated[b] = ended or (stop_on_collision and collided)
+        finite[b] = ok
+    if observe_now:
+        now = np.empty((nb, 3))
+        remaining = np.empty(nb)
+        for b in range(nb):
+            tb = t[b] * dt
+            for c in range(3):
+                now[b, c] = obstacle_pos[c] + tb * obstacle_vel[c]
+            remaining[b] = 1.0 - t[b] / max_steps
+        observe(x, targets, now, p_obs, q_r, remaining, order, pos_scale, vel_scale, obs)
+        for b in range(nb):
+            ok = finite[b]
+            for i in range(m):
+                for c in range(obs.shape[2]):
+                    ok = ok and np.isfinite(obs[b, i, c])
+            finite[b] = ok

@@ -184,7 +184,9 @@ class ClusterCore(BatchedCore):
     truth kernel, one DOP853 step over the decision (``decision_model``; RK4 physics steps with
     the random disturbance), and the separation minima in one compiled pass (:meth:`_step_fused`,
     when no inner loop is registered), and the dense path's graph and observation are compiled
-    (:mod:`satenv.envs._cluster_kernel`); ``fused=False`` is the numpy reference.
+    (:mod:`satenv.envs._cluster_kernel`); on the dense path the separations, infos, rewards,
+    terminations, graph and observation of a decision take one compiled pass
+    (:func:`satenv.envs._cluster_kernel.decision`). ``fused=False`` is the numpy reference.
     """
 
     state_dim = 6
@@ -221,6 +223,11 @@ class ClusterCore(BatchedCore):
         self._own_rng = np.random.default_rng()
         self._kernel = _kernel_module() if fused else None
         self._graph_cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._one_pass = True     # the dense fused step's one compiled pass (False: the numpy glue)
+        self._obstacle = (np.asarray(sc.obstacle_position, dtype=float), np.asarray(sc.obstacle_velocity, dtype=float))
+        self._limits = np.array([sc.pair_distance, sc.obstacle_distance, sc.target_distance, sc.reward_distance_scale,
+                                 sc.reward_control_weight, sc.u_max, sc.collision_penalty, sc.max_distance,
+                                 float(sc.terminate_on_collision), sc.max_steps], dtype=float)
 
     # ------------------------------------------------------------------ helpers
     def time(self) -> np.ndarray:
@@ -365,7 +372,7 @@ class ClusterCore(BatchedCore):
 
     def step(self, accel, rng=None) -> StepResult:
         if self.inner_loop is None and self._kernel is not None:
-            return self._step_fused(np.asarray(accel, dtype=float), rng)
+            return self._step_fused(np.asarray(accel, dtype=float), rng)[0]
         sc = self.scenario
         accel = np.asarray(accel, dtype=float)
         h, n_sub = sc.physics_dt, sc.substeps
@@ -403,35 +410,73 @@ class ClusterCore(BatchedCore):
             pair = self._pair_minimum(path)
         return self._finish(u_sum / n_sub, dv, peak, pair, obs, tgt)
 
-    def _step_fused(self, accel: np.ndarray, rng) -> StepResult:
+    def step_observe(self, accel, rng=None) -> tuple[StepResult, np.ndarray]:
+        """:meth:`step` and :meth:`observe`; the dense fused path observes in the decision's own
+        compiled pass (:func:`satenv.envs._cluster_kernel.decision`)."""
+        if (self.inner_loop is None and self._kernel is not None and self.dense and self._one_pass
+                and self.scenario.obs_neighbours is None):
+            res, obs = self._step_fused(np.asarray(accel, dtype=float), rng, observe=True)
+            return res, obs
+        return super().step_observe(accel, rng)
+
+    def _step_fused(self, accel: np.ndarray, rng, observe: bool = False) -> tuple[StepResult, np.ndarray | None]:
         """:meth:`step` without an inner loop: the command is constant over the decision, so the
         physics steps run in one call of the compiled truth kernel (frames converted once; one
         DOP853 step with the disturbance's staircase inside it integrated exactly) and the
         separation minima in one call of :func:`satenv.envs._cluster_kernel.separations`. The same
-        numbers as the physics-step loop to 1e-10 (``tests/test_cluster_kernel.py``)."""
+        numbers as the physics-step loop to 1e-10 (``tests/test_cluster_kernel.py``). On the dense
+        path (``_one_pass``, the default) the separations, infos, rewards, terminations, the graph
+        and (``observe``) the observations take one compiled pass
+        (:func:`satenv.envs._cluster_kernel.decision`), the same numbers as the numpy glue around
+        :func:`~satenv.envs._cluster_kernel.separations` (``_one_pass = False``) bit for bit.
+        Returns the step and the observations (``None`` unless ``observe``)."""
         sc = self.scenario
         h, n_sub = sc.physics_dt, sc.substeps
-        u = saturate_norm(accel, sc.u_max)
+        rows = np.ascontiguousarray(accel).reshape(-1, 3)
+        u, un = np.empty_like(rows), np.empty(len(rows))
+        self._kernel.saturate(rows, float(sc.u_max), u, un)            # saturate_norm, and the norms
+        u, un = u.reshape(accel.shape), un.reshape(accel.shape[:-1])
         ts = self.time() + h * np.arange(n_sub)[:, None]                       # (S, B)
         common = None   # the sinusoid: one staircase for every satellite (satenv.dynamics._span_kernel)
         if sc.disturbance == "random":     # drawn step by step: the generator's stream as the loop's
             u_steps = u + np.stack([self._disturbance(t, rng) for t in ts])
         else:
             u_steps = np.broadcast_to(u, (n_sub, *u.shape))
-            if sc.disturbance == "sinusoid":
-                common = sinusoid_disturbance(ts, sc.disturbance_amplitude)
+            if sc.disturbance == "sinusoid":   # once per distinct step count (copies in lockstep share it)
+                steps, inverse = np.unique(self.t, return_inverse=True)
+                common = sinusoid_disturbance(steps * sc.dt + h * np.arange(n_sub)[:, None],
+                                              sc.disturbance_amplitude)[:, inverse.reshape(-1)]
         start = self.x[..., :3]
         self.x, self.chief, path = self.decision_model.propagate(self.x, u_steps, self.chief, positions=True,
                                                                  common=common)
-        pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
-        self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
-        if not self.dense:
-            pair = self._pair_minimum(np.concatenate([start[None], path]))
-        un = np.linalg.norm(u, axis=-1)
-        return self._finish(u, un * (h * n_sub), un, pair, obs, tgt)
+        if not (self.dense and self._one_pass and u.shape == (*self.x.shape[:-1], 3)):
+            pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
+            self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
+            if not self.dense:
+                pair = self._pair_minimum(np.concatenate([start[None], path]))
+            res = self._finish(u, un * (h * n_sub), un, pair, obs, tgt)
+            return res, (self.observe() if observe else None)
+        self._advance(u)
+        b, m = self.x.shape[:2]
+        bm = (b, m)
+        pair, obs_d, tgt_d, min_sep, cost, rewards = (np.empty(bm) for _ in range(6))
+        err, collision, viol = np.empty((b, m, 6)), np.empty(bm, bool), np.empty(bm, np.int64)
+        terminated, finite = np.empty(b, bool), np.empty(b, bool)
+        pos, order, degree = np.empty((b, m, 3)), np.empty((b, m, self.n_slots), np.int64), np.empty(bm, np.int64)
+        obs = np.empty((b, m, self.obs_dim) if observe else (0, m, self.obs_dim), np.float32)
+        self._kernel.decision(path, self.x, ts, h, self._obstacle[0], self._obstacle[1], self.q_r, self.all_targets,
+                              self.assignment, un, self.t, float(sc.dt), self._limits, self.n_slots,
+                              float(sc.comm_range), self.p_obs, POS_SCALE, VEL_SCALE, pair, obs_d, tgt_d, err,
+                              min_sep, collision, viol, cost, rewards, terminated, pos, order, degree, finite, obs)
+        self._graph_cache = (pos, order, degree)
+        info = {"state": self.x.copy(), "accel": u.copy(), "delta_v": un * (h * n_sub), "thrust_peak": un,
+                "tracking_error": err, "pair_distance": pair, "obstacle_distance": obs_d, "target_distance": tgt_d,
+                "min_separation": min_sep, "collision": collision, "violations": viol, "cost": cost,
+                "target_index": self.assignment.copy(), "n_neighbours": degree.copy()}
+        return StepResult(rewards, terminated, info, finite), (obs if observe else None)
 
-    def _finish(self, accel, dv, peak, pair, obs, tgt) -> StepResult:
-        """The end of a decision: step count, reallocation, infos, rewards, terminations."""
+    def _advance(self, accel: np.ndarray) -> None:
+        """The decision's count, command and reallocation (when due)."""
         sc = self.scenario
         self.t += 1
         self.accel = accel
@@ -439,6 +484,11 @@ class ClusterCore(BatchedCore):
             due = self.t % sc.reallocate_every == 0
             if np.any(due):
                 self.allocate(np.nonzero(due)[0])
+
+    def _finish(self, accel, dv, peak, pair, obs, tgt) -> StepResult:
+        """The end of a decision: step count, reallocation, infos, rewards, terminations."""
+        sc = self.scenario
+        self._advance(accel)
         info = self._info(slice(None), self.accel, dv, peak, pair, obs, tgt)
         dist = np.linalg.norm(info["tracking_error"][..., :3], axis=-1)
         rewards = (-dist / sc.reward_distance_scale
