@@ -22,11 +22,12 @@ __all__ = ["decision", "neighbours", "observe", "saturate", "separations"]
 
 
 @numba.njit(cache=True, nogil=True)
-def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt):
-    """Minima over the steps of ``path`` (S, B, M, 3) of the distances to the nearest other
-    satellite (when ``all_pairs``; else ``pair`` is left as it is), to the obstacle at
-    ``obstacle`` (S, B, 3) and to the target spacecraft ``q_r`` (3,), into ``pair``, ``obs``,
-    ``tgt`` (B, M), which the caller fills with ``inf``. The minima are taken over squared
+def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt, rows):
+    """Minima over the steps of ``path`` (S, B, M, 3) (copy ``b``'s positions in its row
+    ``rows[b]``) of the distances to the nearest other satellite (when ``all_pairs``; else
+    ``pair`` is left as it is), to the obstacle at ``obstacle`` (S, B, 3) and to the target
+    spacecraft ``q_r`` (3,), into ``pair``, ``obs``, ``tgt`` (B, M), which the caller fills with
+    ``inf``. The minima are taken over squared
     distances and rooted once (the same numbers: the square root is monotone and correctly
     rounded)."""
     n_steps, nb, m = path.shape[0], path.shape[1], path.shape[2]
@@ -38,10 +39,11 @@ def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt):
             pl[i] = pair[b, i] * pair[b, i]
             ol[i] = obs[b, i] * obs[b, i]
             tl[i] = tgt[b, i] * tgt[b, i]
+        row = rows[b]
         for s in range(n_steps):
             o0, o1, o2 = obstacle[s, b, 0], obstacle[s, b, 1], obstacle[s, b, 2]
             for i in range(m):
-                p0, p1, p2 = path[s, b, i, 0], path[s, b, i, 1], path[s, b, i, 2]
+                p0, p1, p2 = path[s, row, i, 0], path[s, row, i, 1], path[s, row, i, 2]
                 px[i], py[i], pz[i] = p0, p1, p2
                 d0, d1, d2 = p0 - o0, p1 - o1, p2 - o2
                 d = d0 * d0 + d1 * d1 + d2 * d2
@@ -177,12 +179,13 @@ def _minimum(a, b):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def decision(path, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets, assignment, un, t, dt, limits,
+def decision(path, rows, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets, assignment, un, t, dt, limits,
              k, comm_range, p_obs, pos_scale, vel_scale, pair, obs_dist, tgt_dist, err, min_sep, collision, viol,
              cost, rewards, terminated, pos, order, degree, finite, obs):
     """The end of a dense decision of :meth:`satenv.envs.cluster_v0.ClusterCore.step` in one pass:
-    the separation minima over ``path`` (S, B, M, 3) (:func:`separations`, the obstacle at the
-    physics steps' ends ``ts + h``, ``ts`` (S, B) their starts), then from the states ``x``
+    the separation minima over ``path`` (S, B, M, 3) (copy ``b`` in its row ``rows[b]``;
+    :func:`separations`, the obstacle at the physics steps' ends ``ts + h``, ``ts`` (S, B) their
+    starts), then from the states ``x``
     (B, M, 6) after the decision, the allocated targets (``all_targets`` (B, T, 3) at
     ``assignment`` (B, M)), the saturated inputs' norms ``un`` (B, M) and the step counts ``t``
     (B,) after it: the tracking errors, minimum separations, collision flags, violations, costs,
@@ -202,7 +205,7 @@ def decision(path, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets, assig
     pair[:, :] = np.inf
     obs_dist[:, :] = np.inf
     tgt_dist[:, :] = np.inf
-    separations(path, obstacle, q_r, True, pair, obs_dist, tgt_dist)
+    separations(path, obstacle, q_r, True, pair, obs_dist, tgt_dist, rows)
     for b in range(nb):
         for i in range(m):
             for c in range(3):
@@ -261,9 +264,9 @@ def decision(path, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets, assig
                 now[b, c] = obstacle_pos[c] + tb * obstacle_vel[c]
             remaining[b] = 1.0 - t[b] / max_steps
         observe(x, targets, now, p_obs, q_r, remaining, order, pos_scale, vel_scale, obs)
+        bits = obs.reshape(nb, -1).view(np.uint32)    # float32 exponent all ones: inf or NaN
         for b in range(nb):
-            ok = finite[b]
-            for i in range(m):
-                for c in range(obs.shape[2]):
-                    ok = ok and np.isfinite(obs[b, i, c])
-            finite[b] = ok
+            bad = 0
+            for c in range(bits.shape[1]):
+                bad += (bits[b, c] & 0x7F800000) == 0x7F800000
+            finite[b] = finite[b] and bad == 0

@@ -432,30 +432,45 @@ class ClusterCore(BatchedCore):
         Returns the step and the observations (``None`` unless ``observe``)."""
         sc = self.scenario
         h, n_sub = sc.physics_dt, sc.substeps
-        rows = np.ascontiguousarray(accel).reshape(-1, 3)
-        u, un = np.empty_like(rows), np.empty(len(rows))
-        self._kernel.saturate(rows, float(sc.u_max), u, un)            # saturate_norm, and the norms
+        flat = np.ascontiguousarray(accel).reshape(-1, 3)
+        u, un = np.empty_like(flat), np.empty(len(flat))
+        self._kernel.saturate(flat, float(sc.u_max), u, un)            # saturate_norm, and the norms
         u, un = u.reshape(accel.shape), un.reshape(accel.shape[:-1])
+        one_pass = self.dense and self._one_pass and u.shape == (*self.x.shape[:-1], 3)
+        # one pass: copies at the same step share their chief's track in the truth kernel when
+        # consecutive (a result never depends on which copies share a call), so they are propagated
+        # grouped (``order``), the path left in that order (copy b's positions in its row rows[b])
+        order = self._grouped_order() if one_pass else None
+        pick = slice(None) if order is None else order
         ts = self.time() + h * np.arange(n_sub)[:, None]                       # (S, B)
         common = None   # the sinusoid: one staircase for every satellite (satenv.dynamics._span_kernel)
         if sc.disturbance == "random":     # drawn step by step: the generator's stream as the loop's
-            u_steps = u + np.stack([self._disturbance(t, rng) for t in ts])
+            u_steps = u[pick] + np.stack([self._disturbance(t, rng) for t in ts])[:, pick]
         else:
-            u_steps = np.broadcast_to(u, (n_sub, *u.shape))
+            u_steps = np.broadcast_to(u[pick], (n_sub, *u.shape))
             if sc.disturbance == "sinusoid":   # once per distinct step count (copies in lockstep share it)
                 steps, inverse = np.unique(self.t, return_inverse=True)
                 common = sinusoid_disturbance(steps * sc.dt + h * np.arange(n_sub)[:, None],
-                                              sc.disturbance_amplitude)[:, inverse.reshape(-1)]
+                                              sc.disturbance_amplitude)[:, inverse.reshape(-1)[pick]]
         start = self.x[..., :3]
-        self.x, self.chief, path = self.decision_model.propagate(self.x, u_steps, self.chief, positions=True,
-                                                                 common=common)
-        if not (self.dense and self._one_pass and u.shape == (*self.x.shape[:-1], 3)):
+        x, chief, path = self.decision_model.propagate(self.x[pick], u_steps, self.chief[pick], positions=True,
+                                                       common=common)
+        if not one_pass:
+            self.x, self.chief = x, chief
             pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
-            self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt)
+            self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt,
+                                     np.arange(self.batch))
             if not self.dense:
                 pair = self._pair_minimum(np.concatenate([start[None], path]))
             res = self._finish(u, un * (h * n_sub), un, pair, obs, tgt)
             return res, (self.observe() if observe else None)
+        if order is None:
+            rows = np.arange(self.batch)
+            self.x, self.chief = x, chief
+        else:
+            rows = np.empty_like(order)
+            rows[order] = np.arange(len(order))
+            self.x, self.chief = x[rows], chief[rows]
         self._advance(u)
         b, m = self.x.shape[:2]
         bm = (b, m)
@@ -464,8 +479,8 @@ class ClusterCore(BatchedCore):
         terminated, finite = np.empty(b, bool), np.empty(b, bool)
         pos, order, degree = np.empty((b, m, 3)), np.empty((b, m, self.n_slots), np.int64), np.empty(bm, np.int64)
         obs = np.empty((b, m, self.obs_dim) if observe else (0, m, self.obs_dim), np.float32)
-        self._kernel.decision(path, self.x, ts, h, self._obstacle[0], self._obstacle[1], self.q_r, self.all_targets,
-                              self.assignment, un, self.t, float(sc.dt), self._limits, self.n_slots,
+        self._kernel.decision(path, rows, self.x, ts, h, self._obstacle[0], self._obstacle[1], self.q_r,
+                              self.all_targets, self.assignment, un, self.t, float(sc.dt), self._limits, self.n_slots,
                               float(sc.comm_range), self.p_obs, POS_SCALE, VEL_SCALE, pair, obs_d, tgt_d, err,
                               min_sep, collision, viol, cost, rewards, terminated, pos, order, degree, finite, obs)
         self._graph_cache = (pos, order, degree)
@@ -474,6 +489,15 @@ class ClusterCore(BatchedCore):
                 "min_separation": min_sep, "collision": collision, "violations": viol, "cost": cost,
                 "target_index": self.assignment.copy(), "n_neighbours": degree.copy()}
         return StepResult(rewards, terminated, info, finite), (obs if observe else None)
+
+    def _grouped_order(self) -> np.ndarray | None:
+        """The copies sorted by step count when copies at the same step are not already
+        consecutive (else ``None``)."""
+        t = self.t
+        runs = 1 + np.count_nonzero(t[1:] != t[:-1])
+        if runs <= 1 or runs == len(np.unique(t)):
+            return None
+        return np.argsort(t, kind="stable")
 
     def _advance(self, accel: np.ndarray) -> None:
         """The decision's count, command and reallocation (when due)."""
