@@ -1,5 +1,5 @@
 """Compiled (numba) parts of the cluster core's decision: input saturation, separation minima,
-graph, observation, and the whole end of a dense decision in one pass.
+graph, observation, infos and rewards.
 
 :meth:`satenv.envs.cluster_v0.ClusterCore.step` propagates a decision's physics steps in one call
 of the truth kernel (:meth:`satenv.dynamics.RelativeModel.propagate`), which returns the LVLH
@@ -7,10 +7,10 @@ positions after every physics step; :func:`separations` reduces them to each sat
 smallest distance to the nearest other satellite (all pairs, the dense path), to the obstacle and
 to the target spacecraft, in one pass without temporaries. The numpy loop of the core
 (``fused=False``) is the reference (``tests/test_cluster_kernel.py``). On the dense path
-:func:`decision` does the rest of the decision in the same pass (separations, infos, rewards,
-terminations, :func:`neighbours`, :func:`observe`), with the numpy glue's operations in its
-order (bit for bit the same numbers); :func:`saturate` is ``saturate_norm`` with the norms.
-Importing this module imports numba; compiled code is cached next to the module.
+:func:`neighbours` and :func:`observe` give the graph and the observation, and :func:`decision`
+the infos, rewards, terminations and the finiteness check in one pass, with the numpy glue's
+operations in its order (bit for bit the same numbers); :func:`saturate` is ``saturate_norm``
+with the norms. Importing this module imports numba; compiled code is cached next to the module.
 """
 
 from __future__ import annotations
@@ -22,12 +22,13 @@ __all__ = ["decision", "neighbours", "observe", "saturate", "separations"]
 
 
 @numba.njit(cache=True, nogil=True)
-def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt, rows):
+def separations(path, rows, ts, h, obstacle_pos, obstacle_vel, q_r, all_pairs, pair, obs, tgt):
     """Minima over the steps of ``path`` (S, B, M, 3) (copy ``b``'s positions in its row
     ``rows[b]``) of the distances to the nearest other satellite (when ``all_pairs``; else
-    ``pair`` is left as it is), to the obstacle at ``obstacle`` (S, B, 3) and to the target
-    spacecraft ``q_r`` (3,), into ``pair``, ``obs``, ``tgt`` (B, M), which the caller fills with
-    ``inf``. The minima are taken over squared
+    ``pair`` is left as it is), to the obstacle (at ``obstacle_pos + (ts + h) obstacle_vel``, as
+    :meth:`satenv.scenarios.cluster.ClusterScenario.obstacle_at`, ``ts`` (S, B) the physics
+    steps' starts) and to the target spacecraft ``q_r`` (3,), into ``pair``, ``obs``, ``tgt``
+    (B, M), which the caller fills with ``inf``. The minima are taken over squared
     distances and rooted once (the same numbers: the square root is monotone and correctly
     rounded)."""
     n_steps, nb, m = path.shape[0], path.shape[1], path.shape[2]
@@ -41,7 +42,10 @@ def separations(path, obstacle, q_r, all_pairs, pair, obs, tgt, rows):
             tl[i] = tgt[b, i] * tgt[b, i]
         row = rows[b]
         for s in range(n_steps):
-            o0, o1, o2 = obstacle[s, b, 0], obstacle[s, b, 1], obstacle[s, b, 2]
+            tt = ts[s, b] + h
+            o0 = obstacle_pos[0] + tt * obstacle_vel[0]
+            o1 = obstacle_pos[1] + tt * obstacle_vel[1]
+            o2 = obstacle_pos[2] + tt * obstacle_vel[2]
             for i in range(m):
                 p0, p1, p2 = path[s, row, i, 0], path[s, row, i, 1], path[s, row, i, 2]
                 px[i], py[i], pz[i] = p0, p1, p2
@@ -117,24 +121,29 @@ def neighbours(pos, k, comm_range, order, degree):
 
 
 @numba.njit(cache=True, nogil=True)
-def observe(x, targets, obstacle, p_obs, q_r, remaining, order, pos_scale, vel_scale, obs):
+def observe(x, all_targets, assignment, obstacle_pos, p_obs, t, dt, max_steps, q_r, order, pos_scale, vel_scale,
+            obs):
     """The cluster observation (module docstring of :mod:`satenv.envs.cluster_v0`) of states ``x``
-    (B, M, 6) into ``obs`` (B, M, 19 + 7 K) float32: ``targets`` (B, M, 3) allocated targets,
-    ``obstacle`` (B, 3) its positions, ``p_obs`` (3,) its velocity, ``q_r`` (3,) the target
-    spacecraft, ``remaining`` (B,) the fraction of the episode left, ``order`` (B, M, K) the
-    neighbour slots of :func:`neighbours`. The reference's float64 formulas, then float32."""
+    (B, M, 6) into ``obs`` (B, M, 19 + 7 K) float32: the allocated targets ``all_targets``
+    (B, T, 3) at ``assignment`` (B, M), the obstacle at ``obstacle_pos + t dt p_obs`` (``p_obs``
+    (3,) its velocity, ``t`` (B,) the step counts), ``q_r`` (3,) the target spacecraft, the
+    fraction of the episode left ``1 - t / max_steps``, ``order`` (B, M, K) the neighbour slots of
+    :func:`neighbours`. The reference's float64 formulas, then float32."""
     nb, m, k = x.shape[0], x.shape[1], order.shape[2]
     for b in range(nb):
+        tb = t[b] * dt
+        remaining = 1.0 - t[b] / max_steps
         for i in range(m):
+            a = assignment[b, i]
             for c in range(3):
                 q, p = x[b, i, c], x[b, i, 3 + c]
-                obs[b, i, c] = (q - targets[b, i, c]) / pos_scale
+                obs[b, i, c] = (q - all_targets[b, a, c]) / pos_scale
                 obs[b, i, 3 + c] = p / vel_scale
                 obs[b, i, 6 + c] = q / pos_scale
-                obs[b, i, 9 + c] = (obstacle[b, c] - q) / pos_scale
+                obs[b, i, 9 + c] = ((obstacle_pos[c] + tb * p_obs[c]) - q) / pos_scale
                 obs[b, i, 12 + c] = (p_obs[c] - p) / vel_scale
                 obs[b, i, 15 + c] = (q_r[c] - q) / pos_scale
-            obs[b, i, 18] = remaining[b]
+            obs[b, i, 18] = remaining
             for s in range(k):
                 base = 19 + 7 * s
                 j = order[b, i, s]
@@ -179,43 +188,22 @@ def _minimum(a, b):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def decision(path, rows, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets, assignment, un, t, dt, limits,
-             k, comm_range, p_obs, pos_scale, vel_scale, pair, obs_dist, tgt_dist, err, min_sep, collision, viol,
-             cost, rewards, terminated, pos, order, degree, finite, obs):
+def decision(x, all_targets, assignment, un, pair, obs_dist, tgt_dist, limits, obs, err, min_sep, collision, viol,
+             cost, rewards, terminated, finite):
     """The end of a dense decision of :meth:`satenv.envs.cluster_v0.ClusterCore.step` in one pass:
-    the separation minima over ``path`` (S, B, M, 3) (copy ``b`` in its row ``rows[b]``;
-    :func:`separations`, the obstacle at the physics steps' ends ``ts + h``, ``ts`` (S, B) their
-    starts), then from the states ``x``
-    (B, M, 6) after the decision, the allocated targets (``all_targets`` (B, T, 3) at
-    ``assignment`` (B, M)), the saturated inputs' norms ``un`` (B, M) and the step counts ``t``
-    (B,) after it: the tracking errors, minimum separations, collision flags, violations, costs,
-    rewards and terminations of the infos, the graph (:func:`neighbours` of the positions, copied
-    into ``pos`` (B, M, 3)), which copies are all finite (states, rewards and, when ``obs`` has
-    rows, the observations) and, when ``obs.shape[0] > 0``, the observations (:func:`observe`).
-    ``limits``: ``pair_distance, obstacle_distance, target_distance, reward_distance_scale,
-    reward_control_weight, u_max, collision_penalty, max_distance, terminate_on_collision,
-    max_steps``. The numpy glue's operations in its order (the same numbers)."""
-    n_steps, nb, m = path.shape[0], path.shape[1], path.shape[2]
-    obstacle = np.empty((n_steps, nb, 3))
-    for s in range(n_steps):
-        for b in range(nb):
-            tt = ts[s, b] + h
-            for c in range(3):
-                obstacle[s, b, c] = obstacle_pos[c] + tt * obstacle_vel[c]
-    pair[:, :] = np.inf
-    obs_dist[:, :] = np.inf
-    tgt_dist[:, :] = np.inf
-    separations(path, obstacle, q_r, True, pair, obs_dist, tgt_dist, rows)
-    for b in range(nb):
-        for i in range(m):
-            for c in range(3):
-                pos[b, i, c] = x[b, i, c]
-    neighbours(pos, k, comm_range, order, degree)
+    from the states ``x`` (B, M, 6) after the decision, the allocated targets (``all_targets``
+    (B, T, 3) at ``assignment`` (B, M)), the saturated inputs' norms ``un`` (B, M) and the
+    separation minima ``pair``, ``obs_dist``, ``tgt_dist`` (B, M) (:func:`separations`): the
+    tracking errors, minimum separations, collision flags, violations, costs, rewards and
+    terminations of the infos, and which copies are all finite (states, rewards and the
+    observations ``obs`` (B, M, D) float32 when it has rows). ``limits``: ``pair_distance,
+    obstacle_distance, target_distance, reward_distance_scale, reward_control_weight, u_max,
+    collision_penalty, max_distance, terminate_on_collision``. The numpy glue's operations in its
+    order (the same numbers)."""
+    nb, m = x.shape[0], x.shape[1]
     pair_d, obstacle_d, target_d = limits[0], limits[1], limits[2]
     scale_d, weight_u, u_max, penalty, max_distance = limits[3], limits[4], limits[5], limits[6], limits[7]
-    stop_on_collision, max_steps = limits[8] != 0.0, limits[9]
-    observe_now = obs.shape[0] > 0
-    targets = np.empty((nb if observe_now else 0, m, 3))
+    stop_on_collision = limits[8] != 0.0
     for b in range(nb):
         ended = False
         collided = False
@@ -225,9 +213,6 @@ def decision(path, rows, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets,
             e0 = x[b, i, 0] - all_targets[b, a, 0]
             e1 = x[b, i, 1] - all_targets[b, a, 1]
             e2 = x[b, i, 2] - all_targets[b, a, 2]
-            if observe_now:
-                for c in range(3):
-                    targets[b, i, c] = all_targets[b, a, c]
             err[b, i, 0], err[b, i, 1], err[b, i, 2] = e0, e1, e2
             for c in range(3, 6):
                 err[b, i, c] = x[b, i, c]
@@ -255,15 +240,7 @@ def decision(path, rows, x, ts, h, obstacle_pos, obstacle_vel, q_r, all_targets,
                 ok = ok and np.isfinite(x[b, i, c])
         terminated[b] = ended or (stop_on_collision and collided)
         finite[b] = ok
-    if observe_now:
-        now = np.empty((nb, 3))
-        remaining = np.empty(nb)
-        for b in range(nb):
-            tb = t[b] * dt
-            for c in range(3):
-                now[b, c] = obstacle_pos[c] + tb * obstacle_vel[c]
-            remaining[b] = 1.0 - t[b] / max_steps
-        observe(x, targets, now, p_obs, q_r, remaining, order, pos_scale, vel_scale, obs)
+    if obs.shape[0] > 0:
         bits = obs.reshape(nb, -1).view(np.uint32)    # float32 exponent all ones: inf or NaN
         for b in range(nb):
             bad = 0

@@ -184,8 +184,7 @@ class ClusterCore(BatchedCore):
     truth kernel, one DOP853 step over the decision (``decision_model``; RK4 physics steps with
     the random disturbance), and the separation minima in one compiled pass (:meth:`_step_fused`,
     when no inner loop is registered), and the dense path's graph and observation are compiled
-    (:mod:`satenv.envs._cluster_kernel`); on the dense path the separations, infos, rewards,
-    terminations, graph and observation of a decision take one compiled pass
+    (:mod:`satenv.envs._cluster_kernel`), as are its infos, rewards and terminations
     (:func:`satenv.envs._cluster_kernel.decision`). ``fused=False`` is the numpy reference.
     """
 
@@ -227,7 +226,7 @@ class ClusterCore(BatchedCore):
         self._obstacle = (np.asarray(sc.obstacle_position, dtype=float), np.asarray(sc.obstacle_velocity, dtype=float))
         self._limits = np.array([sc.pair_distance, sc.obstacle_distance, sc.target_distance, sc.reward_distance_scale,
                                  sc.reward_control_weight, sc.u_max, sc.collision_penalty, sc.max_distance,
-                                 float(sc.terminate_on_collision), sc.max_steps], dtype=float)
+                                 float(sc.terminate_on_collision)], dtype=float)
 
     # ------------------------------------------------------------------ helpers
     def time(self) -> np.ndarray:
@@ -411,8 +410,8 @@ class ClusterCore(BatchedCore):
         return self._finish(u_sum / n_sub, dv, peak, pair, obs, tgt)
 
     def step_observe(self, accel, rng=None) -> tuple[StepResult, np.ndarray]:
-        """:meth:`step` and :meth:`observe`; the dense fused path observes in the decision's own
-        compiled pass (:func:`satenv.envs._cluster_kernel.decision`)."""
+        """:meth:`step` and :meth:`observe`; on the dense fused path the finiteness check of the
+        step covers the observations too (:attr:`StepResult.finite`)."""
         if (self.inner_loop is None and self._kernel is not None and self.dense and self._one_pass
                 and self.scenario.obs_neighbours is None):
             res, obs = self._step_fused(np.asarray(accel, dtype=float), rng, observe=True)
@@ -425,10 +424,10 @@ class ClusterCore(BatchedCore):
         DOP853 step with the disturbance's staircase inside it integrated exactly) and the
         separation minima in one call of :func:`satenv.envs._cluster_kernel.separations`. The same
         numbers as the physics-step loop to 1e-10 (``tests/test_cluster_kernel.py``). On the dense
-        path (``_one_pass``, the default) the separations, infos, rewards, terminations, the graph
-        and (``observe``) the observations take one compiled pass
-        (:func:`satenv.envs._cluster_kernel.decision`), the same numbers as the numpy glue around
-        :func:`~satenv.envs._cluster_kernel.separations` (``_one_pass = False``) bit for bit.
+        path (``_one_pass``, the default) the infos, rewards, terminations and the finiteness
+        check take one compiled pass (:func:`satenv.envs._cluster_kernel.decision`) after the
+        separations and (``observe``) the observation, the same numbers as the numpy glue
+        (``_one_pass = False``) bit for bit.
         Returns the step and the observations (``None`` unless ``observe``)."""
         sc = self.scenario
         h, n_sub = sc.physics_dt, sc.substeps
@@ -458,8 +457,8 @@ class ClusterCore(BatchedCore):
         if not one_pass:
             self.x, self.chief = x, chief
             pair, obs, tgt = (np.full(self.x.shape[:-1], np.inf) for _ in range(3))
-            self._kernel.separations(path, sc.obstacle_at(ts + h), self.q_r, self.dense, pair, obs, tgt,
-                                     np.arange(self.batch))
+            self._kernel.separations(path, np.arange(self.batch), ts, h, *self._obstacle, self.q_r, self.dense,
+                                     pair, obs, tgt)
             if not self.dense:
                 pair = self._pair_minimum(np.concatenate([start[None], path]))
             res = self._finish(u, un * (h * n_sub), un, pair, obs, tgt)
@@ -471,19 +470,18 @@ class ClusterCore(BatchedCore):
             rows = np.empty_like(order)
             rows[order] = np.arange(len(order))
             self.x, self.chief = x[rows], chief[rows]
-        self._advance(u)
         b, m = self.x.shape[:2]
         bm = (b, m)
-        pair, obs_d, tgt_d, min_sep, cost, rewards = (np.empty(bm) for _ in range(6))
-        err, collision, viol = np.empty((b, m, 6)), np.empty(bm, bool), np.empty(bm, np.int64)
+        pair, obs_d, tgt_d = (np.full(bm, np.inf) for _ in range(3))
+        self._kernel.separations(path, rows, ts, h, *self._obstacle, self.q_r, True, pair, obs_d, tgt_d)
+        self._advance(u)
+        obs = self._observe(slice(None)) if observe else np.empty((0, m, self.obs_dim), np.float32)
+        degree = self._neighbours(self.x[..., :3])[1]       # the graph of the observation (cached)
+        err, min_sep, cost, rewards = np.empty((b, m, 6)), np.empty(bm), np.empty(bm), np.empty(bm)
+        collision, viol = np.empty(bm, bool), np.empty(bm, np.int64)
         terminated, finite = np.empty(b, bool), np.empty(b, bool)
-        pos, order, degree = np.empty((b, m, 3)), np.empty((b, m, self.n_slots), np.int64), np.empty(bm, np.int64)
-        obs = np.empty((b, m, self.obs_dim) if observe else (0, m, self.obs_dim), np.float32)
-        self._kernel.decision(path, rows, self.x, ts, h, self._obstacle[0], self._obstacle[1], self.q_r,
-                              self.all_targets, self.assignment, un, self.t, float(sc.dt), self._limits, self.n_slots,
-                              float(sc.comm_range), self.p_obs, POS_SCALE, VEL_SCALE, pair, obs_d, tgt_d, err,
-                              min_sep, collision, viol, cost, rewards, terminated, pos, order, degree, finite, obs)
-        self._graph_cache = (pos, order, degree)
+        self._kernel.decision(self.x, self.all_targets, self.assignment, un, pair, obs_d, tgt_d, self._limits, obs,
+                              err, min_sep, collision, viol, cost, rewards, terminated, finite)
         info = {"state": self.x.copy(), "accel": u.copy(), "delta_v": un * (h * n_sub), "thrust_peak": un,
                 "tracking_error": err, "pair_distance": pair, "obstacle_distance": obs_d, "target_distance": tgt_d,
                 "min_separation": min_sep, "collision": collision, "violations": viol, "cost": cost,
@@ -560,8 +558,8 @@ class ClusterCore(BatchedCore):
         if (self.dense or fixed) and self._kernel is not None:
             obs = np.empty((b, m, self.obs_dim), np.float32)
             order = self._fixed_slots(x[..., :3]) if fixed else self._neighbours(x[..., :3])[0]
-            self._kernel.observe(np.ascontiguousarray(x), np.ascontiguousarray(self.targets()[sel]),
-                                 sc.obstacle_at(t * sc.dt), self.p_obs, self.q_r, 1.0 - t / sc.max_steps,
+            self._kernel.observe(np.ascontiguousarray(x), self.all_targets[sel], self.assignment[sel],
+                                 self._obstacle[0], self.p_obs, t, float(sc.dt), float(sc.max_steps), self.q_r,
                                  order, POS_SCALE, VEL_SCALE, obs)
             return obs
         q, p = x[..., :3], x[..., 3:]
