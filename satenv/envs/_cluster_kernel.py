@@ -22,9 +22,9 @@ __all__ = ["decision", "neighbours", "observe", "saturate", "separations"]
 
 
 @numba.njit(cache=True, nogil=True)
-def separations(path, rows, ts, h, obstacle_pos, obstacle_vel, q_r, all_pairs, pair, obs, tgt):
-    """Minima over the steps of ``path`` (S, B, M, 3) (copy ``b``'s positions in its row
-    ``rows[b]``) of the distances to the nearest other satellite (when ``all_pairs``; else
+def separations(path, copies, ts, h, obstacle_pos, obstacle_vel, q_r, all_pairs, pair, obs, tgt):
+    """Minima over the steps of ``path`` (S, B, M, 3) (row ``r`` the positions of copy
+    ``copies[r]``) of the distances to the nearest other satellite (when ``all_pairs``; else
     ``pair`` is left as it is), to the obstacle (at ``obstacle_pos + (ts + h) obstacle_vel``, as
     :meth:`satenv.scenarios.cluster.ClusterScenario.obstacle_at`, ``ts`` (S, B) the physics
     steps' starts) and to the target spacecraft ``q_r`` (3,), into ``pair``, ``obs``, ``tgt``
@@ -35,12 +35,12 @@ def separations(path, rows, ts, h, obstacle_pos, obstacle_vel, q_r, all_pairs, p
     q0, q1, q2 = q_r[0], q_r[1], q_r[2]
     pl, ol, tl = np.empty(m), np.empty(m), np.empty(m)
     px, py, pz = np.empty(m), np.empty(m), np.empty(m)
-    for b in range(nb):   # one copy at a time, its minima in local arrays; per satellite the same operations in order
+    for row in range(nb):   # one copy at a time, its minima in local arrays; per satellite the same operations in order
+        b = copies[row]
         for i in range(m):
             pl[i] = pair[b, i] * pair[b, i]
             ol[i] = obs[b, i] * obs[b, i]
             tl[i] = tgt[b, i] * tgt[b, i]
-        row = rows[b]
         for s in range(n_steps):
             tt = ts[s, b] + h
             o0 = obstacle_pos[0] + tt * obstacle_vel[0]

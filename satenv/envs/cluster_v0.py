@@ -349,7 +349,10 @@ class ClusterCore(BatchedCore):
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return np.stack([sample_initial_state(self.scenario, rng) for _ in range(n)])
+        sc = self.scenario
+        if not sc.randomize or sc.random_position_spread == 0.0:   # the preset's (no draw), as
+            return np.tile(sc.initial_array(), (n, 1, 1))          # sample_initial_state returns it
+        return np.stack([sample_initial_state(sc, rng) for _ in range(n)])
 
     def reset(self, x0, idx=None, rng=None):
         x0 = np.asarray(x0, dtype=float)
@@ -438,7 +441,7 @@ class ClusterCore(BatchedCore):
         one_pass = self.dense and self._one_pass and u.shape == (*self.x.shape[:-1], 3)
         # one pass: copies at the same step share their chief's track in the truth kernel when
         # consecutive (a result never depends on which copies share a call), so they are propagated
-        # grouped (``order``), the path left in that order (copy b's positions in its row rows[b])
+        # grouped (``order``), the path left in that order (its row r copy order[r]'s positions)
         order = self._grouped_order() if one_pass else None
         pick = slice(None) if order is None else order
         ts = self.time() + h * np.arange(n_sub)[:, None]                       # (S, B)
@@ -464,16 +467,15 @@ class ClusterCore(BatchedCore):
             res = self._finish(u, un * (h * n_sub), un, pair, obs, tgt)
             return res, (self.observe() if observe else None)
         if order is None:
-            rows = np.arange(self.batch)
+            order = np.arange(self.batch)
             self.x, self.chief = x, chief
         else:
-            rows = np.empty_like(order)
-            rows[order] = np.arange(len(order))
-            self.x, self.chief = x[rows], chief[rows]
+            self.x, self.chief = np.empty_like(x), np.empty_like(chief)
+            self.x[order], self.chief[order] = x, chief
         b, m = self.x.shape[:2]
         bm = (b, m)
         pair, obs_d, tgt_d = (np.full(bm, np.inf) for _ in range(3))
-        self._kernel.separations(path, rows, ts, h, *self._obstacle, self.q_r, True, pair, obs_d, tgt_d)
+        self._kernel.separations(path, order, ts, h, *self._obstacle, self.q_r, True, pair, obs_d, tgt_d)
         self._advance(u)
         obs = self._observe(slice(None)) if observe else np.empty((0, m, self.obs_dim), np.float32)
         degree = self._neighbours(self.x[..., :3])[1]       # the graph of the observation (cached)
