@@ -265,9 +265,8 @@ class ServicingCore(BatchedCore):
         weights = np.concatenate([np.broadcast_to(np.asarray(w, dtype=float), (k,)) for w, k in (
             (sc.position_weight, 3), (sc.velocity_weight, 3), (sc.quaternion_weight, 4), (sc.omega_weight, 3),
             (sc.input_weight, 6))])
-        return (module.step, self.model, (params, att, *self._att_constants, *self._pointing, task, weights,
-                                          np.ascontiguousarray(self.waypoints), np.asarray(self._switch_steps,
-                                                                                           dtype=np.int64)))
+        phases = (np.ascontiguousarray(self.waypoints), np.asarray(self._switch_steps, dtype=np.int64))
+        return module.step, self.model, (params, att, *self._att_constants, *self._pointing, task, weights, *phases)
 
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
