@@ -58,12 +58,13 @@ def test_tiny_run_writes_a_loadable_policy_folder(tmp_path, capsys):
     assert list((out / "tb").iterdir())
 
 
-def test_exported_actor_is_the_trained_mean(tmp_path):
+@pytest.mark.parametrize("norm_obs", [False, True])
+def test_exported_actor_is_the_trained_mean(tmp_path, norm_obs):
     import torch
 
     from satenv.training import load
 
-    cfg = ppo.LeanConfig(**TINY, budget=256, out_dir=str(tmp_path / "run"))
+    cfg = ppo.LeanConfig(**TINY, budget=256, norm_obs=norm_obs, out_dir=str(tmp_path / "run"))
     ppo.train(cfg)
     policy = load(tmp_path / "run" / "final")
     norm = json.loads((tmp_path / "run" / "final" / "obs_norm.json").read_text())
@@ -72,7 +73,11 @@ def test_exported_actor_is_the_trained_mean(tmp_path):
         tasks.get(TASK).make_env(), 4, autoreset=False), 0.99)
     ckpt = ppo.latest_checkpoint(tmp_path / "run")
     ppo.load_checkpoint(run, ckpt)
-    x = np.clip((obs - np.array(norm["mean"])) / np.sqrt(np.array(norm["var"]) + 1e-8), -10, 10)
+    if norm_obs:
+        x = np.clip((obs - np.array(norm["mean"])) / np.sqrt(np.array(norm["var"]) + 1e-8), -10, 10)
+    else:   # the envs' own scales: the folder says so and the actor reads the observation as it is
+        assert norm == {"identity": True}
+        x = obs
     with torch.no_grad():
         mean = run.net.mean(torch.as_tensor(x, dtype=torch.float32)[:, None]).numpy()[:, 0]
     assert np.allclose(policy.predict(obs), mean, atol=1e-6)

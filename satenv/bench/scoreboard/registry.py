@@ -45,6 +45,11 @@ POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
                description="artificial potential field (li2022)"),
     PolicySpec("nmpc", "satenv.baselines:NMPC", baseline="nmpc", requires=("casadi",),
                dry_run=False, description="cooperative NMPC (pereira2022 §4)"),
+    PolicySpec("tube_rdmpc_rti", "satenv.baselines:TubeRDMPC", {"solver": "rti"}, baseline="tube_rdmpc",
+               requires=("casadi", "daqp"), dry_run=False,
+               description="tube-based robust DMPC (li2022) by sequential convexification: QPs, not the NLP"),
+    PolicySpec("nmpc_rti", "satenv.baselines:NMPC", {"solver": "rti"}, baseline="nmpc", requires=("casadi", "daqp"),
+               dry_run=False, description="cooperative NMPC (pereira2022 §4) as real-time iteration: one QP a decision"),
     PolicySpec("cgmres", "satenv.baselines:CGMRES", baseline="cgmres", requires=("casadi",),
                dry_run=False, description="centralised C/GMRES NMPC (kannan2022)"),
 ]}
