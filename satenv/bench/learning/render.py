@@ -343,6 +343,12 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "- **Smoke tests**: the earlier grid of this page (SB3 PPO, BenchMARL MAPPO and MASAC at 200,000 "
         "agent-steps, 3 seeds, 5 test seeds, on the training tasks only) was a smoke test of the pipeline, not a "
         "result; its log is kept in `studies/reference_results/smoke_200k_log.jsonl` and is not on this page.",
+        "- **Learner defaults**: the lean learner's first defaults (observations by running statistics, 2 epochs of "
+        "4,096-agent-step minibatches) left the section 5.1 platoon's first rung at 0/20 on validation seeds, its "
+        "policies drifting hundreds of metres; its current ones (the envs' own fixed observation scales, 10 epochs "
+        "of 1,024) solved it there (module docstring of `satenv.training.rl.ppo`). Every row on this page ran at "
+        "the current defaults; the grid under the first ones is kept in "
+        "`studies/reference_results/running_obs_norm_log.jsonl` and is not on this page.",
         f"- **Evaluations**: {g['checkpoints']} per run, evenly spaced over the budget. Each flies the "
         f"deterministic policy on the rung's first {g['curve_test_seeds']} test seeds (the curves), the last "
         f"one on its first {g['final_test_seeds']} test seeds (the published result). No test seed chose "
