@@ -193,3 +193,35 @@ def test_expert_pool_labels_are_those_of_one_process():
             assert len(rows["act"]) == 4 * len(labeller._WORKER[(job.task, '{"max_steps": 4}')][0].possible_agents)
     finally:
         labeller._WORKER.clear()
+
+
+def test_dense_qp_least_distance_form_finds_daqps_optimum_and_warm_starts_to_it():
+    """:class:`DenseQP` (the QP brought to least-distance form here) against DAQP on the QP as it is,
+    with an equality bound; then a perturbed QP from the first one's active set, moved by a shift,
+    against the same QP solved cold."""
+    daqp = pytest.importorskip("daqp")
+    from satenv.baselines._qp import DenseQP
+
+    rng = np.random.default_rng(3)
+    n, m = 12, 20
+    q = rng.normal(size=(n, n))
+    h = q @ q.T + n * np.eye(n)
+    f, a = rng.normal(size=n), rng.normal(size=(m, n))
+    lo, hi = -np.abs(rng.normal(size=m)) - 0.2, np.abs(rng.normal(size=m)) + 0.2
+    lb, ub = -np.full(n, 0.3), np.full(n, 0.3)
+    lb[4] = ub[4] = 0.1
+    sense = np.zeros(n + m, dtype=np.intc)
+    sense[4] = 5
+    ref, _, flag, _ = daqp.solve(h, f, a, np.r_[ub, hi], np.r_[lb, lo], sense)
+    qp = DenseQP()
+    x, ok, status = qp.solve(h, f, a, lo, hi, lb, ub, owner="a")
+    assert flag == 1 and ok, status
+    np.testing.assert_allclose(x, ref, atol=1e-9)
+    assert x[4] == pytest.approx(0.1)
+    f2 = f + 0.05 * rng.normal(size=n)
+    shift = np.r_[np.arange(1, n + m), -1]
+    warm, ok, _ = qp.solve(h, f2, a, lo, hi, lb, ub, owner="a", shift=shift)
+    cold, ok_cold, _ = DenseQP().solve(h, f2, a, lo, hi, lb, ub)
+    assert ok and ok_cold
+    np.testing.assert_allclose(warm, cold, atol=1e-9)
+    assert qp.solve(-h, f, a, lo, hi, lb, ub)[:2] == (None, False)          # not positive definite

@@ -94,3 +94,36 @@ def test_the_nmpc_expert_labels_with_rti_unless_told_otherwise():
     assert make_expert("nmpc", env, horizon=HORIZON).cfg.solver == "rti"
     assert make_expert("nmpc", env, horizon=HORIZON, solver="ipopt").cfg.solver == "ipopt"
     assert NMPC(env, horizon=HORIZON).cfg.solver == "ipopt"          # the baseline and the reproduction
+
+
+def test_condensed_hessian_and_gradient_are_those_of_the_stacked_residuals():
+    """The backward-recursion condensing equals ``2 M'M`` and ``2 M'r`` of the stacked residual
+    Jacobian ``M`` (stage ``k``: ``Jx_k Phi_k + Ju_k E_k``, the terminal ``J_N Phi_N``)."""
+    env = parallel_env()
+    pol = NMPC(env, solver="rti", horizon=HORIZON)
+    fly(pol, env, 3)
+    x, goals, _ = unpack_global_state(env.state(), pol.m)
+    goal_path = np.tile(goals[0], (HORIZON, 1))
+    others = [np.tile(x[1, :3], (HORIZON, 1))]
+    w0, _ = pol._initial_guess(0, x[0], goal_path[0])
+    xg, ug = w0[pol._x_idx], w0[pol._u_idx]
+    hess, grad, *_, phi_m, phi = pol._rti_qp(x[0], xg, ug, goal_path, others)
+    stage, terminal = pol._rti
+    out = stage(xg[:-1].T, ug.T, goal_path.T)[0].T
+    part = [out[:, a:b] for a, b in zip(pol._rti_sizes[:-1], pol._rti_sizes[1:], strict=True)]
+    jrx = part[4].reshape(HORIZON, 13, 19).transpose(0, 2, 1)
+    jru = part[5].reshape(HORIZON, 6, 19).transpose(0, 2, 1)
+    rows, res = [], []
+    for k in range(HORIZON):
+        m_k = jrx[k] @ phi_m[k]
+        m_k[:, 6 * k:6 * k + 6] += jru[k]
+        rows.append(m_k)
+        res.append(part[3][k] + jrx[k] @ phi[k])
+    term = terminal(xg[-1])[0].ravel()
+    n_t = term.size // 14
+    j_n = term[n_t:].reshape(13, n_t).T
+    rows.append(j_n @ phi_m[HORIZON])
+    res.append(term[:n_t] + j_n @ phi[HORIZON])
+    m_all, r_all = np.vstack(rows), np.concatenate(res)
+    np.testing.assert_allclose(hess, 2.0 * m_all.T @ m_all, rtol=1e-10, atol=1e-10 * np.abs(hess).max())
+    np.testing.assert_allclose(grad, 2.0 * m_all.T @ r_all, rtol=1e-10, atol=1e-10 * np.abs(grad).max())

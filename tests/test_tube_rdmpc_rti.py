@@ -49,10 +49,13 @@ def test_qp_step_at_the_nlp_optimum_stays_there():
     params, w_opt = captured["first"]
     assert w_opt is not None
     rti = TubeRDMPC(env, solver="rti")
-    info = {}
-    w = rti.nlp.qp_step(info, params, w_opt, owner=0)
-    assert w is not None, info
-    np.testing.assert_allclose(w[:3], w_opt[:3], atol=1e-4)        # the first input (unit ball)
+    for mu in (None, np.ones(rti.nlp.curvature.shape[0])):     # the convex rows' curvature moves no KKT point
+        if mu is not None:
+            rti.nlp._mu[0] = mu
+        info = {}
+        w = rti.nlp.qp_step(info, params, w_opt, owner=0)
+        assert w is not None, info
+        np.testing.assert_allclose(w[:3], w_opt[:3], atol=1e-4)    # the first input (unit ball)
 
 
 def test_a_failed_qp_falls_back_to_ipopt_and_is_flagged(monkeypatch):
@@ -86,3 +89,37 @@ def test_rti_option_is_validated():
     with pytest.raises(BaselineError, match="solver"):
         TubeRDMPCConfig(solver="qp")
     assert TubeRDMPCConfig(solver="rti").solver == "rti"
+
+
+def test_convex_row_curvature_is_their_hessian_and_their_planes_support_the_ball():
+    """``curvature`` is the Hessian on the inputs of the thrust-ball and speed rows (central
+    differences of the rows' Jacobian, exact for these quadratic rows); ``_support`` gives the
+    tangent plane at the sphere's nearest point: every point of the sphere satisfies it, the
+    nearest one with equality."""
+    from satenv.baselines.tube_rdmpc import _support
+
+    env = parallel_env(terminate_on_collision=False)
+    pol = TubeRDMPC(env, solver="rti")
+    nlp = pol.nlp
+    k = nlp.slot_sizes[0]
+    params = np.zeros(nlp._fixed + k * nlp._per_slot)
+    params[:6] = [100.0, -50.0, 20.0, 1.0, -0.5, 0.2]
+    params[6:9] = [300.0, 200.0, -100.0]
+    rng = np.random.default_rng(0)
+    w = np.zeros(nlp.n_w)
+    w[:3 * nlp.N] = rng.uniform(-0.5, 0.5, 3 * nlp.N)
+    lin = nlp._buffered("lin", k, 0)
+    convex, step, cols = nlp.convex_rows(k), 1e-3, 3 * nlp.N
+    fd = np.empty((convex.size, cols, cols))
+    for j in range(cols):
+        e = np.zeros(nlp.n_w)
+        e[j] = step
+        fd[:, :, j] = (lin(w + e, params)[3][convex, :cols] - lin(w - e, params)[3][convex, :cols]) / (2 * step)
+    np.testing.assert_allclose(nlp.curvature, fd, atol=1e-8 * max(1.0, np.abs(fd).max()))
+    y, r = rng.normal(size=3), 2.0
+    g = np.array([y @ y / r**2 - 1.0])
+    jac = 2.0 * y / r**2
+    sphere = rng.normal(size=(200, 3))
+    sphere = r * sphere / np.linalg.norm(sphere, axis=1, keepdims=True)
+    assert np.all((sphere - y) @ jac <= _support(g)[0] + 1e-12)
+    assert (r * y / np.linalg.norm(y) - y) @ jac == pytest.approx(_support(g)[0])
