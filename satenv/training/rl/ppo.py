@@ -67,7 +67,17 @@ import torch
 
 from satenv.training import runfolder
 from satenv.training.config import RunConfig, check_int, check_number, config_from_json
-from satenv.training.rl.nets import ActorCritic, export_actor
+from satenv.training.rl.nets import (
+    ActorCritic,
+    FlatArrays,
+    adam_step,
+    export_actor,
+    from_copies,
+    mlp_backward,
+    mlp_forward,
+    scratch,
+    to_copies,
+)
 
 __all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "train"]
 
@@ -200,6 +210,9 @@ class Run:
         self.net = ActorCritic(self.obs_dim, self.act_dim, self.state_dim + self.obs_dim, cfg.net_arch,
                                m if cfg.variant == "ippo" else 1, cfg.init_std)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
+        self.params = FlatArrays(self.net, self.net.flat.numpy())   # numpy views of the parameters
+        self.moments = (torch.zeros_like(self.net.flat), torch.zeros_like(self.net.flat))   # Adam's, flat
+        self.buffers: dict[str, np.ndarray] = {}         # the update's work arrays (nets.scratch)
         self.gen = torch.Generator().manual_seed(cfg.seed)
         self.norm = Normalizers(self.obs_dim, max(self.state_dim, 1), cfg.num_envs, m)
         self.steps = 0                                   # agent-steps done
@@ -238,23 +251,40 @@ def _norm_obs(run: Run, obs: np.ndarray) -> np.ndarray:
     return run.norm.obs.normalize(obs, run.cfg.clip_obs) if run.cfg.norm_obs else obs.astype(np.float32)
 
 
+def _actor_mean(run: Run, obs: np.ndarray) -> np.ndarray:
+    """The policy's mean action ``(n, M, A)`` on normalised observations ``(n, M, obs)`` (numpy,
+    the same function as ``run.net.mean``)."""
+    p = run.params
+    out = mlp_forward(p.actor_w, p.actor_b, to_copies(obs, len(p.log_std)))[-1]
+    return from_copies(np.tanh(out, out=out), obs.shape[0])
+
+
+def _value(run: Run, critic_obs: np.ndarray, tag: str | None = None) -> np.ndarray:
+    """The critic's ``V (n, M)`` on its inputs ``(n, M, C)`` (numpy, the same as ``run.net.value``;
+    ``tag``: its hidden activations in the run's work arrays of that tag)."""
+    p = run.params
+    x = to_copies(critic_obs, len(p.log_std))
+    out = mlp_forward(p.critic_w, p.critic_b, x, run.buffers if tag else None, tag or "")[-1]
+    return from_copies(out, critic_obs.shape[0])[..., 0]
+
+
 def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
-    """``n_steps`` decisions of every copy with the current policy; returns the rollout (torch
-    tensors ``(T, B, M, ...)``) and the finished episodes' returns and successes."""
-    cfg, vec, net = run.cfg, run.vec, run.net
+    """``n_steps`` decisions of every copy with the current policy; returns the rollout (numpy
+    float32 arrays ``(T, B, M, ...)``) and the finished episodes' returns and successes."""
+    cfg, vec = run.cfg, run.vec
     T, (B, M) = cfg.n_steps, run.obs.shape[:2]
     scenario = vec.scenario
     raw_obs = np.empty((T, B, M, run.obs_dim), dtype=np.float32)
     critic_obs = np.empty((T, B, M, run.state_dim + run.obs_dim), dtype=np.float32)
-    actions = torch.empty(T, B, M, run.act_dim)
-    logp = torch.empty(T, B, M)
+    actions = np.empty((T, B, M, run.act_dim), dtype=np.float32)
+    logp = np.empty((T, B, M), dtype=np.float32)
     rewards = np.empty((T, B, M), dtype=np.float32)
     dones = np.empty((T, B), dtype=bool)
     boot: list[tuple[int, np.ndarray, np.ndarray]] = []   # (t, truncated copies, their critic input)
     states = np.empty((T, B, run.state_dim)) if run.central else None
     finished: dict[str, list[float]] = {"return": [], "success": [], "length": [], "cost": []}
-    std = run.net.log_std.detach().exp()                  # (K, A)
-    log_norm = (run.net.log_std.detach().sum(-1) + 0.5 * run.act_dim * math.log(2 * math.pi))   # (K,)
+    std = np.exp(run.params.log_std)                      # (K, A)
+    log_norm = run.params.log_std.sum(-1) + np.float32(0.5 * run.act_dim * math.log(2 * math.pi))   # (K,)
     obs = run.obs
     for t in range(T):
         t0 = time.perf_counter()
@@ -264,12 +294,10 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
         if run.central:
             states[t] = state
         critic_obs[t] = _critic_in(run, obs_n, state)
-        with torch.no_grad():
-            mean = net.mean(torch.from_numpy(obs_n))
-            noise = torch.randn(mean.shape, generator=run.gen)
-            actions[t] = mean + std * noise
-            logp[t] = -0.5 * (noise * noise).sum(-1) - log_norm
-        act = actions[t].numpy().clip(-1.0, 1.0)
+        noise = torch.randn((B, M, run.act_dim), generator=run.gen).numpy()
+        np.add(_actor_mean(run, obs_n), std * noise, out=actions[t])
+        logp[t] = -0.5 * (noise * noise).sum(-1) - log_norm
+        act = actions[t].clip(-1.0, 1.0)
         t1 = time.perf_counter()
         obs, rew, term, trunc, info = vec.step(act)
         t2 = time.perf_counter()
@@ -313,76 +341,137 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
         run.norm.obs.update(raw_obs)
     if run.central:
         run.norm.state.update(states)
-    return {"critic_obs": torch.from_numpy(critic_obs), "actions": actions,
-            "logp": logp, "rewards": torch.from_numpy(rewards), "dones": torch.from_numpy(dones),
-            "boot": boot, "last": torch.from_numpy(last), "finished": finished}
+    return {"critic_obs": critic_obs, "actions": actions, "logp": logp, "rewards": rewards, "dones": dones,
+            "boot": boot, "last": last, "finished": finished}
 
 
 # --------------------------------------------------------------------------- 5. GAE and the update
-def gae(rewards: torch.Tensor, values: torch.Tensor, last_value: torch.Tensor, dones: torch.Tensor,
-        gamma: float, lam: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Advantages and returns ``(T, B, M)``; ``dones (T, B)`` end a copy's episode after step t
-    (a truncation's bootstrap is already in its reward)."""
-    adv = torch.zeros_like(rewards)
-    running = torch.zeros_like(last_value)
+def gae(rewards: np.ndarray, values: np.ndarray, last_value: np.ndarray, dones: np.ndarray,
+        gamma: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Advantages and returns ``(T, B, M)`` (numpy float32); ``dones (T, B)`` end a copy's episode
+    after step t (a truncation's bootstrap is already in its reward)."""
+    adv = np.empty_like(rewards)
+    live = (~dones)[..., None].astype(rewards.dtype)      # (T, B, 1)
+    running = np.zeros_like(last_value)
     next_value = last_value
     for t in range(rewards.shape[0] - 1, -1, -1):
-        live = (~dones[t]).float()[:, None]
-        delta = rewards[t] + gamma * next_value * live - values[t]
-        running = delta + gamma * lam * live * running
+        delta = rewards[t] + gamma * next_value * live[t] - values[t]
+        running = delta + gamma * lam * live[t] * running
         adv[t] = running
         next_value = values[t]
     return adv, adv + values
 
 
+def _adam_moments(run: Run) -> tuple[np.ndarray, np.ndarray, int]:
+    """Adam's flat first and second moments (numpy views of ``run.moments``) and its step count.
+    ``run.opt.state`` (what a checkpoint saves and restores) holds per-parameter views of them; a
+    state restored from a checkpoint is copied in first."""
+    flat = run.net.flat
+    steps = 0
+    for p in run.net.parameters():
+        start = (p.data_ptr() - flat.data_ptr()) // flat.element_size()
+        m, v = (buf[start:start + p.numel()].view(p.shape) for buf in run.moments)
+        state = run.opt.state.get(p)
+        if state:
+            steps = int(float(state["step"]))
+            if state["exp_avg"].data_ptr() != m.data_ptr():
+                m.copy_(state["exp_avg"])
+                v.copy_(state["exp_avg_sq"])
+        run.opt.state[p] = {"step": torch.tensor(float(steps)), "exp_avg": m, "exp_avg_sq": v}
+    return run.moments[0].numpy(), run.moments[1].numpy(), steps
+
+
+def _set_adam_steps(run: Run, steps: int) -> None:
+    for state in run.opt.state.values():
+        state["step"].fill_(float(steps))
+
+
+def _ppo_grad(run: Run, grads: FlatArrays, cin: np.ndarray, actions: np.ndarray, old_logp: np.ndarray,
+              adv: np.ndarray, returns: np.ndarray) -> tuple[float, float, float, float]:
+    """One minibatch of ``rows`` copies-steps (``cin (rows, M, C)``, ``actions (rows, M, A)``, the
+    rest ``(rows, M)``): write the clipped-PPO loss's gradient into ``grads``; returns the policy
+    loss, value loss, clip fraction and approximate KL. The loss is
+
+        pg + vf_coef * 0.5 * mean((V - returns)^2) - ent_coef * entropy,
+        pg = mean(max(-a * ratio, -a * clip(ratio, 1 - clip_range, 1 + clip_range)))
+
+    with ``a`` the advantages normalised over the minibatch; forward and backward by hand in numpy
+    (tests/test_lean_nets.py checks the gradient against autograd)."""
+    cfg, p = run.cfg, run.params
+    k = len(p.log_std)
+    x = to_copies(cin, k)                                  # (K, R, C); the actor reads the observation part
+    acts = mlp_forward(p.actor_w, p.actor_b, x[..., run.state_dim:], run.buffers, "actor")
+    mean = np.tanh(acts[-1])                               # (K, R, A)
+    log_std = p.log_std[:, None, :]
+    inv_std = np.exp(-log_std)
+    z = (to_copies(actions, k) - mean) * inv_std
+    logp = -0.5 * (z * z).sum(-1) - log_std.sum(-1) - np.float32(0.5 * run.act_dim * math.log(2 * math.pi))
+    log_ratio = logp - to_copies(old_logp[..., None], k)[..., 0]
+    ratio = np.exp(log_ratio)                              # (K, R)
+    a = to_copies(adv[..., None], k)[..., 0]
+    a = (a - a.mean()) / (a.std(ddof=1) + np.float32(1e-8))
+    n = a.size
+    unclipped, clipped = -a * ratio, -a * np.clip(ratio, 1 - cfg.clip_range, 1 + cfg.clip_range)
+    pg = float(np.maximum(unclipped, clipped).mean())
+    d_logp = np.where(unclipped >= clipped, -a, 0.0).astype(np.float32) * ratio / np.float32(n)
+    grads.log_std[:] = np.einsum("kr,kra->ka", d_logp, z * z - 1) - np.float32(cfg.ent_coef / k)
+    d_out = (d_logp[..., None] * z * inv_std) * (1 - mean * mean)
+    mlp_backward(p.actor_w, acts, d_out, grads.actor_w, grads.actor_b, run.buffers, "actor")
+    acts = mlp_forward(p.critic_w, p.critic_b, x, run.buffers, "critic")
+    diff = acts[-1] - to_copies(returns[..., None], k)     # (K, R, 1)
+    v_loss = 0.5 * float(np.mean(diff * diff))
+    mlp_backward(p.critic_w, acts, diff * np.float32(cfg.vf_coef / n), grads.critic_w, grads.critic_b, run.buffers,
+                 "critic")
+    return pg, v_loss, float(np.mean(np.abs(ratio - 1) > cfg.clip_range)), float(np.mean((ratio - 1) - log_ratio))
+
+
+def _rows(run: Run, name: str, x: np.ndarray, mb: np.ndarray) -> np.ndarray:
+    """``x[mb]`` into the run's work array ``name`` (:func:`satenv.training.rl.nets.scratch`)."""
+    return np.take(x, mb, axis=0, out=scratch(run.buffers, f"mb_{name}", (len(mb), *x.shape[1:])))
+
+
+def _clip_grad_norm(grad: np.ndarray, max_norm: float) -> None:
+    """``torch.nn.utils.clip_grad_norm_`` on the flat gradient."""
+    total = math.sqrt(float(np.dot(grad, grad)))
+    grad *= np.float32(min(max_norm / (total + 1e-6), 1.0))
+
+
 def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[str, float]:
-    """GAE, then ``n_epochs`` passes of clipped-PPO minibatch steps over the iteration's data."""
-    cfg, net = run.cfg, run.net
+    """GAE, then ``n_epochs`` passes of clipped-PPO minibatch steps over the iteration's data (the
+    gradient by :func:`_ppo_grad`, the step by Adam over the flat parameters)."""
+    cfg = run.cfg
     t0 = time.perf_counter()
     T, B, M = batch["rewards"].shape
-    rewards = batch["rewards"].clone()
-    with torch.no_grad():
-        values = net.value(batch["critic_obs"].reshape(T * B, M, -1)).reshape(T, B, M)
-        last_value = net.value(batch["last"])
-        for t, copies, cin in batch["boot"]:
-            rewards[t, torch.from_numpy(copies)] += run.gamma * net.value(torch.from_numpy(cin))
-    adv, returns = gae(rewards, values, last_value, batch["dones"], run.gamma, cfg.gae_lambda)
     n = T * B
     cin = batch["critic_obs"].reshape(n, M, -1)
-    obs = cin[..., run.state_dim:]                 # the normalised observations the actor saw
+    rewards = batch["rewards"].copy()
+    values = _value(run, cin, "values").reshape(T, B, M)
+    for t, copies, c in batch["boot"]:
+        rewards[t, copies] += run.gamma * _value(run, c)
+    adv, returns = gae(rewards, values, _value(run, batch["last"]), batch["dones"], run.gamma, cfg.gae_lambda)
     actions, old_logp = batch["actions"].reshape(n, M, -1), batch["logp"].reshape(n, M)
     adv, returns = adv.reshape(n, M), returns.reshape(n, M)
     rows = max(1, min(n, cfg.minibatch_size // M))
-    stats = {"policy_loss": 0.0, "value_loss": 0.0, "clip_fraction": 0.0, "approx_kl": 0.0}
+    data = {"cin": cin, "actions": actions, "old_logp": old_logp, "adv": adv, "returns": returns}
+    grads = FlatArrays(run.net, np.zeros_like(run.params.buf))
+    exp_avg, exp_avg_sq, steps = _adam_moments(run)
+    group = run.opt.param_groups[0]
+    stats = np.zeros(4)                                    # policy loss, value loss, clip fraction, approx KL
     count = 0
     for _ in range(cfg.n_epochs):
-        perm = torch.randperm(n, generator=run.gen)
+        perm = torch.randperm(n, generator=run.gen).numpy()
         for start in range(0, n - rows + 1, rows):
             mb = perm[start:start + rows]
-            mean = net.mean(obs[mb])
-            log_std = net.log_std                                    # (K, A), broadcast over rows
-            z = (actions[mb] - mean) / log_std.exp()
-            logp = -0.5 * (z * z).sum(-1) - log_std.sum(-1) - 0.5 * run.act_dim * math.log(2 * math.pi)
-            log_ratio = logp - old_logp[mb]
-            ratio = log_ratio.exp()
-            a = adv[mb]
-            a = (a - a.mean()) / (a.std() + 1e-8)
-            pg = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_range, 1 + cfg.clip_range)).mean()
-            v_loss = 0.5 * (net.value(cin[mb]) - returns[mb]).pow(2).mean()
-            entropy = (log_std.sum(-1) + 0.5 * run.act_dim * (1 + math.log(2 * math.pi))).mean()
-            loss = pg + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
-            run.opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
-            run.opt.step()
-            with torch.no_grad():
-                stats["policy_loss"] += float(pg)
-                stats["value_loss"] += float(v_loss)
-                stats["clip_fraction"] += float(((ratio - 1).abs() > cfg.clip_range).float().mean())
-                stats["approx_kl"] += float(((ratio - 1) - log_ratio).mean())
+            stats += _ppo_grad(run, grads, *(_rows(run, name, x, mb) for name, x in data.items()))
+            _clip_grad_norm(grads.buf, cfg.max_grad_norm)
+            steps += 1
+            adam_step(run.params.buf, grads.buf, exp_avg, exp_avg_sq, steps, group["lr"], group["betas"], group["eps"])
             count += 1
+    _set_adam_steps(run, steps)
     timers["update"] += time.perf_counter() - t0
-    return {k: v / max(count, 1) for k, v in stats.items()} | {"std": float(net.log_std.detach().exp().mean())}
+    names = ("policy_loss", "value_loss", "clip_fraction", "approx_kl")
+    return {k: float(v) / max(count, 1) for k, v in zip(names, stats, strict=True)} | {
+        "std": float(np.exp(run.params.log_std).mean())}
 
 
 # --------------------------------------------------------------------------- 6. checkpoints
