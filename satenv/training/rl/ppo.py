@@ -274,7 +274,7 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
     cfg, vec = run.cfg, run.vec
     T, (B, M) = cfg.n_steps, run.obs.shape[:2]
     scenario = vec.scenario
-    raw_obs = np.empty((T, B, M, run.obs_dim), dtype=np.float32)
+    raw_obs = np.empty((T, B, M, run.obs_dim), dtype=np.float32) if cfg.norm_obs else None
     critic_obs = np.empty((T, B, M, run.state_dim + run.obs_dim), dtype=np.float32)
     actions = np.empty((T, B, M, run.act_dim), dtype=np.float32)
     logp = np.empty((T, B, M), dtype=np.float32)
@@ -285,18 +285,24 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
     finished: dict[str, list[float]] = {"return": [], "success": [], "length": [], "cost": []}
     std = np.exp(run.params.log_std)                      # (K, A)
     log_norm = run.params.log_std.sum(-1) + np.float32(0.5 * run.act_dim * math.log(2 * math.pi))   # (K,)
+    noise = torch.randn((T, B, M, run.act_dim), generator=run.gen).numpy()   # the iteration's draws at once
+    np.subtract(-0.5 * (noise * noise).sum(-1), log_norm, out=logp)
+    np.multiply(noise, std, out=actions)
     obs = run.obs
     for t in range(T):
         t0 = time.perf_counter()
-        raw_obs[t] = obs
-        obs_n = _norm_obs(run, obs)
-        state = vec.state() if run.central else None
-        if run.central:
-            states[t] = state
-        critic_obs[t] = _critic_in(run, obs_n, state)
-        noise = torch.randn((B, M, run.act_dim), generator=run.gen).numpy()
-        np.add(_actor_mean(run, obs_n), std * noise, out=actions[t])
-        logp[t] = -0.5 * (noise * noise).sum(-1) - log_norm
+        if raw_obs is not None:
+            raw_obs[t] = obs
+        if run.central or cfg.norm_obs:
+            obs_n = _norm_obs(run, obs)
+            state = vec.state() if run.central else None
+            if run.central:
+                states[t] = state
+            critic_obs[t] = _critic_in(run, obs_n, state)
+        else:                                            # the critic's input is the observation itself
+            obs_n = critic_obs[t]
+            obs_n[...] = obs
+        actions[t] += _actor_mean(run, obs_n)
         act = actions[t].clip(-1.0, 1.0)
         t1 = time.perf_counter()
         obs, rew, term, trunc, info = vec.step(act)
@@ -374,9 +380,10 @@ def _adam_moments(run: Run) -> tuple[np.ndarray, np.ndarray, int]:
         state = run.opt.state.get(p)
         if state:
             steps = int(float(state["step"]))
-            if state["exp_avg"].data_ptr() != m.data_ptr():
-                m.copy_(state["exp_avg"])
-                v.copy_(state["exp_avg_sq"])
+            if state["exp_avg"].data_ptr() == m.data_ptr():
+                continue
+            m.copy_(state["exp_avg"])
+            v.copy_(state["exp_avg_sq"])
         run.opt.state[p] = {"step": torch.tensor(float(steps)), "exp_avg": m, "exp_avg_sq": v}
     return run.moments[0].numpy(), run.moments[1].numpy(), steps
 
