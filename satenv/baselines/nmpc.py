@@ -76,7 +76,7 @@ decision (the first, or a new waypoint with the arc guess) is a full ipopt solve
 and ipopt solves the decision from the same shifted plan. ``info`` adds ``"qp_ms"`` (every QP step),
 ``"rti_steps"`` and ``"nlp_solves"``. At a KKT point of the NLP the QP's step is zero
 (``tests/test_nmpc_rti.py``); on §5.2 (seed 900000, 1200 steps) it flies the same episode as ipopt
-to within 0.02 % in RMSE, with 2.5 % less delta-v and a 3.5 % smaller final error, at 1.4 ms per
+to within 0.02 % in RMSE, with 2.5 % less delta-v and a 3.5 % smaller final error, at 1.5 ms per
 spacecraft decision against ipopt's 9 (``satenv.bench.perf.experts.closed_loop_vs_ipopt``).
 """
 

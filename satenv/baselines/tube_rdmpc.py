@@ -91,7 +91,7 @@ stay at zero, and the Hessian is the cost's exact (constant) one plus the convex
 weighted by their multipliers of the satellite's last QP (moved one stage on): the Hessian of the
 Lagrangian but for the nonconvex rows. Without that curvature the QP sees the thrust ball and the
 speed bound as planes and slides along them, and the plans end up away from the NLP's optimum along
-its flat directions (+3 to +6 % delta-v against ipopt in closed loop on li2022 case 1). Every row
+its flat directions (+3 to +5 % delta-v against ipopt in closed loop on li2022 case 1). Every row
 the QP's point violates also gets its linearisation there, kept beside the first, and the QP is
 solved again (``CUT_ROUNDS``); the inputs are then scaled onto the ball. The point is used only if
 the exact NLP's own rows hold at it to ``NLP_CONSTRAINT_TOL``; else the QP is re-linearised there
