@@ -41,20 +41,21 @@ def test_parameters_are_views_of_the_flat_buffer():
     assert torch.equal(flat, other.flat) and math.isclose(float(net.log_std.detach().exp().mean()), 0.5, rel_tol=1e-6)
 
 
-@pytest.mark.parametrize("copies", [1, 4])
-def test_numpy_forward_is_the_torch_forward(copies):
+@pytest.mark.parametrize(("copies", "rows"), [(1, 50), (4, 50), (1, 1024), (4, 1024)])
+def test_numpy_forward_is_the_torch_forward(copies, rows):
+    """Small batches and large ones (the biases added in tiles: nets._add_bias)."""
     torch.manual_seed(0)
     net = nets.ActorCritic(36, 3, 40, (64, 32), copies, 0.25)
     arrays = nets.FlatArrays(net, net.flat.numpy())
     arrays.buf[:] = np.random.default_rng(1).normal(0.0, 0.3, arrays.buf.shape)
-    x = np.random.default_rng(2).normal(size=(50, 4, 40)).astype(np.float32)
+    x = np.random.default_rng(2).normal(size=(rows, 4, 40)).astype(np.float32)
     with torch.no_grad():
         mean = net.mean(torch.from_numpy(x[..., 4:])).numpy()
         value = net.value(torch.from_numpy(x)).numpy()
     out = nets.mlp_forward(arrays.actor_w, arrays.actor_b, nets.to_copies(x[..., 4:], copies), {}, "a")[-1]
-    assert np.allclose(nets.from_copies(np.tanh(out), 50), mean, rtol=1e-5, atol=1e-6)
+    assert np.allclose(nets.from_copies(np.tanh(out), rows), mean, rtol=1e-5, atol=1e-6)
     out = nets.mlp_forward(arrays.critic_w, arrays.critic_b, nets.to_copies(x, copies))[-1]
-    assert np.allclose(nets.from_copies(out, 50)[..., 0], value, rtol=1e-5, atol=1e-6)
+    assert np.allclose(nets.from_copies(out, rows)[..., 0], value, rtol=1e-5, atol=1e-6)
 
 
 def _autograd_loss(run: ppo.Run, cin, actions, old_logp, adv, returns) -> torch.Tensor:
@@ -73,12 +74,13 @@ def _autograd_loss(run: ppo.Run, cin, actions, old_logp, adv, returns) -> torch.
     return pg + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
 
 
-@pytest.mark.parametrize("variant", ["ppo", "ippo", "mappo"])
-def test_ppo_gradient_equals_autograd(variant):
+@pytest.mark.parametrize(("variant", "rows"), [("ppo", 300), ("ippo", 300), ("mappo", 300), ("ppo", 1024),
+                                               ("ippo", 1024)])
+def test_ppo_gradient_equals_autograd(variant, rows):
     run = _run(variant, ent_coef=0.01)
     _perturb(run, 3)
     rng = np.random.default_rng(4)
-    rows, m = 300, run.vec.n_agents
+    m = run.vec.n_agents
     cin = rng.normal(size=(rows, m, run.state_dim + run.obs_dim)).astype(np.float32)
     actions = rng.normal(0.0, 0.5, size=(rows, m, run.act_dim)).astype(np.float32)
     with torch.no_grad():   # old log-probabilities near the current ones: some ratios inside the clip range
@@ -95,7 +97,7 @@ def test_ppo_gradient_equals_autograd(variant):
     pg, v_loss, clip_fraction, _ = ppo._ppo_grad(run, grads, cin, actions, old_logp, adv, returns)
     assert 0.05 < clip_fraction < 0.95                 # both branches of the clip are exercised
     assert math.isclose(pg + run.cfg.vf_coef * v_loss - run.cfg.ent_coef * (
-        float(run.net.log_std.sum(-1).mean()) + 0.5 * run.act_dim * (1 + math.log(2 * math.pi))),
+        float(run.net.log_std.detach().sum(-1).mean()) + 0.5 * run.act_dim * (1 + math.log(2 * math.pi))),
         float(loss), rel_tol=1e-5)
     # the parameters in order of net.parameters() are contiguous in the flat buffer: the same order
     assert np.allclose(grads.buf, expected, rtol=1e-5, atol=1e-5 * np.abs(expected).max())

@@ -175,6 +175,22 @@ def scratch(buffers: dict[str, np.ndarray] | None, key: str, shape: tuple[int, .
     return buf
 
 
+BIAS_TILE = 16
+"""Rows per bias add in :func:`_add_bias`."""
+
+
+def _add_bias(z: np.ndarray, b: np.ndarray) -> None:
+    """``z (K, R, out) += b (K, 1, out)`` in place, ``BIAS_TILE`` rows at a time (numpy's broadcast
+    over rows of 64 floats ran at half the speed of a same-shape add on 4,096 rows; measured; small
+    arrays add directly)."""
+    k, r, n = z.shape
+    if r % BIAS_TILE or z.size < 65536:
+        z += b
+        return
+    rows = z.reshape(k, r // BIAS_TILE, BIAS_TILE * n)
+    np.add(rows, np.tile(b, (1, 1, BIAS_TILE)), out=rows)
+
+
 def mlp_forward(ws: list[np.ndarray], bs: list[np.ndarray], x: np.ndarray,
                 buffers: dict[str, np.ndarray] | None = None, tag: str = "") -> list[np.ndarray]:
     """The activations ``[x, h1, ..., out]`` of :class:`AgentMLP` on ``x (K, R, in)`` (numpy float32;
@@ -185,7 +201,7 @@ def mlp_forward(ws: list[np.ndarray], bs: list[np.ndarray], x: np.ndarray,
     for i, (w, b) in enumerate(zip(ws, bs, strict=True)):
         shape = (*x.shape[:-1], w.shape[-1])
         z = np.matmul(acts[-1], w, out=scratch(buffers if i < last else None, f"{tag}h{i}", shape))
-        z += b
+        _add_bias(z, b)
         if i < last:
             np.tanh(z, out=z)
         acts.append(z)

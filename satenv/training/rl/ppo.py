@@ -433,8 +433,9 @@ def _ppo_grad(run: Run, grads: FlatArrays, cin: np.ndarray, actions: np.ndarray,
 
 
 def _rows(run: Run, name: str, x: np.ndarray, mb: np.ndarray) -> np.ndarray:
-    """``x[mb]`` into the run's work array ``name`` (:func:`satenv.training.rl.nets.scratch`)."""
-    return np.take(x, mb, axis=0, out=scratch(run.buffers, f"mb_{name}", (len(mb), *x.shape[1:])))
+    """``x[mb]`` into the run's work array ``name`` (:func:`satenv.training.rl.nets.scratch`; ``mb`` from a
+    permutation, always in range: ``mode="clip"`` spares numpy's bounds-checked copy through a buffer)."""
+    return np.take(x, mb, axis=0, out=scratch(run.buffers, f"mb_{name}", (len(mb), *x.shape[1:])), mode="clip")
 
 
 def _clip_grad_norm(grad: np.ndarray, max_norm: float) -> None:
