@@ -49,10 +49,11 @@ EXPERTS: dict[str, str] = {"joint_platoon_mpc": "satenv.baselines.experts:JointP
 expert name is a baseline of :data:`BASELINES`. :data:`satenv.tasks.SYSTEMS` names each system's expert."""
 
 
-EXPERT_OPTIONS: dict[str, dict[str, Any]] = {"nmpc": {"solver": "rti"}}
+EXPERT_OPTIONS: dict[str, dict[str, Any]] = {"nmpc": {"solver": "rti"}, "replanning_tube_rdmpc": {"solver": "rti"}}
 """Default options of an expert built by :func:`make_expert` (the call's options replace them): the
-NMPC labels with its real-time iteration, one QP per decision, whose closed loop is within 2 % of
-ipopt's on the reproduction's problems (``python -m satenv.bench.perf.experts``)."""
+NMPC labels with its real-time iteration and the cluster's re-planning tube-RDMPC by sequential
+convexification, one QP per decision each, whose closed loops are within 2 % of ipopt's on the
+reproduction's problems (``python -m satenv.bench.perf.experts``)."""
 
 
 class ResolveError(BaselineError):
