@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba
 import numpy as np
 import torch
 from torch import nn
@@ -208,6 +209,15 @@ def mlp_forward(ws: list[np.ndarray], bs: list[np.ndarray], x: np.ndarray,
     return acts
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _times_tanh_slope(grad: np.ndarray, y: np.ndarray) -> None:
+    """``grad *= 1 - y * y`` (tanh's derivative from its output ``y``) in one pass over flat float32
+    arrays (numpy took three)."""
+    one = np.float32(1.0)
+    for i in range(grad.size):
+        grad[i] *= one - y[i] * y[i]
+
+
 def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray, gws: list[np.ndarray],
                  gbs: list[np.ndarray], buffers: dict[str, np.ndarray] | None = None, tag: str = "") -> None:
     """Write into ``gws`` / ``gbs`` the gradients of the weights and biases given ``grad``, the
@@ -221,10 +231,7 @@ def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray,
         if i:
             h = acts[i]
             grad = np.matmul(grad, ws[i].transpose(0, 2, 1), out=scratch(buffers, f"{tag}g{i}", h.shape))
-            slope = scratch(buffers, f"{tag}s{i}", h.shape)
-            np.multiply(h, h, out=slope)
-            np.subtract(1.0, slope, out=slope)            # tanh' from its output
-            grad *= slope
+            _times_tanh_slope(grad.reshape(-1), h.reshape(-1))
 
 
 def adam_step(param: np.ndarray, grad: np.ndarray, exp_avg: np.ndarray, exp_avg_sq: np.ndarray, step: int,
