@@ -230,7 +230,8 @@ def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray,
         np.matmul(ones, grad, out=gbs[i])                 # the sum over rows, by BLAS
         if i:
             h = acts[i]
-            grad = np.matmul(grad, ws[i].transpose(0, 2, 1), out=scratch(buffers, f"{tag}g{i}", h.shape))
+            back = np.multiply if grad.shape[-1] == 1 else np.matmul   # an outer product: 8x faster multiplied
+            grad = back(grad, ws[i].transpose(0, 2, 1), out=scratch(buffers, f"{tag}g{i}", h.shape))
             _times_tanh_slope(grad.reshape(-1), h.reshape(-1))
 
 
