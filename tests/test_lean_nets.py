@@ -74,9 +74,13 @@ def _autograd_loss(run: ppo.Run, cin, actions, old_logp, adv, returns) -> torch.
     return pg + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
 
 
-@pytest.mark.parametrize(("variant", "rows"), [("ppo", 300), ("ippo", 300), ("mappo", 300), ("ppo", 1024),
-                                               ("ippo", 1024)])
-def test_ppo_gradient_equals_autograd(variant, rows):
+@pytest.mark.parametrize(("variant", "rows", "onednn"), [("ppo", 300, True), ("ippo", 300, True), ("mappo", 300, True),
+                                                         ("ppo", 1024, True), ("ippo", 1024, True), ("ppo", 300, False),
+                                                         ("mappo", 1024, False)])
+def test_ppo_gradient_equals_autograd(variant, rows, onednn, monkeypatch):
+    """Both product paths: oneDNN's (nets.LINEAR, where this torch has it) and numpy's."""
+    if not onednn:
+        monkeypatch.setattr(nets, "LINEAR", None)
     run = _run(variant, ent_coef=0.01)
     _perturb(run, 3)
     rng = np.random.default_rng(4)
@@ -102,6 +106,20 @@ def test_ppo_gradient_equals_autograd(variant, rows):
     # the parameters in order of net.parameters() are contiguous in the flat buffer: the same order
     assert np.allclose(grads.buf, expected, rtol=1e-5, atol=1e-5 * np.abs(expected).max())
     assert np.linalg.norm(grads.buf - expected) <= 1e-5 * np.linalg.norm(expected)
+
+
+def test_onednn_products_equal_numpy():
+    if nets.LINEAR is None:
+        pytest.skip("this torch build has no oneDNN linear")
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=(1, 2048, 40)).astype(np.float32)
+    w_t, b = rng.normal(size=(1, 64, 40)).astype(np.float32), rng.normal(size=(1, 1, 64)).astype(np.float32)
+    expected = x @ w_t.transpose(0, 2, 1) + b
+    for operand in (x, x[..., :36], np.asfortranarray(x[0])[None]):     # contiguous or not
+        got = nets._times_transposed(operand, w_t[..., :operand.shape[-1]], b)
+        assert np.allclose(got, operand @ w_t[..., :operand.shape[-1]].transpose(0, 2, 1) + b, rtol=1e-5, atol=1e-5)
+    assert np.allclose(nets._times_transposed(x, w_t.transpose(0, 2, 1).copy().transpose(0, 2, 1), b), expected,
+                       rtol=1e-5, atol=1e-5)
 
 
 def test_adam_step_is_torch_adam():
@@ -155,3 +173,16 @@ def test_update_equals_the_autograd_update():
     for p, q in zip(run.net.parameters(), ref_net.parameters(), strict=True):   # what a checkpoint saves
         assert float(run.opt.state[p]["step"]) == float(ref_opt.state[q]["step"])
         assert torch.allclose(run.opt.state[p]["exp_avg_sq"], ref_opt.state[q]["exp_avg_sq"], rtol=1e-4, atol=1e-12)
+
+
+def test_large_minibatches_are_deterministic():
+    """A seed fixes the run on the oneDNN path too (4,096-row minibatches; the tiny runs of
+    tests/test_lean_ppo.py stay below nets.LINEAR_MIN_ROWS)."""
+    flats = []
+    for _ in range(2):
+        vec = SatVectorEnv(tasks.get(TASK).make_env(), 64, autoreset=False)
+        run = ppo.Run(ppo.LeanConfig(task=TASK, num_envs=64, n_steps=32, n_epochs=2, minibatch_size=4096), vec, 0.99)
+        timers = {"env": 0.0, "forward": 0.0, "update": 0.0}
+        ppo.update(run, ppo.collect(run, timers), timers)
+        flats.append(run.net.flat.clone())
+    assert torch.equal(flats[0], flats[1])
