@@ -11,10 +11,12 @@ is inside the ``[-1, 1]`` thrust box) with a state-independent ``log_std``, and 
 The learner's hot path runs without autograd: every parameter of an :class:`ActorCritic` is a view
 of one flat float32 buffer (``net.flat``), :class:`FlatArrays` lays numpy views of the same layout
 over it (or over a gradient buffer), and :func:`mlp_forward` / :func:`mlp_backward` are the MLP's
-hand-written forward and backward in numpy float32 BLAS (the same function as the torch modules;
-tests/test_lean_nets.py checks them against autograd). :func:`adam_step` is torch's Adam over the
-flat buffers. Measured on the lean learner's minibatches (4,096 agent-steps, 64-64), autograd and
-the per-parameter optimizer spent more time in dispatch and small-tensor overhead than in matmuls.
+hand-written forward and backward on numpy float32 arrays (the same function as the torch modules;
+tests/test_lean_nets.py checks them against autograd): products by numpy's BLAS, or by torch's
+oneDNN linear for large batches of shared weights (:data:`LINEAR`). :func:`adam_step` is torch's
+Adam over the flat buffers. Measured on the lean learner's minibatches (4,096 agent-steps, 64-64),
+autograd and the per-parameter optimizer spent more time in dispatch and small-tensor overhead
+than in matmuls.
 """
 
 from __future__ import annotations
@@ -230,8 +232,8 @@ def _times_transposed(x: np.ndarray, w_t: np.ndarray, b: np.ndarray | None = Non
 def mlp_forward(ws: list[np.ndarray], bs: list[np.ndarray], x: np.ndarray,
                 buffers: dict[str, np.ndarray] | None = None, tag: str = "") -> list[np.ndarray]:
     """The activations ``[x, h1, ..., out]`` of :class:`AgentMLP` on ``x (K, R, in)`` (numpy float32;
-    ``out`` before any squashing, a new array). The hidden ones live in ``buffers`` (:func:`scratch`,
-    keys ``tag``...) until the next call with the same ``buffers`` and ``tag``."""
+    ``out`` before any squashing, a new array). Hidden ones made by numpy live in ``buffers``
+    (:func:`scratch`, keys ``tag``...) until the next call with the same ``buffers`` and ``tag``."""
     acts = [x]
     last = len(ws) - 1
     for i, (w, b) in enumerate(zip(ws, bs, strict=True)):
@@ -270,6 +272,7 @@ def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray,
                 grad = np.multiply(grad, ws[i].transpose(0, 2, 1), out=work)
             else:
                 grad = _times_transposed(grad, ws[i], out=work)
+            assert grad.flags.c_contiguous and h.flags.c_contiguous    # the flat views below alias them
             _times_tanh_slope(grad.reshape(-1), h.reshape(-1))
 
 
