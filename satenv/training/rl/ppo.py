@@ -389,6 +389,7 @@ def _adam_moments(run: Run) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 def _set_adam_steps(run: Run, steps: int) -> None:
+    """Adam's step count into every parameter's optimizer state (what a checkpoint saves)."""
     for state in run.opt.state.values():
         state["step"].fill_(float(steps))
 
