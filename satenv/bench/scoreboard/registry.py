@@ -49,7 +49,7 @@ POLICIES: dict[str, PolicySpec] = {p.name: p for p in [
                requires=("casadi", "daqp"), dry_run=False,
                description="tube-based robust DMPC (li2022) by sequential convexification: QPs, not the NLP"),
     PolicySpec("nmpc_rti", "satenv.baselines:NMPC", {"solver": "rti"}, baseline="nmpc", requires=("casadi", "daqp"),
-               dry_run=False, description="cooperative NMPC (pereira2022 §4) as real-time iteration: one QP a decision"),
+               dry_run=False, description="cooperative NMPC (pereira2022 §4) by real-time iteration: a QP a decision"),
     PolicySpec("cgmres", "satenv.baselines:CGMRES", baseline="cgmres", requires=("casadi",),
                dry_run=False, description="centralised C/GMRES NMPC (kannan2022)"),
 ]}
