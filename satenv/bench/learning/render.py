@@ -348,7 +348,10 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "policies drifting hundreds of metres; its current ones (the envs' own fixed observation scales, 10 epochs "
         "of 1,024) solved it there (module docstring of `satenv.training.rl.ppo`). Every row on this page ran at "
         "the current defaults; the grid under the first ones is kept in "
-        "`studies/reference_results/running_obs_norm_log.jsonl` and is not on this page.",
+        "`studies/reference_results/running_obs_norm_log.jsonl` and is not on this page. The first cells at the "
+        "current defaults ran with the training reward's earlier flat in-tolerance bonus (`satenv.rewards`: the "
+        "policies drifted to the tolerance's edge late in training); their log is "
+        "`studies/reference_results/flat_bonus_log.jsonl`, not on this page.",
         f"- **Evaluations**: {g['checkpoints']} per run, evenly spaced over the budget. Each flies the "
         f"deterministic policy on the rung's first {g['curve_test_seeds']} test seeds (the curves), the last "
         f"one on its first {g['final_test_seeds']} test seeds (the published result). No test seed chose "
