@@ -230,3 +230,14 @@ def test_the_commands_write_into_a_user_folder_unless_asked_to_update_the_record
     with pytest.raises(SystemExit) as exit_:
         cli.main(["results", "--update-published", "--out", str(tmp_path / "r.json")])
     assert exit_.value.code == 2 and "--update-published" in capsys.readouterr().err
+
+
+def test_render_writes_into_a_given_folder(tmp_path):
+    from satenv.bench.learning.cli import main
+    from satenv.bench.learning.datasets import MANIFEST
+
+    out = tmp_path / "page"
+    out.mkdir()
+    assert main(["render", "--results", str(RESULTS), "--out-dir", str(out)]) in (0, None)
+    page = render.render_page(json.loads(RESULTS.read_text()), render.read_manifest(MANIFEST))
+    assert (out / "reference_results.md").read_text() == page

@@ -145,7 +145,7 @@ def cmd_render(ns: argparse.Namespace) -> int:
 
 
 def parser() -> argparse.ArgumentParser:
-    from satenv.cliargs import int_at_least, new_parser, out_file
+    from satenv.cliargs import int_at_least, new_parser, out_file, out_folder
 
     p = new_parser("satenv results", __doc__)
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -180,7 +180,7 @@ def parser() -> argparse.ArgumentParser:
     d = command("render", "results.json -> docs page and figures", cmd_render)
     d.add_argument("--results", type=out_file, default=None,
                    help=f"the results file (default: {USER / 'results.json'})")
-    d.add_argument("--out-dir", type=out_file, default=None,
+    d.add_argument("--out-dir", type=out_folder, default=None,
                    help=f"where the page and its figures go (default: {USER})")
     published(d)
     return p
