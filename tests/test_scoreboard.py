@@ -240,7 +240,7 @@ def test_policy_fits_by_env_id():
             if specs.policy_fits(spec, env)}
     assert fits == {("zero", "platoon_v0"), ("zero", "cluster_v0"), ("random", "platoon_v0"),
                     ("random", "cluster_v0"), ("dmpc", "platoon_v0"), ("tube_rdmpc", "cluster_v0"),
-                    ("apf", "cluster_v0")}
+                    ("tube_rdmpc_rti", "cluster_v0"), ("apf", "cluster_v0")}
     trained = registry.discover_trained_policies()
     for spec in trained.values():                          # each fits the env of its env.json only
         assert spec.env_ids and all(specs.policy_fits(spec, env) == (i in spec.env_ids) for i, env in envs.items())

@@ -19,8 +19,8 @@ from satenv import baselines
 from satenv.baselines import BaselineError
 from satenv.baselines.base import MAX_SOLVE_TIME, guarded_solve, new_info
 
-STALL = 0.06
-LIMIT = 0.02
+STALL = 0.2
+LIMIT = 0.08   # a loaded 2-core machine took over 0.02 s for a real first DMPC solve
 
 
 def _slow(fn):
