@@ -53,7 +53,6 @@ expected wall time at a rate measured on a throwaway iteration.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import math
 import sys
@@ -604,29 +603,30 @@ def write_final(run: Run, out: Path, env: Any, wall: float) -> Path:
 
 
 def _probe_seconds(run: Run, steps: int = 4) -> tuple[float, float]:
-    """Seconds of one rollout step and of one minibatch update, measured on throwaway copies (the
-    run's networks, generators and env are not touched)."""
+    """Seconds of one rollout step and of one minibatch update, measured by the loop's own numpy
+    forward and minibatch step on throwaway copies (the run's weights, Adam moments, generators and
+    env are not touched; only its work arrays are reused)."""
     from satenv.vector import SatVectorEnv
 
-    cfg = run.cfg
+    cfg, m = run.cfg, run.vec.n_agents
     vec = SatVectorEnv(run.vec.env, cfg.num_envs, seed=cfg.seed, autoreset=True)
-    net = copy.deepcopy(run.net)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     obs, _ = vec.reset()
     t0 = time.perf_counter()
     for _ in range(steps):
-        with torch.no_grad():
-            act = net.mean(torch.from_numpy(obs.astype(np.float32))).numpy()
-        obs = vec.step(act)[0]
+        obs = vec.step(_actor_mean(run, obs.astype(np.float32)))[0]
     step_s = (time.perf_counter() - t0) / steps
-    rows = max(1, cfg.minibatch_size // vec.n_agents)
-    x = torch.zeros(rows, vec.n_agents, run.state_dim + run.obs_dim)
-    t0 = time.perf_counter()
-    for _ in range(3):
-        loss = net.mean(x[..., run.state_dim:]).sum() + net.value(x).sum()
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
+    rows = max(1, cfg.minibatch_size // m)
+    cin = np.zeros((rows, m, run.state_dim + run.obs_dim), np.float32)
+    actions, zeros = np.zeros((rows, m, run.act_dim), np.float32), np.zeros((rows, m), np.float32)
+    grads = FlatArrays(run.net, np.zeros_like(run.params.buf))
+    param, exp_avg, exp_avg_sq = run.params.buf.copy(), np.zeros_like(grads.buf), np.zeros_like(grads.buf)
+    group = run.opt.param_groups[0]
+    for k in range(4):   # the update's own minibatch step, on copies of the weights and moments
+        if k == 1:       # the first: one-time costs (compiled kernels, work arrays), untimed
+            t0 = time.perf_counter()
+        _ppo_grad(run, grads, cin, actions, zeros, zeros, zeros)
+        _clip_grad_norm(grads.buf, cfg.max_grad_norm)
+        adam_step(param, grads.buf, exp_avg, exp_avg_sq, k + 1, group["lr"], group["betas"], group["eps"])
     return step_s, (time.perf_counter() - t0) / 3
 
 
