@@ -262,14 +262,16 @@ def _grid(monkeypatch):
     from satenv.bench.learning import grid as G
     from satenv.bench.learning import trainers
 
-    def fake(run, checkpoint):
+    def fake(run, checkpoint, finish):
         from satenv import baselines
         for k, steps in enumerate(run.checkpoints):
             checkpoint(k, steps, 0.1 * (k + 1), lambda env: baselines.make("zero", env))
+        finish()
 
     monkeypatch.setattr(trainers, "train", fake)
     monkeypatch.setattr(G, "FINAL_TEST_SEEDS", 2)
     monkeypatch.setattr(G, "CURVE_TEST_SEEDS", 1)
+    monkeypatch.setattr(G, "VALIDATION_SEEDS", 1)
     return lambda log: G.Run(SYSTEM, "ppo", False, 0, str(log), budget_override=5000, rung="platoon-tplf30-rung1-near")
 
 
@@ -292,7 +294,7 @@ def _grid_result(log: Path, out: Path) -> str:
     return canonical(strip(data))
 
 
-@pytest.mark.parametrize("n, torn", [(1, False), (3, True), (5, True)])
+@pytest.mark.parametrize("n, torn", [(1, False), (3, True), (5, True), (5, False), (6, True)])
 def test_grid_killed_between_evaluations_resumes_to_the_same_results(tmp_path, monkeypatch, n, torn):
     from satenv.bench.learning import grid as G
     from satenv.bench.learning import runner
@@ -310,7 +312,7 @@ def test_grid_killed_between_evaluations_resumes_to_the_same_results(tmp_path, m
         runner.read_log(log, repair=True)                       # what the same `satenv results run` does first
     runner.run_one(run(log))
     assert runner.done_runs([run(log)], log) == {run(log)}
-    assert len(runner.read_log(log)) == G.CHECKPOINTS
+    assert len(runner.read_log(log)) == G.CHECKPOINTS + 1   # each checkpoint and the selected one
     assert _grid_result(log, tmp_path / "results.json") == reference
 
 

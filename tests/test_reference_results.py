@@ -89,15 +89,22 @@ def zero_trainer(monkeypatch):
     test seeds (fast)."""
     calls = []
 
-    def fake(run, checkpoint):
+    def fake(run, checkpoint, finish):
         from satenv import baselines
+
+        def zero(env, k):
+            calls.append((run.label(), k))
+            return baselines.make("zero", env)
+
         calls.append(run.label())
         for k, steps in enumerate(run.checkpoints):
-            checkpoint(k, steps, 0.1 * (k + 1), lambda env: baselines.make("zero", env))
+            checkpoint(k, steps, 0.1 * (k + 1), lambda env, k=k: zero(env, k))
+        finish()
 
     monkeypatch.setattr(trainers, "train", fake)
     monkeypatch.setattr(G, "FINAL_TEST_SEEDS", 3)
     monkeypatch.setattr(G, "CURVE_TEST_SEEDS", 2)
+    monkeypatch.setattr(G, "VALIDATION_SEEDS", 2)
     return calls
 
 
@@ -105,20 +112,38 @@ def test_runner_logs_every_checkpoint_and_resumes(tmp_path, zero_trainer):
     log = tmp_path / "log.jsonl"
     run = G.Run("platoon-pereira2023", "ppo", False, 0, str(log), budget_override=5000, rung=RUNG)
     out = runner.run_one(run)
-    assert [r["checkpoint"] for r in out["records"]] == list(range(G.CHECKPOINTS))
-    assert [len(r["episodes"]) for r in out["records"]] == [2] * (G.CHECKPOINTS - 1) + [3]
+    assert [r["checkpoint"] for r in out["records"]] == list(range(G.CHECKPOINTS + 1))
+    assert [len(r["episodes"]) for r in out["records"]] == [2] * (G.CHECKPOINTS - 1) + [3, 3]
     assert {r["task"] for r in out["records"]} == {RUNG} and {r["rung"] for r in out["records"]} == {1}
+    validations = [r["validation"] for r in out["records"][:-1]]
+    assert all(v["seeds"] == list(tasks.get(RUNG).seeds("validation", 2)) for v in validations)
+    chosen = out["records"][-1]
+    assert chosen["selected_checkpoint"] == G.select_checkpoint(validations) == G.CHECKPOINTS - 1   # all tie: latest
+    assert chosen["test_seeds"] == out["records"][-2]["test_seeds"]
     assert runner.done_runs([run], log) == {run}
     runner.run_one(run)
-    assert len(log.read_text().splitlines()) == G.CHECKPOINTS
+    assert len(log.read_text().splitlines()) == G.CHECKPOINTS + 1
     lines = log.read_text().splitlines()
     log.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][: len(lines[-1]) // 2])
     with pytest.warns(UserWarning, match="torn or corrupt"):
         runner.read_log(log, repair=True)
     assert runner.done_runs([run], log) == set()
+    zero_trainer.clear()
     out = runner.run_one(run)
-    assert [r["checkpoint"] for r in out["records"]] == [G.CHECKPOINTS - 1]
+    assert [r["checkpoint"] for r in out["records"]] == [G.CHECKPOINTS]
+    assert zero_trainer[-1] == (run.label(), G.CHECKPOINTS - 1)   # the selected checkpoint's own policy flew
     assert runner.done_runs([run], log) == {run}
+
+
+@pytest.mark.parametrize(("validations", "chosen"), [
+    ([(3, 0), (5, 1), (5, 0), (4, 0)], 2),      # most successes, then fewest unsafe episodes
+    ([(5, 0), (5, 0), (2, 0)], 1),              # then the latest
+    ([(0, 4), (0, 2), (0, 3)], 1),
+])
+def test_select_checkpoint_by_hand(validations, chosen):
+    assert G.select_checkpoint([{"success": s, "unsafe": u} for s, u in validations]) == chosen
+    with pytest.raises(G.LearningError, match="at least one"):
+        G.select_checkpoint([])
 
 
 def test_results_from_the_log(tmp_path, zero_trainer):
@@ -130,7 +155,8 @@ def test_results_from_the_log(tmp_path, zero_trainer):
     (rec,) = data["records"]
     assert rec["rung"] == 1 and rec["task"] == RUNG
     assert [p[0] for p in rec["curve"]] == G.Run("platoon-pereira2023", "ppo", budget_override=5000).checkpoints
-    assert rec["test"]["success_rate"] == 0.0
+    assert rec["test"]["success_rate"] == 0.0 == rec["last_test"]["success_rate"]
+    assert rec["selected_checkpoint"] == G.CHECKPOINTS - 1 and rec["validation_success"] == [0.0] * G.CHECKPOINTS
     assert sum(rec["test"]["failure_modes"].values()) == rec["test"]["episodes"] == 3
     assert rec["command"] == ("satenv results run --systems platoon-pereira2023 --rungs 1 --algorithms ppo --seeds 0 "
                               "--filter-systems '' --budget 5000")

@@ -7,7 +7,7 @@ set -u
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 PY=${PYTHON:-.venv/bin/python}   # the project venv unless PYTHON names another interpreter
-RUN="nice -n 10 $PY -m satenv.bench.learning run --update-published --workers 1"
+RUN="nice -n ${NICE:-10} $PY -m satenv.bench.learning run --update-published --workers 1"
 PLATOON=platoon-pereira2023,platoon-pereira2022
 FORMATION=formation-kannan2022-position,formation-kannan2022-collision
 SWARMS=cluster-li2022,servicing-pereira2022
@@ -19,11 +19,11 @@ eval $RUN --systems $PLATOON,$SWARMS,$FORMATION --rungs 1 --algorithms ppo --see
 # 2. The grid at its budgets (10 M agent-steps per lean run), rung by rung, easiest first: the lean
 #    rows with the filter-in-training row (cluster, servicing, platoon 5.1), then the controllers
 #    (20 test episodes of the formation and cluster MPCs take 0.5-3 h).
-for RUNG in 1 2 3; do
+for RUNG in 1 2 3 4; do
   $RUN --systems $PLATOON,$SWARMS,$FORMATION --rungs $RUNG --algorithms $LEAN --seeds 0-4
   $RUN --systems $PLATOON,$SWARMS,$FORMATION --rungs $RUNG --algorithms controller
 done
 # 3. The slow rows last: MASAC (BenchMARL, 0.25 gradient steps per frame) and DAgger (the experts label).
-for RUNG in 1 2 3; do
+for RUNG in 1 2 3 4; do
   eval $RUN --systems $PLATOON,$FORMATION,$SWARMS --rungs $RUNG --algorithms masac,dagger --seeds 0-4 $NO_FILTER
 done

@@ -4,9 +4,13 @@ A :class:`Run` is one ``(rung, algorithm, filter in training, seed)`` training r
 system's ladder (:func:`satenv.tasks.ladder`: easiest first, ending at the system's training task).
 It is evaluated at :data:`CHECKPOINTS` evenly spaced checkpoints: the intermediate ones on the first
 :data:`CURVE_TEST_SEEDS` test seeds of the rung (the learning curves), the last one on the first
-:data:`FINAL_TEST_SEEDS` (the published result); the same seeds for every algorithm and the
-controller. Nothing is chosen on test seeds: the algorithms run at their defaults. The controller of the system is
-one more run per rung (``algorithm="controller"``, no training).
+:data:`FINAL_TEST_SEEDS`; the same seeds for every algorithm and the controller. Every checkpoint is
+also flown on the rung's first :data:`VALIDATION_SEEDS` validation seeds, and the published result is
+the checkpoint :func:`select_checkpoint` picks there (early stopping on validation seeds: a policy
+that drifts late in training is reported at its best validation point), flown on the
+:data:`FINAL_TEST_SEEDS` test seeds (one more record, checkpoint index :attr:`Run.selected_index`).
+Nothing is chosen on test seeds: the algorithms run at their defaults. The controller of the system is
+one more run per rung (``algorithm="controller"``, no training, nothing to select).
 
 Budgets are agent-steps (one agent's one decision; BenchMARL frames are converted, one frame = every
 agent of one env copy acting once), the same for every RL algorithm of a system
@@ -22,7 +26,8 @@ from typing import Any
 
 from satenv import tasks
 
-__all__ = ["ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "CURVE_TEST_SEEDS", "DAGGER_LABELS", "DEFAULT_ALGORITHMS",
+__all__ = ["VALIDATION_SEEDS", "select_checkpoint",
+           "ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "CURVE_TEST_SEEDS", "DAGGER_LABELS", "DEFAULT_ALGORITHMS",
            "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_BUDGET_AGENT_STEPS", "MASAC_UTD",
            "grid_budget", "RL_ALGORITHMS", "Run", "LearningError", "grid", "test_seeds"]
 
@@ -49,7 +54,9 @@ CHECKPOINTS = 5
 CURVE_TEST_SEEDS = 10
 """Test seeds of an intermediate evaluation (a point of the learning curve)."""
 FINAL_TEST_SEEDS = 20
-"""Test seeds of the final evaluation (the published result)."""
+"""Test seeds of the final evaluation and of the selected checkpoint's (the published result)."""
+VALIDATION_SEEDS = 20
+"""Validation seeds every checkpoint is flown on to select the published one (:func:`select_checkpoint`)."""
 
 BUDGET_AGENT_STEPS: dict[str, int] = {
     "platoon-pereira2023": 10_000_000,
@@ -145,9 +152,28 @@ class Run:
             return [0]
         return [round(self.budget * (k + 1) / CHECKPOINTS) for k in range(CHECKPOINTS)]
 
+    @property
+    def selects(self) -> bool:
+        """Whether the run has a selected checkpoint (every trained run; not the controller)."""
+        return self.algorithm != "controller"
+
+    @property
+    def selected_index(self) -> int:
+        """The checkpoint index of the selected checkpoint's record (one past the last checkpoint)."""
+        return len(self.checkpoints)
+
+    @property
+    def records(self) -> range:
+        """The checkpoint indices of the run's log records: each checkpoint, then the selected one."""
+        return range(len(self.checkpoints) + self.selects)
+
     def seeds(self, k: int) -> tuple[int, ...]:
-        """The test seeds of checkpoint ``k`` (:data:`FINAL_TEST_SEEDS` at the last one)."""
-        return test_seeds(self.task.name, k == len(self.checkpoints) - 1)
+        """The test seeds of record ``k`` (:data:`FINAL_TEST_SEEDS` at the last checkpoint and the selected one)."""
+        return test_seeds(self.task.name, k >= len(self.checkpoints) - 1)
+
+    def validation_seeds(self) -> tuple[int, ...]:
+        """The validation seeds every checkpoint is flown on (:data:`VALIDATION_SEEDS`)."""
+        return self.task.seeds("validation", VALIDATION_SEEDS)
 
     def key(self, checkpoint: int) -> tuple[Any, ...]:
         return (self.task.name, self.algorithm, self.filter, self.seed, self.budget, checkpoint)
@@ -164,6 +190,16 @@ class Run:
     def to_json(self) -> dict[str, Any]:
         return {**{k: v for k, v in asdict(self).items() if k not in ("log_path", "budget_override", "rung")},
                 "task": self.task.name}
+
+
+def select_checkpoint(validations: list[dict[str, Any]]) -> int:
+    """The index of the checkpoint to publish from each checkpoint's validation summary
+    (``{"success": int, "unsafe": int}``: successful episodes, and episodes with a collision or a
+    hard-bound violation): the most successes, then the fewest unsafe episodes, then the latest."""
+    if not validations:
+        raise LearningError("select_checkpoint needs at least one checkpoint's validation summary, got none")
+    return max(range(len(validations)),
+               key=lambda k: (validations[k]["success"], -validations[k]["unsafe"], k))
 
 
 def grid_budget(system: str, algorithm: str) -> int:

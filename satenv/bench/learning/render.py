@@ -115,10 +115,13 @@ def _failures(recs: list[dict[str, Any]]) -> str:
 
 
 def _per_seed(recs: list[dict[str, Any]]) -> str:
-    """Each seed's final success, with the failure modes of a seed below the success bar."""
+    """Each seed's published success, with the failure modes of a seed below the success bar and,
+    where validation picked an earlier checkpoint, which one and the last checkpoint's success."""
     out = []
     for r in sorted(recs, key=lambda r: r["seed"]):
         cell = f"{r['seed']}: {r['test']['success_rate']:.2f}"
+        if r["selected_checkpoint"] != len(r["curve"]) - 1:
+            cell += f" [checkpoint {r['selected_checkpoint'] + 1}; last {r['last_test']['success_rate']:.2f}]"
         if r["test"]["success_rate"] < scoring.SUCCESS_MIN:
             cell += f" ({_failures([r])})"
         out.append(cell)
@@ -351,10 +354,17 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "`studies/reference_results/running_obs_norm_log.jsonl` and is not on this page. The first cells at the "
         "current defaults ran with the training reward's earlier flat in-tolerance bonus (`satenv.rewards`: the "
         "policies drifted to the tolerance's edge late in training); their log is "
-        "`studies/reference_results/flat_bonus_log.jsonl`, not on this page.",
+        "`studies/reference_results/flat_bonus_log.jsonl`, not on this page. The cells run before the "
+        "checkpoint selection on validation seeds (each published at its last checkpoint) are kept in "
+        "`studies/reference_results/last_checkpoint_log.jsonl`, not on this page.",
         f"- **Evaluations**: {g['checkpoints']} per run, evenly spaced over the budget. Each flies the "
-        f"deterministic policy on the rung's first {g['curve_test_seeds']} test seeds (the curves), the last "
-        f"one on its first {g['final_test_seeds']} test seeds (the published result). No test seed chose "
+        f"deterministic policy on the rung's first {g['curve_test_seeds']} test seeds (the curves; the last "
+        f"one on its first {g['final_test_seeds']}) and on its first {g['validation_seeds']} validation seeds. "
+        "The published result is the checkpoint with the most validation successes (then the fewest "
+        "collision or violation episodes, then the latest: early stopping on validation seeds, "
+        "`satenv.bench.learning.grid.select_checkpoint`), flown on the first "
+        f"{g['final_test_seeds']} test seeds; where it is not the last checkpoint, the per-seed column names "
+        "it and gives the last checkpoint's success. No test seed chose "
         "anything: the learners run at their defaults (the lean learner's own on every task; the tuned "
         "configurations beside them, chosen on validation seeds, are not used by the grid).",
         f"- **Seeds**: training seeds {tasks.show_seeds(g['default_seeds'])} per row; the tables say how many "

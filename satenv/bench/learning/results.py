@@ -9,10 +9,14 @@ A run is complete when every one of its checkpoints is logged; its record has
 * ``wall_s``: training wall time (evaluations excluded) on the machine that ran it;
 * ``curve``: ``[agent_steps, success_rate, mean_return, collision_episodes]`` per checkpoint, on
   the run's test seeds (the final point on all of them);
-* ``test``: the last checkpoint's :func:`satenv.scoring.aggregate` fields (success, collision
-  and violation episodes, RMSE, delta-v, interventions per agent-step when filtered), the count of
-  each failure mode (:data:`satenv.scoring.FAILURE_MODES`) and the RMSE and delta-v ratios to the
-  rung's controller on matched episodes (:func:`satenv.scoring.matched_ratios`);
+* ``test``: the selected checkpoint's (the published result: the checkpoint the validation seeds
+  picked, :func:`satenv.bench.learning.grid.select_checkpoint`) :func:`satenv.scoring.aggregate`
+  fields on the final test seeds (success, collision and violation episodes, RMSE, delta-v,
+  interventions per agent-step when filtered), the count of each failure mode
+  (:data:`satenv.scoring.FAILURE_MODES`) and the RMSE and delta-v ratios to the rung's controller
+  on matched episodes (:func:`satenv.scoring.matched_ratios`);
+* ``selected_checkpoint`` (0-based) and ``validation_success`` (per checkpoint, the validation
+  seeds' success rate); ``last_test``: the same fields as ``test`` for the last checkpoint;
 * ``command``: the command that reproduces it.
 
 Controllers are keyed by task. Runs with some checkpoints missing are listed in ``incomplete``
@@ -126,19 +130,23 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
         cps = runs[key]
         run = _run(system, task, algo, filtered, seed, budget)
         n = len(run.checkpoints)
-        if any(k not in cps for k in range(n)):
+        if any(k not in cps for k in run.records):
             incomplete.append({"system": system, "task": task, "rung": run.rung_index, "algorithm": algo,
                                "filter": filtered, "seed": seed, "budget_agent_steps": budget,
                                "checkpoints_logged": sorted(cps)})
             continue
-        last = cps[n - 1]
+        last, chosen = cps[n - 1], cps[run.selected_index]
         ref = reference.get(task)
+        val = [cps[k]["validation"] for k in range(n)]
         out.append({"system": system, "task": task, "rung": run.rung_index, "algorithm": algo, "filter": filtered,
                     "seed": seed, "budget_agent_steps": int(last["budget_agent_steps"]),
                     "agent_steps": int(last["agent_steps"]), "wall_s": _round(last["wall_s"], 1),
                     "test_seeds": last["test_seeds"], "load_avg_1m": last.get("load_avg_1m"),
                     "curve": [_point(cps[k]) for k in range(n)],
-                    "test": _test_block(last["episodes"], ref, _agents(task)),
+                    "test": _test_block(chosen["episodes"], ref, _agents(task)),
+                    "selected_checkpoint": int(chosen["selected_checkpoint"]),
+                    "validation_success": [_round(v["success"] / len(v["seeds"])) for v in val],
+                    "last_test": _test_block(last["episodes"], ref, _agents(task)),
                     "command": command(system, run.rung_index, algo, filtered, str(seed), budget)})
     seen = {run_key(r) for r in (*out, *incomplete, *errors)} | {(t, "controller", False, 0, 0) for t in controllers}
     not_run: Counter[str] = Counter()
@@ -146,7 +154,8 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
         if (r.task.name, r.algorithm, r.filter, r.seed, r.budget) not in seen:
             not_run[r.task.name] += 1
     return {"grid": {"checkpoints": G.CHECKPOINTS, "curve_test_seeds": G.CURVE_TEST_SEEDS,
-                     "final_test_seeds": G.FINAL_TEST_SEEDS, "budget_agent_steps": G.BUDGET_AGENT_STEPS,
+                     "final_test_seeds": G.FINAL_TEST_SEEDS,
+                     "validation_seeds": G.VALIDATION_SEEDS, "budget_agent_steps": G.BUDGET_AGENT_STEPS,
                      "dagger_labels": G.DAGGER_LABELS, "masac_utd": G.MASAC_UTD,
                      "masac_budget_agent_steps": G.MASAC_BUDGET_AGENT_STEPS,
                      "default_seeds": list(G.DEFAULT_SEEDS),

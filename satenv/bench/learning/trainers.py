@@ -2,8 +2,9 @@
 
 Every trainer gets a :class:`~satenv.bench.learning.grid.Run` and a callback
 ``checkpoint(k, agent_steps, wall_s, make_policy)`` that it calls at each of the run's
-checkpoints (``make_policy(env)`` gives the current policy for an env; ``wall_s`` is the training
-wall time so far, evaluations excluded). Each uses the project's own trainer at its documented
+checkpoints (``make_policy(env)`` gives that checkpoint's policy for an env, still valid after later
+checkpoints, for the selection at the end; ``wall_s`` is the training wall time so far, evaluations
+excluded). Each uses the project's own trainer at its documented
 defaults (the lean learner's own on every task: one configuration per row, whatever tuned
 configurations are committed), every run on its rung (``run.task``):
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import tempfile
 import time
 from collections.abc import Callable
@@ -88,7 +90,8 @@ def train_lean(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
         final = ppo.train(cfg, resume=k > 0)
         wall += time.perf_counter() - t0
         steps = json.loads((workdir / "progress.jsonl").read_text().splitlines()[-1])["agent_steps"]
-        checkpoint(k, steps, wall, lambda env, final=final: lean_policy(final, env))
+        kept = shutil.copytree(final, workdir / "kept" / f"{k:04d}")   # the next segment rewrites final/
+        checkpoint(k, steps, wall, lambda env, kept=kept: lean_policy(kept, env))
 
 
 def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
@@ -165,12 +168,15 @@ TRAINERS: dict[str, Callable[[Run, Checkpoint, Path], None]] = {
     "dagger": train_dagger}
 
 
-def train(run: Run, checkpoint: Checkpoint) -> None:
+def train(run: Run, checkpoint: Checkpoint, finish: Callable[[], None] = lambda: None) -> None:
     """Train ``run`` in a temporary folder (weights are not kept), calling ``checkpoint`` at each
-    checkpoint; the controller (no training) is one checkpoint of its scripted policy."""
+    checkpoint and ``finish`` after the last, while every checkpoint's policy can still be made; the
+    controller (no training) is one checkpoint of its scripted policy."""
     if run.algorithm == "controller":
         from satenv import baselines
         checkpoint(0, 0, 0.0, lambda env: baselines.make(run.task.controller, env))
+        finish()
         return
     with tempfile.TemporaryDirectory(prefix=f"learning-{run.algorithm}-") as d:
         TRAINERS[run.algorithm](run, checkpoint, Path(d))
+        finish()
