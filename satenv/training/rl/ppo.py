@@ -743,8 +743,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--lagrangian", action="store_true", default=None,
                    help="PPO-Lagrangian on the safety_cost info at the task's cost_budget")
     for name, what in (("norm-obs", "observations"), ("norm-reward", "rewards")):
+        default = "on" if getattr(LeanConfig, name.replace("-", "_")) else "off: the envs' own fixed scales"
         p.add_argument(f"--{name}", action=argparse.BooleanOptionalAction, default=None,
-                       help=f"normalise the {what} by running statistics in the loop (default on)")
+                       help=f"normalise the {what} by running statistics in the loop (default {default})")
     p.add_argument("--net-arch", type=lambda s: tuple(int(x) for x in s.split(",")), help="e.g. 64,64")
     p.add_argument("--test-seeds", type=_seeds, help="held-out seeds of eval.json, e.g. 900000-900019")
     p.add_argument("--eval-baselines", type=lambda s: tuple(x for x in s.split(",") if x),
