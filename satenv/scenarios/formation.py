@@ -44,7 +44,9 @@ the env reports whether this proximity graph is connected. The paper gives no de
 Random initial states (``randomize=True``): the nominal positions plus ``U(-s, s)`` per axis
 (``s = random_position_spread``) and velocities ``U(-v, v)`` (``v = random_velocity_spread``);
 draws are rejected (up to 1000 times) until the proximity graph is connected and every pair is at
-least ``random_min_gap`` apart.
+least ``random_min_gap`` apart. With ``random_start="target"`` (for easier tasks) the positions are
+drawn around the target formation (:meth:`FormationScenario.target_positions`) instead of the
+nominal initial positions; the velocities stay the nominal ones plus ``U(-v, v)``.
 """
 
 from __future__ import annotations
@@ -71,8 +73,11 @@ from satenv.scenarios._fields import (
     vector,
 )
 
-__all__ = ["FormationScenario", "PRESETS", "resolve_scenario", "sample_initial_state",
+__all__ = ["FormationScenario", "PRESETS", "RANDOM_STARTS", "resolve_scenario", "sample_initial_state",
            "proximity_components"]
+
+RANDOM_STARTS = ("initial", "target")
+"""The values of ``random_start``: the random positions around the nominal start or the target formation."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +110,8 @@ class FormationScenario:
         connection_penalty: reward penalty per step for an agent cut off from the network.
         randomize, random_position_spread, random_velocity_spread, random_min_gap: see the
             module docstring.
+        random_start: where the random positions are centred: ``"initial"`` (default) the nominal
+            initial positions, ``"target"`` the target formation (module docstring).
         success_tol: an episode succeeds when every spacecraft ends within this distance of its
             final position [m] (:func:`satenv.metrics.success`).
         collision_voids_success: a collision flag makes the episode a failure.
@@ -138,6 +145,7 @@ class FormationScenario:
     random_position_spread: float = 20.0
     random_velocity_spread: float = 1.0
     random_min_gap: float = 1.0
+    random_start: str = "initial"
     success_tol: float = 1.0
     collision_voids_success: bool = True
     obs_neighbours: int | None = None
@@ -182,6 +190,8 @@ class FormationScenario:
         s(self, "max_steps", steps(self.max_steps, "max_steps"))
         if self.thrust_mode not in ("box", "norm"):
             raise ValueError(f"thrust_mode must be 'box' or 'norm', got {self.thrust_mode!r}")
+        if self.random_start not in RANDOM_STARTS:
+            raise SatenvError(f"random_start must be one of {list(RANDOM_STARTS)}, got {self.random_start!r}")
         if self.dynamics not in ("cw", "nonlinear", "j2", "j2_drag"):
             raise ValueError(f"dynamics must be 'cw', 'nonlinear', 'j2' or 'j2_drag', got {self.dynamics!r}")
         for name in ("terminate_on_collision", "terminate_on_disconnect", "randomize",
@@ -293,6 +303,8 @@ def proximity_components(positions: np.ndarray, delta: float) -> np.ndarray:
 def sample_initial_state(scenario: FormationScenario, rng: np.random.Generator) -> np.ndarray:
     """Draw an initial state (M, 6) from the documented distribution (module docstring)."""
     nominal = scenario.initial_array()
+    if scenario.random_start == "target":
+        nominal[:, :3] = scenario.target_positions()
     m = scenario.n_agents
     s, v = scenario.random_position_spread, scenario.random_velocity_spread
     iu = np.triu_indices(m, 1)
