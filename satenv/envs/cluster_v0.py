@@ -21,7 +21,8 @@ any field of :class:`~satenv.scenarios.cluster.ClusterScenario` overrides the pr
 ``disturbance="none" | "sinusoid" | "random"``, ``disturbance_force`` [N], ``dynamics``,
 ``dt``, ``physics_dt``, ``max_steps``, ``u_max`` [m/s^2, bound on the norm], ``allocation="fixed"``,
 ``reallocate_every``, ``terminate_on_collision``, ``randomize=True`` (random initial positions
-and target slots from the seed; ``random_position_spread``, ``random_target_radius``),
+and target slots from the seed; ``random_position_spread``, ``random_target_radius``,
+``random_start="slots"``: starts around the target slots),
 ``initial_positions`` (any M), ``success_tol`` (1 m), ``collision_voids_success``,
 ``obs_neighbours`` (``None`` or ``K`` in ``[1, 64]``: the fixed observation layout below).
 Unknown keywords raise ``SatenvError`` (a ``ValueError``).
@@ -350,8 +351,8 @@ class ClusterCore(BatchedCore):
     # ------------------------------------------------------------------ episode
     def sample_initial_state(self, rng: np.random.Generator, n: int) -> np.ndarray:
         sc = self.scenario
-        if not sc.randomize or sc.random_position_spread == 0.0:   # the preset's (no draw), as
-            return np.tile(sc.initial_array(), (n, 1, 1))          # sample_initial_state returns it
+        if not sc.randomize or (sc.random_position_spread == 0.0 and sc.random_start == "preset"):
+            return np.tile(sc.initial_array(), (n, 1, 1))   # the preset's (no draw), as sample_initial_state returns it
         return np.stack([sample_initial_state(sc, rng) for _ in range(n)])
 
     def reset(self, x0, idx=None, rng=None):

@@ -38,7 +38,9 @@ Random episodes (``randomize=True``), drawn from the env's seed:
 
 * initial states: every satellite's preset position plus ``U(-s, s)`` per axis
   (``s = random_position_spread``), at rest, redrawn (up to 1000 times) until all safety
-  distances hold with a 10 m margin;
+  distances hold with a 10 m margin; with ``random_start="slots"`` (for easier tasks) satellite
+  ``i`` starts at the episode's target slot ``i`` instead of its preset position (the offsets are
+  drawn first, then the slots from a copy of the generator, which the reset then draws again);
 * target slots: the T targets are drawn one by one uniformly on the sphere of radius
   ``random_target_radius`` (300 m, as li2022's Table 4 points) around the target spacecraft,
   each redrawn (up to 1000 times) until it is at least ``2 r_s`` + 10 m from the ones before.
@@ -48,6 +50,7 @@ Swarms of any size up to ``satenv.scenarios._fields.MAX_AGENTS`` come from :func
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -86,6 +89,7 @@ CASE2_POSITIONS: tuple[tuple[float, float, float], ...] = (
 
 DISTURBANCES = ("sinusoid", "random", "none")
 ALLOCATIONS = ("hungarian", "fixed")
+RANDOM_STARTS = ("preset", "slots")
 
 
 def _rows(value: Any, name: str, min_rows: int = 1) -> tuple[tuple[float, float, float], ...]:
@@ -152,6 +156,8 @@ class ClusterScenario:
         max_distance: the allowed region, a ball around the reference satellite [m].
         randomize: draw initial positions and target slots from the env's seed (module docstring).
         random_position_spread [m], random_target_radius [m]: see the module docstring.
+        random_start: where the random starts are centred: ``"preset"`` (default) the preset
+            positions, ``"slots"`` the episode's target slots (module docstring).
         reward_distance_scale [m], reward_control_weight, collision_penalty: reward terms
             (``satenv.envs.cluster_v0``).
         success_tol: an episode succeeds when every satellite ends within this distance of its
@@ -189,6 +195,7 @@ class ClusterScenario:
     randomize: bool = False
     random_position_spread: float = 50.0
     random_target_radius: float = 300.0
+    random_start: str = "preset"
     reward_distance_scale: float = 1000.0
     reward_control_weight: float = 0.01
     collision_penalty: float = 10.0
@@ -240,6 +247,8 @@ class ClusterScenario:
             raise ValueError(f"dynamics must be one of {list(MODELS)}, got {self.dynamics!r}")
         if self.disturbance not in DISTURBANCES:
             raise ValueError(f"disturbance must be one of {list(DISTURBANCES)}, got {self.disturbance!r}")
+        if self.random_start not in RANDOM_STARTS:
+            raise _fields.SatenvError(f"random_start must be one of {list(RANDOM_STARTS)}, got {self.random_start!r}")
         if self.allocation not in ALLOCATIONS:
             raise ValueError(f"allocation must be one of {list(ALLOCATIONS)}, got {self.allocation!r}")
         for name in ("terminate_on_collision", "randomize", "collision_voids_success"):
@@ -423,10 +432,16 @@ def sample_initial_state(scenario: ClusterScenario, rng: np.random.Generator) ->
     """Initial states (M, 6): the preset's, or with ``randomize`` a random draw (module docstring)."""
     x = scenario.initial_array()
     s = scenario.random_position_spread
-    if not scenario.randomize or s == 0.0:
+    slots = scenario.random_start == "slots"
+    if not scenario.randomize or (s == 0.0 and not slots):
         return x
     for _ in range(1000):
-        pos = x[:, :3] + rng.uniform(-s, s, size=(scenario.n_agents, 3))
+        pos = rng.uniform(-s, s, size=(scenario.n_agents, 3))
+        if slots:       # the slots the reset will draw next from ``rng``, at rest around them
+            x[:, 3:] = 0.0
+            pos += sample_targets(scenario, copy.deepcopy(rng))[: scenario.n_agents]
+        else:
+            pos += x[:, :3]
         if safety_ok(scenario, pos, 0.0, margin=10.0):
             out = x.copy()
             out[:, :3] = pos

@@ -11,9 +11,11 @@ Waypoints (eq. 50): ``waypoints[k]`` (M, 3) is the target of phase k; phase k ho
 
 Random initial states (``randomize=True``): each spacecraft's position is drawn uniformly on the
 spherical shell ``keepout + [random_min_gap, random_min_gap + random_shell]`` around the object,
-velocity ``U(-v, v)`` per axis (``v = random_velocity_spread``), a uniformly random attitude and
-``omega ~ U(-w, w)`` (``w = random_angular_spread``); draws are rejected until every pair is at
-least ``r_i + r_j + random_min_gap`` apart.
+its direction uniform on the sphere, or, when ``random_cone < pi``, uniform on the cap of half-angle
+``random_cone`` [rad] around the direction of the spacecraft's first waypoint (starts near the first
+target, for easier tasks), velocity ``U(-v, v)`` per axis (``v = random_velocity_spread``), a
+uniformly random attitude and ``omega ~ U(-w, w)`` (``w = random_angular_spread``); draws are
+rejected until every pair is at least ``r_i + r_j + random_min_gap`` apart.
 """
 
 from __future__ import annotations
@@ -84,8 +86,9 @@ class ServicingScenario:
         terminate_on_collision: end the episode at a collision (eq. 40 / 41 violated).
         reward_scale, collision_penalty, violation_penalty: reward shaping (env docstring).
         thrust_mode: ``"box"`` (per-input limit; the only mode of this env).
-        randomize, random_min_gap, random_shell, random_velocity_spread, random_angular_spread:
-            random initial states (module docstring).
+        randomize, random_min_gap, random_shell, random_cone, random_velocity_spread, random_angular_spread:
+            random initial states (module docstring); ``random_cone`` in ``(0, pi]`` [rad], ``pi`` (the
+            default) draws the start directions on the whole sphere.
         success_tol: an episode succeeds when every spacecraft ends within this distance of its
             final waypoint [m] (:func:`satenv.metrics.success`).
         collision_voids_success: a collision flag makes the episode a failure.
@@ -131,6 +134,7 @@ class ServicingScenario:
     randomize: bool = False
     random_min_gap: float = 1.0
     random_shell: float = 10.0
+    random_cone: float = math.pi
     random_velocity_spread: float = 0.5
     random_angular_spread: float = 0.05
     success_tol: float = 0.5
@@ -214,6 +218,13 @@ class ServicingScenario:
             s(self, name, flag(getattr(self, name), name))
         states_in_region(self.initial_array()[:, :6], "initial_position / initial_velocity",
                          self.max_distance)
+        cone = number(self.random_cone, "random_cone")
+        if cone > math.pi:
+            raise SatenvError(f"random_cone must be a half-angle in (0, pi] rad (pi: the whole sphere), got {cone!r}")
+        s(self, "random_cone", cone)
+        if cone < math.pi and np.any(np.linalg.norm(wp[0], axis=1) < 1e-9):
+            raise SatenvError(f"random_cone = {cone!r} < pi draws starts around the first waypoints' directions, "
+                              f"which must be non-zero, got waypoints[0] = {wp[0].tolist()}")
         _fields.spreads_in_region(self.random_shell, self.random_velocity_spread, self.max_distance,
                                   position_name="random_shell")
         _fields.at_most(R_EARTH, "the Earth's radius [m]", self.orbit_radius, "orbit_radius")
@@ -306,14 +317,32 @@ def resolve_scenario(preset: str = "pereira2022", **overrides) -> ServicingScena
     return from_preset(PRESETS, preset, "servicing", overrides)
 
 
+def _start_directions(scenario: ServicingScenario, rng: np.random.Generator) -> np.ndarray:
+    """(M, 3) unit start directions: uniform on the sphere, or on the cap of half-angle
+    ``random_cone`` around each spacecraft's first waypoint direction (module docstring)."""
+    m = scenario.n_agents
+    if scenario.random_cone >= math.pi:
+        d = rng.normal(size=(m, 3))
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+    axis = np.array(scenario.waypoints[0], dtype=float)
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    cos_t = rng.uniform(math.cos(scenario.random_cone), 1.0, size=m)      # uniform on the cap's area
+    phi = rng.uniform(0.0, 2.0 * math.pi, size=m)
+    helper = np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(axis, e1)
+    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+    return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * e1 + (sin_t * np.sin(phi))[:, None] * e2)
+
+
 def sample_initial_state(scenario: ServicingScenario, rng: np.random.Generator) -> np.ndarray:
     """Draw an initial state (M, 13) from the documented distribution (module docstring)."""
     m = scenario.n_agents
     r0 = scenario.keepout_radius + scenario.random_min_gap
     min_sep = scenario.separation_radius + scenario.random_min_gap
     for _ in range(1000):
-        d = rng.normal(size=(m, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = _start_directions(scenario, rng)
         p = d * rng.uniform(r0, r0 + scenario.random_shell, size=(m, 1))
         if m > 1:
             dist = np.linalg.norm(p[:, None] - p[None], axis=-1)
