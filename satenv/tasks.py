@@ -30,7 +30,8 @@ gives any task's env with the paper's cost.
 
 Each system has a **ladder** (:func:`ladder`, :data:`LADDERS`): registered tasks, easiest first,
 ending at its training task. A rung changes only what makes the task hard (where the starts are
-drawn, the success tolerance), never the physics; ``docs/tasks.md`` tabulates them.
+drawn, the success tolerance, the decision period over the same episode duration), never the
+physics; ``docs/tasks.md`` tabulates them.
 
 The registry imports no baseline: controllers and experts are names of the one controller registry,
 ``satenv.baselines.registry`` (``make`` and ``make_expert`` resolve them; a test checks every one does).
@@ -315,14 +316,20 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
     def tolerance(coarse: float, middle: float) -> tuple[tuple[str, str, dict[str, Any]], ...]:
         return tuple((f"tol{tol:g}", f"success tolerance {tol:g} m", {"success_tol": tol}) for tol in (coarse, middle))
 
+    def formation() -> tuple[tuple[str, str, dict[str, Any]], ...]:
+        coarse = {"dt": 0.2, "max_steps": 100, "success_tol": 10.0}   # the same 20 s, 100 decisions
+        return (("near", "starts drawn around the target formation; a decision every 0.2 s (100 per 20 s "
+                 "episode); success tolerance 10 m", {"random_start": "target", **coarse}),
+                ("coarse", "a decision every 0.2 s (100 per 20 s episode); success tolerance 10 m", coarse))
+
     tplf30 = {k: v for k, v in _TPLF30.items() if k != "preset"}
     return {
         "platoon-pereira2023": ("platoon-tplf30", platoon(near_targets("pereira2023", **tplf30))),
         "platoon-pereira2022": ("platoon-pereira2022", platoon(near_targets("pereira2022"))),
         "cluster-li2022": ("cluster-case1", tolerance(10.0, 3.0)),
         "servicing-pereira2022": ("servicing-pereira2022", tolerance(2.0, 1.0)),
-        "formation-kannan2022-position": ("formation-kannan2022-position", tolerance(10.0, 3.0)),
-        "formation-kannan2022-collision": ("formation-kannan2022-collision", tolerance(10.0, 3.0)),
+        "formation-kannan2022-position": ("formation-kannan2022-position", formation()),
+        "formation-kannan2022-collision": ("formation-kannan2022-collision", formation()),
     }
 
 
@@ -433,7 +440,7 @@ def training_task(system_name: str) -> Task:
 
 def ladder(system_name: str) -> tuple[str, ...]:
     """The system's ladder: task names, easiest first, ending at its training task. A rung
-    changes where the starts are drawn or the success tolerance, never the physics."""
+    changes where the starts are drawn, the success tolerance or the decision period, never the physics."""
     return LADDERS[system(system_name).name]
 
 

@@ -290,9 +290,10 @@ def test_torchrl_safety_cost():
 
 
 # ----------------------------------------------------------------------------- ladders
-ALLOWED_RUNG_CHANGES = {"initial_state", "random_position_spread", "success_tol"}
-"""What a rung may change on top of its training task: where the starts are drawn and the
-success tolerance (the physics stays)."""
+ALLOWED_RUNG_CHANGES = {"initial_state", "random_position_spread", "random_start", "random_cone", "success_tol",
+                        "dt", "max_steps"}
+"""What a rung may change on top of its training task: where the starts are drawn, the success
+tolerance and the decision period (over the same episode duration: the physics stays)."""
 
 
 @pytest.mark.parametrize("system", list(tasks.SYSTEMS))
@@ -308,8 +309,11 @@ def test_ladder(system):
                    if rung.env_kwargs.get(k) != training.env_kwargs.get(k)}
         assert changed and changed <= ALLOWED_RUNG_CHANGES, changed
         assert rung.make_env().reward == "training"
-    tols = [tasks.get(n).make_env().scenario.success_tol for n in names]
+    scenarios = [tasks.get(n).make_env().scenario for n in names]
+    tols = [sc.success_tol for sc in scenarios]
     assert tols == sorted(tols, reverse=True)
+    durations = {round(sc.dt * sc.max_steps, 9) for sc in scenarios}
+    assert len(durations) == 1, durations   # a coarser decision period keeps the episode's duration
 
 
 def test_ladder_unknown_system():
