@@ -313,24 +313,44 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
                 ("mid", "starts drawn within 10 m (per axis) of the targets",
                  {"initial_state": targets, "random_position_spread": 10.0}))
 
-    def tolerance(coarse: float, middle: float) -> tuple[tuple[str, str, dict[str, Any]], ...]:
-        return tuple((f"tol{tol:g}", f"success tolerance {tol:g} m", {"success_tol": tol}) for tol in (coarse, middle))
-
     def formation() -> tuple[tuple[str, str, dict[str, Any]], ...]:
         coarse = {"dt": 0.2, "max_steps": 100, "success_tol": 10.0}   # the same 20 s, 100 decisions
         return (("near", "starts drawn around the target formation; a decision every 0.2 s (100 per 20 s "
                  "episode); success tolerance 10 m", {"random_start": "target", **coarse}),
                 ("coarse", "a decision every 0.2 s (100 per 20 s episode); success tolerance 10 m", coarse))
 
+    def servicing() -> tuple[tuple[str, str, dict[str, Any]], ...]:
+        first = {"dt": 0.5, "substeps": 5, "max_steps": 80, "success_tol": 2.0}   # physics step 0.1 s kept
+        return (("near", "starts 1-3 m outside the keep-out sphere within 0.2 rad of the first waypoint; the "
+                 "first waypoint only (40 s), a decision every 0.5 s; success tolerance 2 m",
+                 {"random_shell": 2.0, "random_cone": 0.2, **first}),
+                ("first", "the first waypoint only (40 s), a decision every 0.5 s; success tolerance 2 m", first))
+
+    def cluster() -> tuple[tuple[str, str, dict[str, Any]], ...]:
+        near = {"random_start": "slots", "random_position_spread": 100.0, "dt": 10.0, "max_steps": 50,
+                "success_tol": 10.0}   # physics step 0.25 s kept
+        three = tuple(tuple(p) for p in _cluster_preset_positions()[:3])
+        return (("near3", "3 satellites, starts within 100 m (per axis) of their slots; 500 s, a decision every "
+                 "10 s; success tolerance 10 m", {"initial_positions": three, **near}),
+                ("near", "starts within 100 m (per axis) of the slots; 500 s, a decision every 10 s; success "
+                 "tolerance 10 m", near))
+
     tplf30 = {k: v for k, v in _TPLF30.items() if k != "preset"}
     return {
         "platoon-pereira2023": ("platoon-tplf30", platoon(near_targets("pereira2023", **tplf30))),
         "platoon-pereira2022": ("platoon-pereira2022", platoon(near_targets("pereira2022"))),
-        "cluster-li2022": ("cluster-case1", tolerance(10.0, 3.0)),
-        "servicing-pereira2022": ("servicing-pereira2022", tolerance(2.0, 1.0)),
+        "cluster-li2022": ("cluster-case1", cluster()),
+        "servicing-pereira2022": ("servicing-pereira2022", servicing()),
         "formation-kannan2022-position": ("formation-kannan2022-position", formation()),
         "formation-kannan2022-collision": ("formation-kannan2022-collision", formation()),
     }
+
+
+def _cluster_preset_positions() -> Any:
+    """The li2022 case-1 satellites' start positions (M, 3) [m], the preset's."""
+    from satenv.scenarios.cluster import resolve_scenario
+
+    return resolve_scenario("li2022-case1").initial_positions
 
 
 def _registered() -> list[Task]:
