@@ -30,7 +30,7 @@ gives any task's env with the paper's cost.
 
 Each system has a **ladder** (:func:`ladder`, :data:`LADDERS`): registered tasks, easiest first,
 ending at its training task. A rung changes only what makes the task hard (where the starts are
-drawn, the success tolerance, the decision period over the same episode duration), never the
+drawn, the number of agents, the success tolerance, the horizon, the decision period), never the
 physics; ``docs/tasks.md`` tabulates them.
 
 The registry imports no baseline: controllers and experts are names of the one controller registry,
@@ -300,6 +300,7 @@ def _rung(base: Task, prefix: str, k: int, label: str, what: str, changes: Mappi
 def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]], ...]]]:
     """Per system: the rungs' name prefix and, easiest first, each rung's label, what it changes
     and its env keywords on top of the training task's (the training task is the last rung)."""
+    from satenv.scenarios.cluster import resolve_scenario as resolve_cluster
     from satenv.scenarios.platoon import resolve_scenario
 
     def near_targets(preset: str, **kwargs: Any) -> Any:
@@ -329,7 +330,7 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
     def cluster() -> tuple[tuple[str, str, dict[str, Any]], ...]:
         near = {"random_start": "slots", "random_position_spread": 100.0, "dt": 10.0, "max_steps": 50,
                 "success_tol": 10.0}   # physics step 0.25 s kept
-        three = tuple(tuple(p) for p in _cluster_preset_positions()[:3])
+        three = tuple(tuple(p) for p in resolve_cluster("li2022-case1").initial_positions[:3])
         return (("near3", "3 satellites, starts within 100 m (per axis) of their slots; 500 s, a decision every "
                  "10 s; success tolerance 10 m", {"initial_positions": three, **near}),
                 ("near", "starts within 100 m (per axis) of the slots; 500 s, a decision every 10 s; success "
@@ -344,13 +345,6 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
         "formation-kannan2022-position": ("formation-kannan2022-position", formation()),
         "formation-kannan2022-collision": ("formation-kannan2022-collision", formation()),
     }
-
-
-def _cluster_preset_positions() -> Any:
-    """The li2022 case-1 satellites' start positions (M, 3) [m], the preset's."""
-    from satenv.scenarios.cluster import resolve_scenario
-
-    return resolve_scenario("li2022-case1").initial_positions
 
 
 def _registered() -> list[Task]:
@@ -460,7 +454,8 @@ def training_task(system_name: str) -> Task:
 
 def ladder(system_name: str) -> tuple[str, ...]:
     """The system's ladder: task names, easiest first, ending at its training task. A rung
-    changes where the starts are drawn, the success tolerance or the decision period, never the physics."""
+    changes where the starts are drawn, the number of agents, the success tolerance, the horizon or
+    the decision period, never the physics."""
     return LADDERS[system(system_name).name]
 
 

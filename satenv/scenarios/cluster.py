@@ -435,10 +435,11 @@ def sample_initial_state(scenario: ClusterScenario, rng: np.random.Generator) ->
     slots = scenario.random_start == "slots"
     if not scenario.randomize or (s == 0.0 and not slots):
         return x
+    if slots:
+        x[:, 3:] = 0.0   # at rest around the slots
     for _ in range(1000):
         pos = rng.uniform(-s, s, size=(scenario.n_agents, 3))
-        if slots:       # the slots the reset will draw next from ``rng``, at rest around them
-            x[:, 3:] = 0.0
+        if slots:       # the slots the reset will draw next from ``rng``
             pos += sample_targets(scenario, copy.deepcopy(rng))[: scenario.n_agents]
         else:
             pos += x[:, :3]

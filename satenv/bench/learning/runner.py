@@ -27,7 +27,7 @@ from satenv.bench.learning.evaluate import evaluate_policy
 from satenv.bench.learning.grid import KEY, Run, select_checkpoint
 from satenv.bench.scoreboard.runner import EpisodeLog, read_episodes
 
-__all__ = ["done_runs", "logged_keys", "read_log", "run_one", "lost_record"]
+__all__ = ["done_runs", "logged_keys", "logged_records", "read_log", "run_one", "lost_record"]
 
 
 def read_log(path: str | Path, repair: bool = False) -> list[dict[str, Any]]:
@@ -35,8 +35,13 @@ def read_log(path: str | Path, repair: bool = False) -> list[dict[str, Any]]:
     return read_episodes(path, repair=repair, key=KEY)
 
 
+def logged_records(path: str | Path) -> dict[tuple[Any, ...], dict[str, Any]]:
+    """The log's evaluations (error records left out) by their key."""
+    return {tuple(r[k] for k in KEY): r for r in read_log(path) if r.get("error") is None}
+
+
 def logged_keys(path: str | Path) -> set[tuple[Any, ...]]:
-    return {tuple(r[k] for k in KEY) for r in read_log(path) if r.get("error") is None}
+    return set(logged_records(path))
 
 
 def done_runs(runs: Iterable[Run], path: str | Path) -> set[Run]:
@@ -55,9 +60,13 @@ def lost_record(run: Run, error: str) -> dict[str, Any]:
     return {"records": [{**_base(run), "checkpoint": -1, "error": error, "lost": True}]}
 
 
+def _successes(episodes: list[dict[str, Any]]) -> int:
+    return sum(bool(e["success"]) for e in episodes)
+
+
 def validation_summary(episodes: list[dict[str, Any]]) -> dict[str, Any]:
     """What selection reads of a checkpoint's validation episodes (kept in its record)."""
-    return {"seeds": [int(e["seed"]) for e in episodes], "success": sum(bool(e["success"]) for e in episodes),
+    return {"seeds": [int(e["seed"]) for e in episodes], "success": _successes(episodes),
             "unsafe": sum(bool(e["collisions"] or e["violations"]) for e in episodes)}
 
 
@@ -70,7 +79,7 @@ def run_one(run: Run) -> dict[str, Any]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     path = Path(run.log_path) if run.log_path else None
     log = EpisodeLog(path) if path is not None and path.parent.is_dir() else None
-    logged = {tuple(r[k] for k in KEY): r for r in read_log(path) if r.get("error") is None} if log is not None else {}
+    logged = logged_records(path) if log is not None else {}
     records: list[dict[str, Any]] = []
     if all(run.key(k) in logged for k in run.records):   # done meanwhile (another invocation)
         if log is not None:
@@ -80,6 +89,14 @@ def run_one(run: Run) -> dict[str, Any]:
     validations: list[dict[str, Any]] = []
     policies: list[Any] = []
     last: dict[str, Any] = {}
+
+    def tested(k: int, make_policy) -> dict[str, Any]:
+        """Record ``k``'s evaluation on its test seeds (:meth:`Run.seeds`)."""
+        t0 = time.perf_counter()
+        seeds = run.seeds(k)
+        episodes = evaluate_policy(run.task.make_env, make_policy, seeds, filtered=run.filter)
+        return {"eval_s": round(time.perf_counter() - t0, 2), "load_avg_1m": round(os.getloadavg()[0], 2),
+                "test_seeds": list(seeds), "episodes": episodes, "error": None}
 
     def emit(rec: dict[str, Any]) -> None:
         records.append(rec)
@@ -99,17 +116,13 @@ def run_one(run: Run) -> dict[str, Any]:
                     evaluate_policy(run.task.make_env, make_policy, seeds, filtered=run.filter)))
         if done is not None:
             return
-        t0 = time.perf_counter()
-        seeds = run.seeds(k)
-        episodes = evaluate_policy(run.task.make_env, make_policy, seeds, filtered=run.filter)
         rec = {**_base(run), "checkpoint": k, "agent_steps": int(agent_steps), "wall_s": round(wall_s, 2),
-               "eval_s": round(time.perf_counter() - t0, 2), "load_avg_1m": round(os.getloadavg()[0], 2),
-               "test_seeds": list(seeds), "episodes": episodes, "error": None}
+               **tested(k, make_policy)}
         if run.selects:
             rec["validation"] = validations[-1]
         emit(rec)
-        print(f"{run.label()} checkpoint {k}: {agent_steps} steps, success "
-              f"{sum(bool(e['success']) for e in episodes)}/{len(episodes)}"
+        print(f"{run.label()} checkpoint {k}: {agent_steps} steps, success {_successes(rec['episodes'])}/"
+              f"{len(rec['episodes'])}"
               + (f" (validation {validations[-1]['success']}/{len(validations[-1]['seeds'])})" if run.selects else "")
               + f", train {wall_s:.0f}s", flush=True)
 
@@ -121,15 +134,11 @@ def run_one(run: Run) -> dict[str, Any]:
             raise RuntimeError(f"{run.label()}: {len(validations)} of {len(run.checkpoints)} checkpoints "
                                "reached the selection")
         j = select_checkpoint(validations)
-        t0 = time.perf_counter()
-        seeds = run.seeds(k)
-        episodes = evaluate_policy(run.task.make_env, policies[j], seeds, filtered=run.filter)
-        emit({**_base(run), "checkpoint": k, "selected_checkpoint": j, **last,
-              "eval_s": round(time.perf_counter() - t0, 2), "load_avg_1m": round(os.getloadavg()[0], 2),
-              "test_seeds": list(seeds), "episodes": episodes, "error": None})
+        rec = {**_base(run), "checkpoint": k, "selected_checkpoint": j, **last, **tested(k, policies[j])}
+        emit(rec)
         print(f"{run.label()} selected checkpoint {j} (validation {validations[j]['success']}/"
-              f"{len(validations[j]['seeds'])}): success {sum(bool(e['success']) for e in episodes)}/"
-              f"{len(episodes)}", flush=True)
+              f"{len(validations[j]['seeds'])}): success {_successes(rec['episodes'])}/{len(rec['episodes'])}",
+              flush=True)
 
     try:
         train(run, checkpoint, select)
