@@ -35,13 +35,19 @@ Episodes = Callable[[Any, Any, Sequence[int], str], list[dict[str, Any]]]
 """``episodes(env, policy, seeds, variant)``: the episode records of one way (e.g. a resumable cache)."""
 
 
-def policy(folder: str | Path, env: Any, variant: str = AS_SHIPPED) -> Any:
+def policy(folder: str | Path, env: Any, variant: str = AS_SHIPPED, *, filter_defaults: bool = False) -> Any:
     """The policy of ``folder`` for ``env``, one of :data:`VARIANTS`: ``satenv.training.load(folder,
-    env=env, shielded=variant == AS_SHIPPED)``."""
+    env=env, shielded=variant == AS_SHIPPED)``. With ``filter_defaults``, :data:`AS_SHIPPED` of a folder
+    shipped without the filter is its network behind ``satenv.safety.shield`` at the filter's defaults
+    (e.g. a training checkpoint flown behind the filter)."""
     if variant not in VARIANTS:
         raise SatenvError(f"variant must be one of {list(VARIANTS)}, got {variant!r}")
     from satenv.training.policy import load
 
+    if variant == AS_SHIPPED and filter_defaults and not ships_filtered(folder):
+        from satenv.safety import shield
+
+        return shield(load(folder, env=env, shielded=False), env)
     return load(folder, env=env, shielded=variant == AS_SHIPPED)
 
 

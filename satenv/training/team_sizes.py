@@ -25,27 +25,19 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from satenv.training.both_ways import VARIANTS
+
 __all__ = ["DEFAULT_TASKS", "evaluate", "main", "table"]
 
 DEFAULT_TASKS = ("cluster-swarm10", "cluster-swarm20", "cluster-swarm40")
 """The team-size ladder evaluated by default."""
 
-VARIANTS = ("network alone", "network + filter")
-"""The two ways every policy is reported (the names of ``satenv.training.card``)."""
-
-
 def _policy(folder: Path, env: Any, variant: str) -> Any:
-    from satenv import training
-    from satenv.safety import shield
-    from satenv.training.policy import policy_folder, shipped_filter
+    from satenv.training.both_ways import policy
 
     with warnings.catch_warnings():   # another team size than trained on is the point here
         warnings.filterwarnings("ignore", message="env scenario differs")
-        network = training.load(folder, env=env, shielded=False)
-    if variant == VARIANTS[0]:
-        return network
-    root = policy_folder(folder)
-    return shield(network, env, shipped_filter(root, json.loads((root / "env.json").read_text())))
+        return policy(folder, env, variant, filter_defaults=True)
 
 
 def evaluate(folder: str | Path, tasks: tuple[str, ...], seeds: tuple[int, ...], env_kwargs: dict[str, Any],
