@@ -163,6 +163,8 @@ def test_results_from_the_log(tmp_path, zero_trainer):
     page = render.render_page(data)
     assert "## platoon, pereira2023" in page and "rung 1: not solved by standard RL" in page
     assert "| platoon, pereira2023: standard RL solves rung 1 (platoon-tplf30-rung1-near) | 0.00" in page
+    modes = render._failures([data["controllers"][RUNG]])   # a failing controller names how it fails
+    assert modes != "none" and f"| 0.00 (3 seeds; {modes}) |" in page
 
 
 def test_a_longer_budget_is_its_own_run_and_row(tmp_path, zero_trainer):

@@ -260,7 +260,8 @@ def _system_section(name: str, results: dict[str, Any],
              "|---|---|---|---|"]
     for k, task in enumerate(ladder, start=1):
         ctrl = results["controllers"].get(task)
-        c = f"{ctrl['test']['success_rate']:.2f} ({ctrl['test']['episodes']} seeds)" if ctrl else "not run yet"
+        c = "not run yet" if not ctrl else f"{ctrl['test']['success_rate']:.2f} ({ctrl['test']['episodes']} seeds" + (
+            f"; {_failures([ctrl])})" if ctrl["test"]["success_rate"] < scoring.SUCCESS_MIN else ")")
         lines.append(f"| {k} | `{task}` | {tasks.get(task).description} | {c} |")
     lines += ["", _says(name, groups, len(ladder)), ""]
     if not groups:
