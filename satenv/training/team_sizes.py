@@ -25,16 +25,15 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from satenv.training.both_ways import VARIANTS
+from satenv.training.both_ways import VARIANTS, policy
 
 __all__ = ["DEFAULT_TASKS", "evaluate", "main", "table"]
 
 DEFAULT_TASKS = ("cluster-swarm10", "cluster-swarm20", "cluster-swarm40")
 """The team-size ladder evaluated by default."""
 
-def _policy(folder: Path, env: Any, variant: str) -> Any:
-    from satenv.training.both_ways import policy
 
+def _policy(folder: Path, env: Any, variant: str) -> Any:
     with warnings.catch_warnings():   # another team size than trained on is the point here
         warnings.filterwarnings("ignore", message="env scenario differs")
         return policy(folder, env, variant, filter_defaults=True)

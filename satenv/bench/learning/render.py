@@ -249,6 +249,15 @@ def _says(system: str, groups: dict[Group, dict[int, list[dict[str, Any]]]], n_r
     return "Standard RL: " + "; ".join(parts) + "."
 
 
+def _controller_cell(ctrl: dict[str, Any] | None) -> str:
+    """The controller's test success on a rung, with how its episodes failed below the success bar."""
+    if not ctrl:
+        return "not run yet"
+    test = ctrl["test"]
+    modes = f"; {_failures([ctrl])}" if test["success_rate"] < scoring.SUCCESS_MIN else ""
+    return f"{test['success_rate']:.2f} ({test['episodes']} seeds{modes})"
+
+
 def _system_section(name: str, results: dict[str, Any],
                     groups: dict[Group, dict[int, list[dict[str, Any]]]]) -> list[str]:
     sysdef = tasks.SYSTEMS[name]
@@ -259,10 +268,8 @@ def _system_section(name: str, results: dict[str, Any],
              "| rung | task | what it changes | controller success (test seeds) |",
              "|---|---|---|---|"]
     for k, task in enumerate(ladder, start=1):
-        ctrl = results["controllers"].get(task)
-        c = "not run yet" if not ctrl else f"{ctrl['test']['success_rate']:.2f} ({ctrl['test']['episodes']} seeds" + (
-            f"; {_failures([ctrl])})" if ctrl["test"]["success_rate"] < scoring.SUCCESS_MIN else ")")
-        lines.append(f"| {k} | `{task}` | {tasks.get(task).description} | {c} |")
+        lines.append(f"| {k} | `{task}` | {tasks.get(task).description} | "
+                     f"{_controller_cell(results['controllers'].get(task))} |")
     lines += ["", _says(name, groups, len(ladder)), ""]
     if not groups:
         return lines
