@@ -136,6 +136,12 @@ def test_both_ways_is_built_with_load_only_and_the_board_uses_it():
     with pytest.raises(ValueError, match="variant"):
         both_ways.policy(filtered, env, "shielded")
     plain = training.POLICIES_DIR / "platoon_tplf_ppo"
+    assert not isinstance(both_ways.policy(plain, env), Shield)                # shipped without the filter
+    assert isinstance(both_ways.policy(plain, env, filter_defaults=True), Shield)   # behind it at its defaults
+    assert not isinstance(both_ways.policy(plain, env, both_ways.NETWORK_ALONE, filter_defaults=True), Shield)
+    for bad in ("yes", 1, None):
+        with pytest.raises(TypeError, match="filter_defaults"):
+            both_ways.policy(plain, env, filter_defaults=bad)
     eps = both_ways.evaluate(plain, env, [900_000, 900_001], shipped_seeds=1)
     assert eps[both_ways.AS_SHIPPED] == eps[both_ways.NETWORK_ALONE][:1]        # shipped without it: run once
     specs = discover_trained_policies()

@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from satenv.errors import SatenvError
+from satenv.errors import SatenvError, SatenvTypeError
 
 __all__ = ["AS_SHIPPED", "NETWORK_ALONE", "VARIANTS", "evaluate", "policy", "ships_filtered"]
 
@@ -42,6 +42,8 @@ def policy(folder: str | Path, env: Any, variant: str = AS_SHIPPED, *, filter_de
     (e.g. a training checkpoint flown behind the filter)."""
     if variant not in VARIANTS:
         raise SatenvError(f"variant must be one of {list(VARIANTS)}, got {variant!r}")
+    if not isinstance(filter_defaults, bool):
+        raise SatenvTypeError(f"filter_defaults must be a bool, got {filter_defaults!r:.40}")
     from satenv.training.policy import load
 
     if variant == AS_SHIPPED and filter_defaults and not ships_filtered(folder):
