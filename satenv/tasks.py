@@ -297,22 +297,27 @@ def _rung(base: Task, prefix: str, k: int, label: str, what: str, changes: Mappi
                 f"ladder rung {k} of {base.name}: {what}", (), base.cost_budget)
 
 
+def _rows(array: Any) -> tuple[tuple[float, ...], ...]:
+    """An array's rows as a tuple of float tuples (a frozen env keyword)."""
+    return tuple(tuple(float(v) for v in row) for row in array)
+
+
 def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]], ...]]]:
     """Per system: the rungs' name prefix and, easiest first, each rung's label, what it changes
     and its env keywords on top of the training task's (the training task is the last rung)."""
     from satenv.scenarios.cluster import resolve_scenario as resolve_cluster
     from satenv.scenarios.platoon import resolve_scenario
 
-    def near_targets(preset: str, **kwargs: Any) -> Any:
-        """The scenario's target states, as the ``initial_state`` the random starts are drawn around."""
-        targets = resolve_scenario(preset, **kwargs).desired_states()
-        return tuple(tuple(float(v) for v in row) for row in targets)
-
-    def platoon(targets: Any) -> tuple[tuple[str, str, dict[str, Any]], ...]:
+    def platoon(preset: str, **kwargs: Any) -> tuple[tuple[str, str, dict[str, Any]], ...]:
+        """Starts drawn around the targets, then around the points halfway from the targets to the
+        paper's start (the training task draws around the paper's start, within 20 m per axis)."""
+        scenario = resolve_scenario(preset, **kwargs)
+        targets = scenario.desired_states()
         return (("near", "starts drawn within 5 m (per axis) of the targets",
-                 {"initial_state": targets, "random_position_spread": 5.0}),
-                ("mid", "starts drawn within 10 m (per axis) of the targets",
-                 {"initial_state": targets, "random_position_spread": 10.0}))
+                 {"initial_state": _rows(targets), "random_position_spread": 5.0}),
+                ("half", "starts drawn within 10 m (per axis) of the points halfway from the targets to "
+                 "the paper's start", {"initial_state": _rows((targets + scenario.initial_array()) / 2.0),
+                                       "random_position_spread": 10.0}))
 
     def formation() -> tuple[tuple[str, str, dict[str, Any]], ...]:
         coarse = {"dt": 0.2, "max_steps": 100, "success_tol": 10.0}   # the same 20 s, 100 decisions
@@ -338,8 +343,8 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
 
     tplf30 = {k: v for k, v in _TPLF30.items() if k != "preset"}
     return {
-        "platoon-pereira2023": ("platoon-tplf30", platoon(near_targets("pereira2023", **tplf30))),
-        "platoon-pereira2022": ("platoon-pereira2022", platoon(near_targets("pereira2022"))),
+        "platoon-pereira2023": ("platoon-tplf30", platoon("pereira2023", **tplf30)),
+        "platoon-pereira2022": ("platoon-pereira2022", platoon("pereira2022")),
         "cluster-li2022": ("cluster-case1", cluster()),
         "servicing-pereira2022": ("servicing-pereira2022", servicing()),
         "formation-kannan2022-position": ("formation-kannan2022-position", formation()),
@@ -349,7 +354,7 @@ def _ladder_rungs() -> dict[str, tuple[str, tuple[tuple[str, str, dict[str, Any]
 
 def _registered() -> list[Task]:
     from satenv.scenarios import cluster as _cluster
-    from satenv.scenarios.platoon import swarm
+    from satenv.scenarios.platoon import resolve_scenario, swarm
 
     return [
         *[_platoon(f"platoon-{topo}-{dyn}",
@@ -372,6 +377,12 @@ def _registered() -> list[Task]:
                  "apart, collision-free) and randomised initial states, cw; a collision ends the episode",
                  system="platoon-pereira2023", role="training",
                  perturbations=(*_TRANSLATION, "model-j2"), **_TPLF30, randomize=True, **_TRAINING),
+        _platoon("platoon-tplf30-near10", "platoon-tplf30-random-cw with starts drawn within 10 m (per axis) "
+                 "of the targets: neighbours 8.3 m apart at their targets start out of order, so learners "
+                 "collide more than on the training task (a former ladder rung; its tuned PPO configuration "
+                 "is satenv/training/rl/tuned/platoon-tplf30-near10.json)",
+                 **_TPLF30, randomize=True, **_TRAINING, random_position_spread=10.0,
+                 initial_state=_rows(resolve_scenario(**_TPLF30).desired_states())),
         _platoon("platoon-pereira2022", "pereira2022 §5.1: 2 followers in a chain, keep-out sphere, "
                  "LOS cone (collision-free success)", system="platoon-pereira2022", role="paper",
                  preset="pereira2022"),

@@ -215,8 +215,8 @@ def test_tuned_configs_are_valid_and_flags_override_them():
         assert doc["task"] == path.stem and doc["task"] in tasks.TASKS
         assert doc["chosen_on"]["split"] == "validation" and set(doc["config"]) <= fields
         ppo.LeanConfig(task=doc["task"], **doc["config"])
-    assert ppo.tuned("platoon-tplf30-rung2-mid") == {"lr": 0.001} and ppo.tuned(TASK) == {}
-    cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-rung2-mid", "--tuned"])
+    assert ppo.tuned("platoon-tplf30-near10") == {"lr": 0.001} and ppo.tuned(TASK) == {}
+    cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-near10", "--tuned"])
     assert cfg.lr == 0.001
-    cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-rung2-mid", "--tuned", "--lr", "0.0002"])
+    cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-near10", "--tuned", "--lr", "0.0002"])
     assert cfg.lr == 0.0002
