@@ -354,6 +354,9 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "- **Smoke tests**: the earlier grid of this page (SB3 PPO, BenchMARL MAPPO and MASAC at 200,000 "
         "agent-steps, 3 seeds, 5 test seeds, on the training tasks only) was a smoke test of the pipeline, not a "
         "result; its log is kept in `studies/reference_results/smoke_200k_log.jsonl` and is not on this page.",
+        "- **Former rungs**: the platoons' second rungs first drew their starts within 10 m of the targets; the "
+        "runs on them are kept in `studies/reference_results/former_rungs_log.jsonl` and are not on this page "
+        "(`docs/tasks.md`, Ladders, says why the rung moved).",
         "- **Learner defaults**: the lean learner's first defaults (observations by running statistics, 2 epochs of "
         "4,096-agent-step minibatches) left the section 5.1 platoon's first rung at 0/20 on validation seeds, its "
         "policies drifting hundreds of metres; its current ones (the envs' own fixed observation scales, 10 epochs "
