@@ -33,6 +33,8 @@ COMMANDS: dict[str, Command] = {
                           "train with BenchMARL (MAPPO, IPPO, MASAC, ISAC, MADDPG, IDDPG)", "marl"),
     "train-rllib": Command("satenv.training.rllib_train:main", "train with Ray RLlib (multi-agent PPO)", "rllib"),
     "ppo": Command("satenv.training.rl.ppo:main", "train with the lean batched PPO (ppo, ippo, mappo)", "train"),
+    "ppo-tune": Command("satenv.training.rl.tune:main",
+                        "tune the lean PPO on a task: candidates chosen on validation seeds", "train"),
     "imitate": Command("satenv.training.imitation.cli:main",
                        "imitate an expert controller (DAgger and its safe variants), resume, validate, ship",
                        "train"),
