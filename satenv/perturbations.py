@@ -14,7 +14,9 @@ two steps the core's agent states are replaced by a noisy estimate (Gaussian, ``
 [m] and ``sigma_velocity`` [m/s] per axis, drawn from the episode's seed), so the policy's
 observation, ``env.state()``, the scripted controllers and the safety filter wrapped around a
 policy (:class:`satenv.safety.Shield`) all see the same estimate; the truth is restored before the
-physics of the next step.
+physics of the next step. A controller that acts inside the step at the physics rate (the cluster's
+inner-loop hook, the tube controller of ``satenv.baselines.TubeRDMPC``) reads the true sub-step
+state plus the decision's navigation error, held over the decision: an estimate, never the truth.
 
 **Declared bounds.** Each perturbation declares the :class:`UncertaintyBounds` a planner is told
 (:func:`declared_bounds`), and a safety filter built on the env tightens its constraints by them
@@ -29,6 +31,7 @@ with.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import math
@@ -179,6 +182,7 @@ class PerturbedEnv(BaseParallelWrapper):
         self.nominal_scenario = nominal_env.scenario
         self.metadata = {**truth_env.metadata, "perturbation": perturbation.name}
         self._truth: np.ndarray | None = None
+        self._noise: np.ndarray | None = None
         self._nav_rng = np.random.default_rng(NAV_SEED_KEY)
 
     @property
@@ -205,13 +209,18 @@ class PerturbedEnv(BaseParallelWrapper):
         noise[..., :3] *= p.sigma_position
         noise[..., 3:6] *= p.sigma_velocity
         core.x[..., :6] += noise
+        self._noise = noise
         noisy = core.observe()[0]
         return {a: noisy[i] for i, a in enumerate(self.env.possible_agents) if a in obs}
 
-    def _restore(self) -> None:
-        if self._truth is not None:
-            self.env.core.x[...] = self._truth
-            self._truth = None
+    def _restore(self) -> np.ndarray | None:
+        """Put the truth back; the navigation error it replaces (``None`` when none was installed)."""
+        if self._truth is None:
+            return None
+        noise = self._noise
+        self.env.core.x[...] = self._truth
+        self._truth = None
+        return noise
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         self._restore()
@@ -220,12 +229,40 @@ class PerturbedEnv(BaseParallelWrapper):
         return self._estimate(obs), infos
 
     def step(self, actions: dict[str, Any]):
-        self._restore()
-        obs, rewards, terms, truncs, infos = self.env.step(actions)
+        noise = self._restore()
+        with _estimated_inner_loop(self.env.core, noise):
+            obs, rewards, terms, truncs, infos = self.env.step(actions)
         return self._estimate(obs), rewards, terms, truncs, infos
 
     def state(self) -> np.ndarray:
         return self.env.state()
+
+
+class _EstimatedInnerLoop:
+    """A physics-rate controller hook fed the true sub-step state plus the decision's navigation
+    error (module docstring)."""
+
+    def __init__(self, loop: Any, noise: np.ndarray) -> None:
+        self.loop, self.noise = loop, noise
+
+    def correction(self, t: np.ndarray, x: np.ndarray, chief: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:
+        estimate = x.copy()
+        estimate[..., :6] += self.noise
+        return self.loop.correction(t, estimate, chief, u_cmd)
+
+
+@contextlib.contextmanager
+def _estimated_inner_loop(core: Any, noise: np.ndarray | None) -> Any:
+    """Within: the core's inner-loop hook (if any) reads the estimate; after: the hook as it was."""
+    loop = getattr(core, "inner_loop", None)
+    if loop is None or noise is None:
+        yield
+        return
+    core.inner_loop = _EstimatedInnerLoop(loop, noise)
+    try:
+        yield
+    finally:
+        core.inner_loop = loop
 
 
 def make_env(task: Any, perturbation: str | None, **overrides: Any) -> Any:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -211,3 +212,38 @@ def test_the_shield_reads_the_estimate_the_policy_reads():
     filt = satenv.safety.shield(baselines.make("zero", noisy), noisy).filter
     assert np.array_equal(filt.core.x, noisy.env.core.x)              # the state the env holds now
     assert not np.allclose(filt.core.x[..., :6], truth.core.x[..., :6])  # the estimate, not the truth
+
+
+class _Recorder:
+    """An inner-loop hook that records the states it is given and corrects nothing."""
+
+    def __init__(self) -> None:
+        self.states: list[np.ndarray] = []
+
+    def correction(self, t, x, chief, u_cmd):
+        self.states.append(np.array(x))
+        return np.zeros(np.shape(u_cmd))
+
+
+def _hooked_step(task: tasks.Task, perturbation: str | None) -> tuple[Any, np.ndarray, _Recorder]:
+    """One zero-thrust step of the task's first test seed with a recording hook: the env, the state
+    the policy observed before the step and the hook."""
+    env = perturbations.make_env(task, perturbation)
+    env.reset(seed=task.seeds("test", 1)[0])
+    seen = env.core.x.copy()
+    hook = _Recorder()
+    env.set_inner_loop(hook)
+    env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+    return env, seen, hook
+
+
+def test_the_physics_rate_hook_reads_the_estimate_never_the_truth():
+    task = tasks.get("cluster-case1-rung1-near3")
+    plain_env, truth, plain = _hooked_step(task, None)          # nav error leaves the physics alone
+    env, seen, hook = _hooked_step(task, "nav-1m")
+    assert env.inner_loop is hook and plain_env.inner_loop is plain   # restored after the step
+    assert len(hook.states) == len(plain.states) == task.make_env().scenario.substeps
+    noise = seen[..., :6] - truth[..., :6]                       # the decision's navigation error
+    assert np.abs(noise).max() > 0.1
+    for nav, true in zip(hook.states, plain.states, strict=True):   # every sub-step: truth + that error
+        np.testing.assert_allclose(nav[..., :6] - true[..., :6], noise, rtol=0, atol=1e-9)

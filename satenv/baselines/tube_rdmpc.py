@@ -14,9 +14,10 @@
   satellite i uses ``ζ*_j(t_k + mΔt | t_{k-1})`` (m < N) and the ρ = 0 coast for m = N; all
   satellites solve in parallel (Jacobi) from the previous exchange.
 * **Tube controller** κ (13) with ``k1 = 2``, ``k2 = 4``, running at the env's physics rate on
-  the true state through the env's inner-loop hook
-  (``env.set_inner_loop``): ``u = u~ + κ``, ``κ = -(f(x) - f(x~)) - (1 + k1) ε - (k1 + k2) ε̇``,
-  ``ε = q - q~``; the nominal state ``x~`` is propagated by the controller with ``u~``.
+  the state the env's inner-loop hook gives it (``env.set_inner_loop``: the truth, or under
+  navigation error the estimate, ``satenv.perturbations``): ``u = u~ + κ``,
+  ``κ = -(f(x) - f(x~)) - (1 + k1) ε - (k1 + k2) ε̇``, ``ε = q - q~``; the nominal state ``x~`` is
+  propagated by the controller with ``u~``.
 
 Prediction / nominal model: the exact zero-order-hold Clohessy–Wiltshire model of
 ``satenv.dynamics`` for the chief's mean motion (li2022 integrates its J2 + drag nominal model
@@ -711,8 +712,8 @@ class _NominalNLP:
 class TubeRDMPC(Baseline):
     """Tube-based robust DMPC (li2022) for ``satenv.cluster_v0`` (see the module docstring).
 
-    Privileged: it reads the env's true states, allocated targets, obstacle state, time and
-    scenario, and registers its tube controller with ``env.set_inner_loop`` (it acts inside the
+    Privileged: it reads the env's states (under navigation error, the estimate), allocated targets,
+    obstacle state, time and scenario, and registers its tube controller with ``env.set_inner_loop`` (it acts inside the
     env's physics sub-steps).
 
     Args:

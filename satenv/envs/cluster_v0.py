@@ -35,8 +35,9 @@ Time: one ``step`` is one decision period ``dt`` (Δt = 5 s); inside it the trut
 Inner-loop hook (for controllers that act at the physics rate, e.g. the tube controller κ of
 li2022 eq. 13): ``env.set_inner_loop(obj)`` registers an object with a method
 ``correction(t, x, chief, u_cmd) -> (B, M, 3)`` called at every physics step with the time
-``t`` (B,) [s], the true states ``x`` (B, M, 6), the reference satellite's ECI state
-``chief`` (B, 6) and the commanded accelerations ``u_cmd`` (B, M, 3) of the current decision; the
+``t`` (B,) [s], the states ``x`` (B, M, 6) (the truth; under a navigation-error perturbation the
+truth plus the decision's navigation error, ``satenv.perturbations``), the reference satellite's
+ECI state ``chief`` (B, 6) and the commanded accelerations ``u_cmd`` (B, M, 3) of the current decision; the
 env applies ``saturate_norm(u_cmd + correction, u_max)``. ``reset()`` removes the hook (a
 controller registers it again for its episode: ``satenv.baselines.TubeRDMPC`` does so itself).
 
