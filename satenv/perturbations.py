@@ -24,9 +24,9 @@ state plus the decision's navigation error, held over the decision: an estimate,
 navigation perturbations declare a bound: the radius that holds a 3-axis Gaussian error of the
 declared sigma with probability :data:`NAV_BOUND_PROBABILITY` per draw. The truth changes
 (thrust, disturbance, model, inertia) declare nothing: they are what a planner does not know, and
-the board measures how it copes. A filter built into the truth env (``safety_filter=True`` in the
-task's env kwargs) runs inside its step: it reads the truth and models the scenario it was built
-with.
+the board measures how it copes. A filter built into the env (``safety_filter=True`` in its
+keywords) would run inside the truth's step and read the truth, so a perturbed env refuses it: the
+filter goes around the policy instead (:func:`satenv.safety.shield`).
 """
 
 from __future__ import annotations
@@ -283,6 +283,11 @@ def perturbed(build: Callable[..., Any], perturbation: str | None) -> Any:
     if perturbation is None:
         return nominal
     p = get(perturbation)
+    if getattr(nominal, "safety", None) is not None:
+        raise SatenvError(f"perturbation {perturbation!r} with a filter built into the env (safety_filter=...): "
+                          "that filter would run inside the truth and read it; build the env without it and wrap "
+                          "the policy instead, satenv.safety.shield(policy, env), which plans with the nominal "
+                          "model and reads the estimate")
     try:
         changes = p.truth(nominal.scenario)
     except AttributeError as err:   # the scenario has no such field: another system's perturbation

@@ -247,3 +247,10 @@ def test_the_physics_rate_hook_reads_the_estimate_never_the_truth():
     assert np.abs(noise).max() > 0.1
     for nav, true in zip(hook.states, plain.states, strict=True):   # every sub-step: truth + that error
         np.testing.assert_allclose(nav[..., :6] - true[..., :6], noise, rtol=0, atol=1e-9)
+
+
+def test_a_perturbed_env_refuses_a_filter_inside_the_truth():
+    task = tasks.get("platoon-pereira2022-random")
+    with pytest.raises(SatenvError, match="satenv.safety.shield"):
+        perturbations.make_env(task, "thrust-80", safety_filter=True)
+    assert perturbations.make_env(task, None, safety_filter=True).safety is not None   # unperturbed: allowed
