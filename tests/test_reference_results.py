@@ -192,7 +192,7 @@ def test_grid_covers_the_ladders():
             assert len({r.seed for r in mine if r.algorithm == "ppo"}) >= 5
             assert any(r.filter for r in mine) == (system in G.FILTER_SYSTEMS)
     assert all(G.BUDGET_AGENT_STEPS[s] >= 10_000_000 for s in tasks.SYSTEMS if s.startswith(("platoon", "formation")))
-    assert G.MASAC_UTD >= 0.25
+    assert G.MASAC_UTD >= 0.25 and G.MASAC_BATCH == 128   # BenchMARL's standard off-policy batch
     assert ([r.task.name for r in G.grid(["cluster-li2022"], ["ppo"], [0], (), rungs=[2])]
             == [tasks.ladder("cluster-li2022")[1]])
     with pytest.raises(G.LearningError, match="rungs"):

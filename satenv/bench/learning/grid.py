@@ -28,8 +28,8 @@ from satenv import tasks
 
 __all__ = ["VALIDATION_SEEDS", "select_checkpoint",
            "ALGORITHMS", "BUDGET_AGENT_STEPS", "CHECKPOINTS", "CURVE_TEST_SEEDS", "DAGGER_LABELS", "DEFAULT_ALGORITHMS",
-           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_BUDGET_AGENT_STEPS", "MASAC_UTD",
-           "grid_budget", "RL_ALGORITHMS", "Run", "LearningError", "grid", "test_seeds"]
+           "DEFAULT_SEEDS", "FILTER_PENALTY", "FINAL_TEST_SEEDS", "KEY", "MASAC_BATCH", "MASAC_BUDGET_AGENT_STEPS",
+           "MASAC_UTD", "grid_budget", "RL_ALGORITHMS", "Run", "LearningError", "grid", "test_seeds"]
 
 
 class LearningError(ValueError):
@@ -82,10 +82,15 @@ of ``satenv.bench.learning.trainers.DAGGER_EPISODES`` whole episodes; the expert
 MASAC_UTD = 0.25
 """MASAC's update-to-data ratio: gradient steps per frame (BenchMARL's off-policy optimiser steps
 per collected frame)."""
+MASAC_BATCH = 128
+"""MASAC's frames per gradient step: BenchMARL's standard ``off_policy_train_batch_size``
+(``benchmarl/conf/experiment/base_experiment.yaml``)."""
 MASAC_BUDGET_AGENT_STEPS = 1_000_000
-"""MASAC's budget on every rung [agent-steps]: at :data:`MASAC_UTD` a BenchMARL gradient step costs
-about 0.1 s on these shared cores (measured: 2,048 platoon frames, 512 steps, 65 s), so 10 M
-agent-steps would take about a day per run; the page states it."""
+"""MASAC's budget on every rung [agent-steps]: at :data:`MASAC_UTD` and :data:`MASAC_BATCH` a
+BenchMARL gradient step costs about 6 ms on these shared cores (measured on the TPLF platoon's first
+rung: 2,560 more gradient steps took 15.5 s more, load average 2.5-2.9), so 10 M agent-steps (625,000
+gradient steps on the platoon) would take about an hour per run and 30 hours per rung of five seeds
+on the six systems; the page states it."""
 
 FILTER_SYSTEMS = ("cluster-li2022", "servicing-pereira2022", "platoon-pereira2022")
 """The systems whose PPO row is run once more with the safety filter in the training env."""

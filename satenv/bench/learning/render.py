@@ -348,9 +348,10 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "(measured, table below), so 10 M agent-steps is as far "
         "as five seeds of every lean row on every rung go in a few days of one shared worker. MASAC's budget is "
         f"{g['masac_budget_agent_steps']:,} agent-steps on every rung: it keeps the standard update-to-data ratio "
-        f"({g['masac_utd']} gradient steps per frame), and at that ratio a BenchMARL gradient step costs about "
-        "0.1 s here (measured on the platoon: 2,048 frames, 512 gradient steps, 65 s), about a day per run at "
-        "10 M agent-steps.",
+        f"({g['masac_utd']} gradient steps per frame, of {g['masac_batch']} frames each, BenchMARL's "
+        "standard off-policy batch), and at that ratio a BenchMARL gradient step costs about 6 ms here "
+        "(measured on the TPLF platoon's first rung, `satenv.bench.learning.grid.MASAC_BUDGET_AGENT_STEPS`): "
+        "10 M agent-steps would take about an hour per run, 30 hours per rung of five seeds on the six systems.",
         "- **Smoke tests**: the earlier grid of this page (SB3 PPO, BenchMARL MAPPO and MASAC at 200,000 "
         "agent-steps, 3 seeds, 5 test seeds, on the training tasks only) was a smoke test of the pipeline, not a "
         "result; its log is kept in `studies/reference_results/smoke_200k_log.jsonl` and is not on this page.",

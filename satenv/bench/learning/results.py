@@ -156,7 +156,7 @@ def build_results(records: list[dict[str, Any]]) -> dict[str, Any]:
     return {"grid": {"checkpoints": G.CHECKPOINTS, "curve_test_seeds": G.CURVE_TEST_SEEDS,
                      "final_test_seeds": G.FINAL_TEST_SEEDS,
                      "validation_seeds": G.VALIDATION_SEEDS, "budget_agent_steps": G.BUDGET_AGENT_STEPS,
-                     "dagger_labels": G.DAGGER_LABELS, "masac_utd": G.MASAC_UTD,
+                     "dagger_labels": G.DAGGER_LABELS, "masac_utd": G.MASAC_UTD, "masac_batch": G.MASAC_BATCH,
                      "masac_budget_agent_steps": G.MASAC_BUDGET_AGENT_STEPS,
                      "default_seeds": list(G.DEFAULT_SEEDS),
                      "ladders": {s: list(tasks.ladder(s)) for s in tasks.SYSTEMS},

@@ -14,7 +14,8 @@ configurations are committed), every run on its rung (``run.task``):
   its own checkpoint; the filter-in-training row trains on ``task.make_env(safety_filter=True)``
   (the filter's defaults: every action filtered, no reward penalty for a correction);
 * ``masac``: ``satenv.training.benchmarl_train.build_experiment`` (the fast configuration, with
-  :data:`~satenv.bench.learning.grid.MASAC_UTD` gradient steps per frame) with a BenchMARL callback
+  :data:`~satenv.bench.learning.grid.MASAC_UTD` gradient steps per frame, each of
+  :data:`~satenv.bench.learning.grid.MASAC_BATCH` frames) with a BenchMARL callback
   that exports the actor (``satenv.training.benchmarl_train.export_actor``) at each checkpoint;
 * ``dagger``: ``satenv.training.imitation.run`` (the project's one imitation engine, the system's expert
   and hyper-parameters from :data:`satenv.tasks.SYSTEMS`) one round per checkpoint.
@@ -31,7 +32,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from satenv.bench.learning.grid import CHECKPOINTS, FILTER_PENALTY, MASAC_UTD, Run
+from satenv.bench.learning.grid import CHECKPOINTS, FILTER_PENALTY, MASAC_BATCH, MASAC_UTD, Run
 
 __all__ = ["Checkpoint", "DAGGER_EPISODES", "filtered_task_env", "train"]
 
@@ -108,8 +109,9 @@ def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
     fast = _fast("benchmarl_mappo")
-    if run.algorithm in ("masac", "isac"):   # off-policy: MASAC_UTD gradient steps per collected frame
+    if run.algorithm in ("masac", "isac"):   # off-policy: MASAC_UTD gradient steps of MASAC_BATCH frames
         fast["minibatch_iters"] = math.ceil(MASAC_UTD * fast["frames_per_batch"])
+        fast["minibatch_size"] = MASAC_BATCH
     cfg = BenchMARLConfig(algorithm=run.algorithm, task=task.name,
                           seed=run.seed, max_frames=math.ceil(run.budget / n_agents), out_dir=str(workdir),
                           progress=False, workers=1, **fast).planned()
