@@ -95,11 +95,25 @@ def train_lean(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
         checkpoint(k, steps, wall, lambda env, kept=kept: lean_policy(kept, env))
 
 
+def benchmarl_config(run: Run, n_agents: int, workdir: Path) -> Any:
+    """The BenchMARL config of a grid run: the fast configuration; off-policy rows take
+    :data:`MASAC_UTD` gradient steps per collected frame, each of :data:`MASAC_BATCH` frames."""
+    from satenv.training.benchmarl_train import BenchMARLConfig
+
+    fast = _fast("benchmarl_mappo")
+    if run.algorithm in ("masac", "isac"):
+        fast["minibatch_iters"] = math.ceil(MASAC_UTD * fast["frames_per_batch"])
+        fast["minibatch_size"] = MASAC_BATCH
+    return BenchMARLConfig(algorithm=run.algorithm, task=run.task.name, seed=run.seed,
+                           max_frames=math.ceil(run.budget / n_agents), out_dir=str(workdir), progress=False,
+                           workers=1, **fast).planned()
+
+
 def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     from benchmarl.experiment.callback import Callback
 
     import satenv
-    from satenv.training.benchmarl_train import BenchMARLConfig, build_experiment, export_actor
+    from satenv.training.benchmarl_train import build_experiment, export_actor
     from satenv.training.envs import policy_env_meta
     from satenv.training.policy import LearnedPolicy, ObsNormalizer
 
@@ -108,13 +122,7 @@ def train_benchmarl(run: Run, checkpoint: Checkpoint, workdir: Path) -> None:
     n_agents = len(env.possible_agents)
     agent = env.possible_agents[0]
     obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
-    fast = _fast("benchmarl_mappo")
-    if run.algorithm in ("masac", "isac"):   # off-policy: MASAC_UTD gradient steps of MASAC_BATCH frames
-        fast["minibatch_iters"] = math.ceil(MASAC_UTD * fast["frames_per_batch"])
-        fast["minibatch_size"] = MASAC_BATCH
-    cfg = BenchMARLConfig(algorithm=run.algorithm, task=task.name,
-                          seed=run.seed, max_frames=math.ceil(run.budget / n_agents), out_dir=str(workdir),
-                          progress=False, workers=1, **fast).planned()
+    cfg = benchmarl_config(run, n_agents, workdir)
     experiment = build_experiment(cfg)
     experiment.config.checkpoint_at_end = False
     meta = policy_env_meta(task.env_id, env, dict(task.env_kwargs), dict(task.env_kwargs))
