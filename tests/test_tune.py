@@ -46,6 +46,8 @@ def test_bad_input_is_a_clear_error(tmp_path, capsys):
     base = ["--task", TASK, "--work-dir", str(tmp_path / "w"), "--out", str(tmp_path / "t.json")]
     assert tune.main([*base, "--candidate", 'x={"nope": 1}']) == 2
     assert "not tunable" in capsys.readouterr().err
+    assert tune.main([*base, "--candidate", 'x={"lr": NaN}']) == 2        # refused before anything trains
+    assert "lr must be" in capsys.readouterr().err and not (tmp_path / "w").exists()
     with pytest.raises(SystemExit):
         tune.main([*base, "--candidate", "x=1"])
     assert "expected a JSON object" in capsys.readouterr().err

@@ -775,9 +775,14 @@ TUNED_DIR = Path(__file__).parent / "tuned"
 validation seeds."""
 
 
+def tuned_path(task: str) -> Path:
+    """Where ``task``'s committed tuned configuration lives (``satenv ppo-tune --update-published``)."""
+    return TUNED_DIR / f"{task}.json"
+
+
 def tuned(task: str) -> dict[str, Any]:
     """The tuned fields of ``task`` (``{}`` when none is committed)."""
-    path = TUNED_DIR / f"{task}.json"
+    path = tuned_path(task)
     return json.loads(path.read_text())["config"] if path.is_file() else {}
 
 

@@ -22,7 +22,7 @@ from typing import Any
 
 from satenv.cliargs import int_at_least, new_parser, out_file, out_folder, parse_json_object, published_or_user
 from satenv.training import runfolder
-from satenv.training.rl.ppo import TUNED_DIR, LeanConfig, train
+from satenv.training.rl.ppo import LeanConfig, train, tuned_path
 
 __all__ = ["DEFAULT", "RULE", "choose", "main", "tune"]
 
@@ -77,14 +77,15 @@ def tune(task: str, candidates: dict[str, dict[str, Any]], *, budget: int, seed:
 
     seeds = tasks.get(task).seeds("validation", validation_seeds)
     runs = {DEFAULT: {}, **candidates}
-    for name, config in runs.items():
+    configs = {}
+    for name, config in runs.items():   # every candidate checked before any trains
         check_candidate(name, config)
+        configs[name] = LeanConfig(task=task, seed=seed, budget=budget, test_seeds=seeds, eval_baselines=(),
+                                   out_dir=str(work_dir / name), progress=progress, **config)
     scores = {}
     for k, (name, config) in enumerate(runs.items(), start=1):
         print(f"[{k}/{len(runs)}] {name} {json.dumps(config)}", flush=True)
-        cfg = LeanConfig(task=task, seed=seed, budget=budget, test_seeds=seeds, eval_baselines=(),
-                         out_dir=str(work_dir / name), progress=progress, **config)
-        scores[name] = {"config": config, **_score(cfg)}
+        scores[name] = {"config": config, **_score(configs[name])}
     chosen = choose(scores)
     return {"task": task, "stack": f"satenv.training.rl.ppo (lean PPO, variant {LeanConfig().variant})",
             "chosen_on": {"split": "validation", "seeds": f"{seeds[0]}-{seeds[-1]}", "training_seed": seed,
@@ -113,7 +114,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--work-dir", type=out_folder, help="the candidates' run folders (default results/tune/<task>)")
     p.add_argument("--out", type=out_file, help="the tuned record (default results/tuned/<task>.json)")
     p.add_argument("--update-published", action="store_true",
-                   help=f"write the record to {TUNED_DIR}/<task>.json, which satenv ppo --tuned reads")
+                   help="write the record to satenv/training/rl/tuned/<task>.json, which satenv ppo --tuned reads")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p
 
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     names = [name for name, _ in args.candidate]
     if len(set(names)) != len(names) or DEFAULT in names:
         p.error(f"argument --candidate: names must be distinct and not {DEFAULT!r}, got {names}")
-    out = published_or_user(p, "--out", args.out, args.update_published, TUNED_DIR / f"{args.task}.json",
+    out = published_or_user(p, "--out", args.out, args.update_published, tuned_path(args.task),
                             Path("results/tuned") / f"{args.task}.json")
     work = args.work_dir or Path("results/tune") / args.task
     print(f"{len(names) + 1} candidates x {args.budget:,} agent-steps = {(len(names) + 1) * args.budget:,} "
