@@ -220,3 +220,37 @@ def test_tuned_configs_are_valid_and_flags_override_them():
     assert cfg.lr == 0.001
     cfg, _ = ppo.config_from_args(["--task", "platoon-tplf30-near10", "--tuned", "--lr", "0.0002"])
     assert cfg.lr == 0.0002
+
+
+def test_warm_start_takes_the_network_and_statistics_and_refuses_another_shape(tmp_path, capsys):
+    """A run warm-started from another starts from its weights (the first rung's run into the
+    second rung: the same shapes), with a fresh step counter; a network of another shape is refused
+    with the source named, before anything trains."""
+    import torch
+
+    src = tmp_path / "rung1"
+    ppo.train(ppo.LeanConfig(**TINY, budget=256, seed=3, out_dir=str(src)))
+    ckpt = ppo.latest_checkpoint(src)
+    cfg = ppo.LeanConfig(**TINY, budget=128, seed=4, warm_start=str(src), out_dir=str(tmp_path / "rung2"))
+    vec = __import__("satenv.vector", fromlist=["x"]).SatVectorEnv(tasks.get(TASK).make_env(), 4, autoreset=False)
+    run = ppo.Run(cfg, vec, 0.99)
+    fresh = {k: v.clone() for k, v in run.net.state_dict().items()}
+    assert ppo.warm_start(run, src) == ckpt
+    saved = ppo.Run(cfg, vec, 0.99)
+    ppo.load_checkpoint(saved, ckpt)
+    for k, v in run.net.state_dict().items():
+        assert torch.equal(v, saved.net.state_dict()[k]), k
+    assert any(not torch.equal(v, fresh[k]) for k, v in run.net.state_dict().items())
+    assert run.steps == 0
+    ppo.train(cfg)
+    assert "warm start from" in capsys.readouterr().err
+    assert json.loads((tmp_path / "rung2" / "config.json").read_text())["warm_start"] == str(src)
+
+    wide = ppo.LeanConfig(**TINY, budget=128, net_arch=(8, 8), warm_start=str(src), out_dir=str(tmp_path / "w"))
+    with pytest.raises(ValueError, match="warm_start: the network of .*step_256.* does not fit"):
+        ppo.train(wide)
+    assert not (tmp_path / "w" / "checkpoints").exists()
+    with pytest.raises(ValueError, match="holds no lean checkpoint"):
+        ppo.train(ppo.LeanConfig(**TINY, budget=128, warm_start=str(tmp_path / "none"), out_dir=str(tmp_path / "n")))
+    with pytest.raises(ValueError, match="warm_start must be"):
+        ppo.LeanConfig(**TINY, warm_start="")

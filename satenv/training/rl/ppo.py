@@ -78,7 +78,7 @@ from satenv.training.rl.nets import (
     to_copies,
 )
 
-__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "train"]
+__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "train", "warm_start"]
 
 VARIANTS = ("ppo", "ippo", "mappo")
 
@@ -130,6 +130,9 @@ class LeanConfig(RunConfig):
     """Its dual step size."""
     cost_budget: float | None = None
     """Its episode safety-cost budget per agent; ``None``: the task's ``cost_budget``."""
+    warm_start: str | None = None
+    """A lean run's folder (its newest checkpoint) or one of its ``checkpoints/step_<N>`` whose network
+    and statistics this run starts from (:func:`warm_start`): training along a ladder, rung after rung."""
     out_dir: str = "runs/lean_ppo"
 
     def __post_init__(self) -> None:
@@ -151,6 +154,8 @@ class LeanConfig(RunConfig):
         for name in ("norm_obs", "norm_reward", "lagrangian"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
+        if self.warm_start is not None and (not isinstance(self.warm_start, str) or not self.warm_start):
+            raise ValueError(f"warm_start must be a lean run's folder or checkpoint path, got {self.warm_start!r}")
 
 
 # --------------------------------------------------------------------------- 3. normalisation
@@ -547,6 +552,27 @@ def load_checkpoint(run: Run, folder: Path) -> None:
                                        f"config ({type(err).__name__}: {str(err)[:160]})") from None
 
 
+def warm_start(run: Run, source: Path) -> Path:
+    """Start ``run``'s network (weights and action std) and its running statistics from another lean
+    run's checkpoint (``source``: the run's folder, its newest checkpoint, or one ``step_<N>``); the
+    optimiser, the envs and the step counter start fresh. Returns the checkpoint read. The network
+    must have this run's shapes (variant, observation and action sizes, ``net_arch``)."""
+    from safetensors.torch import load_file
+
+    folder = source if (source / CHECKPOINT_JSON).is_file() else latest_checkpoint(source)
+    if folder is None:
+        raise ValueError(f"warm_start: {source} holds no lean checkpoint (checkpoints/step_<N>/{CHECKPOINT_JSON})")
+    try:
+        tensors = load_file(str(folder / CHECKPOINT_TENSORS))
+        run.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
+        run.norm.load_json(json.loads((folder / CHECKPOINT_JSON).read_text())["norm"])
+    except (KeyError, ValueError, RuntimeError, OSError) as err:
+        raise ValueError(f"warm_start: the network of {folder} does not fit this run (variant "
+                         f"{run.cfg.variant!r}, observation size {run.obs_dim}, action size {run.act_dim}, "
+                         f"net_arch {run.cfg.net_arch}): {type(err).__name__}: {str(err)[:160]}") from None
+    return folder
+
+
 # --------------------------------------------------------------------------- 7.-8. logs and the policy folder
 def _policies(run: Run, meta: dict[str, Any], config: dict[str, Any]) -> list[Any]:
     """The learned policy of each actor copy (one for shared parameters)."""
@@ -676,6 +702,8 @@ def train(cfg: LeanConfig, resume: bool = False) -> Path:
     run = Run(cfg, vec, gamma)
     if ckpt is not None:
         load_checkpoint(run, ckpt)
+    elif cfg.warm_start is not None:
+        print(f"warm start from {warm_start(run, Path(cfg.warm_start))}", file=sys.stderr)
     runfolder.write_json(out / "config.json", {**cfg.to_json(), "gamma_used": gamma}, indent=2)
     per_iter, iterations = plan(cfg, vec.n_agents, run.steps)
     step_s, update_s = _probe_seconds(run)
@@ -751,6 +779,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--eval-baselines", type=lambda s: tuple(x for x in s.split(",") if x),
                    help="scripted baselines beside the learned policy (e.g. zero,dmpc; default auto)")
     p.add_argument("--tuned", action="store_true", help="start from the task's tuned config (tuned/<task>.json)")
+    p.add_argument("--warm-start", help="start the network from a lean run's folder or checkpoint "
+                                        "(e.g. the run of the rung below on the task's ladder)")
     p.add_argument("--out-dir")
     p.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="hide the evaluation progress bars")
