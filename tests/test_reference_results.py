@@ -67,6 +67,17 @@ def test_bootstrap_interval_by_hand():
     assert flat == pytest.approx((0.4, 0.4, 0.4))
 
 
+def test_late_drops_count_runs_that_lost_half_the_test_seeds_by_hand():
+    def rec(published, last, algorithm="ppo"):
+        return {"algorithm": algorithm, "test": {"success_rate": published}, "last_test": {"success_rate": last}}
+
+    results = {"records": [rec(1.0, 0.0), rec(1.0, 0.5), rec(0.9, 0.45), rec(0.6, 0.6), rec(0.0, 0.0),
+                           rec(1.0, 0.0, "controller")]}
+    said = render._late_drops(results)
+    assert "of the 5 learning runs" in said                  # the controller is not a learning run
+    assert "3 ended below" in said and "2 at least 0.5 below" in said   # 1.0 -> 0.0 and 1.0 -> 0.5
+
+
 def test_bootstrap_is_stratified_by_task():
     """Task A scores 0 on both runs, task B 1: a stratified resample always holds two 0s and two 1s
     (IQM 0.5), a pooled one would not."""

@@ -35,6 +35,9 @@ UPPER_RUNG_MIN = 0.5
 """The cluster and servicing target on a rung above the first: success >= 0.5."""
 LABELS = {"ppo": "PPO (lean)", "ippo": "IPPO (lean)", "mappo": "MAPPO (lean)", "ppo_lag": "PPO-Lagrangian (lean)",
           "masac": "MASAC (BenchMARL)", "dagger": "DAgger of the expert"}
+LATE_DROP = 0.5
+"""A run's late drop: its last checkpoint's test success at least this far below its published
+(selected) checkpoint's, i.e. half the test seeds lost by training on."""
 FAILURE_LABELS = {"timeout": "timeout", "left_region": "left", "collision": "collision", "violation": "violation"}
 
 
@@ -112,6 +115,16 @@ def _failures(recs: list[dict[str, Any]]) -> str:
     total = {m: sum(r["test"]["failure_modes"][m] for r in recs) for m in scoring.FAILURE_MODES}
     shown = [f"{FAILURE_LABELS[m]} {n}" for m, n in total.items() if n]
     return ", ".join(shown) if shown else "none"
+
+
+def _late_drops(results: dict[str, Any]) -> str:
+    """How many learning runs ended far below the checkpoint validation picked (:data:`LATE_DROP`)."""
+    runs = [r for r in results["records"] if r["algorithm"] != "controller"]
+    drops = [r for r in runs if r["test"]["success_rate"] - r["last_test"]["success_rate"] >= LATE_DROP]
+    below = [r for r in runs if r["last_test"]["success_rate"] < r["test"]["success_rate"]]
+    return (f"Training success is not monotone at these budgets: of the {len(runs)} learning runs on this page, "
+            f"{len(below)} ended below their published checkpoint's test success and {len(drops)} at least "
+            f"{LATE_DROP:.1f} below it (half the test seeds lost by training on).")
 
 
 def _per_seed(recs: list[dict[str, Any]]) -> str:
@@ -376,7 +389,7 @@ def render_page(results: dict[str, Any], datasets: dict[str, Any] | None = None)
         "collision or violation episodes, then the latest: early stopping on validation seeds, "
         "`satenv.bench.learning.grid.select_checkpoint`), flown on the first "
         f"{g['final_test_seeds']} test seeds; where it is not the last checkpoint, the per-seed column names "
-        "it and gives the last checkpoint's success. No test seed chose "
+        f"it and gives the last checkpoint's success. {_late_drops(results)} No test seed chose "
         "anything: the learners run at their defaults (the lean learner's own on every task; the tuned "
         "configurations beside them, chosen on validation seeds, are not used by the grid).",
         f"- **Seeds**: training seeds {tasks.show_seeds(g['default_seeds'])} per row; the tables say how many "
