@@ -63,3 +63,31 @@ def unconstrained_rows():
         return {"obs": obs, "label": label, "act": label, "filtered": label, "intervened": np.zeros(n, bool),
                 "rows": np.zeros((n, 1, 3), np.float32), "lower": np.full((n, 1), -10.0, np.float32)}
     return make
+
+
+@pytest.fixture
+def relu_policy_folder():
+    """A factory of policy folders in an imitation network's layout for a task's env:
+    ``relu_policy_folder(folder, task)``, a squashed ReLU MLP (16-16, random weights) on the
+    observation plus 6 symlog features, behind a random frozen observation normalisation."""
+    def make(folder, task: str):
+        import numpy as np
+        import torch
+
+        from satenv import tasks
+        from satenv.training.actor import MLPActor
+        from satenv.training.envs import policy_env_meta
+        from satenv.training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
+        from satenv.training.shaping import ObsFeatures
+
+        env = tasks.get(task).make_env()
+        agent = env.possible_agents[0]
+        obs_dim, act_dim = env.observation_space(agent).shape[0], env.action_space(agent).shape[0]
+        torch.manual_seed(0)
+        actor = MLPActor(obs_dim + 6, act_dim, [16, 16], "relu", squash=True)
+        rng = np.random.default_rng(0)
+        norm = ObsNormalizer(rng.normal(0.0, 0.1, obs_dim + 6), rng.uniform(0.5, 2.0, obs_dim + 6), 10.0)
+        policy = LearnedPolicy(actor, norm, obs_shape=(obs_dim,), features=ObsFeatures(10.0, 6))
+        meta = policy_env_meta(tasks.get(task).env_id, env, {}, {})
+        return save_artifacts(folder, policy, env_meta=meta, config={"obs_symlog_scale": 10.0, "obs_symlog_dims": 6})
+    return make

@@ -254,3 +254,31 @@ def test_warm_start_takes_the_network_and_statistics_and_refuses_another_shape(t
         ppo.train(ppo.LeanConfig(**TINY, budget=128, warm_start=str(tmp_path / "none"), out_dir=str(tmp_path / "n")))
     with pytest.raises(ValueError, match="warm_start must be"):
         ppo.LeanConfig(**TINY, warm_start="")
+
+
+def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder, tmp_path):
+    """A run seeded from a policy folder (``init_actor``: an imitation network's layout, features and
+    frozen normalisation) acts as the folder does; through the critic's warm-up its actor keeps its
+    values, after it the actor learns; the final folder reloads as the same policy. A seed that does
+    not fit the env, or with running observation statistics, is refused naming the problem."""
+    from satenv.training.policy import load
+
+    seed = relu_policy_folder(tmp_path / "seed", TASK)
+    env = tasks.get(TASK).make_env()
+    obs, _ = env.reset(seed=900001)
+    before = load(seed).act(obs)
+    warm = ppo.train(ppo.LeanConfig(**TINY, budget=256, init_actor=str(seed), critic_warmup=256,
+                                    out_dir=str(tmp_path / "warm")))
+    after = load(warm).act(obs)
+    assert all(np.allclose(before[a], after[a], atol=1e-6) for a in obs)
+    assert json.loads((warm / "config.json").read_text())["obs_symlog_scale"] == 10.0
+    moved = ppo.train(ppo.LeanConfig(**TINY, budget=256, init_actor=str(seed), out_dir=str(tmp_path / "moved")))
+    assert not all(np.allclose(before[a], load(moved).act(obs)[a], atol=1e-6) for a in obs)
+
+    other = relu_policy_folder(tmp_path / "other", "servicing-pereira2022")
+    with pytest.raises(ValueError, match=r"init_actor .*observation / action shapes"):
+        ppo.train(ppo.LeanConfig(**TINY, budget=128, init_actor=str(other), out_dir=str(tmp_path / "o")))
+    with pytest.raises(ValueError, match="not with norm_obs"):
+        ppo.LeanConfig(**TINY, init_actor=str(seed), norm_obs=True)
+    with pytest.raises(ValueError, match="critic_warmup must be an int >= 0"):
+        ppo.LeanConfig(**TINY, critic_warmup=-1)

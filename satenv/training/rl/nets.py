@@ -4,7 +4,8 @@
 weights; ``K = M``: each agent has its own) and runs all agents of a batch in one matmul per layer
 (``baddbmm`` over the agent axis), never a Python loop over agents. :class:`ActorCritic` is the
 PPO pair: a Gaussian actor whose mean is ``tanh`` of the last layer (so the deterministic action
-is inside the ``[-1, 1]`` thrust box) with a state-independent ``log_std``, and a critic.
+is inside the ``[-1, 1]`` thrust box) with a state-independent ``log_std``, and a critic. The hidden
+layers are ``tanh`` (:data:`ACTIVATIONS`: ``relu`` for an actor seeded from a ReLU policy folder).
 :func:`export_actor` copies one agent's actor into the folder format's
 :class:`satenv.training.actor.MLPActor` (``squash=True``): the saved policy is that mean.
 
@@ -31,8 +32,8 @@ from torch import nn
 
 from satenv.training.actor import MLPActor
 
-__all__ = ["ActorCritic", "AgentMLP", "FlatArrays", "adam_step", "export_actor", "from_copies", "mlp_backward",
-           "mlp_forward", "scratch", "tanh", "to_copies"]
+__all__ = ["ACTIVATIONS", "ActorCritic", "AgentMLP", "FlatArrays", "adam_step", "export_actor", "from_copies",
+           "mlp_backward", "mlp_forward", "scratch", "tanh", "to_copies"]
 
 HIDDEN_GAIN = math.sqrt(2.0)
 """Orthogonal initialisation gain of the hidden layers (CleanRL's PPO)."""
@@ -62,14 +63,26 @@ tanh = _Tanh.apply
 """The activation of every lean network (:class:`_Tanh`)."""
 
 
-class AgentMLP(nn.Module):
-    """``x (n, M, in) -> (n, M, out)``: a tanh MLP of hidden sizes ``hidden``, ``copies`` weight sets
-    (1: shared by every agent; ``M``: one per agent)."""
+def _relu(x: torch.Tensor) -> torch.Tensor:
+    return torch.relu(x)
 
-    def __init__(self, n_in: int, hidden: tuple[int, ...], n_out: int, copies: int, head_gain: float) -> None:
+
+ACTIVATIONS = {"tanh": tanh, "relu": _relu}
+"""The hidden activations the lean networks (torch and :func:`mlp_forward`) implement."""
+
+
+class AgentMLP(nn.Module):
+    """``x (n, M, in) -> (n, M, out)``: an MLP of hidden sizes ``hidden`` and hidden activation
+    ``activation`` (:data:`ACTIVATIONS`), ``copies`` weight sets (1: shared by every agent; ``M``: one
+    per agent)."""
+
+    def __init__(self, n_in: int, hidden: tuple[int, ...], n_out: int, copies: int, head_gain: float,
+                 activation: str = "tanh") -> None:
         super().__init__()
+        if activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
         widths = [n_in, *hidden, n_out]
-        self.copies = copies
+        self.copies, self.activation = copies, activation
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for i, (a, b) in enumerate(zip(widths, widths[1:], strict=False)):
@@ -80,16 +93,16 @@ class AgentMLP(nn.Module):
             self.biases.append(nn.Parameter(torch.zeros(copies, 1, b)))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        last = len(self.weights) - 1
+        last, act = len(self.weights) - 1, ACTIVATIONS[self.activation]
         if self.copies == 1:
             for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
                 x = torch.addmm(b[0], x.reshape(-1, x.shape[-1]), w[0]).reshape(*x.shape[:-1], -1)
-                x = tanh(x) if i < last else x
+                x = act(x) if i < last else x
             return x
         x = x.transpose(0, 1)                          # (M, n, in): one batched matmul per layer
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             x = torch.baddbmm(b, x, w)
-            x = tanh(x) if i < last else x
+            x = act(x) if i < last else x
         return x.transpose(0, 1)
 
 
@@ -98,14 +111,17 @@ class ActorCritic(nn.Module):
 
     ``copies``: 1 (parameters shared by every agent) or ``M`` (per-agent parameters);
     ``critic_in``: the critic's input width (the observation's, or state + observation for a
-    centralised critic).
+    centralised critic); ``actor_hidden`` / ``actor_activation``: the actor's own layout (default:
+    the critic's ``hidden``, ``tanh``).
     """
 
     def __init__(self, obs_dim: int, act_dim: int, critic_in: int, hidden: tuple[int, ...], copies: int,
-                 init_std: float) -> None:
+                 init_std: float, actor_hidden: tuple[int, ...] | None = None,
+                 actor_activation: str = "tanh") -> None:
         super().__init__()
         self.hidden = tuple(hidden)
-        self.actor = AgentMLP(obs_dim, self.hidden, act_dim, copies, ACTOR_HEAD_GAIN)
+        self.actor_hidden = self.hidden if actor_hidden is None else tuple(actor_hidden)
+        self.actor = AgentMLP(obs_dim, self.actor_hidden, act_dim, copies, ACTOR_HEAD_GAIN, actor_activation)
         self.critic = AgentMLP(critic_in, self.hidden, 1, copies, CRITIC_HEAD_GAIN)
         self.log_std = nn.Parameter(torch.full((copies, act_dim), math.log(init_std)))
         self.flat = _flatten(self)
@@ -230,10 +246,12 @@ def _times_transposed(x: np.ndarray, w_t: np.ndarray, b: np.ndarray | None = Non
 
 
 def mlp_forward(ws: list[np.ndarray], bs: list[np.ndarray], x: np.ndarray,
-                buffers: dict[str, np.ndarray] | None = None, tag: str = "") -> list[np.ndarray]:
+                buffers: dict[str, np.ndarray] | None = None, tag: str = "",
+                activation: str = "tanh") -> list[np.ndarray]:
     """The activations ``[x, h1, ..., out]`` of :class:`AgentMLP` on ``x (K, R, in)`` (numpy float32;
-    ``out`` before any squashing, a new array). Hidden ones made by numpy live in ``buffers``
-    (:func:`scratch`, keys ``tag``...) until the next call with the same ``buffers`` and ``tag``."""
+    ``out`` before any squashing, a new array; hidden ``activation`` of :data:`ACTIVATIONS`). Hidden
+    ones made by numpy live in ``buffers`` (:func:`scratch`, keys ``tag``...) until the next call with
+    the same ``buffers`` and ``tag``."""
     acts = [x]
     last = len(ws) - 1
     for i, (w, b) in enumerate(zip(ws, bs, strict=True)):
@@ -241,7 +259,10 @@ def mlp_forward(ws: list[np.ndarray], bs: list[np.ndarray], x: np.ndarray,
         z = _times_transposed(acts[-1], w.transpose(0, 2, 1), b,
                               scratch(buffers if i < last else None, f"{tag}h{i}", shape))
         if i < last:
-            np.tanh(z, out=z)
+            if activation == "tanh":
+                np.tanh(z, out=z)
+            else:
+                np.maximum(z, np.float32(0.0), out=z)
         acts.append(z)
     return acts
 
@@ -255,11 +276,21 @@ def _times_tanh_slope(grad: np.ndarray, y: np.ndarray) -> None:
         grad[i] *= one - y[i] * y[i]
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _times_relu_slope(grad: np.ndarray, y: np.ndarray) -> None:
+    """``grad *= y > 0`` (ReLU's derivative from its output ``y``) in place over flat float32 arrays."""
+    for i in range(grad.size):
+        if y[i] <= 0:
+            grad[i] = 0
+
+
 def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray, gws: list[np.ndarray],
-                 gbs: list[np.ndarray], buffers: dict[str, np.ndarray] | None = None, tag: str = "") -> None:
+                 gbs: list[np.ndarray], buffers: dict[str, np.ndarray] | None = None, tag: str = "",
+                 activation: str = "tanh") -> None:
     """Write into ``gws`` / ``gbs`` the gradients of the weights and biases given ``grad``, the
-    loss's gradient by the last layer's output ``(K, R, out)`` (``acts`` from :func:`mlp_forward`;
-    work arrays from ``buffers`` as there)."""
+    loss's gradient by the last layer's output ``(K, R, out)`` (``acts`` from :func:`mlp_forward`
+    with the same ``activation``; work arrays from ``buffers`` as there)."""
+    slope = _times_tanh_slope if activation == "tanh" else _times_relu_slope
     k, r = grad.shape[:2]
     ones = np.ones((k, 1, r), dtype=np.float32)
     for i in range(len(ws) - 1, -1, -1):
@@ -273,7 +304,7 @@ def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray,
             else:
                 grad = _times_transposed(grad, ws[i], out=work)
             assert grad.flags.c_contiguous and h.flags.c_contiguous    # the flat views below alias them
-            _times_tanh_slope(grad.reshape(-1), h.reshape(-1))
+            slope(grad.reshape(-1), h.reshape(-1))
 
 
 def adam_step(param: np.ndarray, grad: np.ndarray, exp_avg: np.ndarray, exp_avg_sq: np.ndarray, step: int,
@@ -294,6 +325,6 @@ def export_actor(net: ActorCritic, agent: int = 0) -> MLPActor:
     :class:`MLPActor` with ``squash=True`` (a copy of the weights)."""
     k = agent if net.actor.copies > 1 else 0
     obs_dim, act_dim = net.actor.weights[0].shape[1], net.actor.weights[-1].shape[2]
-    actor = MLPActor(int(obs_dim), int(act_dim), list(net.hidden), "tanh", squash=True)
+    actor = MLPActor(int(obs_dim), int(act_dim), list(net.actor_hidden), net.actor.activation, squash=True)
     pairs = [(w[k].detach().T, b[k, 0].detach()) for w, b in zip(net.actor.weights, net.actor.biases, strict=True)]
     return actor.copy_linear_weights(pairs)

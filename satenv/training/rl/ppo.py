@@ -78,7 +78,8 @@ from satenv.training.rl.nets import (
     to_copies,
 )
 
-__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "train", "warm_start"]
+__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "seed_policy", "train",
+           "warm_start"]
 
 VARIANTS = ("ppo", "ippo", "mappo")
 
@@ -133,6 +134,14 @@ class LeanConfig(RunConfig):
     warm_start: str | None = None
     """A lean run's folder (its newest checkpoint) or one of its ``checkpoints/step_<N>`` whose network
     and statistics this run starts from (:func:`warm_start`): training along a ladder, rung after rung."""
+    init_actor: str | None = None
+    """A policy folder (e.g. an imitation network) whose actor this run's actor starts from and keeps
+    the layout of (:func:`seed_policy`): its hidden sizes and activation, its feature map and frozen
+    observation normalisation (the actor's input, and the critic's); the critic is a new ``net_arch``
+    MLP. Not with ``norm_obs`` or ``warm_start``."""
+    critic_warmup: int = 0
+    """Agent-steps at the start of a run in which only the critic learns (the actor and its std keep
+    their values): a seeded actor is not moved by the advantages of an untrained critic."""
     out_dir: str = "runs/lean_ppo"
 
     def __post_init__(self) -> None:
@@ -142,6 +151,7 @@ class LeanConfig(RunConfig):
         for name in ("budget", "num_envs", "n_steps", "minibatch_size", "n_epochs"):
             check_int(name, getattr(self, name), minimum=1)
         check_int("checkpoint_every", self.checkpoint_every, minimum=0)
+        check_int("critic_warmup", self.critic_warmup, minimum=0)
         if self.gamma is not None:
             check_number("gamma", self.gamma, 0.0, 1.0)
         for name, lo, hi in (("gamma_k", 0.0, math.inf), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
@@ -156,6 +166,13 @@ class LeanConfig(RunConfig):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.warm_start is not None and (not isinstance(self.warm_start, str) or not self.warm_start):
             raise ValueError(f"warm_start must be a lean run's folder or checkpoint path, got {self.warm_start!r}")
+        if self.init_actor is not None:
+            if not isinstance(self.init_actor, str) or not self.init_actor:
+                raise ValueError(f"init_actor must be a policy folder's path, got {self.init_actor!r}")
+            if self.norm_obs or self.warm_start is not None:
+                raise ValueError("init_actor keeps the policy folder's own observation normalisation and weights: "
+                                 f"not with norm_obs=True or warm_start (got norm_obs={self.norm_obs!r}, "
+                                 f"warm_start={self.warm_start!r})")
 
 
 # --------------------------------------------------------------------------- 3. normalisation
@@ -206,13 +223,20 @@ class Run:
     def __init__(self, cfg: LeanConfig, vec: Any, gamma: float) -> None:
         self.cfg, self.vec, self.gamma = cfg, vec, gamma
         m = vec.n_agents
-        self.obs_dim = vec.single_observation_space.shape[0]
+        self.env_obs_dim = vec.single_observation_space.shape[0]
         self.act_dim = vec.single_action_space.shape[0]
+        self.seed = seed_policy(cfg.init_actor, self.env_obs_dim, self.act_dim) if cfg.init_actor else None
+        spec = self.seed.actor.spec if self.seed else {"obs_dim": self.env_obs_dim, "hidden": None,
+                                                       "activation": "tanh"}
+        self.obs_dim = spec["obs_dim"]
+        """The actor's input width: the observation's, or a seed policy's featurised one."""
         self.central = cfg.variant == "mappo"
         self.state_dim = vec.state().shape[1] if self.central else 0
         torch.manual_seed(cfg.seed)
         self.net = ActorCritic(self.obs_dim, self.act_dim, self.state_dim + self.obs_dim, cfg.net_arch,
-                               m if cfg.variant == "ippo" else 1, cfg.init_std)
+                               m if cfg.variant == "ippo" else 1, cfg.init_std, spec["hidden"], spec["activation"])
+        if self.seed:
+            _copy_actor(self.net, self.seed.actor)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
         self.params = FlatArrays(self.net, self.net.flat.numpy())   # numpy views of the parameters
         self.moments = (torch.zeros_like(self.net.flat), torch.zeros_like(self.net.flat))   # Adam's, flat
@@ -226,6 +250,36 @@ class Run:
         self.dual = _dual(cfg)
         if self.dual is not None:
             self.episode["cost"] = np.zeros(cfg.num_envs)
+
+
+def seed_policy(folder: str, obs_dim: int, act_dim: int) -> Any:
+    """The :class:`satenv.training.policy.LearnedPolicy` of policy folder ``folder`` (the network alone)
+    for a run's ``init_actor``: a squashed MLP actor of a hidden activation the lean networks
+    implement, for this env's observation and action sizes, with no action map or terminal feedback."""
+    from satenv.training.policy import load
+    from satenv.training.rl.nets import ACTIVATIONS
+
+    policy = load(folder, shielded=False)
+    spec = getattr(policy.actor, "spec", {})
+    problems = []
+    if spec.get("type") != "mlp" or not spec.get("squash") or spec.get("activation") not in ACTIVATIONS:
+        problems.append(f"its actor {spec} is not a squashed MLP with activation in {sorted(ACTIVATIONS)}")
+    if policy.obs_shape != (obs_dim,) or policy.action_shape != (act_dim,):
+        problems.append(f"its observation / action shapes {policy.obs_shape} / {policy.action_shape} are not "
+                        f"the env's {(obs_dim,)} / {(act_dim,)}")
+    if policy.action_map is not None or policy.terminal is not None:
+        problems.append("it maps actions or adds terminal feedback, which the lean actor does not")
+    if problems:
+        raise ValueError(f"init_actor {folder}: " + "; ".join(problems))
+    return policy
+
+
+def _copy_actor(net: ActorCritic, actor: Any) -> None:
+    """Every weight copy of ``net``'s actor from an :class:`satenv.training.actor.MLPActor` of its shape."""
+    with torch.no_grad():
+        for w, b, layer in zip(net.actor.weights, net.actor.biases, actor.linear_layers(), strict=True):
+            w.copy_(layer.weight.T.expand_as(w))
+            b.copy_(layer.bias.expand_as(b))
 
 
 def _dual(cfg: LeanConfig) -> Any:
@@ -252,6 +306,11 @@ def _critic_in(run: Run, obs_n: np.ndarray, state: np.ndarray | None) -> np.ndar
 
 
 def _norm_obs(run: Run, obs: np.ndarray) -> np.ndarray:
+    """The actor's input: the seed policy's features and frozen normalisation, the running
+    statistics' (``norm_obs``), or the observation itself."""
+    if run.seed is not None:
+        feats = run.seed.features
+        return run.seed.normalizer(feats(obs) if feats is not None else obs)
     return run.norm.obs.normalize(obs, run.cfg.clip_obs) if run.cfg.norm_obs else obs.astype(np.float32)
 
 
@@ -259,7 +318,7 @@ def _actor_mean(run: Run, obs: np.ndarray) -> np.ndarray:
     """The policy's mean action ``(n, M, A)`` on normalised observations ``(n, M, obs)`` (numpy,
     the same function as ``run.net.mean``)."""
     p = run.params
-    out = mlp_forward(p.actor_w, p.actor_b, to_copies(obs, len(p.log_std)))[-1]
+    out = mlp_forward(p.actor_w, p.actor_b, to_copies(obs, len(p.log_std)), activation=run.net.actor.activation)[-1]
     return from_copies(np.tanh(out, out=out), obs.shape[0])
 
 
@@ -297,7 +356,7 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
         t0 = time.perf_counter()
         if raw_obs is not None:
             raw_obs[t] = obs
-        if run.central or cfg.norm_obs:
+        if run.central or cfg.norm_obs or run.seed is not None:
             obs_n = _norm_obs(run, obs)
             state = vec.state() if run.central else None
             if run.central:
@@ -412,7 +471,8 @@ def _ppo_grad(run: Run, grads: FlatArrays, cin: np.ndarray, actions: np.ndarray,
     cfg, p = run.cfg, run.params
     k = len(p.log_std)
     x = to_copies(cin, k)                                  # (K, R, C); the actor reads the observation part
-    acts = mlp_forward(p.actor_w, p.actor_b, x[..., run.state_dim:], run.buffers, "actor")
+    activation = run.net.actor.activation
+    acts = mlp_forward(p.actor_w, p.actor_b, x[..., run.state_dim:], run.buffers, "actor", activation)
     mean = np.tanh(acts[-1])                               # (K, R, A)
     log_std = p.log_std[:, None, :]
     inv_std = np.exp(-log_std)
@@ -428,7 +488,7 @@ def _ppo_grad(run: Run, grads: FlatArrays, cin: np.ndarray, actions: np.ndarray,
     d_logp = np.where(unclipped >= clipped, -a, 0.0).astype(np.float32) * ratio / np.float32(n)
     grads.log_std[:] = np.einsum("kr,kra->ka", d_logp, z * z - 1) - np.float32(cfg.ent_coef / k)
     d_out = (d_logp[..., None] * z * inv_std) * (1 - mean * mean)
-    mlp_backward(p.actor_w, acts, d_out, grads.actor_w, grads.actor_b, run.buffers, "actor")
+    mlp_backward(p.actor_w, acts, d_out, grads.actor_w, grads.actor_b, run.buffers, "actor", activation)
     acts = mlp_forward(p.critic_w, p.critic_b, x, run.buffers, "critic")
     diff = acts[-1] - to_copies(returns[..., None], k)     # (K, R, 1)
     v_loss = 0.5 * float(np.mean(diff * diff))
@@ -471,11 +531,14 @@ def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[st
     group = run.opt.param_groups[0]
     stats = np.zeros(4)                                    # policy loss, value loss, clip fraction, approx KL
     count = 0
+    frozen = (*grads.actor_w, *grads.actor_b, grads.log_std) if run.steps < cfg.critic_warmup else ()
     for _ in range(cfg.n_epochs):
         perm = torch.randperm(n, generator=run.gen).numpy()
         for start in range(0, n - rows + 1, rows):
             mb = perm[start:start + rows]
             stats += _ppo_grad(run, grads, *(_rows(run, name, x, mb) for name, x in data.items()))
+            for g in frozen:                               # the critic's warm-up: the actor keeps its values
+                g[...] = 0.0
             _clip_grad_norm(grads.buf, cfg.max_grad_norm)
             steps += 1
             adam_step(run.params.buf, grads.buf, exp_avg, exp_avg_sq, steps, group["lr"], group["betas"], group["eps"])
@@ -581,8 +644,12 @@ def _policies(run: Run, meta: dict[str, Any], config: dict[str, Any]) -> list[An
     """The learned policy of each actor copy (one for shared parameters)."""
     from satenv.training.policy import LearnedPolicy, ObsNormalizer
 
-    norm = ObsNormalizer(run.norm.obs.mean, run.norm.obs.var, run.cfg.clip_obs) if run.cfg.norm_obs else ObsNormalizer()
-    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.obs_dim,), meta=meta)
+    norm, features = ObsNormalizer(), None
+    if run.seed is not None:
+        norm, features = run.seed.normalizer, run.seed.features
+    elif run.cfg.norm_obs:
+        norm = ObsNormalizer(run.norm.obs.mean, run.norm.obs.var, run.cfg.clip_obs)
+    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.env_obs_dim,), features=features, meta=meta)
             for k in range(run.net.actor.copies)]
 
 
@@ -610,6 +677,10 @@ def write_final(run: Run, out: Path, env: Any, wall: float) -> Path:
     cfg = run.cfg
     meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs), "step": run.steps}
     config = {**cfg.to_json(), "gamma_used": run.gamma, "trainer": "satenv.training.rl.ppo"}
+    feats = run.seed.features if run.seed is not None else None
+    if feats is not None:   # what the folder's loader rebuilds the seed's feature map from
+        config.update(obs_symlog_scale=feats.symlog_scale, obs_symlog_dims=feats.symlog_dims,
+                      obs_drop_dims=list(feats.drop_dims))
     policies = _policies(run, meta, config)
     learned = (policies[0] if len(policies) == 1
                else PerAgentPolicy(dict(zip(env.possible_agents, policies, strict=True))))
@@ -642,7 +713,7 @@ def _probe_seconds(run: Run, steps: int = 4) -> tuple[float, float]:
     obs, _ = vec.reset()
     t0 = time.perf_counter()
     for _ in range(steps):
-        obs = vec.step(_actor_mean(run, obs.astype(np.float32)))[0]
+        obs = vec.step(_actor_mean(run, _norm_obs(run, obs)))[0]
     step_s = (time.perf_counter() - t0) / steps
     rows = max(1, cfg.minibatch_size // m)
     cin = np.zeros((rows, m, run.state_dim + run.obs_dim), np.float32)
@@ -769,7 +840,7 @@ def parser() -> argparse.ArgumentParser:
                        ("budget", int), ("seed", int), ("torch-threads", int), ("checkpoint-every", int),
                        ("lr", float), ("gamma", float), ("gamma-k", float), ("gae-lambda", float),
                        ("clip-range", float), ("ent-coef", float), ("init-std", float), ("workers", int),
-                       ("lagrange-lr", float), ("cost-budget", float)):
+                       ("lagrange-lr", float), ("cost-budget", float), ("critic-warmup", int)):
         p.add_argument(f"--{name}", type=kind)
     p.add_argument("--lagrangian", action="store_true", default=None,
                    help="PPO-Lagrangian on the safety_cost info at the task's cost_budget")
@@ -784,6 +855,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--tuned", action="store_true", help="start from the task's tuned config (tuned/<task>.json)")
     p.add_argument("--warm-start", help="start the network from a lean run's folder or checkpoint "
                                         "(e.g. the run of the rung below on the task's ladder)")
+    p.add_argument("--init-actor", help="start the actor from a policy folder (e.g. an imitation network), "
+                                        "in its layout, features and observation normalisation")
     p.add_argument("--out-dir")
     p.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="hide the evaluation progress bars")
