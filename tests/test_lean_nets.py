@@ -76,12 +76,18 @@ def _autograd_loss(run: ppo.Run, cin, actions, old_logp, adv, returns) -> torch.
 
 @pytest.mark.parametrize(("variant", "rows", "onednn"), [("ppo", 300, True), ("ippo", 300, True), ("mappo", 300, True),
                                                          ("ppo", 1024, True), ("ippo", 1024, True), ("ppo", 300, False),
-                                                         ("mappo", 1024, False)])
-def test_ppo_gradient_equals_autograd(variant, rows, onednn, monkeypatch):
-    """Both product paths: oneDNN's (nets.LINEAR, where this torch has it) and numpy's."""
+                                                         ("mappo", 1024, False), ("seeded", 1024, True),
+                                                         ("seeded", 300, False)])
+def test_ppo_gradient_equals_autograd(variant, rows, onednn, monkeypatch, relu_policy_folder, tmp_path):
+    """Both product paths: oneDNN's (nets.LINEAR, where this torch has it) and numpy's; ``seeded``: a
+    PPO actor seeded from a ReLU policy folder (``init_actor``: its own layout, the critic tanh)."""
     if not onednn:
         monkeypatch.setattr(nets, "LINEAR", None)
-    run = _run(variant, ent_coef=0.01)
+    if variant == "seeded":
+        run = _run("ppo", ent_coef=0.01, init_actor=str(relu_policy_folder(tmp_path / "seed", TASK)))
+        assert run.net.actor.activation == "relu" and run.net.actor_hidden == (16, 16) and run.net.hidden == (64, 64)
+    else:
+        run = _run(variant, ent_coef=0.01)
     _perturb(run, 3)
     rng = np.random.default_rng(4)
     m = run.vec.n_agents
@@ -105,29 +111,6 @@ def test_ppo_gradient_equals_autograd(variant, rows, onednn, monkeypatch):
         float(loss), rel_tol=1e-5)
     # the parameters in order of net.parameters() are contiguous in the flat buffer: the same order
     assert np.allclose(grads.buf, expected, rtol=1e-5, atol=1e-5 * np.abs(expected).max())
-    assert np.linalg.norm(grads.buf - expected) <= 1e-5 * np.linalg.norm(expected)
-
-
-@pytest.mark.parametrize("onednn", [True, False])
-def test_ppo_gradient_of_a_seeded_relu_actor_equals_autograd(relu_policy_folder, tmp_path, onednn, monkeypatch):
-    """An actor seeded from a ReLU policy folder (``init_actor``): its own layout, the critic tanh."""
-    if not onednn:
-        monkeypatch.setattr(nets, "LINEAR", None)
-    run = _run("ppo", init_actor=str(relu_policy_folder(tmp_path / "seed", TASK)))
-    assert run.net.actor.activation == "relu" and run.net.actor_hidden == (16, 16) and run.net.hidden == (64, 64)
-    _perturb(run, 3)
-    rng = np.random.default_rng(4)
-    rows, m = 1024, run.vec.n_agents
-    cin = rng.normal(size=(rows, m, run.obs_dim)).astype(np.float32)
-    actions = rng.normal(0.0, 0.5, size=(rows, m, run.act_dim)).astype(np.float32)
-    old_logp = rng.normal(-3.0, 0.3, (rows, m)).astype(np.float32)
-    adv, returns = (rng.normal(size=(rows, m)).astype(np.float32) for _ in range(2))
-    loss = _autograd_loss(run, cin, actions, old_logp, adv, returns)
-    run.net.zero_grad()
-    loss.backward()
-    expected = torch.cat([p.grad.reshape(-1) for p in run.net.parameters()]).numpy()
-    grads = nets.FlatArrays(run.net, np.zeros_like(run.params.buf))
-    ppo._ppo_grad(run, grads, cin, actions, old_logp, adv, returns)
     assert np.linalg.norm(grads.buf - expected) <= 1e-5 * np.linalg.norm(expected)
 
 
