@@ -68,9 +68,10 @@ def unconstrained_rows():
 @pytest.fixture
 def relu_policy_folder():
     """A factory of policy folders in an imitation network's layout for a task's env:
-    ``relu_policy_folder(folder, task)``, a squashed ReLU MLP (16-16, random weights) on the
-    observation plus 6 symlog features, behind a random frozen observation normalisation."""
-    def make(folder, task: str):
+    ``relu_policy_folder(folder, task, terminal=False)``, a squashed ReLU MLP (16-16, random weights) on
+    the observation plus 6 symlog features, behind a random frozen observation normalisation; with
+    ``terminal``, terminal feedback of radius 2 and an action map of power 2 after it."""
+    def make(folder, task: str, terminal: bool = False):
         import numpy as np
         import torch
 
@@ -78,7 +79,7 @@ def relu_policy_folder():
         from satenv.training.actor import MLPActor
         from satenv.training.envs import policy_env_meta
         from satenv.training.policy import LearnedPolicy, ObsNormalizer, save_artifacts
-        from satenv.training.shaping import ObsFeatures
+        from satenv.training.shaping import ActionMap, ObsFeatures, TerminalFeedback
 
         env = tasks.get(task).make_env()
         agent = env.possible_agents[0]
@@ -87,7 +88,11 @@ def relu_policy_folder():
         actor = MLPActor(obs_dim + 6, act_dim, [16, 16], "relu", squash=True)
         rng = np.random.default_rng(0)
         norm = ObsNormalizer(rng.normal(0.0, 0.1, obs_dim + 6), rng.uniform(0.5, 2.0, obs_dim + 6), 10.0)
-        policy = LearnedPolicy(actor, norm, obs_shape=(obs_dim,), features=ObsFeatures(10.0, 6))
+        config = {"obs_symlog_scale": 10.0, "obs_symlog_dims": 6,
+                  **({"terminal": {"radius": 2.0}, "action_power": 2.0} if terminal else {})}
+        policy = LearnedPolicy(actor, norm, obs_shape=(obs_dim,), features=ObsFeatures(10.0, 6),
+                               action_map=ActionMap(2.0) if terminal else None,
+                               terminal=TerminalFeedback(radius=2.0) if terminal else None)
         meta = policy_env_meta(tasks.get(task).env_id, env, {}, {})
-        return save_artifacts(folder, policy, env_meta=meta, config={"obs_symlog_scale": 10.0, "obs_symlog_dims": 6})
+        return save_artifacts(folder, policy, env_meta=meta, config=config)
     return make

@@ -257,13 +257,15 @@ def test_warm_start_takes_the_network_and_statistics_and_refuses_another_shape(t
 
 
 def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder, tmp_path):
-    """A run seeded from a policy folder (``init_actor``: an imitation network's layout, features and
-    frozen normalisation) acts as the folder does; through the critic's warm-up its actor keeps its
-    values, after it the actor learns; the final folder reloads as the same policy. A seed that does
-    not fit the env, or with running observation statistics, is refused naming the problem."""
+    """A run seeded from a policy folder (``init_actor``: an imitation network's layout, features,
+    frozen normalisation, action map and terminal feedback) acts as the folder does; through the
+    critic's warm-up its actor keeps its values, after it the actor learns; the final folder reloads
+    as the same policy. A seed that does not fit the env, or with running observation statistics, is
+    refused naming the problem."""
     from satenv.training.policy import load
 
-    seed = relu_policy_folder(tmp_path / "seed", TASK)
+    seed = relu_policy_folder(tmp_path / "seed", TASK, terminal=True)
+    assert load(seed).terminal is not None and load(seed).action_map is not None
     env = tasks.get(TASK).make_env()
     obs, _ = env.reset(seed=900001)
     before = load(seed).act(obs)
@@ -271,9 +273,20 @@ def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder
                                     out_dir=str(tmp_path / "warm")))
     after = load(warm).act(obs)
     assert all(np.allclose(before[a], after[a], atol=1e-6) for a in obs)
-    assert json.loads((warm / "config.json").read_text())["obs_symlog_scale"] == 10.0
+    saved = json.loads((warm / "config.json").read_text())
+    assert saved["obs_symlog_scale"] == 10.0 and saved["terminal"]["radius"] == 2.0 and saved["action_power"] == 2.0
     moved = ppo.train(ppo.LeanConfig(**TINY, budget=256, init_actor=str(seed), out_dir=str(tmp_path / "moved")))
     assert not all(np.allclose(before[a], load(moved).act(obs)[a], atol=1e-6) for a in obs)
+
+    from satenv.vector import SatVectorEnv  # the rollout gives the env what the folder's policy gives it
+    cfg = ppo.LeanConfig(**TINY, init_actor=str(seed), init_std=1e-6)
+    run = ppo.Run(cfg, SatVectorEnv(env, 4, autoreset=False), 0.99)
+    obs0, sent = run.obs.copy(), []
+    step = run.vec.step
+    run.vec.step = lambda act: sent.append(act.copy()) or step(act)
+    ppo.collect(run, {"env": 0.0, "forward": 0.0})
+    expected = load(seed).predict(obs0.reshape(-1, obs0.shape[-1])).reshape(sent[0].shape)
+    assert np.allclose(sent[0], expected, atol=1e-4)
 
     other = relu_policy_folder(tmp_path / "other", "servicing-pereira2022")
     with pytest.raises(ValueError, match=r"init_actor .*observation / action shapes"):

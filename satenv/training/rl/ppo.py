@@ -137,8 +137,9 @@ class LeanConfig(RunConfig):
     init_actor: str | None = None
     """A policy folder (e.g. an imitation network) whose actor this run's actor starts from and keeps
     the layout of (:func:`seed_policy`): its hidden sizes and activation, its feature map and frozen
-    observation normalisation (the actor's input, and the critic's); the critic is a new ``net_arch``
-    MLP. Not with ``norm_obs`` or ``warm_start``."""
+    observation normalisation (the actor's input, and the critic's), its action map and terminal
+    feedback (applied to every sampled action); the critic is a new ``net_arch`` MLP. Not with
+    ``norm_obs`` or ``warm_start``."""
     critic_warmup: int = 0
     """Agent-steps at the start of a run in which only the critic learns (the actor and its std keep
     their values): a seeded actor is not moved by the advantages of an untrained critic."""
@@ -255,7 +256,8 @@ class Run:
 def seed_policy(folder: str, obs_dim: int, act_dim: int) -> Any:
     """The :class:`satenv.training.policy.LearnedPolicy` of policy folder ``folder`` (the network alone)
     for a run's ``init_actor``: a squashed MLP actor of a hidden activation the lean networks
-    implement, for this env's observation and action sizes, with no action map or terminal feedback."""
+    implement, for this env's observation and action sizes. Its action map and terminal feedback
+    stay part of the policy: the run applies them to each sampled action (:func:`_env_action`)."""
     from satenv.training.policy import load
     from satenv.training.rl.nets import ACTIVATIONS
 
@@ -267,11 +269,37 @@ def seed_policy(folder: str, obs_dim: int, act_dim: int) -> Any:
     if policy.obs_shape != (obs_dim,) or policy.action_shape != (act_dim,):
         problems.append(f"its observation / action shapes {policy.obs_shape} / {policy.action_shape} are not "
                         f"the env's {(obs_dim,)} / {(act_dim,)}")
-    if policy.action_map is not None or policy.terminal is not None:
-        problems.append("it maps actions or adds terminal feedback, which the lean actor does not")
     if problems:
         raise ValueError(f"init_actor {folder}: " + "; ".join(problems))
     return policy
+
+
+def _seed_config(seed: Any) -> dict[str, Any]:
+    """The ``config.json`` fields a policy folder's loader rebuilds a seed policy's feature map, action
+    map and terminal feedback from (:mod:`satenv.training.policy`)."""
+    from dataclasses import asdict
+
+    out: dict[str, Any] = {}
+    if seed.features is not None:
+        f = seed.features
+        out.update(obs_symlog_scale=f.symlog_scale, obs_symlog_dims=f.symlog_dims, obs_drop_dims=list(f.drop_dims))
+    if seed.action_map is not None:
+        out["action_power"] = seed.action_map.power
+    if seed.terminal is not None:
+        out["terminal"] = asdict(seed.terminal)
+    return out
+
+
+def _env_action(run: Run, obs: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """What the env is given for the sampled actions ``act`` (clipped to the box) at the raw
+    observations ``obs``: a seed policy's action map and terminal feedback applied (to the learner
+    they are part of the env, so its log-probabilities stay those of ``act``)."""
+    seed = run.seed
+    if seed is None:
+        return act
+    if seed.action_map is not None:
+        act = seed.action_map(act)
+    return seed.terminal(obs, act) if seed.terminal is not None else act
 
 
 def _copy_actor(net: ActorCritic, actor: Any) -> None:
@@ -366,7 +394,7 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
             obs_n = critic_obs[t]
             obs_n[...] = obs
         actions[t] += _actor_mean(run, obs_n)
-        act = actions[t].clip(-1.0, 1.0)
+        act = _env_action(run, obs, actions[t].clip(-1.0, 1.0))
         t1 = time.perf_counter()
         obs, rew, term, trunc, info = vec.step(act)
         t2 = time.perf_counter()
@@ -649,8 +677,9 @@ def _policies(run: Run, meta: dict[str, Any], config: dict[str, Any]) -> list[An
         norm, features = run.seed.normalizer, run.seed.features
     elif run.cfg.norm_obs:
         norm = ObsNormalizer(run.norm.obs.mean, run.norm.obs.var, run.cfg.clip_obs)
-    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.env_obs_dim,), features=features, meta=meta)
-            for k in range(run.net.actor.copies)]
+    maps = {"action_map": run.seed.action_map, "terminal": run.seed.terminal} if run.seed is not None else {}
+    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.env_obs_dim,), features=features, meta=meta,
+                          **maps) for k in range(run.net.actor.copies)]
 
 
 class PerAgentPolicy:
@@ -677,10 +706,8 @@ def write_final(run: Run, out: Path, env: Any, wall: float) -> Path:
     cfg = run.cfg
     meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs), "step": run.steps}
     config = {**cfg.to_json(), "gamma_used": run.gamma, "trainer": "satenv.training.rl.ppo"}
-    feats = run.seed.features if run.seed is not None else None
-    if feats is not None:   # what the folder's loader rebuilds the seed's feature map from
-        config.update(obs_symlog_scale=feats.symlog_scale, obs_symlog_dims=feats.symlog_dims,
-                      obs_drop_dims=list(feats.drop_dims))
+    if run.seed is not None:
+        config.update(_seed_config(run.seed))
     policies = _policies(run, meta, config)
     learned = (policies[0] if len(policies) == 1
                else PerAgentPolicy(dict(zip(env.possible_agents, policies, strict=True))))
