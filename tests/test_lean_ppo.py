@@ -256,7 +256,7 @@ def test_warm_start_takes_the_network_and_statistics_and_refuses_another_shape(t
         ppo.LeanConfig(**TINY, warm_start="")
 
 
-def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder, tmp_path):
+def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder, tmp_path, monkeypatch):
     """A run seeded from a policy folder (``init_actor``: an imitation network's layout, features,
     frozen normalisation, action map and terminal feedback) acts as the folder does; through the
     critic's warm-up its actor keeps its values, after it the actor learns; the final folder reloads
@@ -291,6 +291,10 @@ def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder
     other = relu_policy_folder(tmp_path / "other", "servicing-pereira2022")
     with pytest.raises(ValueError, match=r"init_actor .*observation / action shapes"):
         ppo.train(ppo.LeanConfig(**TINY, budget=128, init_actor=str(other), out_dir=str(tmp_path / "o")))
+    with monkeypatch.context() as m:   # a copy that missed the weights is caught before training
+        m.setattr(ppo, "_copy_actor", lambda net, actor: None)
+        with pytest.raises(ValueError, match="does not reproduce the folder's actions"):
+            ppo.train(ppo.LeanConfig(**TINY, budget=128, init_actor=str(seed), out_dir=str(tmp_path / "c")))
     with pytest.raises(ValueError, match="not with norm_obs"):
         ppo.LeanConfig(**TINY, init_actor=str(seed), norm_obs=True)
     with pytest.raises(ValueError, match="critic_warmup must be an int >= 0"):

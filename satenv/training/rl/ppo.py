@@ -246,6 +246,8 @@ class Run:
         self.norm = Normalizers(self.obs_dim, max(self.state_dim, 1), cfg.num_envs, m)
         self.steps = 0                                   # agent-steps done
         self.obs, _ = vec.reset(seed=cfg.seed)
+        if self.seed:
+            _check_seeded(self)
         self.episode = {"ret": np.zeros(cfg.num_envs), "len": np.zeros(cfg.num_envs, dtype=np.int64),
                         "collided": np.zeros(cfg.num_envs, dtype=bool)}
         self.dual = _dual(cfg)
@@ -308,6 +310,22 @@ def _copy_actor(net: ActorCritic, actor: Any) -> None:
         for w, b, layer in zip(net.actor.weights, net.actor.biases, actor.linear_layers(), strict=True):
             w.copy_(layer.weight.T.expand_as(w))
             b.copy_(layer.bias.expand_as(b))
+
+
+SEEDED_ACTION_TOL = 1e-4
+"""Largest difference allowed between a seeded run's first actions and its seed policy's."""
+
+
+def _check_seeded(run: Run) -> None:
+    """The seeded run's mean actions at its first observations are its seed policy's (``ValueError``
+    otherwise: the copy or the input map is wrong)."""
+    obs = run.obs
+    mine = _env_action(run, obs, _actor_mean(run, _norm_obs(run, obs)))
+    theirs = run.seed.predict(obs.reshape(-1, obs.shape[-1])).reshape(mine.shape)
+    diff = float(np.abs(mine - theirs).max())
+    if not diff <= SEEDED_ACTION_TOL:
+        raise ValueError(f"init_actor {run.cfg.init_actor}: the seeded actor does not reproduce the folder's "
+                         f"actions (max difference {diff:.3g} > SEEDED_ACTION_TOL {SEEDED_ACTION_TOL})")
 
 
 def _dual(cfg: LeanConfig) -> Any:
