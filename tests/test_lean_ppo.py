@@ -299,3 +299,18 @@ def test_init_actor_starts_from_a_policy_folder_in_its_layout(relu_policy_folder
         ppo.LeanConfig(**TINY, init_actor=str(seed), norm_obs=True)
     with pytest.raises(ValueError, match="critic_warmup must be an int >= 0"):
         ppo.LeanConfig(**TINY, critic_warmup=-1)
+
+
+def test_target_kl_stops_the_epochs_at_the_first_minibatch_too_far(tmp_path):
+    """A step of lr 1 moves the policy far past a target KL of 1e-3: each iteration makes one gradient
+    step (its first minibatch is at the collecting policy: KL 0 up to rounding); without a target,
+    every epoch's minibatches."""
+    def steps(**kw):
+        out = tmp_path / str(len(kw))
+        ppo.train(ppo.LeanConfig(**TINY, budget=256, out_dir=str(out), **kw))
+        return [json.loads(ln)["gradient_steps"] for ln in (out / "progress.jsonl").read_text().splitlines()]
+
+    assert steps() == [2 * 128 // 64] * 2                  # n_epochs x minibatches of an iteration
+    assert steps(target_kl=1e-3, lr=1.0) == [1, 1]
+    with pytest.raises(ValueError, match="target_kl must be a number in"):
+        ppo.LeanConfig(**TINY, target_kl=0.0)

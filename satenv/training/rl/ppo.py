@@ -116,6 +116,9 @@ class LeanConfig(RunConfig):
     ent_coef: float = 0.0
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
+    target_kl: float | None = None
+    """Stop an iteration's epochs at the first minibatch whose approximate KL to the collecting policy
+    exceeds ``1.5 * target_kl`` (SB3's rule; ``None``: every epoch runs)."""
     init_std: float = 0.25
     """Initial action standard deviation on the ``[-1, 1]`` box."""
     norm_obs: bool = False
@@ -155,6 +158,8 @@ class LeanConfig(RunConfig):
         check_int("critic_warmup", self.critic_warmup, minimum=0)
         if self.gamma is not None:
             check_number("gamma", self.gamma, 0.0, 1.0)
+        if self.target_kl is not None:
+            check_number("target_kl", self.target_kl, 0.0, math.inf)
         for name, lo, hi in (("gamma_k", 0.0, math.inf), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
                              ("max_grad_norm", 0.0, math.inf), ("init_std", 0.0, 10.0), ("clip_obs", 0.0, math.inf)):
             check_number(name, getattr(self, name), lo, hi)
@@ -578,22 +583,30 @@ def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[st
     stats = np.zeros(4)                                    # policy loss, value loss, clip fraction, approx KL
     count = 0
     frozen = (*grads.actor_w, *grads.actor_b, grads.log_std) if run.steps < cfg.critic_warmup else ()
+    kl_stop = math.inf if cfg.target_kl is None else 1.5 * cfg.target_kl
+    stopped = False
     for _ in range(cfg.n_epochs):
         perm = torch.randperm(n, generator=run.gen).numpy()
         for start in range(0, n - rows + 1, rows):
             mb = perm[start:start + rows]
-            stats += _ppo_grad(run, grads, *(_rows(run, name, x, mb) for name, x in data.items()))
+            mb_stats = _ppo_grad(run, grads, *(_rows(run, name, x, mb) for name, x in data.items()))
+            stopped = mb_stats[3] > kl_stop                # too far from the collecting policy: no more steps
+            if stopped:
+                break
+            stats += mb_stats
             for g in frozen:                               # the critic's warm-up: the actor keeps its values
                 g[...] = 0.0
             _clip_grad_norm(grads.buf, cfg.max_grad_norm)
             steps += 1
             adam_step(run.params.buf, grads.buf, exp_avg, exp_avg_sq, steps, group["lr"], group["betas"], group["eps"])
             count += 1
+        if stopped:
+            break
     _set_adam_steps(run, steps)
     timers["update"] += time.perf_counter() - t0
     names = ("policy_loss", "value_loss", "clip_fraction", "approx_kl")
     return {k: float(v) / max(count, 1) for k, v in zip(names, stats, strict=True)} | {
-        "std": float(np.exp(run.params.log_std).mean())}
+        "std": float(np.exp(run.params.log_std).mean()), "gradient_steps": count}
 
 
 # --------------------------------------------------------------------------- 6. checkpoints
@@ -885,7 +898,8 @@ def parser() -> argparse.ArgumentParser:
                        ("budget", int), ("seed", int), ("torch-threads", int), ("checkpoint-every", int),
                        ("lr", float), ("gamma", float), ("gamma-k", float), ("gae-lambda", float),
                        ("clip-range", float), ("ent-coef", float), ("init-std", float), ("workers", int),
-                       ("lagrange-lr", float), ("cost-budget", float), ("critic-warmup", int)):
+                       ("lagrange-lr", float), ("cost-budget", float), ("critic-warmup", int),
+                       ("target-kl", float)):
         p.add_argument(f"--{name}", type=kind)
     p.add_argument("--lagrangian", action="store_true", default=None,
                    help="PPO-Lagrangian on the safety_cost info at the task's cost_budget")
