@@ -314,3 +314,24 @@ def test_target_kl_stops_the_epochs_at_the_first_minibatch_too_far(tmp_path):
     assert steps(target_kl=1e-3, lr=1.0) == [1, 1]
     with pytest.raises(ValueError, match="target_kl must be a number in"):
         ppo.LeanConfig(**TINY, target_kl=0.0)
+
+
+def test_actor_lr_sets_the_actors_rate_apart_from_the_critics(tmp_path):
+    """``actor_lr`` moves the actor's weights and std at its own rate, the critic's at ``lr``: at a
+    rate 1e-6 of ``lr`` the actor moves about a millionth as far as at ``lr``; the critic about as far."""
+    def moved(**kw):
+        vec = __import__("satenv.vector", fromlist=["x"]).SatVectorEnv(tasks.get(TASK).make_env(), 4, autoreset=False)
+        run = ppo.Run(ppo.LeanConfig(**TINY, **kw), vec, 0.99)
+        before = {k: v.clone() for k, v in run.net.state_dict().items()}
+        timers = {"env": 0.0, "forward": 0.0, "update": 0.0}
+        ppo.update(run, ppo.collect(run, timers), timers)
+        after = run.net.state_dict()
+        return {part: sum(float((after[k] - before[k]).abs().sum()) for k in after if k.startswith(part))
+                for part in ("actor", "critic", "log_std")}
+
+    same, slow = moved(), moved(actor_lr=3e-10)
+    assert math.isclose(slow["critic"], same["critic"], rel_tol=0.05)   # one gradient-norm clip over both
+    for part in ("actor", "log_std"):
+        assert slow[part] < 1e-5 * same[part] and same[part] > 0
+    with pytest.raises(ValueError, match="actor_lr must be a number in"):
+        ppo.LeanConfig(**TINY, actor_lr=-1.0)

@@ -308,9 +308,9 @@ def mlp_backward(ws: list[np.ndarray], acts: list[np.ndarray], grad: np.ndarray,
 
 
 def adam_step(param: np.ndarray, grad: np.ndarray, exp_avg: np.ndarray, exp_avg_sq: np.ndarray, step: int,
-              lr: float, betas: tuple[float, float], eps: float) -> None:
+              lr: float | np.ndarray, betas: tuple[float, float], eps: float) -> None:
     """One step of ``torch.optim.Adam`` (no weight decay, no amsgrad) on flat float32 arrays, in
-    place; ``step`` counts this one (1 on the first)."""
+    place; ``step`` counts this one (1 on the first); ``lr``: one rate, or one per entry of ``param``."""
     b1, b2 = betas
     exp_avg += (1.0 - b1) * (grad - exp_avg)              # torch's lerp_
     exp_avg_sq *= b2

@@ -143,6 +143,9 @@ class LeanConfig(RunConfig):
     observation normalisation (the actor's input, and the critic's), its action map and terminal
     feedback (applied to every sampled action); the critic is a new ``net_arch`` MLP. Not with
     ``norm_obs`` or ``warm_start``."""
+    actor_lr: float | None = None
+    """The actor's (and its std's) learning rate; ``None``: ``lr``, which the critic always takes (a
+    seeded actor is fine-tuned at a smaller rate than its new critic learns)."""
     critic_warmup: int = 0
     """Agent-steps at the start of a run in which only the critic learns (the actor and its std keep
     their values): a seeded actor is not moved by the advantages of an untrained critic."""
@@ -158,8 +161,9 @@ class LeanConfig(RunConfig):
         check_int("critic_warmup", self.critic_warmup, minimum=0)
         if self.gamma is not None:
             check_number("gamma", self.gamma, 0.0, 1.0)
-        if self.target_kl is not None:
-            check_number("target_kl", self.target_kl, 0.0, math.inf)
+        for name in ("target_kl", "actor_lr"):
+            if getattr(self, name) is not None:
+                check_number(name, getattr(self, name), 0.0, math.inf)
         for name, lo, hi in (("gamma_k", 0.0, math.inf), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
                              ("max_grad_norm", 0.0, math.inf), ("init_std", 0.0, 10.0), ("clip_obs", 0.0, math.inf)):
             check_number(name, getattr(self, name), lo, hi)
@@ -560,6 +564,18 @@ def _clip_grad_norm(grad: np.ndarray, max_norm: float) -> None:
     grad *= np.float32(min(max_norm / (total + 1e-6), 1.0))
 
 
+def _learning_rates(run: Run) -> float | np.ndarray:
+    """Adam's rate: ``lr``, or with ``actor_lr`` a flat array of the parameters' rates (the actor's
+    weights and ``log_std`` at ``actor_lr``, the critic's at ``lr``)."""
+    lr = run.opt.param_groups[0]["lr"]
+    if run.cfg.actor_lr is None:
+        return lr
+    rates = FlatArrays(run.net, np.full_like(run.params.buf, lr))
+    for a in (*rates.actor_w, *rates.actor_b, rates.log_std):
+        a[...] = run.cfg.actor_lr
+    return rates.buf
+
+
 def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[str, float]:
     """GAE, then ``n_epochs`` passes of clipped-PPO minibatch steps over the iteration's data (the
     gradient by :func:`_ppo_grad`, the step by Adam over the flat parameters)."""
@@ -583,6 +599,7 @@ def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[st
     stats = np.zeros(4)                                    # policy loss, value loss, clip fraction, approx KL
     count = 0
     frozen = (*grads.actor_w, *grads.actor_b, grads.log_std) if run.steps < cfg.critic_warmup else ()
+    lr = _learning_rates(run)
     kl_stop = math.inf if cfg.target_kl is None else 1.5 * cfg.target_kl
     stopped = False
     for _ in range(cfg.n_epochs):
@@ -598,7 +615,7 @@ def update(run: Run, batch: dict[str, Any], timers: dict[str, float]) -> dict[st
                 g[...] = 0.0
             _clip_grad_norm(grads.buf, cfg.max_grad_norm)
             steps += 1
-            adam_step(run.params.buf, grads.buf, exp_avg, exp_avg_sq, steps, group["lr"], group["betas"], group["eps"])
+            adam_step(run.params.buf, grads.buf, exp_avg, exp_avg_sq, steps, lr, group["betas"], group["eps"])
             count += 1
         if stopped:
             break
@@ -899,7 +916,7 @@ def parser() -> argparse.ArgumentParser:
                        ("lr", float), ("gamma", float), ("gamma-k", float), ("gae-lambda", float),
                        ("clip-range", float), ("ent-coef", float), ("init-std", float), ("workers", int),
                        ("lagrange-lr", float), ("cost-budget", float), ("critic-warmup", int),
-                       ("target-kl", float)):
+                       ("target-kl", float), ("actor-lr", float)):
         p.add_argument(f"--{name}", type=kind)
     p.add_argument("--lagrangian", action="store_true", default=None,
                    help="PPO-Lagrangian on the safety_cost info at the task's cost_budget")
