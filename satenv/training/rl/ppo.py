@@ -78,7 +78,7 @@ from satenv.training.rl.nets import (
     to_copies,
 )
 
-__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "main", "seed_policy", "train",
+__all__ = ["LeanConfig", "RunningMeanStd", "VARIANTS", "gae", "horizon_gamma", "load_init_actor", "main", "train",
            "warm_start"]
 
 VARIANTS = ("ppo", "ippo", "mappo")
@@ -139,7 +139,7 @@ class LeanConfig(RunConfig):
     and statistics this run starts from (:func:`warm_start`): training along a ladder, rung after rung."""
     init_actor: str | None = None
     """A policy folder (e.g. an imitation network) whose actor this run's actor starts from and keeps
-    the layout of (:func:`seed_policy`): its hidden sizes and activation, its feature map and frozen
+    the layout of (:func:`load_init_actor`): its hidden sizes and activation, its feature map and frozen
     observation normalisation (the actor's input, and the critic's), its action map and terminal
     feedback (applied to every sampled action); the critic is a new ``net_arch`` MLP. Not with
     ``norm_obs`` or ``warm_start``."""
@@ -235,18 +235,18 @@ class Run:
         m = vec.n_agents
         self.env_obs_dim = vec.single_observation_space.shape[0]
         self.act_dim = vec.single_action_space.shape[0]
-        self.seed = seed_policy(cfg.init_actor, self.env_obs_dim, self.act_dim) if cfg.init_actor else None
-        spec = self.seed.actor.spec if self.seed else {"obs_dim": self.env_obs_dim, "hidden": None,
+        self.init_policy = load_init_actor(cfg.init_actor, self.env_obs_dim, self.act_dim) if cfg.init_actor else None
+        spec = self.init_policy.actor.spec if self.init_policy else {"obs_dim": self.env_obs_dim, "hidden": None,
                                                        "activation": "tanh"}
         self.obs_dim = spec["obs_dim"]
-        """The actor's input width: the observation's, or a seed policy's featurised one."""
+        """The actor's input width: the observation's, or the init policy's featurised one."""
         self.central = cfg.variant == "mappo"
         self.state_dim = vec.state().shape[1] if self.central else 0
         torch.manual_seed(cfg.seed)
         self.net = ActorCritic(self.obs_dim, self.act_dim, self.state_dim + self.obs_dim, cfg.net_arch,
                                m if cfg.variant == "ippo" else 1, cfg.init_std, spec["hidden"], spec["activation"])
-        if self.seed:
-            _copy_actor(self.net, self.seed.actor)
+        if self.init_policy:
+            _copy_actor(self.net, self.init_policy.actor)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
         self.params = FlatArrays(self.net, self.net.flat.numpy())   # numpy views of the parameters
         self.moments = (torch.zeros_like(self.net.flat), torch.zeros_like(self.net.flat))   # Adam's, flat
@@ -255,7 +255,7 @@ class Run:
         self.norm = Normalizers(self.obs_dim, max(self.state_dim, 1), cfg.num_envs, m)
         self.steps = 0                                   # agent-steps done
         self.obs, _ = vec.reset(seed=cfg.seed)
-        if self.seed:
+        if self.init_policy:
             _check_seeded(self)
         self.episode = {"ret": np.zeros(cfg.num_envs), "len": np.zeros(cfg.num_envs, dtype=np.int64),
                         "collided": np.zeros(cfg.num_envs, dtype=bool)}
@@ -264,7 +264,7 @@ class Run:
             self.episode["cost"] = np.zeros(cfg.num_envs)
 
 
-def seed_policy(folder: str, obs_dim: int, act_dim: int) -> Any:
+def load_init_actor(folder: str, obs_dim: int, act_dim: int) -> Any:
     """The :class:`satenv.training.policy.LearnedPolicy` of policy folder ``folder`` (the network alone)
     for a run's ``init_actor``: a squashed MLP actor of a hidden activation the lean networks
     implement, for this env's observation and action sizes. Its action map and terminal feedback
@@ -285,32 +285,32 @@ def seed_policy(folder: str, obs_dim: int, act_dim: int) -> Any:
     return policy
 
 
-def _seed_config(seed: Any) -> dict[str, Any]:
-    """The ``config.json`` fields a policy folder's loader rebuilds a seed policy's feature map, action
+def _maps_config(policy: Any) -> dict[str, Any]:
+    """The ``config.json`` fields a policy folder's loader rebuilds ``policy``'s feature map, action
     map and terminal feedback from (:mod:`satenv.training.policy`)."""
     from dataclasses import asdict
 
     out: dict[str, Any] = {}
-    if seed.features is not None:
-        f = seed.features
+    if policy.features is not None:
+        f = policy.features
         out.update(obs_symlog_scale=f.symlog_scale, obs_symlog_dims=f.symlog_dims, obs_drop_dims=list(f.drop_dims))
-    if seed.action_map is not None:
-        out["action_power"] = seed.action_map.power
-    if seed.terminal is not None:
-        out["terminal"] = asdict(seed.terminal)
+    if policy.action_map is not None:
+        out["action_power"] = policy.action_map.power
+    if policy.terminal is not None:
+        out["terminal"] = asdict(policy.terminal)
     return out
 
 
 def _env_action(run: Run, obs: np.ndarray, act: np.ndarray) -> np.ndarray:
     """What the env is given for the sampled actions ``act`` (clipped to the box) at the raw
-    observations ``obs``: a seed policy's action map and terminal feedback applied (to the learner
+    observations ``obs``: the init policy's action map and terminal feedback applied (to the learner
     they are part of the env, so its log-probabilities stay those of ``act``)."""
-    seed = run.seed
-    if seed is None:
+    policy = run.init_policy
+    if policy is None:
         return act
-    if seed.action_map is not None:
-        act = seed.action_map(act)
-    return seed.terminal(obs, act) if seed.terminal is not None else act
+    if policy.action_map is not None:
+        act = policy.action_map(act)
+    return policy.terminal(obs, act) if policy.terminal is not None else act
 
 
 def _copy_actor(net: ActorCritic, actor: Any) -> None:
@@ -322,15 +322,15 @@ def _copy_actor(net: ActorCritic, actor: Any) -> None:
 
 
 SEEDED_ACTION_TOL = 1e-4
-"""Largest difference allowed between a seeded run's first actions and its seed policy's."""
+"""Largest difference allowed between a seeded run's first actions and its init policy's."""
 
 
 def _check_seeded(run: Run) -> None:
-    """The seeded run's mean actions at its first observations are its seed policy's (``ValueError``
+    """The seeded run's mean actions at its first observations are its init policy's (``ValueError``
     otherwise: the copy or the input map is wrong)."""
     obs = run.obs
     mine = _env_action(run, obs, _actor_mean(run, _norm_obs(run, obs)))
-    theirs = run.seed.predict(obs.reshape(-1, obs.shape[-1])).reshape(mine.shape)
+    theirs = run.init_policy.predict(obs.reshape(-1, obs.shape[-1])).reshape(mine.shape)
     diff = float(np.abs(mine - theirs).max())
     if not diff <= SEEDED_ACTION_TOL:
         raise ValueError(f"init_actor {run.cfg.init_actor}: the seeded actor does not reproduce the folder's "
@@ -361,11 +361,11 @@ def _critic_in(run: Run, obs_n: np.ndarray, state: np.ndarray | None) -> np.ndar
 
 
 def _norm_obs(run: Run, obs: np.ndarray) -> np.ndarray:
-    """The actor's input: the seed policy's features and frozen normalisation, the running
+    """The actor's input: the init policy's features and frozen normalisation, the running
     statistics' (``norm_obs``), or the observation itself."""
-    if run.seed is not None:
-        feats = run.seed.features
-        return run.seed.normalizer(feats(obs) if feats is not None else obs)
+    if run.init_policy is not None:
+        feats = run.init_policy.features
+        return run.init_policy.normalizer(feats(obs) if feats is not None else obs)
     return run.norm.obs.normalize(obs, run.cfg.clip_obs) if run.cfg.norm_obs else obs.astype(np.float32)
 
 
@@ -411,7 +411,7 @@ def collect(run: Run, timers: dict[str, float]) -> dict[str, Any]:
         t0 = time.perf_counter()
         if raw_obs is not None:
             raw_obs[t] = obs
-        if run.central or cfg.norm_obs or run.seed is not None:
+        if run.central or cfg.norm_obs or run.init_policy is not None:
             obs_n = _norm_obs(run, obs)
             state = vec.state() if run.central else None
             if run.central:
@@ -720,14 +720,14 @@ def _policies(run: Run, meta: dict[str, Any], config: dict[str, Any]) -> list[An
     """The learned policy of each actor copy (one for shared parameters)."""
     from satenv.training.policy import LearnedPolicy, ObsNormalizer
 
-    norm, features = ObsNormalizer(), None
-    if run.seed is not None:
-        norm, features = run.seed.normalizer, run.seed.features
+    init, norm, maps = run.init_policy, ObsNormalizer(), {}
+    if init is not None:   # the init policy's input and output maps stay the policy's
+        norm = init.normalizer
+        maps = {"features": init.features, "action_map": init.action_map, "terminal": init.terminal}
     elif run.cfg.norm_obs:
         norm = ObsNormalizer(run.norm.obs.mean, run.norm.obs.var, run.cfg.clip_obs)
-    maps = {"action_map": run.seed.action_map, "terminal": run.seed.terminal} if run.seed is not None else {}
-    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.env_obs_dim,), features=features, meta=meta,
-                          **maps) for k in range(run.net.actor.copies)]
+    return [LearnedPolicy(export_actor(run.net, k), norm, obs_shape=(run.env_obs_dim,), meta=meta, **maps)
+            for k in range(run.net.actor.copies)]
 
 
 class PerAgentPolicy:
@@ -754,8 +754,8 @@ def write_final(run: Run, out: Path, env: Any, wall: float) -> Path:
     cfg = run.cfg
     meta = {**policy_env_meta(cfg.env_id, env, cfg.env_kwargs, cfg.resolved_eval_env_kwargs), "step": run.steps}
     config = {**cfg.to_json(), "gamma_used": run.gamma, "trainer": "satenv.training.rl.ppo"}
-    if run.seed is not None:
-        config.update(_seed_config(run.seed))
+    if run.init_policy is not None:
+        config.update(_maps_config(run.init_policy))
     policies = _policies(run, meta, config)
     learned = (policies[0] if len(policies) == 1
                else PerAgentPolicy(dict(zip(env.possible_agents, policies, strict=True))))
