@@ -335,3 +335,5 @@ def test_actor_lr_sets_the_actors_rate_apart_from_the_critics(tmp_path):
         assert slow[part] < 1e-5 * same[part] and same[part] > 0
     with pytest.raises(ValueError, match="actor_lr must be a number in"):
         ppo.LeanConfig(**TINY, actor_lr=-1.0)
+    with pytest.raises(ValueError, match="actor_lr must be a finite number > 0, got inf"):
+        ppo.LeanConfig(**TINY, actor_lr=math.inf)

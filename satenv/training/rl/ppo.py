@@ -161,9 +161,12 @@ class LeanConfig(RunConfig):
         check_int("critic_warmup", self.critic_warmup, minimum=0)
         if self.gamma is not None:
             check_number("gamma", self.gamma, 0.0, 1.0)
-        for name in ("target_kl", "actor_lr"):
-            if getattr(self, name) is not None:
-                check_number(name, getattr(self, name), 0.0, math.inf)
+        if self.target_kl is not None:
+            check_number("target_kl", self.target_kl, 0.0, math.inf)      # inf: no stop, as None
+        if self.actor_lr is not None:
+            check_number("actor_lr", self.actor_lr, 0.0, math.inf)
+            if not math.isfinite(self.actor_lr):
+                raise ValueError(f"actor_lr must be a finite number > 0, got {self.actor_lr!r}")
         for name, lo, hi in (("gamma_k", 0.0, math.inf), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, math.inf),
                              ("max_grad_norm", 0.0, math.inf), ("init_std", 0.0, 10.0), ("clip_obs", 0.0, math.inf)):
             check_number(name, getattr(self, name), lo, hi)
@@ -236,8 +239,8 @@ class Run:
         self.env_obs_dim = vec.single_observation_space.shape[0]
         self.act_dim = vec.single_action_space.shape[0]
         self.init_policy = load_init_actor(cfg.init_actor, self.env_obs_dim, self.act_dim) if cfg.init_actor else None
-        spec = self.init_policy.actor.spec if self.init_policy else {"obs_dim": self.env_obs_dim, "hidden": None,
-                                                       "activation": "tanh"}
+        spec = (self.init_policy.actor.spec if self.init_policy
+                else {"obs_dim": self.env_obs_dim, "hidden": None, "activation": "tanh"})
         self.obs_dim = spec["obs_dim"]
         """The actor's input width: the observation's, or the init policy's featurised one."""
         self.central = cfg.variant == "mappo"
@@ -303,14 +306,10 @@ def _maps_config(policy: Any) -> dict[str, Any]:
 
 def _env_action(run: Run, obs: np.ndarray, act: np.ndarray) -> np.ndarray:
     """What the env is given for the sampled actions ``act`` (clipped to the box) at the raw
-    observations ``obs``: the init policy's action map and terminal feedback applied (to the learner
-    they are part of the env, so its log-probabilities stay those of ``act``)."""
-    policy = run.init_policy
-    if policy is None:
-        return act
-    if policy.action_map is not None:
-        act = policy.action_map(act)
-    return policy.terminal(obs, act) if policy.terminal is not None else act
+    observations ``obs``: the init policy's action map and terminal feedback applied
+    (:meth:`satenv.training.policy.LearnedPolicy.env_action`; to the learner they are part of the env,
+    so its log-probabilities stay those of ``act``)."""
+    return act if run.init_policy is None else run.init_policy.env_action(obs, act)
 
 
 def _copy_actor(net: ActorCritic, actor: Any) -> None:
@@ -364,8 +363,7 @@ def _norm_obs(run: Run, obs: np.ndarray) -> np.ndarray:
     """The actor's input: the init policy's features and frozen normalisation, the running
     statistics' (``norm_obs``), or the observation itself."""
     if run.init_policy is not None:
-        feats = run.init_policy.features
-        return run.init_policy.normalizer(feats(obs) if feats is not None else obs)
+        return run.init_policy.network_input(obs)
     return run.norm.obs.normalize(obs, run.cfg.clip_obs) if run.cfg.norm_obs else obs.astype(np.float32)
 
 
