@@ -196,20 +196,26 @@ class LearnedPolicy:
     def reset(self, seed: int | None = None) -> None:
         self.info = {"fallbacks": 0}
 
+    def network_input(self, obs: np.ndarray) -> np.ndarray:
+        """The actor's float32 input for raw observations ``(..., *obs_shape)``: the feature map, then
+        the saved normalisation."""
+        return self.normalizer(self.features(obs) if self.features is not None else obs)
+
+    def env_action(self, obs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """What the env is given for network actions ``actions`` at raw observations ``obs``: clipped to
+        ``[-1, 1]``, then the action map and the terminal feedback (which reads ``obs``)."""
+        actions = np.clip(actions, -1.0, 1.0)
+        if self.action_map is not None:
+            actions = self.action_map(actions)
+        return self.terminal(obs, actions) if self.terminal is not None else actions
+
     def predict(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, act_dim)`` in ``[-1, 1]`` for raw per-agent observations ``(n, *obs_shape)``."""
         import torch
 
-        raw = obs
-        if self.features is not None:
-            obs = self.features(obs)
         with torch.no_grad(), torch_threads(INFERENCE_THREADS):
-            y = self.actor(torch.as_tensor(self.normalizer(obs))).numpy()
-        actions = np.clip(y.astype(np.float64), -1.0, 1.0)
-        if self.action_map is not None:
-            actions = self.action_map(actions)
-        if self.terminal is not None:   # reads the raw observation: checked below with the rest
-            actions = self.terminal(raw, actions)
+            y = self.actor(torch.as_tensor(self.network_input(obs))).numpy()
+        actions = self.env_action(obs, y.astype(np.float64))   # non-finite entries checked below
         bad = ~np.isfinite(actions).all(axis=-1)
         if bad.any():  # e.g. an observation beyond the float range: the safe action, flagged
             actions[bad] = 0.0

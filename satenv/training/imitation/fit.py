@@ -62,9 +62,7 @@ def inputs(policy: Any, obs: np.ndarray) -> Any:
     """The actor's input for raw observations (the policy's features, then its normaliser)."""
     import torch
 
-    raw = obs.astype(np.float64)
-    return torch.as_tensor(policy.normalizer(policy.features(raw) if policy.features is not None else raw),
-                           dtype=torch.float32)
+    return torch.as_tensor(policy.network_input(obs.astype(np.float64)), dtype=torch.float32)
 
 
 def fit_safe(policy: Any, data: dict[str, np.ndarray], loss: SafeLoss, *, lr: float, epochs: int,

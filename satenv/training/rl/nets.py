@@ -60,7 +60,8 @@ class _Tanh(torch.autograd.Function):
 
 
 tanh = _Tanh.apply
-"""The activation of every lean network (:class:`_Tanh`)."""
+"""The lean networks' tanh (:class:`_Tanh`): every critic's hidden activation, and the actors' but a
+ReLU-seeded one's (:data:`ACTIVATIONS`)."""
 
 
 def _relu(x: torch.Tensor) -> torch.Tensor:

@@ -16,13 +16,12 @@ from satenv.bench.learning.render import LATE_DROP
 
 HERE = Path(__file__).parent
 RESULTS = HERE.parents[1] / "reference_results" / "results.json"
-ALGORITHMS = {"ippo": "ippo", "ppo": "ppo", "mappo": "mappo"}
 
 
 def _grid_curves(task: str, variant: str) -> dict[int, list[float]]:
     records = json.loads(RESULTS.read_text())["records"]
     return {r["seed"]: r["validation_success"] for r in records
-            if r["task"] == task and r["algorithm"] == ALGORITHMS[variant] and not r["filter"]}
+            if r["task"] == task and r["algorithm"] == variant and not r["filter"]}
 
 
 def _study_curve(folder: Path) -> list[float]:
