@@ -10,7 +10,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from satenv.allocation import hungarian_assignment
 from satenv.dynamics import cw_matrices, sinusoid_disturbance
 from satenv.envs.base import SatenvError
-from satenv.envs.cluster_v0 import N_FIXED_OBS, POS_SCALE, env, parallel_env
+from satenv.envs.cluster_v0 import N_FIXED_OBS, POS_SCALE, env, own_action_jacobian, parallel_env
 from satenv.scenarios.cluster import PRESETS, ClusterScenario, resolve_scenario
 
 pytestmark = pytest.mark.filterwarnings("ignore:ignoring unknown reset option", "ignore:Agent.s m")
@@ -116,6 +116,25 @@ def test_physics_matches_cw_with_the_sinusoid_disturbance():
     np.testing.assert_allclose(info["accel"], u, rtol=1e-12)
     assert info["delta_v"] == pytest.approx(np.linalg.norm(u) * sc.dt)
     assert info["thrust_peak"] == pytest.approx(np.linalg.norm(u))
+
+
+def test_own_action_jacobian_matches_the_env_step():
+    """A change of one satellite's action moves its own next observation by the jacobian times the
+    acceleration change (CW truth: exact up to round-off), and nothing else in the layout."""
+    obs1 = {}
+    for da in (0.0, 0.3):
+        e = parallel_env(dynamics="cw", max_steps=3, randomize=True)
+        e.reset(seed=3)
+        action = {ag: np.array([0.2, -0.1, 0.05]) for ag in e.agents}
+        action["sat_1"] = action["sat_1"] + np.array([da, -da, 0.5 * da])
+        obs1[da] = e.step(action)[0]["sat_1"].astype(float)
+    sc = e.scenario
+    du = np.array([0.3, -0.3, 0.15]) * sc.u_max
+    jac = own_action_jacobian(obs1[0.0], cw_matrices(sc.orbit.n, sc.dt)[1])
+    np.testing.assert_allclose(obs1[0.3] - obs1[0.0], jac @ du, rtol=0, atol=1e-6)
+    assert np.abs(jac[N_FIXED_OBS - 1]).max() == 0.0                  # the clock does not move
+    with pytest.raises(SatenvError, match="own_action_jacobian"):
+        own_action_jacobian(np.zeros(20), np.zeros((6, 3)))
 
 
 def test_thrust_is_saturated_on_the_norm_ball():

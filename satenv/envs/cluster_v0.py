@@ -140,7 +140,7 @@ from satenv.scenarios.cluster import (
 )
 
 __all__ = ["ClusterCore", "ClusterEnv", "InnerLoop", "POS_SCALE", "VEL_SCALE", "env",
-           "parallel_env", "raw_env"]
+           "own_action_jacobian", "parallel_env", "raw_env"]
 
 POS_SCALE = 1000.0
 """Observation position scale L [m]."""
@@ -150,6 +150,27 @@ N_FIXED_OBS = 19
 CANDIDATES = 4
 """Neighbour candidates per satellite of the sparse separation search (module docstring of
 :class:`ClusterCore`)."""
+
+
+def own_action_jacobian(obs: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """How each satellite's next observation moves with its own acceleration, all else held:
+    ``d obs+ / d u`` ``(..., D, 3)`` [per m/s^2] for raw observations ``obs (..., D)`` in the layout of
+    the module docstring (the neighbour slots filled now move) and the one-decision input matrix
+    ``b (6, 3)`` of ``x+ = A x + b u`` (e.g. :func:`satenv.dynamics.cw_matrices`). Exact for linear
+    relative dynamics while the neighbour slots keep their order."""
+    obs = np.asarray(obs, dtype=float)
+    k = (obs.shape[-1] - N_FIXED_OBS) // 7
+    if obs.shape[-1] != N_FIXED_OBS + 7 * k or np.shape(b) != (6, 3):
+        raise SatenvError(f"own_action_jacobian needs observations of {N_FIXED_OBS} + 7 K entries and b of "
+                          f"shape (6, 3), got {obs.shape} and {np.shape(b)}")
+    bq, bp = np.asarray(b[:3], dtype=float) / POS_SCALE, np.asarray(b[3:], dtype=float) / VEL_SCALE
+    rows = np.zeros((N_FIXED_OBS, 3))
+    rows[0:3], rows[3:6], rows[6:9] = bq, bp, bq            # error to the target, velocity, position
+    rows[9:12], rows[12:15], rows[15:18] = -bq, -bp, -bq    # obstacle and target spacecraft, relative
+    slot = np.concatenate([np.zeros((1, 3)), -bq, -bp])     # [flag, q_j - q_i, p_j - p_i]
+    flags = obs[..., N_FIXED_OBS::7][..., :k, None, None]   # (..., K, 1, 1): filled slots move
+    slots = (flags * slot).reshape(*obs.shape[:-1], 7 * k, 3)
+    return np.concatenate([np.broadcast_to(rows, (*obs.shape[:-1], N_FIXED_OBS, 3)), slots], axis=-2)
 
 
 def _kernel_module():

@@ -2,7 +2,7 @@
 the validation seeds, as ``logs/<system>/segments.json`` and a markdown table; its training log
 thinned to every 10th row as ``logs/<system>/progress.jsonl``, and its config.
 
-    .venv/bin/python studies/runs/imitation_lagrangian_finetune/summarize.py servicing runs/lag_ft_servicing
+    .venv/bin/python studies/runs/imitation_rl_finetune/summarize.py servicing runs/lag_ft_servicing
 """
 
 from __future__ import annotations
