@@ -10,9 +10,14 @@ spacecraft, neighbour slots) jointly with the network:
 
 ``o+(a) = o+_flown + J (u(a) - u_flown)`` (:func:`satenv.envs.cluster_v0.own_action_jacobian`, the
 nominal CW input matrix of :func:`satenv.safety.model.safety_model`): the next observation as a
-differentiable function of the satellite's own action, its neighbours as flown. Unsafe: inside a
-keep-out distance now. Safe: outside every keep-out distance by more than the braking distance of
-the closing speed at full thrust plus ``SAFE_MARGIN_M`` (derived from the thrust bound, not tuned).
+differentiable function of the satellite's own action, its neighbours as flown. Both labels are
+derived from the thrust bound (radial braking of a double integrator), not tuned:
+
+* unsafe: inside a keep-out distance now, or doomed: closer to it than full thrust ``u_max`` can
+  stop the closing speed in (``--no-doomed`` drops the second part);
+* safe: beyond every keep-out distance by the braking distance at the filter's braking authority
+  (``SafetyModel.brake``, the smaller) plus ``SAFE_MARGIN_M``.
+
 After each round the network alone is evaluated on the validation seeds (``history.json``).
 
     nice -n 5 env OMP_NUM_THREADS=1 .venv/bin/python studies/runs/cluster_learned_barrier/train.py \\
@@ -65,16 +70,20 @@ def safety_entries(o: torch.Tensor) -> tuple[torch.Tensor, list[tuple[torch.Tens
     return torch.cat([o[..., 9:18], o[..., N_FIXED_OBS:], extra], dim=-1), geo
 
 
-def labels(o: torch.Tensor, radii: list[float], brake: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """``unsafe`` (inside a keep-out distance) and ``safe`` (every body beyond keep-out + braking
-    distance + margin) masks of observations ``o``."""
+def labels(o: torch.Tensor, radii: list[float], brake: float, full_thrust: float,
+           doomed: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+    """``unsafe`` and ``safe`` masks of observations ``o``. Unsafe: inside a keep-out distance, or
+    (``doomed``) closer to it than the distance full thrust ``full_thrust`` [m/s^2] needs to stop the
+    closing speed. Safe: every body beyond keep-out + the braking distance at the filter's authority
+    ``brake`` + ``SAFE_MARGIN_M``."""
     _, geo = safety_entries(o)
     unsafe = torch.zeros(o.shape[:-1], dtype=torch.bool)
     safe = torch.ones(o.shape[:-1], dtype=torch.bool)
     for (d, c, f), radius in zip(geo, radii, strict=True):
         on = f > 0.5
-        unsafe |= on & (d < radius)
-        stop = c.clamp_min(0.0) ** 2 / (2.0 * brake)
+        closing2 = c.clamp_min(0.0) ** 2
+        unsafe |= on & ((d < radius) | (doomed & (d - radius < closing2 / (2.0 * full_thrust))))
+        stop = closing2 / (2.0 * brake)
         safe &= ~on | (d > radius + stop + SAFE_MARGIN_M)
     return unsafe, safe & ~unsafe
 
@@ -125,7 +134,7 @@ def train_round(policy, anchor, barrier, data, model, radii, args, gen) -> dict[
     a_flown = ball(torch.as_tensor(data["act"], dtype=torch.float32))
     off, slope = (torch.as_tensor(v, dtype=torch.float32) for v in terminal_affine(policy, data["obs"], 3))
     power = float(policy.action_map.power) if policy.action_map is not None else 1.0
-    unsafe, safe = labels(o, radii, model.brake)
+    unsafe, safe = labels(o, radii, model.brake, args.full_thrust, args.doomed)
     opt_h = torch.optim.Adam(barrier.parameters(), lr=args.lr_h)
     opt_pi = torch.optim.Adam(policy.actor.parameters(), lr=args.lr_pi)
     sums, count = np.zeros(5), 0
@@ -177,6 +186,10 @@ def main() -> None:
     p.add_argument("--lr-h", type=float, default=1e-3)
     p.add_argument("--lr-pi", type=float, default=1e-5)
     p.add_argument("--w-deriv", type=float, default=10.0)
+    p.add_argument("--no-doomed", dest="doomed", action="store_false",
+                   help="label unsafe only the states inside a keep-out distance (not those full thrust cannot stop)")
+    p.add_argument("--first-seed", type=int, default=TRAIN_SEED0, help="the first flight's seed (train band)")
+    p.add_argument("--init", type=Path, help="start network and barrier from a round file of an earlier run")
     args = p.parse_args()
     torch.manual_seed(0)
     gen = torch.Generator().manual_seed(0)
@@ -187,14 +200,19 @@ def main() -> None:
     model = safety_model(fly_env)
     sc = fly_env.scenario
     k = (fly_env.observation_space(fly_env.possible_agents[0]).shape[0] - N_FIXED_OBS) // 7
+    args.full_thrust = float(sc.u_max)
     radii = [sc.obstacle_distance, sc.target_distance] + [sc.pair_distance] * k
     barrier = Barrier(len(safety_entries(torch.zeros(1, N_FIXED_OBS + 7 * k))[0][0]))
+    if args.init is not None:      # the anchor stays the shipped network
+        start = torch.load(args.init, weights_only=True)
+        policy.actor.load_state_dict(start["actor"])
+        barrier.load_state_dict(start["barrier"])
     history = [{"round": -1, **validate(policy, VAL_SEEDS)}]
     print(json.dumps(history[-1]), flush=True)
     data: dict[str, np.ndarray] = {}
     for r in range(args.rounds):
         t0 = time.time()
-        seeds = range(TRAIN_SEED0 + r * args.episodes, TRAIN_SEED0 + (r + 1) * args.episodes)
+        seeds = range(args.first_seed + r * args.episodes, args.first_seed + (r + 1) * args.episodes)
         new = fly_alone(policy, fly_env, seeds)
         data = {k_: np.concatenate([data[k_], v]) if data else v for k_, v in new.items()}
         t1 = time.time()

@@ -1,8 +1,10 @@
 """The segments of a fine-tune run (``run.sh``): each kept final/'s evaluation of the network alone on
-the validation seeds, as ``logs/<system>/segments.json`` and a markdown table; its training log
-thinned to every 10th row as ``logs/<system>/progress.jsonl``, and its config.
+the validation seeds, as ``logs/<name>/segments.json`` and a markdown table; its training log
+thinned to every 10th row as ``logs/<name>/progress.jsonl``, and its config. ``<name>`` is the
+system (the PPO-Lagrangian runs) or ``<system>_reward`` (``METHOD=reward``).
 
     .venv/bin/python studies/runs/imitation_rl_finetune/summarize.py servicing runs/lag_ft_servicing
+    .venv/bin/python studies/runs/imitation_rl_finetune/summarize.py cluster_reward runs/reward_ft_cluster
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from pathlib import Path
 FIELDS = ("episodes", "successes", "collision_episodes", "violation_episodes", "final_error_m", "steps")
 
 
-def main(system: str, run: Path) -> None:
-    out = Path(__file__).parent / "logs" / system
+def main(name: str, run: Path) -> None:
+    out = Path(__file__).parent / "logs" / name
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for kept in sorted((run / "kept").iterdir(), key=lambda p: int(p.name)):
