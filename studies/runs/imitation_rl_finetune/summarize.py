@@ -35,7 +35,8 @@ def main(name: str, run: Path) -> None:
     for r in rows:
         n = r["episodes"]
         print(f"| {r['agent_steps']:,} | {r['successes']}/{n} | {r['collision_episodes']}/{n} | "
-              f"{r['violation_episodes']}/{n} | {r['final_error_m']:.1f} | {r['steps']:.1f} | {r['train_wall_s']:.0f} |")
+              f"{r['violation_episodes']}/{n} | {r['final_error_m']:.1f} | {r['steps']:.1f} | "
+              f"{r['train_wall_s']:.0f} |")
 
 
 if __name__ == "__main__":
