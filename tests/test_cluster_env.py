@@ -133,8 +133,13 @@ def test_own_action_jacobian_matches_the_env_step():
     jac = own_action_jacobian(obs1[0.0], cw_matrices(sc.orbit.n, sc.dt)[1])
     np.testing.assert_allclose(obs1[0.3] - obs1[0.0], jac @ du, rtol=0, atol=1e-6)
     assert np.abs(jac[N_FIXED_OBS - 1]).max() == 0.0                  # the clock does not move
-    with pytest.raises(SatenvError, match="own_action_jacobian"):
-        own_action_jacobian(np.zeros(20), np.zeros((6, 3)))
+    b = cw_matrices(sc.orbit.n, sc.dt)[1]
+    for bad_obs, bad_b, kind in ((np.zeros(20), b, ValueError), (obs1[0.0], np.zeros((3, 6)), ValueError),
+                                 (np.full(47, np.nan), b, ValueError), (obs1[0.0], np.full((6, 3), np.inf), ValueError),
+                                 (obs1[0.0] + 0j, b, TypeError), (np.ma.masked_all(47), b, TypeError),
+                                 (np.float64(1.0), b, ValueError)):
+        with pytest.raises(kind, match="own_action_jacobian"):
+            own_action_jacobian(bad_obs, bad_b)
 
 
 def test_thrust_is_saturated_on_the_norm_ball():

@@ -128,6 +128,7 @@ from satenv.dynamics import (
     saturate_norm,
     sinusoid_disturbance,
 )
+from satenv.dynamics._checks import as_array, numeric
 from satenv.envs.base import BatchedCore, SatenvError, SatParallelEnv, StepResult, resolve_preset
 from satenv.neighbours import DENSE_MAX, nearest, norm3
 from satenv.scenarios.cluster import (
@@ -158,12 +159,13 @@ def own_action_jacobian(obs: np.ndarray, b: np.ndarray) -> np.ndarray:
     the module docstring (the neighbour slots filled now move) and the one-decision input matrix
     ``b (6, 3)`` of ``x+ = A x + b u`` (e.g. :func:`satenv.dynamics.cw_matrices`). Exact for linear
     relative dynamics while the neighbour slots keep their order."""
-    obs = np.asarray(obs, dtype=float)
-    k = (obs.shape[-1] - N_FIXED_OBS) // 7
-    if obs.shape[-1] != N_FIXED_OBS + 7 * k or np.shape(b) != (6, 3):
+    obs = numeric(obs, "own_action_jacobian obs")
+    b = as_array(b, "own_action_jacobian b", (6, 3), min_ndim=2)
+    k = (obs.shape[-1] - N_FIXED_OBS) // 7 if obs.ndim else -1
+    if k < 0 or obs.shape[-1] != N_FIXED_OBS + 7 * k or b.ndim != 2:
         raise SatenvError(f"own_action_jacobian needs observations of {N_FIXED_OBS} + 7 K entries and b of "
-                          f"shape (6, 3), got {obs.shape} and {np.shape(b)}")
-    bq, bp = np.asarray(b[:3], dtype=float) / POS_SCALE, np.asarray(b[3:], dtype=float) / VEL_SCALE
+                          f"shape (6, 3), got {obs.shape} and {b.shape}")
+    bq, bp = b[:3] / POS_SCALE, b[3:] / VEL_SCALE
     rows = np.zeros((N_FIXED_OBS, 3))
     rows[0:3], rows[3:6], rows[6:9] = bq, bp, bq            # error to the target, velocity, position
     rows[9:12], rows[12:15], rows[15:18] = -bq, -bp, -bq    # obstacle and target spacecraft, relative
